@@ -1,0 +1,276 @@
+"""Emulated Unity transform hierarchy, stored as structure-of-arrays.
+
+Unity semantics: Y up, left-handed, quaternions (x, y, z, w). A node has a local position,
+rotation and scale relative to its parent; its world matrix is ``parent_local_to_world @
+TRS(local)``, its world rotation ``parent_world_rotation * local_rotation`` and its lossy
+scale the diagonal of ``inverse(R_world) @ local_to_world[:3, :3]`` (reference §A.3), so
+numbers read off a Unity scene carry over unchanged.
+
+Nodes are stored parents-before-children, so one forward pass (``propagate_world``, a numba
+kernel) updates every world pose. Arrays (n = ``count``):
+
+==================  ===========  ======  ================================================
+field               shape        units   written by
+==================  ===========  ======  ================================================
+parent              (n,) int32   index   build; -1 for a root
+local_position      (n, 3)       m       animation drivers (UPDATE), restore (RESTORE),
+                                         cloth write-back (LATE_UPDATE)
+local_rotation      (n, 4)       xyzw    same as local_position
+local_scale         (n, 3)       1       animation drivers
+world_position      (n, 3)       m       ``propagate`` (derived)
+world_rotation      (n, 4)       xyzw    ``propagate`` (derived)
+lossy_scale         (n, 3)       1       ``propagate`` (derived)
+local_to_world      (n, 4, 4)    m       ``propagate`` (derived)
+rest_local_*        like local   -       ``capture_rest_pose`` (build time)
+==================  ===========  ======  ================================================
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from magica_py.jit import kernel
+from magica_py.kernels.math3d import (
+    load3,
+    load4,
+    q_inverse,
+    q_mul,
+    q_normalize,
+    q_rotate,
+    q_to_matrix,
+    store3,
+    store4,
+)
+
+
+# ----------------------------------------------------------------------------- kernels
+@kernel
+def compose_trs(position, rotation, scale, out, i):
+    """Write TRS(position, rotation, scale) into out[i] (4x4)."""
+    r0, r1, r2 = q_to_matrix(rotation)
+    for c in range(3):
+        out[i, 0, c] = r0[c] * scale[c]
+        out[i, 1, c] = r1[c] * scale[c]
+        out[i, 2, c] = r2[c] * scale[c]
+        out[i, 3, c] = 0.0
+    out[i, 0, 3] = position[0]
+    out[i, 1, 3] = position[1]
+    out[i, 2, 3] = position[2]
+    out[i, 3, 3] = 1.0
+
+
+@kernel
+def propagate_world(parent, local_position, local_rotation, local_scale,
+                    world_position, world_rotation, lossy_scale, local_to_world):
+    """Forward pass over parents-before-children nodes: world pose, lossy scale, matrices."""
+    n = parent.shape[0]
+    for i in range(n):
+        lp = load3(local_position, i)
+        lr = q_normalize(load4(local_rotation, i))
+        ls = load3(local_scale, i)
+        p = parent[i]
+        if p < 0:
+            compose_trs(lp, lr, ls, local_to_world, i)
+            wr = lr
+        else:
+            # world = parent_l2w @ TRS(local); expand the product without temporaries
+            r0, r1, r2 = q_to_matrix(lr)
+            for row in range(3):
+                a0 = local_to_world[p, row, 0]
+                a1 = local_to_world[p, row, 1]
+                a2 = local_to_world[p, row, 2]
+                a3 = local_to_world[p, row, 3]
+                for c in range(3):
+                    local_to_world[i, row, c] = (a0 * r0[c] + a1 * r1[c] + a2 * r2[c]) * ls[c]
+                local_to_world[i, row, 3] = a0 * lp[0] + a1 * lp[1] + a2 * lp[2] + a3
+            local_to_world[i, 3, 0] = 0.0
+            local_to_world[i, 3, 1] = 0.0
+            local_to_world[i, 3, 2] = 0.0
+            local_to_world[i, 3, 3] = 1.0
+            wr = q_normalize(q_mul(load4(world_rotation, p), lr))
+        store4(world_rotation, i, wr)
+        world_position[i, 0] = local_to_world[i, 0, 3]
+        world_position[i, 1] = local_to_world[i, 1, 3]
+        world_position[i, 2] = local_to_world[i, 2, 3]
+        # lossy scale = diag(R^-1 @ M3x3): column c of M rotated back, component c
+        for c in range(3):
+            col = (local_to_world[i, 0, c], local_to_world[i, 1, c], local_to_world[i, 2, c])
+            back = q_rotate(q_inverse(wr), col)
+            lossy_scale[i, c] = back[c]
+
+
+@kernel
+def restore_local_pose(indices, rest_position, rest_rotation, local_position, local_rotation):
+    """RESTORE phase: write the build-time local position and rotation back (reference §A.2)."""
+    for k in range(indices.shape[0]):
+        i = indices[k]
+        for c in range(3):
+            local_position[i, c] = rest_position[i, c]
+        for c in range(4):
+            local_rotation[i, c] = rest_rotation[i, c]
+
+
+@kernel
+def world_to_local_pose(parent, local_to_world, world_rotation, i, position, rotation):
+    """The local position and rotation that give node i the world pose (position, rotation)."""
+    p = parent[i]
+    if p < 0:
+        return position, rotation
+    # inverse of the parent's affine matrix applied to the point
+    m = local_to_world[p]
+    d = (position[0] - m[0, 3], position[1] - m[1, 3], position[2] - m[2, 3])
+    a = m[0, 0]; b = m[0, 1]; c = m[0, 2]
+    e = m[1, 0]; f = m[1, 1]; g = m[1, 2]
+    h = m[2, 0]; k = m[2, 1]; l = m[2, 2]
+    det = a * (f * l - g * k) - b * (e * l - g * h) + c * (e * k - f * h)
+    if abs(det) < 1e-30:
+        local_p = (0.0, 0.0, 0.0)
+    else:
+        inv = 1.0 / det
+        local_p = (
+            ((f * l - g * k) * d[0] + (c * k - b * l) * d[1] + (b * g - c * f) * d[2]) * inv,
+            ((g * h - e * l) * d[0] + (a * l - c * h) * d[1] + (c * e - a * g) * d[2]) * inv,
+            ((e * k - f * h) * d[0] + (b * h - a * k) * d[1] + (a * f - b * e) * d[2]) * inv,
+        )
+    local_r = q_normalize(q_mul(q_inverse(load4(world_rotation, p)), rotation))
+    return local_p, local_r
+
+
+# ----------------------------------------------------------------------------- python API
+@dataclass
+class BoneSpec:
+    """One node to add: name, parent name (None for a root) and local TRS."""
+
+    name: str
+    parent: str | None = None
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    tags: dict = field(default_factory=dict)
+
+
+class HierarchyError(ValueError):
+    """A hierarchy that cannot be built (duplicate name, missing parent, cycle)."""
+
+
+class TransformHierarchy:
+    """All transforms of a scene in one structure-of-arrays (see the module docstring)."""
+
+    def __init__(self, bones: list[BoneSpec]):
+        order = _topological_order(bones)
+        self.names: list[str] = [bones[i].name for i in order]
+        self.index_of: dict[str, int] = {name: i for i, name in enumerate(self.names)}
+        n = len(order)
+        self.count = n
+        self.parent = np.full(n, -1, dtype=np.int32)
+        self.local_position = np.zeros((n, 3))
+        self.local_rotation = np.zeros((n, 4))
+        self.local_rotation[:, 3] = 1.0
+        self.local_scale = np.ones((n, 3))
+        self.tags: list[dict] = []
+        for new, old in enumerate(order):
+            b = bones[old]
+            self.parent[new] = -1 if b.parent is None else self.index_of[b.parent]
+            self.local_position[new] = b.position
+            q = np.asarray(b.rotation, dtype=np.float64)
+            self.local_rotation[new] = q / np.linalg.norm(q)
+            self.local_scale[new] = b.scale
+            self.tags.append(dict(b.tags))
+        self.world_position = np.zeros((n, 3))
+        self.world_rotation = np.zeros((n, 4))
+        self.lossy_scale = np.ones((n, 3))
+        self.local_to_world = np.zeros((n, 4, 4))
+        self.children: list[list[int]] = [[] for _ in range(n)]
+        for i in range(n):  # sibling order = order of appearance in the bone list
+            if self.parent[i] >= 0:
+                self.children[self.parent[i]].append(i)
+        self.propagate()
+        self.capture_rest_pose()
+
+    # -- queries
+    def index(self, name: str) -> int:
+        try:
+            return self.index_of[name]
+        except KeyError:
+            raise KeyError(f"no transform named {name!r}") from None
+
+    def descendants(self, i: int) -> list[int]:
+        """Node i's subtree in pre-order (i first)."""
+        out, stack = [], [i]
+        while stack:
+            j = stack.pop()
+            out.append(j)
+            stack.extend(reversed(self.children[j]))
+        return out
+
+    # -- updates
+    def propagate(self) -> None:
+        """Recompute every world pose from the local poses (one numba pass)."""
+        propagate_world(self.parent, self.local_position, self.local_rotation, self.local_scale,
+                        self.world_position, self.world_rotation, self.lossy_scale,
+                        self.local_to_world)
+
+    def capture_rest_pose(self) -> None:
+        """Remember the current local pose as the rest (build-time) pose restored each frame."""
+        self.rest_local_position = self.local_position.copy()
+        self.rest_local_rotation = self.local_rotation.copy()
+        self.rest_local_scale = self.local_scale.copy()
+
+    def restore_rest_pose(self, indices: np.ndarray) -> None:
+        restore_local_pose(indices, self.rest_local_position, self.rest_local_rotation,
+                           self.local_position, self.local_rotation)
+
+    def set_world_pose(self, i: int, position=None, rotation=None, propagate: bool = True) -> None:
+        """Set node i's world position and/or rotation; its local pose is recomputed."""
+        pos = tuple(self.world_position[i]) if position is None else tuple(map(float, position))
+        rot = tuple(self.world_rotation[i]) if rotation is None else tuple(map(float, rotation))
+        lp, lr = world_to_local_pose(self.parent, self.local_to_world, self.world_rotation, i, pos, rot)
+        self.local_position[i] = lp
+        self.local_rotation[i] = lr
+        if propagate:
+            self.propagate()
+
+    # -- Unity Transform helpers (after propagate)
+    def transform_point(self, i: int, p) -> np.ndarray:
+        m = self.local_to_world[i]
+        return m[:3, :3] @ np.asarray(p, dtype=np.float64) + m[:3, 3]
+
+    def inverse_transform_point(self, i: int, p) -> np.ndarray:
+        return np.linalg.solve(self.local_to_world[i][:3, :3], np.asarray(p, dtype=np.float64) - self.local_to_world[i][:3, 3])
+
+    def transform_direction(self, i: int, d) -> np.ndarray:
+        """Rotate a direction by node i's world rotation (scale ignored, as Unity does)."""
+        return np.asarray(q_rotate(tuple(self.world_rotation[i]), tuple(map(float, d))))
+
+    def inverse_transform_direction(self, i: int, d) -> np.ndarray:
+        q = self.world_rotation[i]
+        return np.asarray(q_rotate((-q[0], -q[1], -q[2], q[3]), tuple(map(float, d))))
+
+
+def _topological_order(bones: list[BoneSpec]) -> list[int]:
+    """Indices of ``bones`` with every parent before its children (stable otherwise)."""
+    by_name: dict[str, int] = {}
+    for i, b in enumerate(bones):
+        if b.name in by_name:
+            raise HierarchyError(f"duplicate transform name {b.name!r}")
+        by_name[b.name] = i
+    children: dict[int, list[int]] = {}
+    roots = []
+    for i, b in enumerate(bones):
+        if b.parent is None:
+            roots.append(i)
+        elif b.parent not in by_name:
+            raise HierarchyError(f"transform {b.name!r}: parent {b.parent!r} does not exist")
+        else:
+            children.setdefault(by_name[b.parent], []).append(i)
+    order: list[int] = []
+    stack = list(reversed(roots))
+    while stack:
+        i = stack.pop()
+        order.append(i)
+        stack.extend(reversed(children.get(i, [])))
+    if len(order) != len(bones):
+        cyclic = sorted(bones[i].name for i in set(range(len(bones))) - set(order))
+        raise HierarchyError(f"transform parents form a cycle through {cyclic}")
+    return order
