@@ -1,0 +1,121 @@
+"""The BoneCloth parameter table (ref §F.1), one row per parameter.
+
+Keys are MagicaCloth2's serialized names in snake_case, grouped as in its inspector
+(``inertia.world_inertia``). Kinds:
+
+* ``float``  — a number clamped to [lo, hi] by validation (out of range is an error);
+* ``curve``  — a depth curve (``params.curves.Curve``): the range applies to its value;
+* ``limit``  — MagicaCloth2's CheckSliderSerializeData: a number enables the limit, ``false``
+  / ``off`` disables it; the simulation receives -1 for "no limit";
+* ``bool``, ``enum`` (choices), ``vector3``, ``transform`` (a transform name or null).
+
+``implemented`` is False for parameters that are accepted (so MagicaCloth2 settings carry
+over) but have no effect because the feature does not exist in scene format v1 (wind zones,
+self collision): ``docs/parameters.md`` says so.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class ParameterDef:
+    key: str
+    kind: str
+    default: object
+    lo: float | None = None
+    hi: float | None = None
+    units: str = ""
+    ref: str = ""
+    doc: str = ""
+    choices: tuple[str, ...] = ()
+    implemented: bool = True
+
+
+def _p(key, kind, default, lo=None, hi=None, units="", ref="", doc="", choices=(), implemented=True):
+    return ParameterDef(key, kind, default, lo, hi, units, ref, doc, tuple(choices), implemented)
+
+
+# Curve defaults are written as YAML-shaped values and parsed by params.__init__.
+PARAMETER_DEFS: tuple[ParameterDef, ...] = (
+    # -- bone cloth / general
+    _p("rotational_interpolation", "float", 0.5, 0, 1, "", "E.2", "How far a moving bone turns towards its children (0: follow the parent edge, 1: point at the children)."),
+    _p("root_rotation", "float", 0.5, 0, 1, "", "E.2", "How far a fixed root bone turns towards its simulated children."),
+    _p("update_mode", "enum", "normal", ref="A.4", doc="Frame delta source: normal (deltaTime), unity_physics (fixed updates x fixedDeltaTime), unscaled (unscaledDeltaTime). animator_linkage resolves to normal (no Animator here).",
+       choices=("normal", "unity_physics", "unscaled", "animator_linkage")),
+    _p("animation_pose_ratio", "float", 0.0, 0, 1, "", "D.2, D.4, E.2", "Blend of the rest shape towards the animated pose as the constraints' reference."),
+    _p("normal_axis", "enum", "up", ref="D.9", doc="Bone axis used as the backstop direction.",
+       choices=("right", "up", "forward", "inverse_right", "inverse_up", "inverse_forward")),
+    _p("gravity", "float", 5.0, 0, 20, "m/s^2", "C.3, D.1", "Gravity acceleration magnitude (MagicaCloth2 default 5, not 9.81)."),
+    _p("gravity_direction", "vector3", (0.0, -1.0, 0.0), units="unit vector", ref="C.2", doc="World gravity direction; normalized (zero if too short). Defaults to the scene's gravity direction."),
+    _p("gravity_falloff", "float", 0.0, 0, 1, "", "C.3", "Reduces gravity while the cloth's center frame keeps its build orientation."),
+    _p("stabilization_time_after_reset", "float", 0.1, 0, 1, "s", "C.3, H.2", "Ramp time of velocities and blend weight after a reset."),
+    _p("blend_weight", "float", 1.0, 0, 1, "", "C.3, E.1, E.2", "Blend between the animated pose (0) and the simulation (1)."),
+    _p("damping", "curve", 0.05, 0, 1, "per step at 90 Hz", "D.1", "Velocity damping; the job table is value x 0.2."),
+    _p("radius", "curve", 0.02, 0.001, 1, "m", "D.8, D.9", "Particle collision radius over depth."),
+    # -- inertia
+    _p("inertia.anchor", "transform", None, ref="C.4", doc="Optional anchor transform whose motion is (partly) removed from the cloth's felt motion."),
+    _p("inertia.anchor_inertia", "float", 0.0, 0, 1, "", "C.4", "How much of the anchor's motion the cloth still feels."),
+    _p("inertia.world_inertia", "float", 1.0, 0, 1, "", "C.4", "Fraction of the component's world motion the particles feel (0: carried rigidly)."),
+    _p("inertia.movement_inertia_smoothing", "float", 0.4, 0, 1, "", "C.4", "Per-frame smoothing of the component's velocity."),
+    _p("inertia.movement_speed_limit", "limit", 5.0, 0, 10, "m/s", "C.4", "Cap on the world movement speed the cloth feels; the rest is shifted rigidly."),
+    _p("inertia.rotation_speed_limit", "limit", 720.0, 0, 1440, "deg/s", "C.4", "Cap on the world rotation speed the cloth feels."),
+    _p("inertia.local_inertia", "float", 1.0, 0, 1, "", "C.3", "Fraction of the center's per-step motion the particles feel."),
+    _p("inertia.local_movement_speed_limit", "limit", False, 0, 10, "m/s", "C.3", "Cap on the felt per-step center speed (off by default; default value when enabled 5)."),
+    _p("inertia.local_rotation_speed_limit", "limit", False, 0, 1440, "deg/s", "C.3", "Cap on the felt per-step center rotation speed (off by default; default value when enabled 720)."),
+    _p("inertia.depth_inertia", "float", 0.0, 0, 1, "", "D.1", "Makes root-side particles follow the center's step motion more."),
+    _p("inertia.centrifugal_acceleration", "float", 0.0, 0, 1, "", "D.10", "Centrifugal boost while the center rotates."),
+    _p("inertia.particle_speed_limit", "limit", 4.0, 0, 10, "m/s", "D.10", "Cap on each particle's speed."),
+    _p("inertia.teleport_mode", "enum", "none", ref="C.4", doc="What a jump beyond the teleport thresholds does: none, reset (snap to the animated pose), keep (carry the shape over).",
+       choices=("none", "reset", "keep")),
+    _p("inertia.teleport_distance", "float", 0.5, 0, 1e6, "m", "C.4", "Teleport distance threshold per frame."),
+    _p("inertia.teleport_rotation", "float", 90.0, 0, 360, "deg", "C.4", "Teleport rotation threshold per frame."),
+    # -- constraints
+    _p("tether.distance_compression", "float", 0.4, 0, 1, "", "D.3", "How far a particle may approach its root (compression limit is 1 - value)."),
+    _p("distance.stiffness", "curve", {"value": 1.0, "curve": [1.0, 0.5], "use_curve": False}, 0, 1, "", "D.4", "Distance constraint stiffness over depth (horizontal links get half)."),
+    _p("triangle_bending.stiffness", "float", 1.0, 0, 1, "", "D.7", "Triangle bending and volume stiffness (mesh connection modes only)."),
+    _p("angle_restoration.use", "bool", True, ref="D.6", doc="Restore each edge towards its rest direction."),
+    _p("angle_restoration.stiffness", "curve", {"value": 0.2, "curve": [1.0, 0.2]}, 0, 1, "", "D.6", "Restoration stiffness over depth; the job table is value x 0.2."),
+    _p("angle_restoration.velocity_attenuation", "float", 0.8, 0, 1, "", "D.6", "Fraction of the restoration correction not turned into velocity."),
+    _p("angle_restoration.gravity_falloff", "float", 0.0, 0, 1, "", "D.6", "Weakens restoration while gravity pulls along the rest direction."),
+    _p("angle_limit.use", "bool", False, ref="D.5", doc="Limit the angle between each edge and its rest direction."),
+    _p("angle_limit.limit_angle", "curve", {"value": 60.0, "curve": [0.0, 1.0]}, 0, 180, "deg", "D.5", "Maximum angle over depth (evaluated without clamp)."),
+    _p("angle_limit.stiffness", "float", 1.0, 0, 1, "", "D.5", "How far a violating edge is brought back to the limit per iteration."),
+    _p("motion.use_max_distance", "bool", False, ref="D.9", doc="Keep each particle within max_distance of its animated position."),
+    _p("motion.max_distance", "curve", 0.3, 0, 5, "m", "D.9", "Maximum distance from the animated pose (evaluated at depth^2)."),
+    _p("motion.use_backstop", "bool", False, ref="D.9", doc="Keep particles outside a backstop sphere behind the animated pose."),
+    _p("motion.backstop_radius", "float", 10.0, 0, 10, "m", "D.9", "Backstop sphere radius."),
+    _p("motion.backstop_distance", "curve", 0.0, 0, 1, "m", "D.9", "Backstop offset along -normal_axis (evaluated at depth^2)."),
+    _p("motion.stiffness", "float", 1.0, 0, 1, "", "D.9", "Stiffness of the motion constraint."),
+    _p("collider_collision.mode", "enum", "point", ref="D.8", doc="Collider collision: none, point (particle spheres) or edge (proxy edges).",
+       choices=("none", "point", "edge")),
+    _p("collider_collision.friction", "float", 0.05, 0, 0.5, "", "D.8, D.10", "Dynamic and static friction against colliders."),
+    # -- culling (distance culling; camera culling has no camera here)
+    _p("culling.distance_culling_length", "limit", False, 0, 100, "m", "H.1", "Stop simulating beyond this distance from the reference transform (off by default; default value when enabled 30)."),
+    _p("culling.distance_culling_fade_ratio", "float", 0.2, 0, 1, "", "H.1", "Fraction of the culling length over which the cloth fades to the animated pose."),
+    _p("culling.distance_culling_reference", "transform", None, ref="H.1", doc="Transform the culling distance is measured from (the main camera in Unity)."),
+    # -- wind (accepted for compatibility; scene format v1 has no wind zones)
+    _p("wind.influence", "float", 1.0, 0, 2, "", "D.1", "Wind influence.", implemented=False),
+    _p("wind.frequency", "float", 1.0, 0, 2, "", "D.1", "Wind frequency.", implemented=False),
+    _p("wind.turbulence", "float", 1.0, 0, 2, "", "D.1", "Wind turbulence.", implemented=False),
+    _p("wind.blend", "float", 0.7, 0, 1, "", "D.1", "Wind noise blend.", implemented=False),
+    _p("wind.synchronization", "float", 0.7, 0, 1, "", "D.1", "Wind synchronization.", implemented=False),
+    _p("wind.depth_weight", "float", 0.0, 0, 1, "", "D.1", "Wind depth weight.", implemented=False),
+    _p("wind.moving_wind", "float", 0.0, 0, 10, "", "D.1", "Wind from the cloth's own movement.", implemented=False),
+    # -- beyond MagicaCloth2 (issue 4 item 4, issue 8)
+    _p("solver.rate_mode", "enum", "magica", ref="docs/parameters.md",
+       doc="magica: per-step rates tuned for 90 Hz and patched by SimulationPower (MagicaCloth2); frequency_consistent: every per-step rate k becomes 1-(1-k)^(90/f), so the same parameters give the same motion at any frequency (identical at 90 Hz).",
+       choices=("magica", "frequency_consistent")),
+)
+
+# Defaults a limit takes when enabled without a value (ref §F.1 "check (false, v)").
+LIMIT_ENABLED_DEFAULTS = {
+    "inertia.movement_speed_limit": 5.0,
+    "inertia.rotation_speed_limit": 720.0,
+    "inertia.local_movement_speed_limit": 5.0,
+    "inertia.local_rotation_speed_limit": 720.0,
+    "inertia.particle_speed_limit": 4.0,
+    "culling.distance_culling_length": 30.0,
+}
+
+PARAMETERS = {d.key: d for d in PARAMETER_DEFS}
