@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 from collections.abc import Mapping
 
 from magica_py.params.curves import Curve, evaluate_curve, evaluate_curve_clamp01
@@ -97,7 +98,9 @@ def preset_names() -> list[str]:
 
 
 def _normalize_preset_name(name: str) -> str:
-    return name.strip().lower().replace("-", "_").replace(" ", "_")
+    """'ShortHair', 'short-hair', 'Short Hair' and 'short_hair' all name the same preset."""
+    snake = re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", name.strip())
+    return re.sub(r"[\s\-]+", "_", snake).lower()
 
 
 def flatten_overrides(overrides: Mapping | None, where: str) -> dict:
