@@ -1,0 +1,128 @@
+"""Collider world shapes for drawing and for the penetration metric (numpy, all colliders at once).
+
+The shapes are those of ref §G.2/§G.3 at the frame pose (no step interpolation): for a
+collider on node t with world position P, rotation R and lossy scale S (|S| < 1e-6 -> 1e-6)
+
+* frame position   ``framePos = P + (R·(center ∘ sign S)) ∘ |S|``
+* sphere           centre framePos, radius ``radius·|S.x|``
+* capsule          axis = local X/Y/Z · sign(S_axis) (negated when ``reverse_direction``),
+                   k = |S_axis|, (rs, re, L) = (radius, end_radius, length)·k; aligned on
+                   centre: a = b = L/2, else a = 0, b = L − rs; a = max(a − rs, 0),
+                   b = max(b − re, 0); start = framePos + R·axis·a, end = framePos − R·axis·b
+                   (the centres of the two end caps)
+* plane            point framePos, normal ``R·(0, sign S.y, 0)``
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from magica_py.sinks.base import ColliderShapes
+
+SPHERE, CAPSULE, PLANE = 0, 1, 2
+_SCALE_EPS = 1e-6
+
+
+def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors v (k,3) by unit quaternions q (k,4) xyzw (numpy twin of math3d.q_rotate)."""
+    u = q[:, :3]
+    w = q[:, 3:4]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def collider_shapes(colliders, hierarchy) -> ColliderShapes:
+    """World shapes of every collider of a ``ColliderSet`` at the hierarchy's current pose."""
+    n = len(colliders.names) if colliders is not None else 0
+    if n == 0:
+        return ColliderShapes.empty()
+    node = np.asarray(colliders.transform, dtype=np.int64)
+    P = hierarchy.world_position[node]
+    R = hierarchy.world_rotation[node]
+    S = hierarchy.lossy_scale[node].copy()
+    sign = np.where(S < 0.0, -1.0, 1.0)
+    S_abs = np.maximum(np.abs(S), _SCALE_EPS)
+    frame_pos = P + rotate(R, np.asarray(colliders.center, dtype=np.float64) * sign) * S_abs
+    shape = np.asarray(colliders.shape)
+    radius = np.asarray(colliders.radius, dtype=np.float64)
+
+    sph = shape == SPHERE
+    sphere_center = frame_pos[sph]
+    sphere_radius = radius[sph] * S_abs[sph, 0]
+
+    cap = np.flatnonzero(shape == CAPSULE)
+    direction = np.asarray(colliders.direction, dtype=np.int64)[cap]
+    axis = np.zeros((cap.size, 3))
+    axis[np.arange(cap.size), direction] = 1.0
+    s_axis = S[cap, direction]
+    axis *= np.where(s_axis < 0.0, -1.0, 1.0)[:, None]
+    axis *= np.where(np.asarray(colliders.reverse_direction, dtype=bool)[cap], -1.0, 1.0)[:, None]
+    k = np.maximum(np.abs(s_axis), _SCALE_EPS)
+    rs = radius[cap] * k
+    re = np.asarray(colliders.end_radius, dtype=np.float64)[cap] * k
+    length = np.asarray(colliders.length, dtype=np.float64)[cap] * k
+    aligned = np.asarray(colliders.aligned_on_center, dtype=bool)[cap]
+    a = np.where(aligned, length * 0.5, 0.0)
+    b = np.where(aligned, length * 0.5, length - rs)
+    a = np.maximum(a - rs, 0.0)
+    b = np.maximum(b - re, 0.0)
+    world_axis = rotate(R[cap], axis)
+    capsule_start = frame_pos[cap] + world_axis * a[:, None]
+    capsule_end = frame_pos[cap] - world_axis * b[:, None]
+
+    pl = shape == PLANE
+    up = np.zeros((int(pl.sum()), 3))
+    up[:, 1] = sign[pl, 1]
+    plane_normal = rotate(R[pl], up)
+    return ColliderShapes(sphere_center, sphere_radius, capsule_start, capsule_end, rs, re,
+                          frame_pos[pl], plane_normal)
+
+
+def shape_slots(colliders) -> tuple[np.ndarray, np.ndarray]:
+    """(kind, slot) per collider: its shape and its row in the ColliderShapes arrays of that kind."""
+    shape = np.asarray(colliders.shape) if colliders is not None else np.zeros(0, np.int8)
+    slot = np.zeros(shape.size, np.int64)
+    for kind in (SPHERE, CAPSULE, PLANE):
+        sel = shape == kind
+        slot[sel] = np.arange(int(sel.sum()))
+    return shape.astype(np.int64), slot
+
+
+def capsule_pose(start: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(length (C,), quaternion (C,4)) turning rerun's capsule axis +Z onto start->end."""
+    d = end - start
+    length = np.linalg.norm(d, axis=1)
+    return length, from_z_rotation(d)
+
+
+def from_z_rotation(d: np.ndarray) -> np.ndarray:
+    """Quaternions (k,4) rotating +Z onto the directions d (k,3); identity for zero vectors."""
+    return from_to_rotation(np.array([0.0, 0.0, 1.0]), d)
+
+
+def from_y_rotation(d: np.ndarray) -> np.ndarray:
+    """Quaternions (k,4) rotating +Y onto the directions d (k,3)."""
+    return from_to_rotation(np.array([0.0, 1.0, 0.0]), d)
+
+
+def from_to_rotation(a: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Shortest-arc quaternions from the unit vector a to each direction d (opposite: 180° about a normal axis)."""
+    k = d.shape[0]
+    out = np.zeros((k, 4))
+    out[:, 3] = 1.0
+    norm = np.linalg.norm(d, axis=1)
+    ok = norm > 1e-12
+    u = np.zeros_like(d)
+    u[ok] = d[ok] / norm[ok, None]
+    c = u @ a
+    axis = np.cross(np.broadcast_to(a, u.shape), u)
+    half = np.sqrt(np.maximum((1.0 + c) * 2.0, 0.0))
+    regular = ok & (c > -1.0 + 1e-9)
+    out[regular, :3] = axis[regular] / half[regular, None]
+    out[regular, 3] = half[regular] * 0.5
+    opposite = ok & ~regular
+    if opposite.any():  # any axis normal to a
+        perp = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        perp = perp - a * (perp @ a)
+        out[opposite, :3] = perp / np.linalg.norm(perp)
+        out[opposite, 3] = 0.0
+    return out
