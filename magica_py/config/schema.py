@@ -1,0 +1,483 @@
+"""Scene format v1: the structure of every section, checked and normalized.
+
+``check_document(checker, data)`` returns a ``NormalizedScene`` of plain values (dicts with
+every default filled in, quaternions normalized, Euler angles converted, enum values lower
+case) and records every structural problem on the checker. Names are not resolved here:
+``load.py`` expands rigs, instances and globs and checks the cross references.
+
+The field tables (``PART_FIELDS``, ``DRIVER_FIELDS``, ``SHAPE_FIELDS``, ...) are the single
+description of each mapping: the validation reads them and ``docs/scene-format.md`` lists
+them; ``tests/test_config_schema.py`` checks that every table key is documented.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from magica_py.config.checker import ANY, NON_NEGATIVE, POSITIVE, REQUIRED, Checker, Range
+
+FORMAT_VERSION = 1
+TOP_LEVEL_KEYS = ("version", "scene", "rigs", "animation", "colliders", "cloths", "output")
+UPDATE_MODES = ("normal", "unity_physics", "unscaled")
+TIMING_MODES = ("exact", "faithful")
+CONNECTION_MODES = ("line", "automatic_mesh", "sequential_loop_mesh", "sequential_non_loop_mesh")
+COLLISION_MODES = ("none", "point", "edge")
+BONE_ATTRIBUTES = ("fixed", "move", "invalid")
+CLOTH_TYPES = ("bone_cloth",)
+AXES = ("x", "y", "z")
+
+
+@dataclass(frozen=True)
+class Field:
+    """One key of a mapping: kind (number, int, bool, text, choice, vec3, dir3, name), default
+    (REQUIRED if it must be given), numeric range, enum choices and a one-line doc."""
+
+    kind: str
+    default: object = REQUIRED
+    rng: Range = ANY
+    choices: tuple = ()
+    doc: str = ""
+
+
+def F(kind, default=REQUIRED, rng=ANY, choices=(), doc=""):
+    return Field(kind, default, rng, tuple(choices), doc)
+
+
+DEGREES_360 = Range(-360.0, 360.0)
+COUNT = Range(1)
+
+# -- rigs --------------------------------------------------------------------------------
+# Keys and defaults follow the generators of magica_py.scene.rigs (chain, fan, skirt).
+_STRAND_COMMON = {
+    "curl": F("number", 0.0, DEGREES_360, doc="bend per bone about the bone's +X (degrees)"),
+    "position": F("vec3", (0.0, 0.0, 0.0), doc="root position in the parent's space (m)"),
+}
+PART_FIELDS: dict[str, dict[str, Field]] = {
+    "chain": {
+        "name": F("name", doc="bones are named <name>_0 .. <name>_<bones-1>"),
+        "parent": F("name", doc="bone the chain hangs from"),
+        "bones": F("int", REQUIRED, COUNT, doc="number of bones"),
+        "length": F("number", REQUIRED, POSITIVE, doc="total length, first bone to last (m)"),
+        "direction": F("dir3", (0.0, -1.0, 0.0), doc="direction of the first segment in the parent's space"),
+        **_STRAND_COMMON,
+        "curl_axis": F("dir3", None, doc="curl axis in the parent's space (default: the bone's +X)"),
+    },
+    "fan": {
+        "name": F("name", doc="strand s, bone b is named <name>_<s>_<b>"),
+        "parent": F("name", doc="bone the strands hang from (e.g. the head)"),
+        "strands": F("int", REQUIRED, COUNT, doc="number of strands"),
+        "bones": F("int", REQUIRED, COUNT, doc="bones per strand"),
+        "length": F("number", REQUIRED, POSITIVE, doc="strand length (m)"),
+        "spread": F("number", 120.0, Range(0.0, 360.0), doc="angle covered by the strand roots about the axis (degrees)"),
+        "tilt": F("number", 30.0, Range(-90.0, 90.0), doc="outward tilt of each strand from the axis (degrees)"),
+        "radius": F("number", 0.08, NON_NEGATIVE, doc="radius of the root arc (m)"),
+        "axis": F("dir3", (0.0, -1.0, 0.0), doc="direction the strands hang along (parent space)"),
+        "facing": F("dir3", (0.0, 0.0, -1.0), doc="azimuth 0 of the fan (parent space; default the back of the head)"),
+        **_STRAND_COMMON,
+    },
+    "skirt": {
+        "name": F("name", doc="strand s, bone b is named <name>_<s>_<b>"),
+        "parent": F("name", doc="bone the skirt hangs from (usually the hips)"),
+        "strands": F("int", 12, COUNT, doc="strands evenly around the ring"),
+        "bones": F("int", 4, COUNT, doc="bones per strand"),
+        "radius": F("number", 0.15, POSITIVE, doc="ring radius (m)"),
+        "length": F("number", 0.4, POSITIVE, doc="strand length (m)"),
+        "flare": F("number", 20.0, Range(-90.0, 90.0), doc="outward angle of each strand from the axis (degrees)"),
+        "axis": F("dir3", (0.0, -1.0, 0.0), doc="direction the strands hang along (parent space)"),
+        "facing": F("dir3", (0.0, 0.0, 1.0), doc="azimuth of strand 0 (parent space; default the front)"),
+        **_STRAND_COMMON,
+    },
+}
+
+INSTANCE_FIELDS = {
+    "count": F("int", REQUIRED, COUNT, doc="number of copies of the rig"),
+    "spacing": F("vec3", (1.0, 0.0, 0.0), doc="offset between neighbouring copies in a row (m)"),
+    "columns": F("int", 0, NON_NEGATIVE, doc="copies per row; 0 = all in one row"),
+    "row_spacing": F("vec3", None, doc="offset between rows (m); default: spacing turned 90 degrees about Y"),
+    "phase_offset": F("number", 0.0, NON_NEGATIVE, doc="animation time offset per instance index (s)"),
+    "phase_jitter": F("number", 0.0, NON_NEGATIVE, doc="extra random offset in [0, phase_jitter) per instance (s), seeded by scene.seed"),
+}
+
+# -- animation ---------------------------------------------------------------------------
+DRIVER_FIELDS: dict[str, dict[str, Field]] = {
+    "keyframes": {
+        "interpolation": F("choice", "linear", choices=("linear", "step", "smooth"),
+                           doc="linear (slerp for rotations), step, or smooth (eased segments)"),
+        "loop": F("bool", False, doc="repeat after the last key (else hold the last key)"),
+        "keys": F("keys", doc="list of {time, position?, rotation|euler?, scale?} (local pose)"),
+    },
+    "orbit": {
+        "center": F("vec3", (0.0, 0.0, 0.0), doc="circle centre in the parent's space (m)"),
+        "radius": F("number", REQUIRED, POSITIVE, doc="circle radius (m)"),
+        "period": F("number", REQUIRED, Range(0.0, low_open=True), doc="time for one revolution (s)"),
+        "axis": F("dir3", (0.0, 1.0, 0.0), doc="axis of the circle (counter-clockwise about it, Unity left-handed)"),
+        "phase": F("number", 0.0, doc="start angle (degrees)"),
+        "face_path": F("bool", False, doc="also rotate the target so it faces along the path"),
+    },
+    "oscillate": {
+        "property": F("choice", "position", choices=("position", "rotation"), doc="what oscillates"),
+        "axis": F("dir3", (0.0, 1.0, 0.0), doc="direction (position) or rotation axis (rotation)"),
+        "amplitude": F("number", REQUIRED, doc="m for position, degrees for rotation"),
+        "frequency": F("number", REQUIRED, POSITIVE, doc="Hz"),
+        "phase": F("number", 0.0, doc="degrees"),
+    },
+    "spin": {
+        "axis": F("dir3", (0.0, 1.0, 0.0), doc="rotation axis in the parent's space"),
+        "speed": F("number", REQUIRED, doc="angular speed (degrees/s)"),
+    },
+    "walk": {
+        "speed": F("number", 0.0, NON_NEGATIVE, doc="forward speed (m/s); 0 = walk on the spot"),
+        "stride_frequency": F("number", 1.8, POSITIVE, doc="steps per second (Hz)"),
+        "bob": F("number", 0.03, NON_NEGATIVE, doc="vertical bob amplitude (m), twice per stride"),
+        "sway": F("number", 4.0, NON_NEGATIVE, doc="lateral sway amplitude (degrees)"),
+        "lateral": F("number", 0.0, NON_NEGATIVE, doc="side-to-side shift amplitude (m), once per stride"),
+        "twist": F("number", 0.0, NON_NEGATIVE, doc="yaw amplitude about the local +Y (degrees)"),
+        "direction": F("dir3", (0.0, 0.0, 1.0), doc="forward direction in the parent's space"),
+        "up": F("dir3", (0.0, 1.0, 0.0), doc="bob direction in the parent's space (not parallel to direction)"),
+    },
+}
+DRIVER_COMMON = {
+    "target": F("name", doc="transform driven"),
+    "start": F("number", 0.0, NON_NEGATIVE, doc="driver active from this time (s)"),
+    "end": F("number", None, NON_NEGATIVE, doc="... until this time (s); null = forever"),
+    "phase_offset": F("number", 0.0, doc="time offset added to the driver's clock (s)"),
+    "fade": F("number", 0.0, NON_NEGATIVE, doc="periodic drivers fade in/out over this time inside [start, end] (s)"),
+}
+EVENT_KINDS = ("teleport", "time_scale", "set_parameter")
+EVENT_FIELDS = {
+    "teleport": {"target": F("name", doc="transform moved"),
+                 "position": F("vec3", None, doc="new world position (m); null keeps it"),
+                 "rotation": F("quat", None, doc="new world rotation [x,y,z,w] (or euler: [x,y,z] degrees)")},
+    "set_parameter": {"cloth": F("name", doc="cloth name"),
+                      "key": F("text", doc="parameter key (dotted)"),
+                      "value": F("any", doc="new value, validated like cloths[].parameters")},
+}
+
+# -- colliders ---------------------------------------------------------------------------
+MIN_COLLIDER_SIZE = Range(0.001)
+SHAPE_FIELDS: dict[str, dict[str, Field]] = {
+    "sphere": {"radius": F("number", REQUIRED, MIN_COLLIDER_SIZE, doc="radius (m)")},
+    "capsule": {
+        "radius": F("number", REQUIRED, MIN_COLLIDER_SIZE, doc="start radius (m)"),
+        "end_radius": F("number", None, MIN_COLLIDER_SIZE, doc="end radius (m); default: radius"),
+        "length": F("number", REQUIRED, NON_NEGATIVE, doc="length tip to tip (m)"),
+        "direction": F("choice", "y", choices=AXES, doc="local axis x, y or z"),
+        "reverse": F("bool", False, doc="reverse the axis"),
+        "aligned_on_center": F("bool", True, doc="centred on the transform (else starts at it)"),
+    },
+    "plane": {},
+}
+SHAPES = tuple(SHAPE_FIELDS)
+
+OUTPUT_LOG_FIELDS = {
+    "skeleton": F("bool", True, doc="rig joints and bones"),
+    "particles": F("bool", True, doc="cloth particles coloured by attribute"),
+    "edges": F("bool", True, doc="proxy edges"),
+    "triangles": F("bool", True, doc="proxy triangles (mesh connection modes)"),
+    "baselines": F("bool", False, doc="baseline chains"),
+    "base_pose": F("bool", False, doc="the animated base pose the solver reads"),
+    "colliders": F("bool", True, doc="collider shapes"),
+    "metrics": F("bool", True, doc="time series: steps, phase wall times, stretch, speed"),
+    "events": F("bool", True, doc="teleports, time-scale changes, parameter changes"),
+}
+
+
+@dataclass
+class NormalizedScene:
+    """Plain, checked values of every section (names still unresolved)."""
+
+    settings: dict = field(default_factory=dict)
+    rigs: list = field(default_factory=list)
+    animation: list = field(default_factory=list)
+    colliders: list = field(default_factory=list)
+    cloths: list = field(default_factory=list)
+    output: dict = field(default_factory=dict)
+
+
+# ----------------------------------------------------------------------------- readers
+def read_fields(c: Checker, value, path: tuple, spec: dict[str, Field], *, extra=()) -> dict | None:
+    """Check a mapping against a field table; unknown keys reported; defaults filled in."""
+    m = c.mapping(value, path, list(spec) + list(extra))
+    if m is None:
+        return None
+    out = {}
+    for key, f in spec.items():
+        out[key] = read_field(c, m, key, path, f)
+    return out
+
+
+def read_field(c: Checker, m: dict, key: str, path: tuple, f: Field):
+    kind = f.kind
+    if kind in ("number", "int"):
+        return c.number(m, key, path, f.default, f.rng, integer=kind == "int")
+    if kind == "bool":
+        return c.boolean(m, key, path, f.default)
+    if kind == "text":
+        return c.text(m, key, path, f.default)
+    if kind == "name":
+        return c.text(m, key, path, f.default, what="a name")
+    if kind == "choice":
+        return c.choice(m, key, path, f.choices, f.default)
+    if kind == "vec3":
+        return c.vector(m, key, path, 3, f.default, f.rng)
+    if kind == "dir3":
+        return c.direction(m, key, path, f.default)
+    if kind == "any":
+        if key not in m:
+            c.error(path, f"missing {key!r}")
+        return m.get(key)
+    raise AssertionError(f"field kind {kind} is read by its section")
+
+
+def check_document(c: Checker, data) -> NormalizedScene:
+    out = NormalizedScene()
+    root = c.mapping(data, (), TOP_LEVEL_KEYS, what="a mapping with the sections " + ", ".join(TOP_LEVEL_KEYS))
+    if root is None:
+        return out
+    version = root.get("version", FORMAT_VERSION)
+    if version != FORMAT_VERSION or isinstance(version, bool):
+        c.error(("version",), f"unsupported format version {version!r}: this magica_py reads version {FORMAT_VERSION}")
+    out.settings = check_settings(c, root.get("scene"), ("scene",))
+    sections = (("rigs", check_rig, 1), ("animation", check_animation_entry, 0),
+                ("colliders", check_collider, 0), ("cloths", check_cloth, 0))
+    for key, check, min_length in sections:
+        items = [check(c, item, (key, i)) for i, item in enumerate(c.sequence(root, key, (), min_length=min_length))]
+        setattr(out, key, [item for item in items if item is not None])
+    out.output = check_output(c, root.get("output"), ("output",))
+    return out
+
+
+# ----------------------------------------------------------------------------- scene
+SETTINGS_KEYS = ("name", "fps", "frame_times", "frame_times_cycle", "clock", "frames", "duration", "time_scale", "update_mode",
+                 "simulation_frequency", "max_steps_per_frame", "fixed_delta_time", "maximum_delta_time",
+                 "gravity", "timing", "seed")
+
+
+def check_settings(c: Checker, value, path: tuple) -> dict:
+    m = c.mapping(value, path, SETTINGS_KEYS) or {}
+    s: dict = {"name": c.text(m, "name", path, None, what="a scene name")}
+    source = c.exactly_one(m, ("fps", "frame_times", "clock"), path, required=False) or "fps"
+    s["fps"] = c.number(m, "fps", path, 60.0 if source == "fps" else None, Range(0.0, 10000.0, low_open=True),
+                        units="frames/s")
+    s["frame_times"] = None
+    if source == "frame_times":
+        times = c.sequence(m, "frame_times", path, min_length=1)
+        checked = [c.number({i: t}, i, path + ("frame_times",), REQUIRED, Range(0.0, 10.0, low_open=True), units="s")
+                   for i, t in enumerate(times)]
+        s["frame_times"] = tuple(t for t in checked if t is not None)
+    s["frame_times_cycle"] = c.boolean(m, "frame_times_cycle", path, True)
+    if s["frame_times"] and not s["frame_times_cycle"] and isinstance(m.get("frames"), int) \
+            and m["frames"] > len(s["frame_times"]):
+        c.error(path + ("frames",), f"expected at most {len(s['frame_times'])} frames: frame_times is not "
+                                    f"cycled (frame_times_cycle: false) and has {len(s['frame_times'])} entries")
+    s["clock"] = c.choice(m, "clock", path, ("realtime",), None)
+    length = c.exactly_one(m, ("frames", "duration"), path, required=False) or "frames"
+    s["frames"] = c.integer(m, "frames", path, 600 if length == "frames" else None, COUNT)
+    s["duration"] = c.number(m, "duration", path, None, POSITIVE, units="s")
+    s["time_scale"] = c.number(m, "time_scale", path, 1.0, Range(0.0, 100.0))
+    s["update_mode"] = c.choice(m, "update_mode", path, UPDATE_MODES, "normal")
+    s["simulation_frequency"] = c.integer(m, "simulation_frequency", path, 90, Range(30, 150))
+    s["max_steps_per_frame"] = c.integer(m, "max_steps_per_frame", path, 3, Range(1, 5))
+    s["fixed_delta_time"] = c.number(m, "fixed_delta_time", path, 0.02, Range(0.0001, 10.0), units="s")
+    s["maximum_delta_time"] = c.number(m, "maximum_delta_time", path, 1.0 / 3.0, Range(0.0001, 10.0), units="s")
+    if s["maximum_delta_time"] < s["fixed_delta_time"]:
+        c.error(path + ("maximum_delta_time",), f"expected maximum_delta_time >= fixed_delta_time "
+                                                f"({s['fixed_delta_time']:g} s), got {s['maximum_delta_time']:g}")
+    s["gravity"] = c.direction(m, "gravity", path, (0.0, -1.0, 0.0))
+    s["timing"] = c.choice(m, "timing", path, TIMING_MODES, "exact")
+    s["seed"] = c.integer(m, "seed", path, 0, Range(0, 2**63 - 1))
+    return s
+
+
+# ----------------------------------------------------------------------------- rigs
+def check_pose(c: Checker, m: dict, path: tuple, *, scale: bool = True) -> dict:
+    pose = {"position": c.vector(m, "position", path, 3, (0.0, 0.0, 0.0)),
+            "rotation": c.rotation(m, path)}
+    if scale:
+        s = c.vector(m, "scale", path, 3, (1.0, 1.0, 1.0))
+        if any(abs(x) < 1e-6 for x in s):
+            c.error(path + ("scale",), f"expected non-zero scale components, got {list(s)}")
+            s = (1.0, 1.0, 1.0)
+        pose["scale"] = s
+    return pose
+
+
+def check_rig(c: Checker, value, path: tuple) -> dict | None:
+    m = c.mapping(value, path, ("name", "position", "rotation", "euler", "bones", "parts", "instances"))
+    if m is None:
+        return None
+    rig = {"name": c.text(m, "name", path, what="a rig name"), **check_pose(c, m, path, scale=False)}
+    rig["bones"] = []
+    for i, b in enumerate(c.sequence(m, "bones", path)):
+        bp = path + ("bones", i)
+        bm = c.mapping(b, bp, ("name", "parent", "position", "rotation", "euler", "scale"))
+        if bm is None:
+            continue
+        rig["bones"].append({"name": c.text(bm, "name", bp, what="a bone name"),
+                             "parent": c.text(bm, "parent", bp, None, what="a bone name or null"),
+                             "path": bp, **check_pose(c, bm, bp)})
+    rig["parts"] = []
+    for i, p in enumerate(c.sequence(m, "parts", path)):
+        pp = path + ("parts", i)
+        pm = c.mapping(p, pp, PART_FIELDS, what="a mapping with one generator: chain, fan or skirt")
+        if pm is None:
+            continue
+        kind = c.exactly_one(pm, tuple(PART_FIELDS), pp)
+        if kind is None:
+            continue
+        params = read_fields(c, pm[kind], pp + (kind,), PART_FIELDS[kind])
+        if params is not None:
+            rig["parts"].append({"kind": kind, "params": params, "path": pp + (kind,)})
+    rig["instances"] = None
+    if m.get("instances") is not None:
+        rig["instances"] = read_fields(c, m["instances"], path + ("instances",), INSTANCE_FIELDS)
+    if not m.get("bones") and not m.get("parts"):
+        c.error(path, "a rig needs bones and/or parts")
+    rig["path"] = path
+    return rig
+
+
+# ----------------------------------------------------------------------------- animation
+def check_animation_entry(c: Checker, value, path: tuple) -> dict | None:
+    kinds = tuple(DRIVER_FIELDS) + EVENT_KINDS
+    m = c.mapping(value, path, kinds + tuple(DRIVER_COMMON) + ("at",),
+                  what="a driver {target: ..., <kind>: {...}} or an event {at: ..., <event>: ...}")
+    if m is None:
+        return None
+    kind = c.exactly_one(m, kinds, path)
+    if kind is None:
+        return None
+    entry: dict = {"kind": kind, "path": path}
+    if kind in DRIVER_FIELDS:
+        if "at" in m:
+            c.error(path + ("at",), f"'at' belongs to events ({', '.join(EVENT_KINDS)}); "
+                                    f"a {kind} driver is timed with start/end")
+        for key, f in DRIVER_COMMON.items():
+            entry[key] = read_field(c, m, key, path, f)
+        if entry["end"] is not None and entry["end"] <= entry["start"]:
+            c.error(path + ("end",), f"expected end > start ({entry['start']:g} s), got {entry['end']:g}")
+        kp = path + (kind,)
+        if kind == "keyframes":
+            params = read_fields(c, m[kind], kp, {k: f for k, f in DRIVER_FIELDS[kind].items() if k != "keys"},
+                                 extra=("keys",))
+            if params is not None:
+                params["keys"] = check_keys(c, m[kind], kp)
+        else:
+            params = read_fields(c, m[kind], kp, DRIVER_FIELDS[kind])
+        if kind == "walk" and params and params["direction"] and params["up"]:
+            d, u = params["direction"], params["up"]
+            if abs(sum(a * b for a, b in zip(d, u))) > 1 - 1e-9:
+                c.error(kp + ("up",), f"expected 'up' not parallel to 'direction' {list(d)}")
+        if params is None:
+            return None
+        entry["params"] = params
+        return entry
+    # events
+    for key in DRIVER_COMMON:
+        if key in m:
+            c.error(path + (key,), f"{key!r} is not used by a {kind} event (events take 'at')")
+    entry["at"] = c.number(m, "at", path, REQUIRED, NON_NEGATIVE, units="s")
+    if kind == "time_scale":
+        entry["params"] = {"value": c.number(m, "time_scale", path, REQUIRED, Range(0.0, 100.0))}
+    elif kind == "teleport":
+        tp = path + ("teleport",)
+        tm = c.mapping(m["teleport"], tp, ("target", "position", "rotation", "euler"))
+        if tm is None:
+            return None
+        has_rotation = "rotation" in tm or "euler" in tm
+        entry["params"] = {"target": c.text(tm, "target", tp, what="a transform name"),
+                           "position": c.vector(tm, "position", tp, 3, None),
+                           "rotation": c.rotation(tm, tp) if has_rotation else None}
+        if entry["params"]["position"] is None and not has_rotation:
+            c.error(tp, "expected a position and/or a rotation (or euler) to teleport to")
+    else:
+        params = read_fields(c, m["set_parameter"], path + ("set_parameter",), EVENT_FIELDS["set_parameter"])
+        if params is None:
+            return None
+        entry["params"] = params
+    return entry
+
+
+def check_keys(c: Checker, m: dict, path: tuple) -> list[dict]:
+    keys = []
+    last_time = None
+    for i, k in enumerate(c.sequence(m, "keys", path, min_length=1)):
+        kp = path + ("keys", i)
+        km = c.mapping(k, kp, ("time", "position", "rotation", "euler", "scale"))
+        if km is None:
+            continue
+        t = c.number(km, "time", kp, REQUIRED, NON_NEGATIVE, units="s")
+        if t is not None and last_time is not None and t <= last_time:
+            c.error(kp + ("time",), f"key times must increase: expected > {last_time:g}, got {t:g}")
+        last_time = t if t is not None else last_time
+        key = {"time": t,
+               "position": c.vector(km, "position", kp, 3, None),
+               "rotation": c.rotation(km, kp) if ("rotation" in km or "euler" in km) else None,
+               "scale": c.vector(km, "scale", kp, 3, None)}
+        if key["position"] is None and key["rotation"] is None and key["scale"] is None and not c.issues:
+            c.error(kp, "a key needs at least one of position, rotation (or euler), scale")
+        keys.append(key)
+    return keys
+
+
+# ----------------------------------------------------------------------------- colliders
+def check_collider(c: Checker, value, path: tuple) -> dict | None:
+    m = c.mapping(value, path, ("name", "transform", "position", "rotation", "euler", "center") + SHAPES)
+    if m is None:
+        return None
+    col = {"name": c.text(m, "name", path, what="a collider name"),
+           "transform": c.text(m, "transform", path, None, what="a transform name"),
+           "center": c.vector(m, "center", path, 3, (0.0, 0.0, 0.0)), "path": path}
+    if col["transform"] is not None and any(k in m for k in ("position", "rotation", "euler")):
+        key = next(k for k in ("position", "rotation", "euler") if k in m)
+        c.error(path + (key,), "a collider with a transform takes its pose from it: give 'center' "
+                               "(local offset) instead, or drop 'transform' for a static collider")
+    col["static_pose"] = check_pose(c, m, path, scale=False)
+    shape = c.exactly_one(m, SHAPES, path)
+    col["shape"] = shape
+    col["params"] = read_fields(c, m[shape], path + (shape,), SHAPE_FIELDS[shape]) if shape else None
+    if shape == "capsule" and col["params"] is not None and col["params"]["end_radius"] is None:
+        col["params"]["end_radius"] = col["params"]["radius"]
+    return col if col["params"] is not None else None
+
+
+# ----------------------------------------------------------------------------- cloths
+CLOTH_KEYS = ("name", "type", "root_bones", "component", "connection", "preset", "parameters", "colliders",
+              "collision_mode", "bone_attributes")
+
+
+def check_cloth(c: Checker, value, path: tuple) -> dict | None:
+    m = c.mapping(value, path, CLOTH_KEYS)
+    if m is None:
+        return None
+    cloth = {"name": c.text(m, "name", path, what="a cloth name"),
+             "type": c.choice(m, "type", path, CLOTH_TYPES, "bone_cloth"),
+             "root_bones": c.names(m, "root_bones", path, min_length=1),
+             "component": c.text(m, "component", path, None, what="a transform name"),
+             "connection": c.choice(m, "connection", path, CONNECTION_MODES, "line"),
+             "preset": c.text(m, "preset", path, None, what="a preset name"),
+             "parameters": m.get("parameters") or {},
+             "colliders": c.names(m, "colliders", path),
+             "collision_mode": c.choice(m, "collision_mode", path, COLLISION_MODES, None),
+             "bone_attributes": {}, "path": path}
+    if not isinstance(cloth["parameters"], dict):
+        c.error(path + ("parameters",), f"expected a mapping of parameter names to values, got {m['parameters']!r}")
+        cloth["parameters"] = {}
+    attrs = m.get("bone_attributes")
+    if attrs is not None and not isinstance(attrs, dict):
+        c.error(path + ("bone_attributes",), f"expected a mapping bone name (or glob) -> "
+                                             f"{' | '.join(BONE_ATTRIBUTES)}, got {attrs!r}")
+    elif attrs:
+        for name in attrs:
+            cloth["bone_attributes"][name] = c.choice(attrs, name, path + ("bone_attributes",), BONE_ATTRIBUTES)
+    return cloth
+
+
+# ----------------------------------------------------------------------------- output
+def check_output(c: Checker, value, path: tuple) -> dict:
+    m = c.mapping(value, path, ("rrd", "log")) or {}
+    out = {"rrd": c.text(m, "rrd", path, None, what="a file path ending in .rrd")}
+    if out["rrd"] is not None and not out["rrd"].endswith(".rrd"):
+        c.error(path + ("rrd",), f"expected a file path ending in .rrd, got {out['rrd']!r}")
+    out["log"] = read_fields(c, m.get("log"), path + ("log",), OUTPUT_LOG_FIELDS) or \
+        {k: f.default for k, f in OUTPUT_LOG_FIELDS.items()}
+    return out
