@@ -307,9 +307,9 @@ class RerunSink:
             archetype, per_row = _ARCHETYPES[entity.rsplit("/", 1)[-1]] if entity.startswith(L.CLOTHS) \
                 else _ARCHETYPES[entity]
             if archetype == "AnyValues":
-                columns = rr.AnyValues.columns(**{k: v.reshape(-1) for k, v in comps.items()})
-                columns = columns.partition([comps[next(iter(comps))][0].size] * n)
-                rec.send_columns(entity, indexes=index(), columns=columns)
+                for name, values in comps.items():  # one call each: row sizes differ per component
+                    columns = rr.AnyValues.columns(**{name: values.reshape(-1)}).partition([values[0].size] * n)
+                    rec.send_columns(entity, indexes=index(), columns=columns)
                 continue
             cls = getattr(rr, archetype)
             first = comps[next(iter(comps))]

@@ -19,62 +19,23 @@ import numpy as np
 from magica_py.sinks.base import ColliderShapes
 
 SPHERE, CAPSULE, PLANE = 0, 1, 2
-_SCALE_EPS = 1e-6
-
-
-def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors v (k,3) by unit quaternions q (k,4) xyzw (numpy twin of math3d.q_rotate)."""
-    u = q[:, :3]
-    w = q[:, 3:4]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
 
 
 def collider_shapes(colliders, hierarchy) -> ColliderShapes:
-    """World shapes of every collider of a ``ColliderSet`` at the hierarchy's current pose."""
-    n = len(colliders.names) if colliders is not None else 0
-    if n == 0:
+    """World shapes of every collider of a ``ColliderSet`` at the hierarchy's current pose.
+
+    Uses ``ColliderSet.world_shapes`` (scene/colliders.py, the project's numpy oracle of §G.2/§G.3)
+    and splits it by shape kind."""
+    if colliders is None or len(colliders.names) == 0:
         return ColliderShapes.empty()
-    node = np.asarray(colliders.transform, dtype=np.int64)
-    P = hierarchy.world_position[node]
-    R = hierarchy.world_rotation[node]
-    S = hierarchy.lossy_scale[node].copy()
-    sign = np.where(S < 0.0, -1.0, 1.0)
-    S_abs = np.maximum(np.abs(S), _SCALE_EPS)
-    frame_pos = P + rotate(R, np.asarray(colliders.center, dtype=np.float64) * sign) * S_abs
-    shape = np.asarray(colliders.shape)
-    radius = np.asarray(colliders.radius, dtype=np.float64)
-
-    sph = shape == SPHERE
-    sphere_center = frame_pos[sph]
-    sphere_radius = radius[sph] * S_abs[sph, 0]
-
-    cap = np.flatnonzero(shape == CAPSULE)
-    direction = np.asarray(colliders.direction, dtype=np.int64)[cap]
-    axis = np.zeros((cap.size, 3))
-    axis[np.arange(cap.size), direction] = 1.0
-    s_axis = S[cap, direction]
-    axis *= np.where(s_axis < 0.0, -1.0, 1.0)[:, None]
-    axis *= np.where(np.asarray(colliders.reverse_direction, dtype=bool)[cap], -1.0, 1.0)[:, None]
-    k = np.maximum(np.abs(s_axis), _SCALE_EPS)
-    rs = radius[cap] * k
-    re = np.asarray(colliders.end_radius, dtype=np.float64)[cap] * k
-    length = np.asarray(colliders.length, dtype=np.float64)[cap] * k
-    aligned = np.asarray(colliders.aligned_on_center, dtype=bool)[cap]
-    a = np.where(aligned, length * 0.5, 0.0)
-    b = np.where(aligned, length * 0.5, length - rs)
-    a = np.maximum(a - rs, 0.0)
-    b = np.maximum(b - re, 0.0)
-    world_axis = rotate(R[cap], axis)
-    capsule_start = frame_pos[cap] + world_axis * a[:, None]
-    capsule_end = frame_pos[cap] - world_axis * b[:, None]
-
-    pl = shape == PLANE
-    up = np.zeros((int(pl.sum()), 3))
-    up[:, 1] = sign[pl, 1]
-    plane_normal = rotate(R[pl], up)
-    return ColliderShapes(sphere_center, sphere_radius, capsule_start, capsule_end, rs, re,
-                          frame_pos[pl], plane_normal)
+    w = colliders.world_shapes(hierarchy)
+    shape = np.asarray(w.shape)
+    sph, cap, pl = shape == SPHERE, shape == CAPSULE, shape == PLANE
+    return ColliderShapes(
+        sphere_center=w.position[sph], sphere_radius=w.radius[sph],
+        capsule_start=w.start[cap], capsule_end=w.end[cap],
+        capsule_start_radius=w.radius[cap], capsule_end_radius=w.end_radius[cap],
+        plane_point=w.position[pl], plane_normal=w.normal[pl])
 
 
 def shape_slots(colliders) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,251 @@
+"""Wire a sink into a player: the RENDER_WRITE system, the replay capture, the options.
+
+``attach(player, scene, options)`` (re-exported by ``magica_py.sinks``) registers
+
+* UPDATE ``capture_replay`` (right after ``animation``): copies the local pose of every
+  *driven* transform (see ``driven_nodes``), the frame's ``UnityTime`` and the events raised so
+  far. This is exactly what LATE_UPDATE (the solver) starts from, so ``resim`` can rebuild it.
+* RENDER_WRITE ``rerun_sink``: gathers a ``FrameData`` (joint world positions, cloth snapshots,
+  collider shapes, metrics, events) and hands it to the sink.
+
+It returns the ``Recorder``; the caller must ``close(success)`` it when the run ends (the CLI
+does it in a ``finally``): a successful close renames the temporary file to the requested
+name, a failed one deletes it.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from magica_py.sinks.base import (ClothFrame, FrameData, LogToggles, NullSink, ReplayFrame, SceneStatics,
+                                  SnapshotProvider)
+from magica_py.sinks.shapes import collider_shapes, shape_slots
+
+CAPTURE_SYSTEM = "capture_replay"
+SINK_SYSTEM = "rerun_sink"
+
+
+@dataclass
+class SinkOptions:
+    """How to record. ``rrd``: a path, or None to use ``scene.output.rrd``; ``no_rrd`` turns
+    file output off. ``spawn`` / ``connect`` stream to a viewer (never in tests)."""
+
+    rrd: Any = None
+    no_rrd: bool = False
+    spawn: bool = False
+    connect: str | None = None
+    batch_frames: int | None = None
+    recording_id: str | None = None
+    snapshots: SnapshotProvider | None = None
+    toggles: Any = None            # overrides scene.output.log
+    replay_nodes: Any = None       # hierarchy indices to record for resim (default: driven_nodes)
+
+
+def driven_nodes(scene, player) -> np.ndarray:
+    """Transforms whose local pose can change before LATE_UPDATE: every node the cloth systems
+    do not restore (animation may drive any of them; teleports move roots), plus the restored
+    ones that animation targets. Recording all of them (float64) makes resim exact without
+    knowing the drivers' internals."""
+    n = scene.hierarchy.count
+    restored = np.asarray(getattr(player, "restored_bones", np.zeros(0)), dtype=np.int64)
+    mask = np.ones(n, bool)
+    mask[restored] = False
+    targets = getattr(getattr(scene, "animation", None), "targets", None)
+    if targets is not None:
+        mask[np.asarray(list(targets), dtype=np.int64)] = True
+    return np.flatnonzero(mask).astype(np.int64)
+
+
+def find_snapshot_provider(player) -> SnapshotProvider | None:
+    """The cloth snapshot provider: the solver's ClothSystem when it is scheduled."""
+    from magica_py.runtime.phases import Phase
+
+    for system in player.schedule.systems(Phase.LATE_UPDATE):
+        owner = getattr(system.run, "__self__", None)
+        for candidate in (owner, getattr(owner, "snapshots", None)):
+            if isinstance(candidate, SnapshotProvider):
+                return candidate
+        if owner is not None:
+            adapter = _solver_adapter(owner)
+            if adapter is not None:
+                return adapter
+    return None
+
+
+def _solver_adapter(owner):
+    try:
+        from magica_py.sinks.solver_adapter import adapt
+    except ImportError:
+        return None
+    return adapt(owner)
+
+
+class _EmptyProvider:
+    def cloth_topologies(self):
+        return []
+
+    def cloth_frames(self):
+        return []
+
+
+class Recorder:
+    """Holds the sink and the per-frame state shared by the two systems."""
+
+    def __init__(self, player, scene, options: SinkOptions):
+        self.player = player
+        self.scene = scene
+        self.options = options
+        toggles = options.toggles if options.toggles is not None else _scene_toggles(scene)
+        self.toggles = LogToggles.from_any(toggles)
+        self.provider = options.snapshots or find_snapshot_provider(player) or _EmptyProvider()
+        self.replay_nodes = None if options.replay_nodes is None else np.asarray(options.replay_nodes, np.int64)
+        self.sink = None
+        self.pending_replay: ReplayFrame | None = None
+        self.colliders = getattr(scene, "colliders", None)
+        self.collider_kind, self.collider_slot = shape_slots(self.colliders)
+        self.time_fields: tuple[str, ...] = ()
+
+    # ------------------------------------------------------------ lifecycle
+    def open(self) -> None:
+        """Create the sink (called lazily on the first frame so that every system is attached)."""
+        scene, opts = self.scene, self.options
+        if self.replay_nodes is None:
+            self.replay_nodes = driven_nodes(scene, self.player)
+        names = list(scene.hierarchy.names)
+        statics = SceneStatics(
+            name=str(getattr(scene, "name", "scene")),
+            joint_names=names, joint_parent=np.asarray(scene.hierarchy.parent, np.int32),
+            cloths=list(self.provider.cloth_topologies()), toggles=self.toggles,
+            replay_node_names=[names[i] for i in self.replay_nodes],
+            replay_scene_text=_scene_text(scene), replay_scene_source=str(getattr(scene, "source", "") or ""),
+            time_fields=self.time_fields)
+        rrd = None if opts.no_rrd else (opts.rrd if opts.rrd is not None else _scene_rrd(scene))
+        if rrd is None and not opts.spawn and opts.connect is None:
+            self.sink = NullSink()
+            return
+        from magica_py.sinks.rerun_sink import RerunSink
+
+        self.sink = RerunSink(statics, rrd_path=rrd, spawn=opts.spawn, connect=opts.connect,
+                              batch_frames=opts.batch_frames, recording_id=opts.recording_id,
+                              collider_kind=self.collider_kind, collider_slot=self.collider_slot)
+
+    def close(self, success: bool = True) -> None:
+        if self.sink is not None:
+            self.sink.close(success)
+
+    @property
+    def seconds(self) -> float:
+        """Wall time spent inside the sink (copying + sending + closing)."""
+        return float(getattr(self.sink, "seconds", 0.0))
+
+    @property
+    def output_path(self):
+        return getattr(self.sink, "final_path", None)
+
+    # ------------------------------------------------------------ systems
+    def capture(self, ctx) -> None:
+        """UPDATE, after animation: what the solver is about to read."""
+        if not self.toggles.replay:
+            return
+        if not self.time_fields:
+            self.time_fields = tuple(f.name for f in dataclasses.fields(ctx.time))
+        if self.replay_nodes is None:
+            self.replay_nodes = driven_nodes(self.scene, self.player)
+        h, d = self.scene.hierarchy, self.replay_nodes
+        self.pending_replay = ReplayFrame(
+            local_position=h.local_position[d], local_rotation=h.local_rotation[d], local_scale=h.local_scale[d],
+            time_values=np.array([float(getattr(ctx.time, f)) for f in self.time_fields]),
+            events_json=json.dumps(ctx.events, default=_json_default) if ctx.events else "")
+
+    def render_write(self, ctx) -> None:
+        if self.sink is None:
+            self.open()
+        hierarchy = self.scene.hierarchy
+        cloths = list(self.provider.cloth_frames())
+        data = FrameData(
+            frame=ctx.frame, sim_time=float(ctx.time.time), delta_time=float(ctx.time.delta_time),
+            joint_positions=hierarchy.world_position, cloths=cloths,
+            colliders=collider_shapes(self.colliders, hierarchy) if self.toggles.colliders or self.toggles.metrics
+            else None,
+            metrics={k: float(v) for k, v in ctx.metrics.items() if _is_number(v)},
+            events=list(ctx.events), replay=self.pending_replay)
+        if data.colliders is None:
+            from magica_py.sinks.base import ColliderShapes
+            data.colliders = ColliderShapes.empty()
+        self.sink.begin_frame(ctx.frame, data.sim_time)
+        self.sink.log(data)
+        self.sink.end_frame()
+        self.pending_replay = None
+
+
+def attach(player, scene, options: SinkOptions | dict | None = None) -> Recorder:
+    """Register the capture (UPDATE) and sink (RENDER_WRITE) systems; returns the Recorder.
+
+    Validates the output path right away so a bad ``--rrd`` fails before any simulation.
+    """
+    from magica_py.runtime.phases import Phase, System
+
+    if options is None:
+        options = SinkOptions()
+    elif isinstance(options, dict):
+        options = SinkOptions(**options)
+    recorder = Recorder(player, scene, options)
+    rrd = None if options.no_rrd else (options.rrd if options.rrd is not None else _scene_rrd(scene))
+    if rrd is not None:
+        from magica_py.sinks.rerun_sink import check_output_path
+
+        check_output_path(rrd, "--rrd" if options.rrd is not None else "output.rrd")
+    schedule = player.schedule
+    anchor = "animation" if any(s.name == "animation" for s in schedule.systems(Phase.UPDATE)) else None
+    schedule.add(Phase.UPDATE, System(CAPTURE_SYSTEM, recorder.capture), after=anchor)
+    schedule.add(Phase.RENDER_WRITE, System(SINK_SYSTEM, recorder.render_write))
+    return recorder
+
+
+# ------------------------------------------------------------------ helpers
+def _scene_rrd(scene):
+    output = getattr(scene, "output", None)
+    return getattr(output, "rrd", None) if output is not None else None
+
+
+def _scene_toggles(scene):
+    output = getattr(scene, "output", None)
+    log = dict(getattr(output, "log", {}) or {}) if output is not None else {}
+    known = set(LogToggles.__dataclass_fields__)
+    return {k: v for k, v in log.items() if k in known}
+
+
+def _scene_text(scene) -> str:
+    text = getattr(scene, "source_text", None)
+    if text:
+        return str(text)
+    source = getattr(scene, "source", None)
+    if source:
+        try:
+            with open(source, encoding="utf-8") as fh:
+                return fh.read()
+        except OSError:
+            return ""
+    return ""
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+
+
+def _json_default(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, (set, frozenset, tuple)):
+        return list(value)
+    return str(value)
+
+
+# keep ClothFrame importable from here for adapters
+__all__ = ["attach", "Recorder", "SinkOptions", "driven_nodes", "find_snapshot_provider", "ClothFrame"]
