@@ -1,0 +1,301 @@
+"""Animation drivers against closed-form values, composition order, windows, events, teleport."""
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from magica_py.kernels.math3d import q_axis_angle, q_from_euler_degrees, q_mul, q_rotate
+from magica_py.scene.animation import Animation, instance_phase_offset
+from magica_py.scene.hierarchy import BoneSpec, TransformHierarchy
+
+
+def rig(root_position=(0.0, 0.0, 0.0), root_rotation=(0.0, 0.0, 0.0, 1.0),
+        root_scale=(1.0, 1.0, 1.0)):
+    return TransformHierarchy([BoneSpec("root", None, root_position, root_rotation, root_scale),
+                               BoneSpec("hips", "root", (0.0, 1.0, 0.0)),
+                               BoneSpec("head", "hips", (0.0, 0.6, 0.0))])
+
+
+def ctx_at(t):
+    return SimpleNamespace(time=SimpleNamespace(time=t, delta_time=1 / 60), events=[])
+
+
+def pose_at(entries, t, h=None):
+    h = h or rig()
+    anim = Animation.from_specs(entries, h)
+    anim.apply(h, ctx_at(t))
+    h.propagate()
+    return h
+
+
+def local(h, name):
+    i = h.index(name)
+    return h.local_position[i].copy(), h.local_rotation[i].copy()
+
+
+def assert_same_rotation(q, expected, atol=1e-9):
+    q, e = np.asarray(q), np.asarray(expected)
+    assert min(np.abs(q - e).max(), np.abs(q + e).max()) < atol, (q, e)
+
+
+def euler(x, y, z):
+    return np.asarray(q_from_euler_degrees(x, y, z))
+
+
+# ----------------------------------------------------------------------------- orbit
+def test_orbit_starts_on_plus_x_and_reaches_minus_z_at_a_quarter_period():
+    spec = [{"target": "root", "orbit": {"center": [0, 1, 0], "radius": 0.5, "period": 2.0}}]
+    np.testing.assert_allclose(local(pose_at(spec, 0.0), "root")[0], (0.5, 1, 0), atol=1e-12)
+    # positive rotation about +Y (Unity: clockwise from above) takes +X to -Z
+    np.testing.assert_allclose(local(pose_at(spec, 0.5), "root")[0], (0, 1, -0.5), atol=1e-12)
+    np.testing.assert_allclose(local(pose_at(spec, 1.0), "root")[0], (-0.5, 1, 0), atol=1e-12)
+    # same sense as a positive spin about the axis
+    np.testing.assert_allclose(q_rotate(q_axis_angle((0, 1, 0), math.pi / 2), (0.5, 0, 0)),
+                               (0, 0, -0.5), atol=1e-12)
+
+
+def test_orbit_phase_and_face_path():
+    spec = [{"target": "root", "orbit": {"radius": 1.0, "period": 4.0, "phase": 90,
+                                         "face_path": True}}]
+    h = pose_at(spec, 0.0)
+    p, q = local(h, "root")
+    np.testing.assert_allclose(p, (0, 0, -1), atol=1e-12)
+    # velocity at angle 90 deg: axis x radial = Y x (-Z) = -X; +Z faces it, +Y stays up
+    np.testing.assert_allclose(q_rotate(tuple(q), (0, 0, 1)), (-1, 0, 0), atol=1e-12)
+    np.testing.assert_allclose(q_rotate(tuple(q), (0, 1, 0)), (0, 1, 0), atol=1e-12)
+
+
+# ----------------------------------------------------------------------------- keyframes
+KEYS = [{"time": 0, "position": [0, 0, 0], "euler": [0, 0, 0]},
+        {"time": 2, "position": [0, 0, 2], "euler": [0, 90, 0]}]
+
+
+def test_keyframes_lerp_and_slerp_midpoints():
+    h = pose_at([{"target": "root", "keyframes": {"keys": KEYS}}], 1.0)
+    p, q = local(h, "root")
+    np.testing.assert_allclose(p, (0, 0, 1), atol=1e-12)
+    assert_same_rotation(q, euler(0, 45, 0))
+    h = pose_at([{"target": "root", "keyframes": {"keys": KEYS}}], 0.5)
+    assert_same_rotation(local(h, "root")[1], euler(0, 22.5, 0))
+
+
+def test_keyframes_clamp_and_loop():
+    p_clamped = local(pose_at([{"target": "root", "keyframes": {"keys": KEYS}}], 5.0), "root")[0]
+    np.testing.assert_allclose(p_clamped, (0, 0, 2), atol=1e-12)
+    looped = [{"target": "root", "keyframes": {"keys": KEYS, "loop": True}}]
+    np.testing.assert_allclose(local(pose_at(looped, 2.5), "root")[0], (0, 0, 0.5), atol=1e-12)
+    np.testing.assert_allclose(local(pose_at(looped, 4.0), "root")[0], (0, 0, 0), atol=1e-12)
+
+
+def test_step_interpolation_holds_the_previous_key():
+    spec = [{"target": "root", "keyframes": {"interpolation": "step", "keys": KEYS}}]
+    p, q = local(pose_at(spec, 1.99), "root")
+    np.testing.assert_allclose(p, (0, 0, 0), atol=1e-12)
+    assert_same_rotation(q, (0, 0, 0, 1))
+    np.testing.assert_allclose(local(pose_at(spec, 2.0), "root")[0], (0, 0, 2), atol=1e-12)
+
+
+def test_smooth_interpolation_eases_the_segment():
+    spec = [{"target": "root", "keyframes": {"interpolation": "smooth", "keys": KEYS}}]
+    # smoothstep(0.25) = 0.15625
+    np.testing.assert_allclose(local(pose_at(spec, 0.5), "root")[0], (0, 0, 0.3125), atol=1e-12)
+
+
+def test_each_channel_uses_only_the_keys_that_have_it():
+    keys = [{"time": 0, "position": [0, 0, 0], "scale": [1, 1, 1]},
+            {"time": 1, "euler": [0, 0, 90]},
+            {"time": 2, "position": [2, 0, 0], "scale": [3, 1, 1]}]
+    h = pose_at([{"target": "hips", "keyframes": {"keys": keys}}], 1.0)
+    p, q = local(h, "hips")
+    np.testing.assert_allclose(p, (1, 0, 0), atol=1e-12)
+    np.testing.assert_allclose(h.local_scale[h.index("hips")], (2, 1, 1), atol=1e-12)
+    assert_same_rotation(q, euler(0, 0, 90))  # a single rotation key is held
+
+
+def test_keyframe_times_are_relative_to_start():
+    spec = [{"target": "root", "start": 3.0, "keyframes": {"keys": KEYS}}]
+    np.testing.assert_allclose(local(pose_at(spec, 1.0), "root")[0], (0, 0, 0), atol=1e-12)
+    np.testing.assert_allclose(local(pose_at(spec, 4.0), "root")[0], (0, 0, 1), atol=1e-12)
+
+
+# ----------------------------------------------------------------------------- oscillate
+def test_position_oscillation_peaks_at_a_quarter_period_inside_its_window():
+    spec = [{"target": "hips", "start": 1.0, "end": 4.0,
+             "oscillate": {"property": "position", "axis": [0, 2, 0], "amplitude": 0.03,
+                           "frequency": 2.0, "phase": 0}}]
+    np.testing.assert_allclose(local(pose_at(spec, 1.125), "hips")[0], (0, 1.03, 0), atol=1e-12)
+    np.testing.assert_allclose(local(pose_at(spec, 1.375), "hips")[0], (0, 0.97, 0), atol=1e-12)
+    # outside the window the periodic offset is gone
+    np.testing.assert_allclose(local(pose_at(spec, 0.625), "hips")[0], (0, 1, 0), atol=1e-12)
+    np.testing.assert_allclose(local(pose_at(spec, 4.125), "hips")[0], (0, 1, 0), atol=1e-12)
+
+
+def test_rotation_oscillation_composes_about_local_axes_with_phase_in_degrees():
+    h = rig()
+    h.rest_local_rotation[h.index("hips")] = euler(0, 90, 0)
+    spec = [{"target": "hips", "oscillate": {"property": "rotation", "axis": [1, 0, 0],
+                                             "amplitude": 10, "frequency": 1, "phase": 90}}]
+    q = local(pose_at(spec, 0.0, h), "hips")[1]
+    expected = q_mul(tuple(euler(0, 90, 0)), q_axis_angle((1, 0, 0), math.radians(10)))
+    assert_same_rotation(q, expected)
+
+
+def test_fade_ramps_the_amplitude_in():
+    spec = [{"target": "hips", "start": 0.0, "end": 10.0, "fade": 1.0,
+             "oscillate": {"axis": [0, 1, 0], "amplitude": 0.1, "frequency": 1, "phase": 90}}]
+    # t = 0.5: weight 0.5, sin(2 pi 0.5 + pi/2) = -1
+    np.testing.assert_allclose(local(pose_at(spec, 0.5), "hips")[0], (0, 0.95, 0), atol=1e-12)
+
+
+# ----------------------------------------------------------------------------- spin and walk
+def test_spin_turns_at_constant_speed_and_holds_after_its_window():
+    spec = [{"target": "root", "end": 1.0, "spin": {"axis": [0, 1, 0], "speed": 90}}]
+    assert_same_rotation(local(pose_at(spec, 0.5), "root")[1], euler(0, 45, 0))
+    assert_same_rotation(local(pose_at(spec, 3.0), "root")[1], euler(0, 90, 0))
+
+
+def test_walk_bob_sway_and_forward_travel_closed_form():
+    f, bob, sway, speed, t = 1.8, 0.03, 4.0, 1.2, 0.37
+    spec = [{"target": "hips", "walk": {"speed": speed, "stride_frequency": f, "bob": bob,
+                                        "sway": sway, "lateral": 0.02}}]
+    p, q = local(pose_at(spec, t), "hips")
+    phase = 2 * math.pi * f * t
+    expected = (0.02 * math.sin(phase), 1 + bob * math.sin(2 * phase), speed * t)
+    np.testing.assert_allclose(p, expected, atol=1e-12)
+    assert_same_rotation(q, q_axis_angle((0, 0, 1), math.radians(sway * math.sin(phase))))
+
+
+def test_walk_that_ends_stays_where_it_stopped_without_bob():
+    spec = [{"target": "hips", "end": 2.0, "walk": {"speed": 1.0, "bob": 0.05}}]
+    np.testing.assert_allclose(local(pose_at(spec, 5.0), "hips")[0], (0, 1, 2), atol=1e-12)
+
+
+# ----------------------------------------------------------------------------- composition
+def test_drivers_on_one_target_compose_in_list_order():
+    orbit = {"target": "root", "orbit": {"radius": 1.0, "period": 4.0}}
+    bob = {"target": "root", "oscillate": {"axis": [0, 1, 0], "amplitude": 0.5,
+                                           "frequency": 0.25}}
+    keys = {"target": "root", "keyframes": {"keys": [{"time": 0, "position": [7, 7, 7]}]}}
+    # orbit then additive bob: (0, 0.5, -1) at t = 1
+    np.testing.assert_allclose(local(pose_at([orbit, bob], 1.0), "root")[0], (0, 0.5, -1),
+                               atol=1e-12)
+    # an absolute driver later in the list overwrites the position
+    np.testing.assert_allclose(local(pose_at([orbit, bob, keys], 1.0), "root")[0], (7, 7, 7))
+    # additive rotations stack on the rest rotation, about local axes
+    h = rig(root_rotation=tuple(euler(90, 0, 0)))
+    spin = {"target": "root", "spin": {"axis": [0, 1, 0], "speed": 30}}
+    q = local(pose_at([spin, spin], 1.0, h), "root")[1]
+    assert_same_rotation(q, q_mul(tuple(euler(90, 0, 0)), q_axis_angle((0, 1, 0), math.radians(60))))
+
+
+def test_driven_nodes_restart_from_rest_every_frame():
+    h = rig()
+    anim = Animation.from_specs([{"target": "hips", "oscillate": {"axis": [1, 0, 0],
+                                  "amplitude": 1.0, "frequency": 0.25}}], h)
+    for _ in range(3):
+        anim.apply(h, ctx_at(1.0))  # additive drivers do not accumulate across frames
+    np.testing.assert_allclose(local(h, "hips")[0], (1, 1, 0), atol=1e-12)
+    assert anim.driven.tolist() == [h.index("hips")]
+
+
+def test_phase_offset_shifts_the_driver_clock():
+    base = {"target": "root", "orbit": {"radius": 1.0, "period": 4.0}}
+    shifted = dict(base, phase_offset=0.75)
+    np.testing.assert_allclose(local(pose_at([shifted], 0.25), "root")[0],
+                               local(pose_at([base], 1.0), "root")[0], atol=1e-12)
+    assert instance_phase_offset(3, 0.25) == 0.75
+    a = instance_phase_offset(5, 0.0, jitter=1.0, seed=7)
+    assert 0.0 <= a < 1.0 and a == instance_phase_offset(5, 0.0, jitter=1.0, seed=7)
+    assert a != instance_phase_offset(6, 0.0, jitter=1.0, seed=7)
+
+
+def test_config_normalised_entries_are_accepted():
+    h = rig()
+    entries = [{"kind": "orbit", "path": ("animation", 0), "target": "root", "start": 0.0,
+                "end": None, "phase_offset": 0.0,
+                "params": {"center": (0, 0, 0), "radius": 2.0, "period": 1.0,
+                           "axis": (0, 1, 0), "phase": 0.0, "face_path": False}},
+               {"kind": "time_scale", "path": ("animation", 1), "at": 0.0,
+                "params": {"value": 0.5}}]
+    anim = Animation.from_specs(entries, h)
+    ctx = ctx_at(0.0)
+    anim.apply(h, ctx)
+    np.testing.assert_allclose(local(h, "root")[0], (2, 0, 0), atol=1e-12)
+    assert ctx.events == [("time_scale", 0.5)]
+
+
+# ----------------------------------------------------------------------------- events
+def test_events_fire_exactly_once_when_time_passes_at():
+    h = rig()
+    anim = Animation.from_specs([
+        {"at": 4.0, "set_parameter": {"cloth": "tail", "key": "damping", "value": 0.2}},
+        {"at": 2.0, "time_scale": 0.1},
+    ], h)
+    fired = []
+    for t in (0.0, 1.0, 1.99, 2.0, 2.5, 3.9, 4.2, 9.0):
+        ctx = ctx_at(t)
+        anim.apply(h, ctx)
+        fired.append((t, ctx.events))
+    assert [t for t, ev in fired if ev] == [2.0, 4.2]
+    assert fired[3][1] == [("time_scale", 0.1)]
+    assert fired[6][1] == [("set_parameter", {"cloth": "tail", "key": "damping", "value": 0.2})]
+    anim.reset()
+    ctx = ctx_at(10.0)
+    anim.apply(h, ctx)  # a big step fires every due event, in time order
+    assert [k for k, _ in ctx.events] == ["time_scale", "set_parameter"]
+
+
+def test_teleport_lands_on_the_world_pose_under_a_rotated_scaled_parent():
+    h = rig(root_position=(1.0, 2.0, 3.0), root_rotation=tuple(euler(10, 70, -20)),
+            root_scale=(2.0, 0.5, 3.0))
+    target_q = euler(0, 90, 0)
+    anim = Animation.from_specs([
+        {"at": 2.0, "teleport": {"target": "hips", "position": [10, 0, 0], "euler": [0, 90, 0]}},
+    ], h)
+    ctx = ctx_at(2.0)
+    anim.apply(h, ctx)
+    h.propagate()
+    i = h.index("hips")
+    np.testing.assert_allclose(h.world_position[i], (10, 0, 0), atol=1e-9)
+    assert_same_rotation(h.world_rotation[i], target_q)
+    assert ctx.events[0][0] == "teleport" and ctx.events[0][1]["name"] == "hips"
+    # the undriven target stays there on later frames (offset on top of the rest pose)
+    anim.apply(h, ctx_at(3.0))
+    h.propagate()
+    np.testing.assert_allclose(h.world_position[i], (10, 0, 0), atol=1e-9)
+
+
+def test_motion_continues_relative_to_the_teleported_place():
+    h = rig(root_rotation=tuple(euler(0, 90, 0)), root_scale=(2.0, 2.0, 2.0))
+    walk_keys = {"target": "hips", "keyframes": {"keys": [
+        {"time": 0, "position": [0, 1, 0]}, {"time": 10, "position": [0, 1, 10]}]}}
+    anim = Animation.from_specs([walk_keys, {"at": 2.0, "teleport": {"target": "hips",
+                                                                       "position": [5, 0, 5]}}], h)
+    anim.apply(h, ctx_at(2.0))
+    h.propagate()
+    i = h.index("hips")
+    np.testing.assert_allclose(h.world_position[i], (5, 0, 5), atol=1e-9)
+    anim.apply(h, ctx_at(3.0))
+    h.propagate()
+    # one more metre along local +Z: the parent maps it to 2 m along world +X
+    np.testing.assert_allclose(h.world_position[i], (7, 0, 5), atol=1e-9)
+    anim.reset()  # offsets cleared and the teleport re-armed: back on the keyframed path
+    anim.apply(h, ctx_at(1.0))
+    h.propagate()
+    np.testing.assert_allclose(h.world_position[i], (2, 2, 0), atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- errors
+@pytest.mark.parametrize("entry, message", [
+    ({"target": "nope", "spin": {"speed": 1}}, r"animation\[0\]\.target: no transform named 'nope'"),
+    ({"target": "root", "start": 2, "end": 1, "spin": {"speed": 1}}, r"\.end: expected end > start"),
+    ({"target": "root", "spin": {"axis": [0, 0, 0], "speed": 1}}, r"spin\.axis: expected a non-zero"),
+    ({"target": "root", "keyframes": {"keys": [{"time": 1, "position": [0, 0, 0]},
+                                               {"time": 1, "position": [0, 0, 0]}]}}, "must increase"),
+    ({"target": "root", "orbit": {"radius": 1}}, r"orbit\.period: required"),
+    ({"at": 1, "teleport": {"target": "root"}}, "a position and/or a rotation"),
+])
+def test_bad_entries_name_the_path(entry, message):
+    with pytest.raises(ValueError, match=message):
+        Animation.from_specs([entry], rig())
