@@ -1,0 +1,140 @@
+"""`magica-py record-all`: regenerate replays/<config>.rrd for every showcase config in configs/.
+
+Each scene runs in this process with the cloth solver (when ``magica_py.solver.attach``
+exists) and the Rerun sink in batched file mode. The table printed at the end is the cost
+figure of issue 5: simulation wall time (everything but the sink) against the sink's own
+time (copying, sending, closing the file).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import pathlib
+import sys
+import time
+from dataclasses import dataclass
+
+DEFAULT_CONFIGS = "configs"
+DEFAULT_OUT = "replays"
+
+
+@dataclass
+class RecordResult:
+    name: str
+    path: pathlib.Path | None
+    frames: int
+    wall_seconds: float        # whole run including the sink and the file close
+    sink_seconds: float        # time inside the sink
+    particles: int
+    bytes: int
+
+    @property
+    def sim_seconds(self) -> float:
+        return self.wall_seconds - self.sink_seconds
+
+    @property
+    def sink_ratio(self) -> float:
+        """Recording cost as a fraction of the simulation time."""
+        return self.sink_seconds / self.sim_seconds if self.sim_seconds > 0 else float("inf")
+
+
+def scene_frames(scene) -> int:
+    s = scene.settings
+    if getattr(s, "frames", None):
+        return int(s.frames)
+    duration, fps = getattr(s, "duration", None), getattr(s, "fps", None)
+    if duration and fps:
+        return int(round(duration * fps))
+    raise ValueError(f"scene {scene.name!r}: no frame count (give scene.frames, or duration with fps)")
+
+
+def attach_solver(player, scene):
+    """The solver's LATE_UPDATE system, when the solver package provides ``attach``."""
+    try:
+        from magica_py import solver
+    except ImportError:
+        return None
+    attach = getattr(solver, "attach", None)
+    if attach is None or not getattr(scene, "cloths", None):
+        return None
+    return attach(player, scene)
+
+
+def record_scene(scene, rrd, *, frames=None, batch_frames=None, spawn=False, connect=None, progress=None,
+                 recording_id=None) -> RecordResult:
+    """Run ``scene`` with solver and sink; the file appears at ``rrd`` only if the run succeeds."""
+    from magica_py.runtime.player import Player
+    from magica_py.sinks.recorder import SinkOptions, attach
+
+    player = Player.for_scene(scene)
+    attach_solver(player, scene)
+    recorder = attach(player, scene, SinkOptions(rrd=rrd, no_rrd=rrd is None, spawn=spawn, connect=connect,
+                                                 batch_frames=batch_frames, recording_id=recording_id))
+    n = scene_frames(scene) if frames is None else int(frames)
+    ok = False
+    start = time.perf_counter()
+    try:
+        player.run(n, progress=progress)
+        ok = True
+    finally:
+        recorder.close(success=ok)
+    wall = time.perf_counter() - start
+    out = recorder.output_path
+    particles = sum(t.particle_count for t in recorder.provider.cloth_topologies())
+    return RecordResult(name=scene.name, path=out, frames=n, wall_seconds=wall, sink_seconds=recorder.seconds,
+                        particles=particles, bytes=os.path.getsize(out) if out is not None and out.exists() else 0)
+
+
+def showcase_configs(folder) -> list[pathlib.Path]:
+    folder = pathlib.Path(folder)
+    if not folder.is_dir():
+        raise ValueError(f"--configs: {str(folder)!r} is not a folder")
+    return sorted(p for p in folder.glob("*.yaml") if not p.name.startswith("_"))
+
+
+def main_record_all(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="magica-py record-all",
+                                     description="Regenerate one recording per showcase config: CONFIGS/NAME.yaml -> "
+                                                 "OUT/NAME.rrd. Open one with `rerun OUT/NAME.rrd`.")
+    parser.add_argument("--configs", default=DEFAULT_CONFIGS, help="folder of scene files (default: configs)")
+    parser.add_argument("--out", default=DEFAULT_OUT, help="folder for the recordings (default: replays)")
+    parser.add_argument("--only", action="append", default=[], metavar="NAME",
+                        help="record only this config (file stem); repeatable")
+    parser.add_argument("--frames", type=int, help="override every scene's frame count")
+    parser.add_argument("--batch-frames", type=int, help="frames per columnar send (default 64)")
+    args = parser.parse_args(argv)
+    from magica_py.config import ConfigError, load_scene
+
+    try:
+        configs = showcase_configs(args.configs)
+        if args.only:
+            unknown = sorted(set(args.only) - {p.stem for p in configs})
+            if unknown:
+                raise ValueError(f"--only: no config named {unknown} in {args.configs} "
+                                 f"(have {[p.stem for p in configs]})")
+            configs = [p for p in configs if p.stem in args.only]
+        out = pathlib.Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+    except (ValueError, OSError) as exc:
+        print(f"magica-py record-all: error: {exc}", file=sys.stderr)
+        return 2
+    results, failures = [], 0
+    for path in configs:
+        try:
+            scene = load_scene(path)
+            result = record_scene(scene, out / f"{path.stem}.rrd", frames=args.frames,
+                                  batch_frames=args.batch_frames)
+        except (ConfigError, ValueError, OSError) as exc:
+            failures += 1
+            print(f"magica-py record-all: {path}: {exc}", file=sys.stderr)
+            continue
+        results.append(result)
+        print(f"{path.stem:<20} {result.frames:>6} frames {result.particles:>7} particles  "
+              f"sim {result.sim_seconds:7.2f} s  sink {result.sink_seconds:6.2f} s "
+              f"({100 * result.sink_ratio:5.1f} % of sim)  {result.bytes / 1e6:7.1f} MB -> {result.path}",
+              flush=True)
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main_record_all())
