@@ -299,3 +299,66 @@ def test_motion_continues_relative_to_the_teleported_place():
 def test_bad_entries_name_the_path(entry, message):
     with pytest.raises(ValueError, match=message):
         Animation.from_specs([entry], rig())
+
+
+# ----------------------------------------------------------------------------- properties
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+finite = st.floats(-3.0, 3.0, allow_nan=False)
+times = st.floats(0.0, 20.0, allow_nan=False)
+unit_axis = st.tuples(finite, finite, finite).filter(lambda v: np.linalg.norm(v) > 0.1)
+
+DRIVER_SAMPLES = [
+    {"orbit": {"center": [0.1, 0.2, 0.3], "radius": 0.7, "period": 1.3, "axis": [1, 2, 0],
+               "face_path": True}},
+    {"keyframes": {"loop": True, "keys": KEYS + [{"time": 3, "position": [1, 0, 0],
+                                                  "euler": [30, 0, 10]}]}},
+    {"oscillate": {"property": "rotation", "axis": [0, 1, 1], "amplitude": 20, "frequency": 0.7}},
+    {"oscillate": {"property": "position", "axis": [1, 0, 1], "amplitude": 0.2, "frequency": 1.1}},
+    {"spin": {"axis": [1, 1, 0], "speed": -45}},
+    {"walk": {"speed": 0.8, "stride_frequency": 1.5, "bob": 0.04, "sway": 5, "twist": 3,
+              "lateral": 0.01}},
+]
+
+
+@settings(max_examples=40, deadline=None)
+@given(kind=st.integers(0, len(DRIVER_SAMPLES) - 1), t=times, offset=st.floats(0.0, 5.0))
+def test_phase_offset_equals_evaluating_later_for_every_driver_kind(kind, t, offset):
+    entry = dict(DRIVER_SAMPLES[kind], target="hips")
+    p1, q1 = local(pose_at([dict(entry, phase_offset=offset)], t), "hips")
+    p2, q2 = local(pose_at([entry], t + offset), "hips")
+    np.testing.assert_allclose(p1, p2, atol=1e-9)
+    assert_same_rotation(q1, q2, atol=1e-9)
+    assert abs(np.linalg.norm(q1) - 1.0) < 1e-12
+
+
+@settings(max_examples=40, deadline=None)
+@given(t=times, axis=unit_axis, radius=st.floats(0.01, 5.0), period=st.floats(0.1, 10.0))
+def test_orbit_stays_on_its_circle_and_repeats_every_period(t, axis, radius, period):
+    spec = [{"target": "root", "orbit": {"center": [1, 2, 3], "radius": radius,
+                                         "period": period, "axis": list(axis)}}]
+    p = local(pose_at(spec, t), "root")[0] - (1, 2, 3)
+    a = np.asarray(axis) / np.linalg.norm(axis)
+    assert np.linalg.norm(p) == pytest.approx(radius, rel=1e-9)
+    assert abs(np.dot(p, a)) < 1e-9 * max(1.0, radius)
+    np.testing.assert_allclose(local(pose_at(spec, t + period), "root")[0] - (1, 2, 3), p,
+                               atol=1e-8 * max(1.0, radius))
+
+
+@settings(max_examples=30, deadline=None)
+@given(parent=st.tuples(finite, finite, finite), parent_euler=st.tuples(finite, finite, finite),
+       scale=st.tuples(st.floats(0.2, 3.0), st.floats(0.2, 3.0), st.floats(0.2, 3.0)),
+       goal=st.tuples(finite, finite, finite), goal_euler=st.tuples(finite, finite, finite))
+def test_teleport_lands_exactly_for_random_parents(parent, parent_euler, scale, goal, goal_euler):
+    h = rig(root_position=parent, root_rotation=tuple(euler(*(100 * np.array(parent_euler)))),
+            root_scale=scale)
+    goal_q = euler(*(100 * np.array(goal_euler)))
+    anim = Animation.from_specs([
+        {"target": "head", "spin": {"axis": [0, 1, 0], "speed": 40}},
+        {"at": 0.5, "teleport": {"target": "head", "position": list(goal), "rotation": list(goal_q)}}], h)
+    anim.apply(h, ctx_at(0.6))
+    h.propagate()
+    i = h.index("head")
+    np.testing.assert_allclose(h.world_position[i], goal, atol=1e-9)
+    assert_same_rotation(h.world_rotation[i], goal_q, atol=1e-9)
