@@ -186,5 +186,7 @@ def test_time_from_settings_picks_the_source_and_unity_parameters():
     assert math.isclose(tm.maximum_delta_time, 1 / 3)
     src, _ = time_from_settings({"frame_times": [0.1, 0.2]})
     assert isinstance(src, FrameTimeList) and src.times == (0.1, 0.2)
+    src, _ = time_from_settings({"frame_times": [0.1, 0.2], "frame_times_cycle": False})
+    assert [src.next_delta() for _ in range(4)] == [0.1, 0.2, 0.2, 0.2]
     src, _ = time_from_settings({"clock": "realtime", "fps": 50})
     assert isinstance(src, RealClock) and src.first_delta == 1 / 50

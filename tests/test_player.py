@@ -290,3 +290,27 @@ def test_unscaled_team_ignores_unity_time_scale_in_the_player():
     player.schedule.add(Phase.LATE_UPDATE, System("cloth", cloth.run))
     player.run(10)
     assert np.array(cloth.steps).sum(axis=0).tolist() == [0, 30]
+
+
+# ----------------------------------------------------------------------------- with the real Animation
+def test_real_animation_spin_and_time_scale_event_through_the_player():
+    from magica_py.scene.animation import Animation
+
+    h = chain_hierarchy(n=2, length=0.5)  # root at (0,1,0), child 0.5 below
+    h.local_position[1] = (0.5, 0.0, 0.0)  # child along +X so that a spin about Y moves it
+    h.propagate()
+    h.capture_rest_pose()
+    anim = Animation.from_specs([
+        {"target": "root", "spin": {"axis": [0, 1, 0], "speed": 90.0}},
+        {"at": 0.5, "time_scale": 0.5},
+    ], h)
+    player = make_player(fps=10, scene=SimpleNamespace(hierarchy=h, animation=anim))
+    seen = []
+    player.schedule.add(Phase.LATE_UPDATE, System(
+        "read", lambda ctx: seen.append((ctx.time.time, ctx.time.delta_time, h.world_position[1].copy()))))
+    player.run(10)
+    # the event fires at t = 0.5 (frame 4); from frame 5 on the game clock runs at half speed
+    assert [round(d, 12) for _, d, _ in seen] == [0.1] * 5 + [0.05] * 5
+    for t, _, child in seen:
+        a = math.radians(90.0 * t)  # Unity: +Y spin turns +X towards -Z
+        np.testing.assert_allclose(child, (0.5 * math.cos(a), 1.0, -0.5 * math.sin(a)), atol=1e-9)

@@ -252,7 +252,8 @@ class TimeManager:
 def time_from_settings(settings) -> tuple[FrameTimeSource, TimeManager]:
     """A frame-time source and a TimeManager from scene settings (read by attribute name).
 
-    Understands ``fps`` | ``frame_times`` (+ optional ``frame_times_cycle``, default True) |
+    Understands ``fps`` | ``frame_times`` (+ optional ``frame_times_cycle``, default True;
+    when False the last frame time repeats after the list) |
     ``clock == "realtime"``, and ``fixed_delta_time``, ``maximum_delta_time``, ``time_scale``
     when present (Unity defaults otherwise). Works with any object, not only config's.
     """
@@ -265,7 +266,10 @@ def time_from_settings(settings) -> tuple[FrameTimeSource, TimeManager]:
     clock = get("clock")
     fps = get("fps")
     if frame_times:
-        source: FrameTimeSource = FrameTimeList(frame_times, cycle=bool(get("frame_times_cycle", True)))
+        cycle = bool(get("frame_times_cycle", True))
+        # not cycled: the last frame time is kept after the list (SceneSettings semantics)
+        source: FrameTimeSource = FrameTimeList(frame_times, cycle=cycle,
+                                                then=None if cycle else frame_times[-1])
     elif clock in ("realtime", "real", "wall"):
         source = RealClock(first_delta=1.0 / float(fps) if fps else 1.0 / 60.0)
     elif fps:
