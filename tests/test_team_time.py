@@ -406,3 +406,37 @@ def test_kernel_matches_naive_twin_on_random_frames(timing, f32, epsilon):
             assert state.now_update_time[t] == twin.now_update_time
             assert state.frame_old_time[t] == twin.frame_old_time
             assert interps[t] == twin.interpolations
+
+
+# ----------------------------------------------------------------------------- invariants
+from hypothesis import given, settings as hyp_settings, strategies as st  # noqa: E402
+
+
+@hyp_settings(max_examples=60, deadline=None)
+@given(deltas=st.lists(st.floats(min_value=1e-4, max_value=0.5), min_size=1, max_size=60),
+       frequency=st.integers(30, 150), max_steps=st.integers(1, 5),
+       scale=st.floats(min_value=0.0, max_value=1.0))
+def test_time_is_conserved_and_now_update_time_lags_by_less_than_a_step(deltas, frequency,
+                                                                          max_steps, scale):
+    settings = SimulationTimeSettings(frequency=frequency, max_steps_per_frame=max_steps,
+                                      global_time_scale=scale)
+    dt = settings.simulation_delta_time
+    state = TeamTimeState.allocate(1)
+    state.activate(0)
+    added = steps = skipped = 0
+    for d in deltas:
+        counts, skips, interps = run_frame(state, settings, unity_time(d))
+        added += d * scale
+        steps += int(counts[0])
+        skipped += int(skips[0])
+        assert 0 <= counts[0] <= max_steps
+        assert skips[0] == 0 or counts[0] == max_steps  # time is dropped only beyond the cap
+        lag = state.time[0] - state.now_update_time[0]
+        assert -1e-6 * dt - 1e-12 <= lag < dt
+        r = interps[0]
+        assert all(0.0 <= x <= 1.0 for x in r) and r == sorted(r)
+        if r:  # the last step sits less than one step before the frame
+            span = state.time[0] - state.frame_old_time[0]
+            assert (1.0 - r[-1]) * span < dt + 1e-12
+    # every whole step of added time was either run or dropped, none invented
+    assert abs((steps + skipped) - added / dt) <= 1.0 + 1e-6
