@@ -260,3 +260,36 @@ def test_mass_helpers_match_reference_formulas():
     assert m.inverse_mass_friction_depth(0.5, 0.5) == pytest.approx(1 / (1 + 1.5 + 1.25))
     assert m.saturate(-1.0) == 0.0 and m.saturate(2.0) == 1.0 and m.saturate(0.3) == 0.3
     assert m.unlerp(2.0, 4.0, 3.0) == 0.5 and m.unlerp(1.0, 1.0, 5.0) == 0.0
+
+
+def unity_mathematics_quaternion(r):
+    """Transcription of Unity.Mathematics ``quaternion(float3x3)`` (sign-bit masks -> branches)."""
+    u, v, w = r[:, 0], r[:, 1], r[:, 2]
+    u_neg = math.copysign(1.0, u[0]) < 0
+    t = v[1] + (-w[2] if u_neg else w[2])
+    t_neg = math.copysign(1.0, t) < 0
+    tr = 1.0 + abs(u[0])
+    flips = np.array([0, 1, 1, 1])
+    if u_neg:
+        flips ^= np.array([0, 1, 0, 1])
+    if t_neg:
+        flips ^= np.array([1, 1, 1, 0])
+    signs = np.where(flips == 1, -1.0, 1.0)
+    value = np.array([tr, u[1], w[0], v[2]]) + np.array([t, v[0], u[2], w[1]]) * signs
+    if u_neg:
+        value = value[[2, 3, 0, 1]]  # .zwxy
+    if not t_neg:
+        value = value[[3, 2, 1, 0]]  # .wzyx
+    return value / np.linalg.norm(value)
+
+
+def test_q_from_matrix_matches_unity_mathematics_signs_exactly():
+    seen_branches = set()
+    for _ in range(400):
+        q = random_quat()
+        r = matrix_of(q)
+        expected = unity_mathematics_quaternion(r)
+        np.testing.assert_allclose(m.q_from_matrix(*r.ravel()), expected, atol=1e-12)
+        u_neg = r[0, 0] < 0
+        seen_branches.add((u_neg, (r[1, 1] - r[2, 2] if u_neg else r[1, 1] + r[2, 2]) < 0))
+    assert len(seen_branches) == 4
