@@ -1,0 +1,119 @@
+"""Humanoid bone naming: VRM humanoid names as the common vocabulary, default tables for
+CMU (cgspeed BVH), Mixamo-like rigs and skeletons already named with VRM names, plus
+user overrides (a dict or a YAML file ``{humanoid_name: bone_name}``).
+
+Matching ignores case, a ``prefix:`` namespace (``mixamorig:``, ``mixamorig1:``) and the
+separators ``_ - . `` so ``mixamorig:LeftUpLeg``, ``LeftUpLeg`` and ``left_up_leg`` match.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import yaml
+
+# The VRM humanoid bones the retargeter transfers (at least these; fingers are not mapped).
+HUMANOID_BONES = (
+    "hips", "spine", "chest", "upperChest", "neck", "head",
+    "leftShoulder", "leftUpperArm", "leftLowerArm", "leftHand",
+    "rightShoulder", "rightUpperArm", "rightLowerArm", "rightHand",
+    "leftUpperLeg", "leftLowerLeg", "leftFoot", "leftToes",
+    "rightUpperLeg", "rightLowerLeg", "rightFoot", "rightToes",
+)
+REQUIRED_BONES = ("hips",)
+
+
+def _sided(table: dict[str, str]) -> dict[str, str]:
+    """Expand '{side}' templates into left/right entries."""
+    out = {}
+    for human, bone in table.items():
+        if "{side}" in human:
+            out[human.format(side="left")] = bone.format(Side="Left", S="L")
+            out[human.format(side="right")] = bone.format(Side="Right", S="R")
+        else:
+            out[human] = bone
+    return out
+
+
+CMU = _sided({
+    "hips": "Hips", "spine": "LowerBack", "chest": "Spine", "upperChest": "Spine1", "neck": "Neck", "head": "Head",
+    "{side}Shoulder": "{Side}Shoulder", "{side}UpperArm": "{Side}Arm", "{side}LowerArm": "{Side}ForeArm",
+    "{side}Hand": "{Side}Hand", "{side}UpperLeg": "{Side}UpLeg", "{side}LowerLeg": "{Side}Leg",
+    "{side}Foot": "{Side}Foot", "{side}Toes": "{Side}ToeBase",
+})
+MIXAMO = _sided({
+    "hips": "Hips", "spine": "Spine", "chest": "Spine1", "upperChest": "Spine2", "neck": "Neck", "head": "Head",
+    "{side}Shoulder": "{Side}Shoulder", "{side}UpperArm": "{Side}Arm", "{side}LowerArm": "{Side}ForeArm",
+    "{side}Hand": "{Side}Hand", "{side}UpperLeg": "{Side}UpLeg", "{side}LowerLeg": "{Side}Leg",
+    "{side}Foot": "{Side}Foot", "{side}Toes": "{Side}ToeBase",
+})
+VRM_NAMES = {h: h for h in HUMANOID_BONES}
+SCHEMES = {"cmu": CMU, "mixamo": MIXAMO, "vrm": VRM_NAMES}
+
+
+def normalize(name: str) -> str:
+    return re.sub(r"[\s_.\-]", "", name.rsplit(":", 1)[-1]).lower()
+
+
+def detect_scheme(bone_names) -> str:
+    keys = {normalize(n) for n in bone_names}
+    if "lowerback" in keys:
+        return "cmu"
+    if "spine2" in keys or any(n.lower().startswith("mixamorig") for n in bone_names):
+        return "mixamo"
+    if "leftupperleg" in keys and "hips" in keys:
+        return "vrm"
+    return "mixamo" if "leftupleg" in keys else "unknown"
+
+
+def load_overrides(source) -> dict[str, str]:
+    """Overrides from a dict or a YAML file: ``{humanoid_name: bone_name | null}``."""
+    if source is None:
+        return {}
+    if isinstance(source, (str, Path)):
+        path = Path(source)
+        try:
+            data = yaml.safe_load(path.read_text())
+        except (OSError, yaml.YAMLError) as exc:
+            raise ValueError(f"{path}: cannot read the humanoid mapping ({exc})") from None
+        where = str(path)
+    else:
+        data, where = source, "mapping"
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: expected a mapping humanoid_name: bone_name")
+    unknown = [k for k in data if k not in HUMANOID_BONES]
+    if unknown:
+        raise ValueError(f"{where}: unknown humanoid bone(s) {unknown}; expected some of {', '.join(HUMANOID_BONES)}")
+    return {k: v for k, v in data.items()}
+
+
+def humanoid_map(bone_names, scheme: str | dict = "auto", overrides=None) -> dict[str, str]:
+    """humanoid name → bone name for a skeleton, from a scheme table (or a given dict,
+    such as a VRM file's humanoid) with overrides applied (``None`` unmaps a bone)."""
+    names = list(bone_names)
+    by_key = {}
+    for n in names:
+        by_key.setdefault(normalize(n), n)
+    if isinstance(scheme, dict):
+        table, direct = scheme, True
+    else:
+        chosen = detect_scheme(names) if scheme == "auto" else scheme
+        if chosen not in SCHEMES:
+            raise ValueError(f"cannot tell the naming scheme of bones {names[:6]}...; pass scheme= one of "
+                             f"{sorted(SCHEMES)} or a humanoid mapping")
+        table, direct = SCHEMES[chosen], False
+    out = {}
+    for human, bone in table.items():
+        if human not in HUMANOID_BONES:
+            continue
+        found = bone if direct and bone in names else by_key.get(normalize(bone))
+        if found is not None:
+            out[human] = found
+    for human, bone in load_overrides(overrides).items():
+        if bone is None:
+            out.pop(human, None)
+        elif bone not in names:
+            raise ValueError(f"humanoid override {human}: {bone!r} is not a bone of the skeleton")
+        else:
+            out[human] = bone
+    return out

@@ -1,0 +1,136 @@
+"""What the scene loader calls: imported files as YAML-shaped scene sections.
+
+The config loader owns the YAML; these functions turn the file-referencing entries
+
+    rigs:      - {name: avatar, file: Godette_vrm_v4.vrm}
+    animation: - {target: avatar, clip: cmu_01_01.bvh, retarget: {source_rest: 0}}
+               - {target: fox, clip: "Fox.glb#Run", drop: ["b_Tail*"]}
+    cloths:    - {from_vrm: avatar, group_by: group}
+
+into the plain sections the rest of the loader already understands: a rig dict with
+explicit ``bones`` (name, parent, position, rotation xyzw, scale — Unity convention,
+metres), ``colliders`` and ``cloths`` entries, and animation either as a ``Clip`` (for
+``clip.ClipDriver``, the efficient path) or as YAML keyframe entries.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from magica_py.io.bvh import load_bvh
+from magica_py.io.clip import Clip
+from magica_py.io.errors import AssetError
+from magica_py.io.gltf import load_gltf, read_document
+from magica_py.io.retarget import retarget
+from magica_py.io.vrm import load_vrm
+from magica_py.scene.hierarchy import BoneSpec
+
+GLTF_SUFFIXES = (".gltf", ".glb", ".vrm")
+
+
+def bone_entries(bones: list[BoneSpec]) -> list[dict]:
+    return [{"name": b.name, "parent": b.parent, "position": [float(x) for x in b.position],
+             "rotation": [float(x) for x in b.rotation], "scale": [float(x) for x in b.scale]} for b in bones]
+
+
+def is_vrm(path) -> bool:
+    path = Path(path)
+    if path.suffix.lower() == ".vrm":
+        return True
+    if path.suffix.lower() not in GLTF_SUFFIXES:
+        return False
+    ext = read_document(path)[0].extensions or {}
+    return any(k in ext for k in ("VRM", "VRMC_vrm", "VRMC_springBone"))
+
+
+def load_rig(path, *, prefix: str = "", unit_scale: float = 1.0):
+    """The importer result for a rig file: ``VrmAvatar``, ``GltfRig`` or ``BvhAnimation``."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".bvh":
+        return load_bvh(path, prefix=prefix, units="auto" if unit_scale == 1.0 else unit_scale)
+    if suffix not in GLTF_SUFFIXES:
+        raise AssetError(path, "", f"unknown rig file type {suffix!r}; expected .gltf, .glb, .vrm or .bvh")
+    if is_vrm(path):
+        return load_vrm(path, prefix=prefix, unit_scale=unit_scale)
+    return load_gltf(path, prefix=prefix, unit_scale=unit_scale)
+
+
+def rig_section(path, *, name: str | None = None, prefix: str = "", unit_scale: float = 1.0) -> dict:
+    """``rigs: - file: ...`` → ``{"name", "bones": [...], "joints": [...], "humanoid": {...}}``.
+
+    ``joints`` lists skin joints (glTF); ``humanoid`` maps VRM humanoid names to bones (VRM).
+    VRM synthetic nodes (virtual tails, collider frames) are included in ``bones``.
+    """
+    result = load_rig(path, prefix=prefix, unit_scale=unit_scale)
+    section = {"name": name or Path(path).stem, "bones": bone_entries(result.bones)}
+    rig = getattr(result, "rig", result)
+    section["joints"] = sorted(getattr(rig, "joints", set()))
+    section["humanoid"] = dict(getattr(result, "humanoid", {}))
+    return section
+
+
+def vrm_sections(path, *, group_by: str = "group", prefix: str = "", cloth_prefix: str = "vrm_",
+                 oversized_colliders: str = "keep", chains=None) -> dict:
+    """``cloths: - from_vrm: ...`` → ``{"colliders": [...], "cloths": [...], "warnings", "skipped"}``.
+
+    ``chains``: optional list of chain / group names (globs not supported) to keep.
+    """
+    avatar = load_vrm(path, prefix=prefix, oversized_colliders=oversized_colliders)
+    cloths = avatar.cloth_entries(group_by=group_by, prefix=cloth_prefix)
+    if chains is not None:
+        wanted = {f"{cloth_prefix}{c}" for c in chains}
+        unknown = wanted - {c["name"] for c in cloths}
+        if unknown:
+            raise AssetError(path, "secondary animation", f"no chain named {sorted(unknown)}; "
+                             f"chains: {[c['name'] for c in cloths]}")
+        cloths = [c for c in cloths if c["name"] in wanted]
+    used = {n for c in cloths for n in c["colliders"]}
+    return {"colliders": [c for c in avatar.collider_entries() if c["name"] in used], "cloths": cloths,
+            "warnings": list(avatar.warnings), "skipped": list(avatar.skipped)}
+
+
+def split_clip_reference(ref: str) -> tuple[str, str | None]:
+    """``"Fox.glb#Run"`` → (``"Fox.glb"``, ``"Run"``); ``"walk.bvh"`` → (``"walk.bvh"``, None)."""
+    file, _, clip = str(ref).partition("#")
+    return file, (clip or None)
+
+
+def load_clip(ref, *, base_dir=".", target_bones: list[BoneSpec] | None = None, target_map="auto",
+              retarget_options: dict | None = None, drop=(), prefix: str = "", unit_scale: float = 1.0) -> Clip:
+    """``animation: - clip: ...`` → a ``Clip`` targeting the scene's bone names.
+
+    * ``file.glb#Name``: that glTF animation (the only one if ``#Name`` is omitted and the
+      file has exactly one); bone names get ``prefix`` (the rig's prefix).
+    * ``file.bvh``: the BVH clip. With ``target_bones`` (the rig it drives) it is retargeted
+      by humanoid names (``retarget_options``: source_map, source_overrides, target_overrides,
+      source_rest, root_translation, same_names).
+    * ``drop``: globs of bones whose channels are removed (bones the cloth simulates).
+    """
+    file, clip_name = split_clip_reference(ref)
+    path = Path(base_dir) / file
+    options = dict(retarget_options or {})
+    if path.suffix.lower() == ".bvh":
+        anim = load_bvh(path, units=options.pop("units", "auto"))
+        clip = anim.clip
+        if target_bones is not None:
+            clip = retarget(clip, anim.bones, target_bones, target_map=target_map, **options)
+        elif prefix:
+            clip = clip.renamed({n: prefix + n for n in clip.nodes()})
+    else:
+        rig = load_gltf(path, prefix=prefix, unit_scale=unit_scale, mirror_axis="z" if _is_vrm0(path) else "x")
+        if clip_name is None:
+            if len(rig.clips) != 1:
+                raise AssetError(path, "animations", f"name the clip with {file}#<name>; the file has {sorted(rig.clips) or 'none'}")
+            clip = next(iter(rig.clips.values()))
+        else:
+            clip = rig.clip(clip_name)
+        if target_bones is not None and options:
+            clip = retarget(clip, rig.bones, target_bones, target_map=target_map, **options)
+    if drop:
+        clip = clip.without(drop)
+    return clip
+
+
+def _is_vrm0(path: Path) -> bool:
+    ext = read_document(path)[0].extensions or {}
+    return "VRM" in ext and "VRMC_vrm" not in ext
