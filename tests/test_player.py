@@ -314,3 +314,30 @@ def test_real_animation_spin_and_time_scale_event_through_the_player():
     for t, _, child in seen:
         a = math.radians(90.0 * t)  # Unity: +Y spin turns +X towards -Z
         np.testing.assert_allclose(child, (0.5 * math.cos(a), 1.0, -0.5 * math.sin(a)), atol=1e-9)
+
+
+def test_system_errors_name_the_system_phase_and_frame():
+    player = make_player()
+
+    def broken(ctx):
+        if ctx.frame == 2:
+            raise RuntimeError("boom")
+
+    player.schedule.add(Phase.LATE_UPDATE, System("cloth", broken))
+    with pytest.raises(RuntimeError, match="boom") as info:
+        player.run(5)
+    assert "in system 'cloth' (LATE_UPDATE) at frame 2" in info.value.__notes__
+
+
+def test_profile_systems_records_per_system_wall_time_and_reset_restarts_time():
+    player = make_player(fps=30)
+    player.profile_systems = True
+    player.run(3)
+    metrics = player.last_context.metrics
+    assert {"time.system.restore_bones", "time.system.animation",
+            "time.system.reset_frame_counters"} <= set(metrics)
+    assert metrics["time.system.animation"] <= metrics["time.update"]
+    player.reset()
+    ctx = player.step()
+    assert ctx.frame == 0 and ctx.time.frame_count == 1 and ctx.time.time == pytest.approx(1 / 30)
+    assert player.metric_totals["time.update"] == ctx.metrics["time.update"]

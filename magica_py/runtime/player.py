@@ -7,7 +7,9 @@
    ``ctx.fixed_time`` = that step's fixed clock; ``ctx.counters.fixed_update_count`` += 1 after
    each, as MagicaCloth2's TimeManager.AfterFixedUpdate does), UPDATE, LATE_UPDATE,
    RENDER_WRITE, AFTER_RENDERING. The wall time of each phase is recorded in
-   ``ctx.metrics["time.<phase>"]`` (seconds; FIXED_UPDATE summed over its runs).
+   ``ctx.metrics["time.<phase>"]`` (seconds; FIXED_UPDATE summed over its runs), and with
+   ``player.profile_systems = True`` each system's in ``ctx.metrics["time.system.<name>"]``.
+   An exception escaping a system gets a note naming the system, phase and frame.
 3. Events raised this frame (``ctx.events``, ``(kind, payload)``) are dispatched to the
    handlers in ``player.event_handlers`` at the end of the frame, so a time-scale change
    takes effect on the next frame's delta time. Built in: ``("time_scale", value)`` sets
@@ -84,6 +86,18 @@ class Player:
         self.event_handlers: dict[str, Callable[["Player", Any], None]] = {
             "time_scale": _apply_time_scale,
         }
+        self.profile_systems = False  # True: also record ctx.metrics["time.system.<name>"]
+
+    def reset(self) -> None:
+        """Back to frame 0: time source, time manager, counters and metric totals.
+
+        Scene state (poses, animation events, cloth state) belongs to its owners."""
+        self.time_source.reset()
+        self.time_manager.reset()
+        self.counters.fixed_update_count = 0
+        self.frame = 0
+        self.last_context = None
+        self.metric_totals.clear()
 
     @classmethod
     def for_scene(cls, scene: Any, schedule: Schedule | None = None) -> "Player":
@@ -112,8 +126,17 @@ class Player:
     # -- the loop
     def _run_phase(self, ctx: FrameContext, phase: Phase) -> None:
         ctx.phase = phase
+        clock = _time.perf_counter
         for system in self.schedule.systems(phase):
-            system.run(ctx)
+            start = clock() if self.profile_systems else 0.0
+            try:
+                system.run(ctx)
+            except Exception as exc:
+                exc.add_note(f"in system {system.name!r} ({phase.name}) at frame {ctx.frame}")
+                raise
+            if self.profile_systems:
+                key = f"time.system.{system.name}"
+                ctx.metrics[key] = ctx.metrics.get(key, 0.0) + clock() - start
 
     def step(self) -> FrameContext:
         """Run one frame; returns its context."""
