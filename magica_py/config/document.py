@@ -29,6 +29,13 @@ class Document:
     source: str | None = None
     lines: dict[Path, int] = field(default_factory=dict)
     overridden: dict[Path, str] = field(default_factory=dict)  # path -> the --set text
+    text: str | None = None                                     # the file's text as read
+
+    def effective_text(self) -> str:
+        """The scene as YAML text: the file itself, or (after ``--set``) the overridden data."""
+        if not self.overridden and self.text is not None:
+            return self.text
+        return yaml.safe_dump(self.data, sort_keys=False, default_flow_style=None)
 
     def mark_overridden(self, path: Path, text: str) -> None:
         """Forget the file lines under ``path``: its value now comes from ``--set text``."""
@@ -71,7 +78,7 @@ def parse_text(text: str, source: str | None = None) -> Document:
             raise ConfigError(source, [Issue("", f"invalid YAML: {problem}", line)]) from None
         except yaml.YAMLError as exc:
             raise ConfigError(source, [Issue("", f"invalid YAML: {exc}")]) from None
-        doc = Document(None, source)
+        doc = Document(None, source, text=text)
         issues: list[Issue] = []
         if node is not None:
             doc.data = _convert(loader, node, (), doc.lines, issues)

@@ -145,7 +145,7 @@ def load_scene(path, overrides=()):
     """Read, validate and build the scene file at ``path`` (``--set`` strings in ``overrides``)."""
     doc = load_document(path, overrides)
     resolved = validate_document(doc)
-    return build_scene(resolved, pathlib.Path(path))
+    return build_scene(resolved, pathlib.Path(path), doc.effective_text())
 
 
 def load_scene_text(text: str, overrides=(), source: str = "<text>"):
@@ -153,7 +153,7 @@ def load_scene_text(text: str, overrides=(), source: str = "<text>"):
     doc = parse_text(text, source)
     if overrides:
         apply_overrides(doc, overrides)
-    return build_scene(validate_document(doc), None)
+    return build_scene(validate_document(doc), None, doc.effective_text())
 
 
 # ----------------------------------------------------------------------------- resolution
@@ -621,7 +621,7 @@ def _check_parameter_change(c: Checker, params: dict, cloth: dict, path: tuple) 
 
 
 # ----------------------------------------------------------------------------- build
-def build_scene(resolved: ResolvedScene, source: pathlib.Path | None):
+def build_scene(resolved: ResolvedScene, source: pathlib.Path | None, text: str | None = None):
     """Construct the runtime objects of a resolved scene."""
     from magica_py.scene.colliders import ColliderSet
     from magica_py.scene.hierarchy import HierarchyError, TransformHierarchy
@@ -648,7 +648,7 @@ def build_scene(resolved: ResolvedScene, source: pathlib.Path | None):
                     r["nodes_per_instance"], r["instances"]) for r in resolved.rigs]
     return Scene(name=settings.name, source=source, settings=settings, hierarchy=hierarchy,
                  colliders=colliders, animation=animation, cloths=cloths, output=output, rigs=rigs,
-                 collider_names=list(colliders.names))
+                 collider_names=list(colliders.names), source_text=text)
 
 
 def _issue(path: str, message: str):

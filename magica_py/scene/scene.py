@@ -130,6 +130,7 @@ class Scene:
     output: OutputSpec
     rigs: list[RigInfo] = field(default_factory=list)
     collider_names: list[str] = field(default_factory=list)
+    source_text: str | None = None          # YAML of the scene as run (overrides applied): for replays
 
     def cloth(self, name: str) -> ClothSpec:
         for spec in self.cloths:

@@ -1,0 +1,513 @@
+"""``magica-py``: run, validate and describe scene files.
+
+Commands (``magica-py COMMAND --help`` for each):
+
+* ``run SCENE.yaml [--frames N] [--rrd PATH] [--no-rrd] [--set K=V ...] [--spawn]
+  [--connect ADDR] [--quiet]``: build the scene, the player (``default_schedule``), the
+  cloth system (``magica_py.solver.attach(player, scene)`` when the solver provides it) and
+  the sink (``magica_py.sinks.attach(player, scene, options)``), run, print a summary;
+* ``validate SCENE.yaml [--set ...]``: check everything (and build the cloths when
+  ``magica_py.build`` is present), print ``OK`` or every problem;
+* ``info SCENE.yaml [--set ...] [--bones]``: settings, rigs, bones, colliders, cloths and,
+  when ``magica_py.build`` is present, particles and constraints per cloth;
+* commands registered in ``COMMANDS`` by other packages (``inspect``, ``record-all``,
+  ``resim`` from ``magica_py.sinks``): ``name -> (module, function, help)``; the function
+  takes the remaining argv and returns an exit code. It is imported only when used.
+
+Exit codes: 0 success, 1 unexpected failure (with a traceback: a bug), 2 bad input (scene
+file, ``--set``, output path, build error: printed without a traceback), 130 interrupted.
+No partial output: the recording is written to a temporary name and renamed at the end by the
+sink; a failed or interrupted run deletes it.
+
+Heavy modules (numpy, numba, rerun) are imported inside the commands, so ``--help`` is fast.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+import time
+import traceback
+
+EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+# name -> (module, function, one-line help). The function is called with the argv after the
+# command name and returns an int exit code. Other packages add their commands here (or call
+# register_command); nothing is imported until the command runs.
+COMMANDS: dict[str, tuple[str, str, str]] = {
+    "inspect": ("magica_py.sinks.inspect", "main_inspect",
+                "summarize a recording: frames, entities, particles, metrics, events"),
+    "record-all": ("magica_py.sinks.record_all", "main_record_all",
+                   "regenerate one recording per showcase config into replays/"),
+    "resim": ("magica_py.sinks.resim", "main_resim",
+              "re-simulate cloths on the animated pose recorded in an .rrd"),
+}
+
+# Names of per-frame metrics that count simulation steps (first one present wins).
+STEP_METRICS = ("solver.steps", "simulation.steps", "steps")
+
+
+def register_command(name: str, module: str, function: str, help: str) -> None:
+    """Add a lazily imported subcommand (``function(argv) -> int`` in ``module``)."""
+    COMMANDS[name] = (module, function, help)
+
+
+class InputError(Exception):
+    """Bad input detected by the CLI itself (printed without a traceback, exit 2)."""
+
+
+# ----------------------------------------------------------------------------- parser
+def build_parser() -> argparse.ArgumentParser:
+    from magica_py import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="magica-py",
+        description="MagicaCloth2-style BoneCloth secondary motion (hair, tails, skirts) in Python + numba. "
+                    "Scenes are YAML files (docs/scene-format.md); recordings open in the Rerun viewer.",
+        epilog="Examples:\n  magica-py run configs/tail_orbit.yaml\n"
+               "  magica-py run configs/character_walk.yaml --frames 120 --set cloths.skirt.parameters.damping=0.2\n"
+               "  magica-py validate configs/crowd.yaml\n  magica-py info configs/character_walk.yaml",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"magica-py {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    def scene_args(p):
+        p.add_argument("scene", metavar="SCENE.yaml", help="scene file (format: docs/scene-format.md)")
+        p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                       help="override a value before validation, e.g. scene.fps=30, "
+                            "cloths[0].parameters.damping=0.2 or cloths.tail.parameters.damping=0.2 "
+                            "(VALUE is parsed as YAML; repeatable)")
+
+    run = sub.add_parser("run", help="simulate a scene and record it",
+                         description="Simulate a scene frame by frame and record it for the Rerun viewer.")
+    scene_args(run)
+    run.add_argument("--frames", type=_positive_int, metavar="N",
+                     help="number of frames (default: scene.frames or scene.duration)")
+    run.add_argument("--rrd", metavar="PATH", help="write the recording here (default: output.rrd of the scene)")
+    run.add_argument("--no-rrd", action="store_true", help="do not write a recording file")
+    run.add_argument("--spawn", action="store_true", help="stream to a new Rerun viewer")
+    run.add_argument("--connect", metavar="ADDR", help="stream to a running Rerun viewer (host:port or URL)")
+    run.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no summary")
+
+    validate = sub.add_parser("validate", help="check a scene file and report every problem",
+                              description="Check a scene file completely (and build its cloths when the build "
+                                          "module is available); print OK or every problem found.")
+    scene_args(validate)
+    validate.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
+
+    info = sub.add_parser("info", help="describe a scene: bones, colliders, cloths, particles, constraints",
+                          description="Describe a scene: settings, rigs, bones, colliders, cloths and, when the "
+                                      "build module is available, each cloth's particles and constraints.")
+    scene_args(info)
+    info.add_argument("--bones", action="store_true", help="list every bone as a tree (long for crowds)")
+
+    for name, (_, _, text) in COMMANDS.items():
+        p = sub.add_parser(name, help=text, add_help=False)
+        p.add_argument("rest", nargs=argparse.REMAINDER)
+    return parser
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of frames, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected at least 1 frame, got {value}")
+    return value
+
+
+# ----------------------------------------------------------------------------- main
+def main(argv=None) -> int:
+    """Entry point of the ``magica-py`` console script; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in COMMANDS:  # registered commands parse their own arguments
+        return _run_registered(argv[0], argv[1:])
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
+        return int(exc.code or 0)
+    handler = {"run": cmd_run, "validate": cmd_validate, "info": cmd_info}[args.command]
+    try:
+        return handler(args)
+    except KeyboardInterrupt:
+        print("magica-py: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:  # `magica-py info ... | head`: the reader went away
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_OK
+    except Exception as exc:  # noqa: BLE001 - classify, then report
+        if _is_input_error(exc):
+            print(_format_input_error(exc), file=sys.stderr)
+            return EXIT_BAD_INPUT
+        traceback.print_exc()
+        print(f"magica-py: internal error: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+
+
+def _run_registered(name: str, argv: list[str]) -> int:
+    module_name, function, _ = COMMANDS[name]
+    try:
+        module = importlib.import_module(module_name)
+        fn = getattr(module, function)
+    except (ImportError, AttributeError) as exc:
+        print(f"magica-py {name}: not available in this installation ({module_name}.{function}: {exc})",
+              file=sys.stderr)
+        return EXIT_FAILURE
+    return int(fn(argv) or 0)
+
+
+def _is_input_error(exc: BaseException) -> bool:
+    from magica_py.config.errors import ConfigError
+
+    if isinstance(exc, (ConfigError, InputError)):
+        return True
+    # errors that name a bad input of the user: output path, build of a cloth
+    return type(exc).__name__ in ("OutputError", "BuildError", "ParameterError", "RecordingError")
+
+
+def _format_input_error(exc: BaseException) -> str:
+    from magica_py.config.errors import ConfigError
+
+    if isinstance(exc, ConfigError):
+        return exc.report()
+    return f"magica-py: error: {exc}"
+
+
+# ----------------------------------------------------------------------------- commands
+def cmd_validate(args) -> int:
+    from magica_py.config import load_scene
+
+    scene = load_scene(args.scene, args.overrides)
+    models = _build_models(scene)
+    if not args.quiet:
+        counts = scene.summary()
+        particles = ""
+        if models:
+            total = sum(models[spec.name].particle_count * _copies(scene, spec) for spec in _representative_cloths(scene))
+            particles = f", {total} particles"
+        print(f"OK {args.scene}: scene {scene.name!r}: {counts['bones']} bones, {counts['colliders']} colliders, "
+              f"{counts['cloths']} cloths{particles}")
+    return EXIT_OK
+
+
+def cmd_info(args) -> int:
+    from magica_py.config import load_scene
+
+    scene = load_scene(args.scene, args.overrides)
+    for line in describe_scene(scene, list_bones=args.bones):
+        print(line)
+    models = _build_models(scene)
+    if models is None:
+        print("cloth build: magica_py.build is not available (particles and constraints not shown)")
+    else:
+        for spec in _representative_cloths(scene):
+            for line in _describe_model(models[spec.name]):
+                print("  " + line)
+    return EXIT_OK
+
+
+def cmd_run(args) -> int:
+    from magica_py.config import load_scene
+    from magica_py.runtime.player import Player
+
+    if args.no_rrd and args.rrd:
+        raise InputError("--rrd and --no-rrd contradict each other; give one")
+    scene = load_scene(args.scene, args.overrides)
+    frames = args.frames if args.frames is not None else scene.settings.frame_count()
+    player = Player.for_scene(scene)  # default_schedule(scene) + the scene's time source
+    notes = []
+    solver_attached = _attach_solver(player, scene, notes)
+    created_dir = _ensure_output_folder(scene, args)
+    recorder = None
+    ok = False
+    try:
+        recorder = _attach_sink(player, scene, args, notes)
+        if not args.quiet:
+            for note in notes:
+                print(f"magica-py: {note}", file=sys.stderr)
+        summary = _play(player, scene, frames, quiet=args.quiet)
+        ok = True
+    finally:
+        if recorder is not None:
+            recorder.close(ok)
+        if not ok and created_dir is not None:
+            _remove_if_empty(created_dir)
+    if not args.quiet:
+        out = getattr(recorder, "output_path", None) if recorder is not None else None
+        print(_summary_line(scene, summary, solver_attached, out))
+    return EXIT_OK
+
+
+# ----------------------------------------------------------------------------- run helpers
+def _attach_solver(player, scene, notes: list[str]) -> bool:
+    """``magica_py.solver.attach(player, scene)`` when the solver provides it."""
+    try:
+        solver = importlib.import_module("magica_py.solver")
+    except ImportError as exc:
+        notes.append(f"cloth solver unavailable ({exc}); cloths are not simulated")
+        return False
+    attach = getattr(solver, "attach", None)
+    if attach is None:
+        if scene.cloths:
+            notes.append("this installation's magica_py.solver has no attach(); cloths are not simulated "
+                         "(bones follow the animation only)")
+        return False
+    attach(player, scene)
+    return True
+
+
+def _attach_sink(player, scene, args, notes: list[str]):
+    """``magica_py.sinks.attach(player, scene, options)``; returns the recorder (or None)."""
+    wants_output = (not args.no_rrd and (args.rrd or scene.output.rrd)) or args.spawn or args.connect
+    if not wants_output:
+        return None  # nothing to write or stream: no sink at all
+    try:
+        sinks = importlib.import_module("magica_py.sinks")
+        attach = getattr(sinks, "attach")
+    except (ImportError, AttributeError) as exc:
+        if wants_output:
+            raise InputError(f"cannot record: the sinks package is unavailable ({exc}); use --no-rrd") from None
+        return None
+    options = {"rrd": args.rrd, "no_rrd": bool(args.no_rrd), "spawn": bool(args.spawn), "connect": args.connect}
+    options_type = getattr(sinks, "SinkOptions", None)
+    return attach(player, scene, options_type(**options) if options_type else options)
+
+
+def _ensure_output_folder(scene, args):
+    """Create the folder of the scene's own ``output.rrd`` (e.g. replays/) when missing;
+    returns it when created, so a failed run can remove it again."""
+    if args.no_rrd or args.rrd or scene.output.rrd is None:
+        return None
+    folder = scene.output.rrd.parent
+    if str(folder) in ("", ".") or folder.exists():
+        return None
+    try:
+        folder.mkdir(parents=True)
+    except OSError as exc:
+        raise InputError(f"output.rrd: cannot create the folder {str(folder)!r}: {exc}") from None
+    return folder
+
+
+def _remove_if_empty(folder) -> None:
+    try:
+        folder.rmdir()
+    except OSError:
+        pass
+
+
+class ProgressBar:
+    """A plain-text progress bar on stderr, shown only when the run lasts over ``delay`` s
+    and stderr is a terminal (or ``force``); at most ``rate`` redraws per second."""
+
+    def __init__(self, total: int | None, stream=None, delay: float = 1.0, rate: float = 10.0,
+                 force: bool = False, width: int = 30):
+        self.total = total
+        self.stream = stream if stream is not None else sys.stderr
+        self.delay = delay
+        self.interval = 1.0 / rate
+        self.enabled = force or bool(getattr(self.stream, "isatty", lambda: False)())
+        self.width = width
+        self.start = time.perf_counter()
+        self.last_draw = 0.0
+        self.drawn = False
+
+    def update(self, done: int, force: bool = False) -> None:
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        elapsed = now - self.start
+        if elapsed < self.delay or (now - self.last_draw < self.interval and not force):
+            return
+        self.last_draw = now
+        per_frame = elapsed / max(done, 1)
+        if self.total:
+            filled = int(self.width * done / self.total)
+            bar = "#" * filled + "." * (self.width - filled)
+            eta = per_frame * (self.total - done)
+            text = f"\r[{bar}] {done}/{self.total} frames  {1000 * per_frame:.2f} ms/frame  ETA {eta:.1f} s "
+        else:
+            text = f"\r{done} frames  {1000 * per_frame:.2f} ms/frame  {elapsed:.1f} s "
+        self.stream.write(text)
+        self.stream.flush()
+        self.drawn = True
+
+    def close(self) -> None:
+        if self.drawn:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+class RunStats:
+    """Totals of a run for the summary line."""
+
+    def __init__(self):
+        self.frames = 0
+        self.steps = 0.0
+        self.steps_known = False
+        self.wall_time = 0.0
+
+
+def _play(player, scene, frames: int | None, quiet: bool) -> RunStats:
+    """Step the player ``frames`` times (or, for a realtime clock with a duration, until that
+    much unscaled time has passed), with the progress bar."""
+    stats = RunStats()
+    bar = ProgressBar(frames, force=False) if not quiet else None
+    duration = scene.settings.duration if frames is None else None
+    start = time.perf_counter()
+    try:
+        while True:
+            if frames is not None and stats.frames >= frames:
+                break
+            ctx = player.step()
+            stats.frames += 1
+            for name in STEP_METRICS:
+                if name in ctx.metrics:
+                    stats.steps += float(ctx.metrics[name])
+                    stats.steps_known = True
+                    break
+            if bar is not None:
+                bar.update(stats.frames)
+            if duration is not None and ctx.time.unscaled_time >= duration:
+                break
+    finally:
+        if bar is not None:
+            bar.close()
+    stats.wall_time = time.perf_counter() - start
+    return stats
+
+
+def _summary_line(scene, stats: RunStats, solver_attached: bool, output) -> str:
+    per_frame = 1000.0 * stats.wall_time / max(stats.frames, 1)
+    if stats.steps_known:
+        steps = f"{int(round(stats.steps))} simulation steps"
+    else:
+        steps = "no simulation steps (no cloth solver)" if not solver_attached or not scene.cloths \
+            else "simulation steps not reported"
+    where = ""
+    if output:
+        text = os.path.relpath(output)
+        where = f" -> {text if not text.startswith('..') else os.path.abspath(output)}"
+    return (f"{scene.name}: {stats.frames} frames, {steps}, {per_frame:.2f} ms/frame "
+            f"(wall {stats.wall_time:.2f} s){where}")
+
+
+# ----------------------------------------------------------------------------- info helpers
+def describe_scene(scene, list_bones: bool = False) -> list[str]:
+    """Human-readable lines for ``info``."""
+    s = scene.settings
+    h = scene.hierarchy
+    if s.frame_source == "fps":
+        source = f"{s.fps:g} fps"
+    elif s.frame_source == "frame_times":
+        source = f"{len(s.frame_times)} frame times ({'cycled' if s.frame_times_cycle else 'once'})"
+    else:
+        source = "real-time clock"
+    frames = s.frame_count()
+    length = f"{frames} frames" if frames is not None else f"{s.duration:g} s"
+    out = [f"scene {scene.name!r} ({scene.source or '<text>'})",
+           f"  time: {source}, {length}, time scale {s.time_scale:g}, update mode {s.update_mode}, "
+           f"timing {s.timing}",
+           f"  simulation: {s.simulation_frequency} Hz, at most {s.max_steps_per_frame} steps per frame; fixed "
+           f"delta time {s.fixed_delta_time:g} s, maximum delta time {s.maximum_delta_time:.4g} s",
+           f"  gravity direction {tuple(round(x, 4) for x in s.gravity)}, seed {s.seed}",
+           f"bones: {h.count} transforms in {len(scene.rigs)} rigs"]
+    for rig in scene.rigs:
+        inst = f", {rig.instances} instances" if rig.instances > 1 else ""
+        roots = ", ".join(h.names[i] for i in rig.root_nodes[:3]) + (" ..." if len(rig.root_nodes) > 3 else "")
+        out.append(f"  rig {rig.name!r}: {rig.nodes_per_instance} bones{inst} (root {roots})")
+    if list_bones:
+        out.extend(_bone_tree(h))
+    cols = scene.colliders
+    out.append(f"colliders: {len(cols)}")
+    shape_names = ("sphere", "capsule", "plane")
+    shown = {}
+    for i in range(len(cols)):
+        base = _base_name(cols.names[i])
+        shown.setdefault(base, []).append(i)
+    for base, members in shown.items():
+        i = members[0]
+        kind = shape_names[int(cols.shape[i])]
+        if kind == "sphere":
+            size = f"radius {cols.radius[i]:g}"
+        elif kind == "capsule":
+            size = (f"radius {cols.radius[i]:g}..{cols.end_radius[i]:g}, length {cols.length[i]:g}, "
+                    f"axis {'xyz'[int(cols.direction[i])]}")
+        else:
+            size = "normal +Y"
+        label = f"{base} x{len(members)} (instance 0 shown)" if len(members) > 1 else cols.names[i]
+        out.append(f"  {label}: {kind} on {h.names[int(cols.transform[i])]!r}, {size}")
+    out.append(f"cloths: {len(scene.cloths)}")
+    for spec in _representative_cloths(scene):
+        copies = _copies(scene, spec)
+        label = f"{_base_name(spec.name)!r} x{copies} (instance 0 shown)" if spec.instance is not None \
+            else repr(spec.name)
+        roots = [h.names[i] for i in spec.root_bones]
+        shown = ", ".join(roots[:6]) + (f" ... ({len(roots)} roots)" if len(roots) > 6 else "")
+        out.append(f"  {label}: {spec.connection_mode}, preset {spec.preset or 'defaults'}, "
+                   f"component {h.names[spec.component]!r}")
+        out.append(f"    roots: {shown}")
+        cols_text = ", ".join(scene.colliders.names[i] for i in spec.colliders) or "none"
+        out.append(f"    colliders ({spec.collision_mode}): {cols_text}")
+        if spec.bone_attributes:
+            attrs = ", ".join(f"{h.names[i]}={a}" for i, a in list(spec.bone_attributes.items())[:8])
+            out.append(f"    bone attributes: {attrs}")
+    return out
+
+
+def _bone_tree(h) -> list[str]:
+    out = []
+    depth = [0] * h.count
+    for i in range(h.count):
+        p = int(h.parent[i])
+        depth[i] = depth[p] + 1 if p >= 0 else 0
+        out.append("    " + "  " * depth[i] + h.names[i])
+    return out
+
+
+def _base_name(name: str) -> str:
+    return name.split("#", 1)[0]
+
+
+def _copies(scene, spec) -> int:
+    """How many cloths the YAML entry of ``spec`` became (instances)."""
+    if spec.instance is None:
+        return 1
+    return sum(1 for c in scene.cloths if c.instance is not None and _base_name(c.name) == _base_name(spec.name))
+
+
+def _representative_cloths(scene):
+    """One cloth per YAML entry (instance 0 of a replicated cloth)."""
+    seen, out = set(), []
+    for spec in scene.cloths:
+        key = _base_name(spec.name) if spec.instance is not None else spec.name
+        if key not in seen:
+            seen.add(key)
+            out.append(spec)
+    return out
+
+
+def _build_models(scene):
+    """Build the representative cloths with ``magica_py.build`` (None when unavailable)."""
+    try:
+        build = importlib.import_module("magica_py.build")
+        build_cloth = getattr(build, "build_cloth")
+    except (ImportError, AttributeError):
+        return None
+    return {spec.name: build_cloth(scene.hierarchy, spec) for spec in _representative_cloths(scene)}
+
+
+def _describe_model(model) -> list[str]:
+    try:
+        from magica_py.build import describe
+    except ImportError:
+        return [f"cloth {getattr(model, 'name', '?')!r}: {model.particle_count} particles"]
+    return describe(model)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
