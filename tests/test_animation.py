@@ -102,6 +102,20 @@ def test_smooth_interpolation_eases_the_segment():
     np.testing.assert_allclose(local(pose_at(spec, 0.5), "root")[0], (0, 0, 0.3125), atol=1e-12)
 
 
+def test_cubic_interpolation_passes_through_keys_with_catmull_rom_tangents():
+    keys = [{"time": 0, "position": [0, 0, 0]}, {"time": 1, "position": [0, 1, 0]},
+            {"time": 2, "position": [0, 0, 0]}]
+    spec = [{"target": "root", "keyframes": {"interpolation": "cubic", "keys": keys}}]
+    # segment 0: m0 = 1 (one-sided), m1 = (0 - 0) / 2 = 0; Hermite at f = 0.5 -> 0.625
+    np.testing.assert_allclose(local(pose_at(spec, 0.5), "root")[0], (0, 0.625, 0), atol=1e-12)
+    np.testing.assert_allclose(local(pose_at(spec, 1.0), "root")[0], (0, 1, 0), atol=1e-12)
+    # evenly spaced collinear keys stay on the line at constant speed
+    line = [{"time": 0, "position": [0, 0, 0]}, {"time": 1, "position": [1, 0, 0]},
+            {"time": 3, "position": [3, 0, 0]}]
+    spec = [{"target": "root", "keyframes": {"interpolation": "cubic", "keys": line}}]
+    np.testing.assert_allclose(local(pose_at(spec, 1.7), "root")[0], (1.7, 0, 0), atol=1e-12)
+
+
 def test_each_channel_uses_only_the_keys_that_have_it():
     keys = [{"time": 0, "position": [0, 0, 0], "scale": [1, 1, 1]},
             {"time": 1, "euler": [0, 0, 90]},
@@ -264,6 +278,24 @@ def test_teleport_lands_on_the_world_pose_under_a_rotated_scaled_parent():
     anim.apply(h, ctx_at(3.0))
     h.propagate()
     np.testing.assert_allclose(h.world_position[i], (10, 0, 0), atol=1e-9)
+
+
+def test_teleports_of_a_parent_and_its_child_in_one_frame_both_land():
+    h = rig(root_scale=(2.0, 2.0, 2.0))
+    anim = Animation.from_specs([
+        {"at": 1.0, "teleport": {"target": "root", "position": [5, 0, 0], "euler": [0, 90, 0]}},
+        {"at": 1.0, "teleport": {"target": "head", "position": [0, 3, 0]}},
+        {"at": 1.0, "teleport": {"target": "hips", "position": [1, 1, 1]}},
+    ], h)
+    ctx = ctx_at(1.0)
+    anim.apply(h, ctx)
+    h.propagate()
+    np.testing.assert_allclose(h.world_position[h.index("root")], (5, 0, 0), atol=1e-9)
+    np.testing.assert_allclose(h.world_position[h.index("hips")], (1, 1, 1), atol=1e-9)
+    # the head was placed before its parent hips moved, so it moved along with the hips
+    assert [e[1]["name"] for e in ctx.events] == ["root", "head", "hips"]
+    np.testing.assert_allclose(h.world_position[h.index("head")], (0, 3, 0) + np.array([1, 1, 1])
+                               - np.array([5, 2, 0]), atol=1e-9)
 
 
 def test_motion_continues_relative_to_the_teleported_place():

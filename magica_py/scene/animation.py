@@ -37,7 +37,9 @@ Driver parameters (angles in degrees, lengths in metres, times in seconds)
 * ``keyframes: {keys: [{time, position?, rotation? (xyzw) | euler?, scale?}], interpolation:
   linear | step | smooth, loop: false}``: local pose tracks; each channel uses the keys that
   have it; vectors lerp, rotations slerp (shortest arc: add intermediate keys for turns over
-  180 degrees); ``smooth`` eases each segment (smoothstep); ``loop`` wraps over
+  180 degrees); ``smooth`` eases each segment (smoothstep: starts and stops at every key);
+  ``cubic`` passes smoothly through the keys (Catmull-Rom tangents for uneven key times,
+  one-sided at the ends; rotations slerp linearly); ``loop`` wraps over
   [first key, last key], otherwise the ends are held. Key times are relative to ``start``.
 * ``orbit: {center, radius, period, axis=(0,1,0), phase=0, face_path=false}``: position on
   the circle ``center + rotate(axis, 360 tau/period + phase) * radius * u`` where ``u`` is
@@ -93,7 +95,8 @@ KEYFRAMES, ORBIT, OSCILLATE, SPIN, WALK = 0, 1, 2, 3, 4
 DRIVER_KINDS = {"keyframes": KEYFRAMES, "orbit": ORBIT, "oscillate": OSCILLATE,
                 "spin": SPIN, "walk": WALK}
 EVENT_KINDS = ("teleport", "time_scale", "set_parameter")
-INTERPOLATIONS = {"linear": 0, "step": 1, "smooth": 2}
+INTERPOLATIONS = {"linear": 0, "step": 1, "smooth": 2, "cubic": 3}
+CUBIC = 3
 PARAM_WIDTH = 16
 CHANNEL_POSITION, CHANNEL_ROTATION, CHANNEL_SCALE = 0, 1, 2
 
@@ -141,6 +144,39 @@ def ease(f, interpolation):
 
 
 @kernel
+def cubic_segment(key_time, key_value, first, last, k0, k1, f):
+    """Cubic Hermite between keys k0 and k1 with Catmull-Rom tangents for uneven key times
+    (``(p[k+1] - p[k-1]) / (t[k+1] - t[k-1])``, one-sided at the track ends)."""
+    if k0 == k1:
+        return load3(key_value, k0)
+    h = key_time[k1] - key_time[k0]
+    a = k0 - 1 if k0 > first else k0
+    b = k1 + 1 if k1 < last else k1
+    f2 = f * f
+    f3 = f2 * f
+    h00 = 2.0 * f3 - 3.0 * f2 + 1.0
+    h10 = (f3 - 2.0 * f2 + f) * h
+    h01 = -2.0 * f3 + 3.0 * f2
+    h11 = (f3 - f2) * h
+    ta = key_time[k1] - key_time[a]
+    tb = key_time[b] - key_time[k0]
+    out0 = 0.0
+    out1 = 0.0
+    out2 = 0.0
+    for c in range(3):
+        m0 = (key_value[k1, c] - key_value[a, c]) / ta
+        m1 = (key_value[b, c] - key_value[k0, c]) / tb
+        v = h00 * key_value[k0, c] + h10 * m0 + h01 * key_value[k1, c] + h11 * m1
+        if c == 0:
+            out0 = v
+        elif c == 1:
+            out1 = v
+        else:
+            out2 = v
+    return (out0, out1, out2)
+
+
+@kernel
 def window_weight(t, start, end, fade):
     """Envelope of periodic motions: 0 outside [start, end], linear ramps of ``fade`` s."""
     if t < start or t > end:
@@ -175,13 +211,17 @@ def apply_drivers(t, kind, target, start, end, phase_offset, fade, params, key_f
                 n = key_count[d, ch]
                 if n == 0:
                     continue
-                k0, k1, f = track_segment(key_time, key_first[d, ch], n, tau, loop)
+                first = key_first[d, ch]
+                k0, k1, f = track_segment(key_time, first, n, tau, loop)
                 f = ease(f, interpolation)
                 if ch == CHANNEL_ROTATION:
                     q = q_slerp(load4(key_value, k0), load4(key_value, k1), f)
                     store4(local_rotation, i, q)
                 else:
-                    v = v_lerp(load3(key_value, k0), load3(key_value, k1), f)
+                    if interpolation == CUBIC:
+                        v = cubic_segment(key_time, key_value, first, first + n - 1, k0, k1, f)
+                    else:
+                        v = v_lerp(load3(key_value, k0), load3(key_value, k1), f)
                     if ch == CHANNEL_POSITION:
                         store3(local_position, i, v)
                     else:
@@ -414,25 +454,43 @@ class Animation:
                       hierarchy.local_rotation, hierarchy.local_scale)
 
     def apply(self, hierarchy, ctx) -> None:
-        """UPDATE phase: drivers at ``ctx.time.time``, then the events now due."""
+        """UPDATE phase: drivers at ``ctx.time.time``, then the events now due, in ``at``
+        order (list order at equal times). Writes local poses only: the caller propagates."""
         t = float(ctx.time.time)
         self.evaluate(hierarchy, t)
+        moved: set[int] = set()  # nodes teleported this frame (their subtrees are stale)
         while self.next_event < len(self.events) and self.events[self.next_event].at <= t:
             event = self.events[self.next_event]
             self.next_event += 1
             if event.kind == "teleport":
+                # world poses of the parents must reflect this frame's animation and any
+                # teleport of an ancestor earlier in this frame: one propagate per need
+                if not moved or self._under(hierarchy, event.target, moved):
+                    hierarchy.propagate()
+                    moved.clear()
                 self._teleport(hierarchy, event)
+                moved.add(event.target)
             ctx.events.append((event.kind, event.payload))
+
+    @staticmethod
+    def _under(hierarchy, i: int, nodes: set[int]) -> bool:
+        """Whether a strict ancestor of node i is in ``nodes``."""
+        p = int(hierarchy.parent[i])
+        while p >= 0:
+            if p in nodes:
+                return True
+            p = int(hierarchy.parent[p])
+        return False
 
     def _teleport(self, hierarchy, event: Event) -> None:
         """Land the target on the requested world pose now and keep later motion relative
-        to it: offset_new = (desired * current^-1) * offset_old (parent space)."""
+        to it: offset_new = (desired * current^-1) * offset_old (parent space). Needs the
+        parent's world pose of this frame (``apply`` propagates first)."""
         i = event.target
-        hierarchy.propagate()  # parents' world poses of this frame's animation
         cur_p = hierarchy.local_position[i].copy()
         cur_q = tuple(hierarchy.local_rotation[i])
         payload = event.payload
-        hierarchy.set_world_pose(i, payload.get("position"), payload.get("rotation"), propagate=True)
+        hierarchy.set_world_pose(i, payload.get("position"), payload.get("rotation"), propagate=False)
         want_p = hierarchy.local_position[i]
         want_q = tuple(hierarchy.local_rotation[i])
         delta_q = q_normalize(q_mul(want_q, (-cur_q[0], -cur_q[1], -cur_q[2], cur_q[3])))
