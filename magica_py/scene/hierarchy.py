@@ -174,7 +174,10 @@ class TransformHierarchy:
             self.parent[new] = -1 if b.parent is None else self.index_of[b.parent]
             self.local_position[new] = b.position
             q = np.asarray(b.rotation, dtype=np.float64)
-            self.local_rotation[new] = q / np.linalg.norm(q)
+            norm = float(np.linalg.norm(q))
+            if not np.isfinite(q).all() or norm < 1e-12:
+                raise HierarchyError(f"transform {b.name!r}: rotation {tuple(b.rotation)} is not a valid quaternion (zero length or non-finite)")
+            self.local_rotation[new] = q / norm
             self.local_scale[new] = b.scale
             self.tags.append(dict(b.tags))
         self.world_position = np.zeros((n, 3))
