@@ -200,11 +200,20 @@ class ColliderWorldShapes:
     axis: np.ndarray
 
 
-def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate rows of v (n,3) by unit quaternions q (n,4, xyzw)."""
-    u = q[:, :3]
-    t = 2.0 * np.cross(u, v)
-    return v + q[:, 3:4] * t + np.cross(u, t)
+def _rotation_matrices(q: np.ndarray) -> np.ndarray:
+    """(n,3,3) rotation matrices of unit quaternions q (n,4, xyzw)."""
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    m = np.empty((q.shape[0], 3, 3))
+    m[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    m[:, 0, 1] = 2.0 * (x * y - z * w)
+    m[:, 0, 2] = 2.0 * (x * z + y * w)
+    m[:, 1, 0] = 2.0 * (x * y + z * w)
+    m[:, 1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    m[:, 1, 2] = 2.0 * (y * z - x * w)
+    m[:, 2, 0] = 2.0 * (x * z - y * w)
+    m[:, 2, 1] = 2.0 * (y * z + x * w)
+    m[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    return m
 
 
 def world_shapes(colliders: ColliderSet, hierarchy: TransformHierarchy) -> ColliderWorldShapes:
@@ -218,7 +227,8 @@ def world_shapes(colliders: ColliderSet, hierarchy: TransformHierarchy) -> Colli
     suspended = tiny.any(axis=1)
     scale[tiny] = SCALE_EPSILON
     sign = np.where(scale < 0.0, -1.0, 1.0)
-    frame_pos = pos + _rotate(rot, colliders.center * sign) * np.abs(scale)
+    rmat = _rotation_matrices(rot)
+    frame_pos = pos + np.einsum("nij,nj->ni", rmat, colliders.center * sign) * np.abs(scale)
 
     shape = colliders.shape
     radius = np.zeros(n)
@@ -248,7 +258,7 @@ def world_shapes(colliders: ColliderSet, hierarchy: TransformHierarchy) -> Colli
         b = np.where(aligned, 0.5 * length, length - rs)
         a = np.maximum(a - rs, 0.0)
         b = np.maximum(b - re, 0.0)
-        world_axis = _rotate(rot[cap], axis)
+        world_axis = np.einsum("nij,nj->ni", rmat[cap], axis)
         start[cap] = frame_pos[cap] + world_axis * a[:, None]
         end[cap] = frame_pos[cap] - world_axis * b[:, None]
         radius[cap] = rs
@@ -257,9 +267,7 @@ def world_shapes(colliders: ColliderSet, hierarchy: TransformHierarchy) -> Colli
 
     plane = np.flatnonzero(shape == PLANE)
     if plane.size:
-        up = np.zeros((plane.size, 3))
-        up[:, 1] = sign[plane, 1]
-        normal[plane] = _rotate(rot[plane], up)
+        normal[plane] = rmat[plane, :, 1] * sign[plane, 1][:, None]  # R (0, sign S.y, 0)
 
     return ColliderWorldShapes(shape=shape.copy(), position=frame_pos, rotation=rot.copy(),
                                scale=scale, suspended=suspended, start=start, end=end,
