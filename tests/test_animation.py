@@ -64,6 +64,12 @@ def test_orbit_phase_and_face_path():
     # velocity at angle 90 deg: axis x radial = Y x (-Z) = -X; +Z faces it, +Y stays up
     np.testing.assert_allclose(q_rotate(tuple(q), (0, 0, 1)), (-1, 0, 0), atol=1e-12)
     np.testing.assert_allclose(q_rotate(tuple(q), (0, 1, 0)), (0, 1, 0), atol=1e-12)
+    # a negative period runs backwards and still faces along the motion
+    spec[0]["orbit"]["period"] = -4.0
+    h = pose_at(spec, 1.0)
+    p, q = local(h, "root")
+    np.testing.assert_allclose(p, (1, 0, 0), atol=1e-12)
+    np.testing.assert_allclose(q_rotate(tuple(q), (0, 0, 1)), (0, 0, 1), atol=1e-12)
 
 
 # ----------------------------------------------------------------------------- keyframes

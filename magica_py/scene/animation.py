@@ -45,7 +45,8 @@ Driver parameters (angles in degrees, lengths in metres, times in seconds)
   the circle ``center + rotate(axis, 360 tau/period + phase) * radius * u`` where ``u`` is
   the parent's +X made orthogonal to the axis (+Z when the axis is along X). The rotation
   is positive about ``axis`` as in Unity (clockwise seen from the tip of the axis, since
-  Unity is left-handed), the same sense as a positive ``spin``. ``face_path`` sets the
+  Unity is left-handed), the same sense as a positive ``spin``; a negative ``period`` runs
+  the other way. ``face_path`` sets the
   rotation to +Z along the velocity and +Y along the axis.
 * ``oscillate: {property: position | rotation, axis, amplitude, frequency, phase=0}``:
   ``amplitude * sin(360 frequency tau + phase)`` metres along ``axis`` (parent space) or
@@ -237,6 +238,8 @@ def apply_drivers(t, kind, target, start, end, phase_offset, fade, params, key_f
                                        params[d, 2] + radius * radial[2]))
             if params[d, 12] != 0.0:
                 forward = v_normalize(v_cross(axis, radial))
+                if params[d, 4] < 0.0:  # a negative period runs the circle backwards
+                    forward = (-forward[0], -forward[1], -forward[2])
                 store4(local_rotation, i, q_look_rotation(forward, axis))
         elif k == OSCILLATE:
             w = window_weight(t, start[d], end[d], fade[d])
