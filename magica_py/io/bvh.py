@@ -155,6 +155,8 @@ def parse_bvh(path) -> BvhFile:
             elif tok == "}":
                 tokens.next()
                 return
+            elif tok is None:
+                raise AssetError(path, f"line {tokens.line()}", f"unexpected end of file before MOTION: joint {name!r} is missing its closing '}}'")
             else:
                 raise AssetError(path, f"line {tokens.line()}", f"inside joint {name!r}: expected JOINT, End Site or '}}', got {tok!r}")
 

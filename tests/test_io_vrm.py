@@ -1,0 +1,178 @@
+"""VRM 0.x / 1.0 spring bones → bone cloths and colliders (magica_py.io.vrm, io.sections)."""
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from magica_py.io.errors import AssetError
+from magica_py.io.sections import rig_section, vrm_sections
+from magica_py.io.vrm import load_vrm
+from magica_py.params import resolve_parameters
+from magica_py.scene.hierarchy import TransformHierarchy
+
+DATA = Path(__file__).parents[1].parent / "shared" / "data"
+GODETTE = DATA / "vrm" / "Godette_vrm_v4.vrm"
+EXAMPLES = DATA / "vrm" / "three-vrm-springbone-examples"
+pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"shared test data folder {DATA} is absent")
+
+
+@pytest.fixture(scope="module")
+def godette():
+    with pytest.warns(UserWarning, match="radius 1 m exceeds"):
+        return load_vrm(GODETTE)
+
+
+def test_godette_is_vrm0_with_71_nodes_68_joints_45_humanoid_bones(godette):
+    assert godette.spec_version == "0.x"
+    assert len(godette.rig.bones) == 71 and len(godette.rig.joints) == 68
+    assert len(godette.humanoid) == 45
+    assert godette.humanoid["hips"] == "pelvis_Armature" and godette.humanoid["head"] == "head_Armature"
+
+
+def test_godette_has_eight_chains_in_three_groups_with_the_file_parameters(godette):
+    assert len(godette.chains) == 8
+    by_group = {}
+    for c in godette.chains:
+        by_group.setdefault(c.group, []).append(c)
+    assert [len(v) for v in by_group.values()] == [4, 1, 3]
+    stiff = [v[0].vrm["stiffness"] for v in by_group.values()]
+    drag = [v[0].vrm["drag_force"] for v in by_group.values()]
+    assert stiff == [2.5, 2.0, 4.0] and drag == pytest.approx([0.4, 0.4, 0.1])
+    assert all(c.vrm["hit_radius"] == pytest.approx(0.02) for c in godette.chains)
+    # chains are a bone plus its end node; no synthetic tail was needed
+    assert all(len(c.joints) == 2 and c.joints[1].lower().endswith("_end") for c in godette.chains)
+    assert godette.extra_bones == []
+
+
+def test_godette_colliders_are_four_spheres_on_chest_and_head(godette):
+    cols = {c.name: c for c in godette.colliders}
+    assert len(cols) == 4 and all(c.shape == "sphere" for c in cols.values())
+    radii = sorted(round(c.radius, 3) for c in cols.values())
+    assert radii == [0.1, 0.15, 0.217, 1.0]
+    assert {c.transform for c in cols.values()} == {"chest_Armature", "head_Armature"}
+    hair = next(c for c in godette.chains if c.name == "FrontHair_L")
+    ribbon = next(c for c in godette.chains if c.name == "Ribbon")
+    assert {cols[n].transform for n in hair.colliders} == {"head_Armature"}
+    assert {cols[n].transform for n in ribbon.colliders} == {"chest_Armature"}
+    assert [c for c in godette.chains if c.group == "group2"][0].colliders == []
+    assert cols["vrm_col1_1"].center == pytest.approx((0.0, 1.31, 0.07), abs=1e-6)
+
+
+def test_oversized_collider_can_be_clamped_or_dropped():
+    with pytest.warns(UserWarning, match="clamped to 0.5 m"):
+        clamped = load_vrm(GODETTE, oversized_colliders="clamp")
+    assert max(c.radius for c in clamped.colliders) == 0.5
+    with pytest.warns(UserWarning, match="dropped"):
+        dropped = load_vrm(GODETTE, oversized_colliders="drop")
+    assert len(dropped.colliders) == 3
+    assert all("vrm_col1_1" not in c.colliders for c in dropped.chains)
+
+
+def test_godette_cloth_entries_validate_as_cloth_parameters(godette):
+    entries = godette.cloth_entries()
+    assert [e["root_bones"] for e in entries] == [
+        ["FrontHair_Center_L", "FrontHair_Center_R", "FrontHair_R", "FrontHair_L"], ["Ribbon"],
+        ["HairBall_L", "HairBall_R", "HairBall_Center"]]
+    for i, e in enumerate(entries):
+        p = resolve_parameters(None, e["parameters"], f"cloths[{i}].parameters")
+        assert p["radius"].value == pytest.approx(0.02)
+        assert p["root_rotation"] == 1.0 and p["angle_limit.use"] is False
+    assert len(godette.cloth_entries(group_by="chain")) == 8
+
+
+def test_vrm_sections_keep_only_the_colliders_the_cloths_use():
+    with pytest.warns(UserWarning):
+        sections = vrm_sections(GODETTE, chains=["group1"])
+    assert [c["name"] for c in sections["cloths"]] == ["vrm_group1"]
+    assert [c["transform"] for c in sections["colliders"]] == ["chest_Armature", "chest_Armature"]
+    assert sections["colliders"][0]["sphere"]["radius"] == pytest.approx(0.1)
+
+
+def test_rig_section_of_a_vrm_lists_bones_joints_and_humanoid():
+    with pytest.warns(UserWarning):
+        rig = rig_section(GODETTE, name="godette")
+    assert rig["name"] == "godette" and len(rig["bones"]) == 71
+    assert len(rig["joints"]) == 68 and rig["humanoid"]["leftFoot"] == "foot.l_Armature"
+    assert rig["bones"][0] == {"name": "Armature_rootJoint", "parent": None, "position": [0.0, pytest.approx(0.050284), 0.0],
+                               "rotation": [0.0, 0.0, 0.0, 1.0], "scale": [1.0, 1.0, 1.0]}
+
+
+def test_vrm1_sphere_example_has_one_five_joint_chain_and_a_half_metre_sphere():
+    avatar = load_vrm(EXAMPLES / "sphere-collider.gltf")
+    assert avatar.spec_version == "1.0"
+    assert [c.joints for c in avatar.chains] == [["Spring A", "Spring B", "Spring C", "Spring D", "Spring E"]]
+    chain = avatar.chains[0]
+    assert chain.vrm == {"stiffness": 1.0, "gravity_power": 0.0, "gravity_dir": (0.0, -1.0, 0.0),
+                         "drag_force": 0.4, "hit_radius": 0.25}
+    assert chain.segment_length == pytest.approx(0.5)       # -2 local units under a 0.25 scale
+    (col,) = avatar.colliders
+    h = TransformHierarchy(avatar.bones)
+    world_radius = col.radius * h.lossy_scale[h.index(col.transform), 0]
+    assert col.shape == "sphere" and world_radius == pytest.approx(0.5)
+    assert np.allclose(h.world_position[h.index(col.transform)], [-0.75, 1.0, 0.0])
+
+
+def test_vrm1_extended_plane_becomes_a_plane_whose_up_is_the_normal():
+    avatar = load_vrm(EXAMPLES / "plane-collider.gltf")
+    (col,) = avatar.colliders
+    assert col.shape == "plane" and col.transform == "Collider#vrm_collider0"
+    h = TransformHierarchy(avatar.bones)
+    normal = h.transform_direction(h.index(col.transform), [0, 1, 0])
+    # file: normal +Z in a node turned +90 deg about Y → world +X (glTF) → -X in Unity
+    assert np.allclose(normal, [-1.0, 0.0, 0.0], atol=1e-9)
+    assert np.allclose(h.world_position[h.index(col.transform)], [0.25, 1.0, 0.0])
+
+
+def test_vrm1_inside_sphere_is_skipped_with_a_note():
+    avatar = load_vrm(EXAMPLES / "inside-collider.gltf")
+    assert avatar.colliders == [] and len(avatar.chains) == 1
+    assert any("inside sphere has no MagicaCloth2 counterpart" in s for s in avatar.skipped)
+    assert avatar.cloth_entries()[0]["collision_mode"] == "none"
+
+
+def test_spring_joint_referencing_a_missing_node_names_the_json_path(tmp_path):
+    for f in ("sphere-collider.gltf", "sphere_mesh.bin"):
+        shutil.copy(EXAMPLES / f, tmp_path / f)
+    path = tmp_path / "sphere-collider.gltf"
+    doc = json.loads(path.read_text())
+    doc["extensions"]["VRMC_springBone"]["springs"][0]["joints"][3]["node"] = 99
+    path.write_text(json.dumps(doc))
+    with pytest.raises(AssetError, match=r"sphere-collider\.gltf: extensions\.VRMC_springBone\.springs\[0\]\.joints\[3\]\.node: "
+                                         r"node index 99 does not exist \(the file has 6 nodes\)"):
+        load_vrm(path)
+
+
+def test_vrm0_bone_group_referencing_a_missing_node_is_rejected(tmp_path):
+    import pygltflib
+    doc = pygltflib.GLTF2().load_binary(str(GODETTE))
+    doc.extensions["VRM"]["secondaryAnimation"]["boneGroups"][1]["bones"] = [500]
+    bad = tmp_path / "bad.vrm"
+    doc.save_binary(str(bad))
+    with pytest.raises(AssetError, match=r"boneGroups\[1\]\.bones\[0\]: node index 500 does not exist"):
+        load_vrm(bad)
+
+
+def test_a_childless_root_gets_a_7cm_virtual_tail(tmp_path):
+    for f in ("sphere-collider.gltf", "sphere_mesh.bin"):
+        shutil.copy(EXAMPLES / f, tmp_path / f)
+    path = tmp_path / "sphere-collider.gltf"
+    doc = json.loads(path.read_text())
+    # turn the file into VRM 0.x: one bone group whose root is the leaf "Spring E"
+    del doc["extensions"]["VRMC_springBone"]
+    doc["extensions"]["VRM"] = {"secondaryAnimation": {"boneGroups": [{"bones": [4], "stiffiness": 1.0, "dragForce": 0.4,
+                                                                         "hitRadius": 0.02, "gravityPower": 0}],
+                                                        "colliderGroups": []}}
+    path.write_text(json.dumps(doc))
+    avatar = load_vrm(path)
+    (tail,) = avatar.extra_bones
+    assert tail.name == "Spring E_vrm_tail" and avatar.chains[0].joints == ["Spring E", "Spring E_vrm_tail"]
+    h = TransformHierarchy(avatar.bones)
+    step = h.world_position[h.index(tail.name)] - h.world_position[h.index("Spring E")]
+    assert np.allclose(step, [0.0, -0.07 * 0.25, 0.0], atol=1e-12)   # 7 cm x the joint's 0.25 world scale
+
+
+def test_file_without_vrm_data_is_rejected():
+    with pytest.raises(AssetError, match=r"Fox\.glb: extensions: no VRM data"):
+        load_vrm(DATA / "gltf" / "Fox.glb")
