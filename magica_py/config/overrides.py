@@ -8,9 +8,12 @@ entries, the name inside the generator), so these are equivalent::
     cloths.0.parameters.damping=0.2
     cloths.tail.parameters.damping=0.2
 
+A generator part selected by name is entered directly: ``rigs.character.parts.skirt.strands=8``
+is ``rigs[0].parts[<i>].skirt.strands=8``.
+
 VALUE is parsed as YAML (``0.2`` is a number, ``true`` a bool, ``[0, -1, 0]`` a list,
 ``null`` None, ``tail`` text). Missing mapping keys are created, so an override can add a
-key the file does not have; unknown keys are then reported by the validation like any other.
+key the file does not have (but never replaces a number or text by a mapping); unknown keys are then reported by the validation like any other.
 Because overrides are applied before validation, an out-of-range override is reported with
 its document path exactly as if it were in the file (tagged ``(from --set ...)``).
 """
@@ -89,6 +92,7 @@ def _set(doc: Document, tokens: list, value, text: str) -> Issue | None:
         if isinstance(node, list):
             if isinstance(token, str) and token.lstrip("-").isdigit():
                 token = int(token)
+            selected_by_name = isinstance(token, str)
             if isinstance(token, str):
                 names = [_element_name(item) for item in node]
                 if token not in names:
@@ -100,10 +104,22 @@ def _set(doc: Document, tokens: list, value, text: str) -> Issue | None:
                 return Issue(format_path(path), f"--set {text}: index {token} is out of range "
                                                 f"(the list has {len(node)} elements)")
             token %= len(node)
+            item = node[token]
+            nxt = tokens[k + 1] if not last else None
+            if (selected_by_name and isinstance(item, dict) and "name" not in item and len(item) == 1
+                    and nxt is not None and nxt not in item):
+                # a generator part selected by its inner name: parts.skirt.strands means parts[i].skirt.strands
+                kind = next(iter(item))
+                path.extend([token, kind])
+                node = item[kind]
+                continue
         elif isinstance(node, dict):
             token = str(token)
-            if not last and not isinstance(node.get(token), (dict, list)):
-                node[token] = {}
+            if not last and node.get(token) is None:
+                node[token] = {}  # create missing mappings on the way
+            elif not last and not isinstance(node[token], (dict, list)):
+                return Issue(format_path(path + [token]), f"--set {text}: cannot descend into the "
+                                                          f"{type(node[token]).__name__} value {node[token]!r}")
         else:
             return Issue(format_path(path), f"--set {text}: cannot descend into a {type(node).__name__} value")
         path.append(token)

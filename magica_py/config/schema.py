@@ -178,6 +178,7 @@ OUTPUT_LOG_FIELDS = {
     "colliders": F("bool", True, doc="collider shapes"),
     "metrics": F("bool", True, doc="time series: steps, phase wall times, stretch, speed"),
     "events": F("bool", True, doc="teleports, time-scale changes, parameter changes"),
+    "replay": F("bool", True, doc="animated local poses and frame times, what `magica-py resim` needs"),
 }
 
 
