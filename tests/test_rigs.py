@@ -15,6 +15,7 @@ from magica_py.scene.rigs import (
     instance_rig,
     part_bones,
     rig_bones,
+    sheet,
     skirt,
 )
 
@@ -169,6 +170,19 @@ def test_skirt_root_glob_selects_exactly_the_strand_roots():
     for s in range(12):
         sub = {h.names[i] for i in h.descendants(h.index(f"skirt_{s}_0"))}
         assert sub == {f"skirt_{s}_{k}" for k in range(4)}
+
+
+# ----------------------------------------------------------------------------- sheet
+def test_sheet_strands_are_parallel_and_evenly_spaced_across_the_width():
+    h = build(sheet("cape", "hips", strands=5, bones=3, length=0.6, width=0.4,
+                    position=(0.0, 0.2, -0.1)))
+    for s in range(5):
+        np.testing.assert_allclose(world(h, f"cape_{s}_0"), (-0.2 + 0.1 * s, 1.2, -0.1), atol=1e-12)
+        np.testing.assert_allclose(world(h, f"cape_{s}_2"), (-0.2 + 0.1 * s, 0.6, -0.1), atol=1e-12)
+        # +Z = across x direction = X x (-Y) = -Z: away from the body for a cape on the back
+        np.testing.assert_allclose(axis_of(h, f"cape_{s}_1", (0.0, 0.0, 1.0)), (0, 0, -1), atol=1e-12)
+    with pytest.raises(ValueError, match="parallel"):
+        sheet("cape", "hips", 2, 2, 0.1, 0.1, direction=(1, 0, 0), across=(2, 0, 0))
 
 
 def test_part_bones_dispatches_on_the_single_key():

@@ -1,4 +1,4 @@
-"""Rig generators for secondary-motion bones (chain, fan, skirt), rig placement and crowds.
+"""Rig generators for secondary-motion bones (chain, fan, skirt, sheet), rig placement and crowds.
 
 Every generator returns ``list[BoneSpec]`` (``magica_py.scene.hierarchy``) in parents-before-
 children order, ready to be appended to a rig's explicit bones. All lengths are metres, all
@@ -10,7 +10,8 @@ Bone axis convention (what the solver sees, ref §B.2: normal = bone +Y, tangent
   humanoid bones), so ``child.local_position == (0, segment, 0)``;
 * local **+Z** is the bend direction: "outward" for fans and skirts, and for chains the
   parent's +Y made orthogonal to the chain (a horizontal tail curls upward), or the parent's
-  -Z when the chain is (nearly) vertical (a hanging strand curls backward);
+  -Z when the chain is (nearly) vertical (a hanging strand curls backward); for sheets the
+  side the sheet faces (``across x direction``);
 * local **+X** = Y x Z is the curl axis. ``curl`` degrees per bone rotate each bone about its
   own +X relative to the previous one, bending the strand towards its +Z (a negative curl
   bends the other way). The first segment always follows ``direction`` exactly.
@@ -23,7 +24,7 @@ and ``length`` is their sum (the distance covered by the particles, tip bone inc
 Naming (the cloths refer to roots with globs such as ``skirt_*_0``)
 -------------------------------------------------------------------
 * chain: ``<name>_<bone>`` (``tail_0`` .. ``tail_7``), bone 0 is the root;
-* fan and skirt: ``<name>_<strand>_<bone>`` (``skirt_3_0`` is the root of strand 3); each
+* fan, skirt and sheet: ``<name>_<strand>_<bone>`` (``skirt_3_0`` is the root of strand 3); each
   strand root is a child of ``parent`` and the strand's other bones are its descendants;
 * instances: ``<bone>#<i>`` for every bone of instance ``i`` (0-based, instance 0 included),
   see ``instance_name``; the same rule maps glob patterns (``skirt_*_0#3``).
@@ -38,6 +39,8 @@ Entry points (keyword arguments are the YAML keys of ``rigs[].parts[]``, already
   axis=(0,-1,0), facing=(0,0,-1), curl=0, position=(0,0,0))``
 * ``skirt(name, parent, strands=12, bones=4, radius=0.15, length=0.4, flare=20,
   axis=(0,-1,0), facing=(0,0,1), curl=0, position=(0,0,0))``
+* ``sheet(name, parent, strands, bones, length, width, direction=(0,-1,0), across=(1,0,0),
+  curl=0, position=(0,0,0))``: parallel strands (capes, flags), named like fans;
 * ``part_bones(part)`` for one ``{"chain": {...}}`` / ``{"fan": {...}}`` / ``{"skirt": {...}}``
   entry;
 * ``rig_bones(rig)`` for a whole ``rigs[]`` entry (explicit bones, parts, placement,
@@ -210,7 +213,37 @@ def skirt(name: str, parent: str | None, strands: int = 12, bones: int = 4,
                          radius, axis, facing, curl, position)
 
 
-GENERATORS = {"chain": chain, "fan": fan, "skirt": skirt}
+def sheet(name: str, parent: str | None, strands: int, bones: int, length: float,
+          width: float, direction=(0.0, -1.0, 0.0), across=(1.0, 0.0, 0.0), curl: float = 0.0,
+          position=(0.0, 0.0, 0.0)) -> list[BoneSpec]:
+    """Parallel strands side by side (cape, flag, wide ribbon; ``sequential_non_loop_mesh``).
+
+    Strand roots are evenly spaced over ``width`` along ``across``, centred on ``position``
+    (strand 0 at ``-across * width/2``); every strand runs along ``direction``. Bone +Z is
+    ``across x direction`` (for a cape hanging down the back, across +X: +Z points back,
+    away from the body), so a positive ``curl`` bends the strands that way.
+    """
+    if strands < 1:
+        raise ValueError(f"sheet {name!r}: expected strands >= 1, got {strands}")
+    if width < 0.0:
+        raise ValueError(f"sheet {name!r}: expected width >= 0, got {width}")
+    d = np.asarray(_unit(direction, f"sheet {name!r} direction"))
+    a = _orthogonal_part(_unit(across, f"sheet {name!r} across"), d)
+    if np.linalg.norm(a) < 1e-6:
+        raise ValueError(f"sheet {name!r}: across must not be parallel to direction")
+    a /= np.linalg.norm(a)
+    rotation = bone_frame(tuple(d), tuple(np.cross(a, d)))
+    base = np.asarray(position, dtype=np.float64)
+    out: list[BoneSpec] = []
+    for s in range(strands):
+        u = s / (strands - 1) - 0.5 if strands > 1 else 0.0
+        tags = {"generator": "sheet", "part": name, "strand": s}
+        out.extend(_strand(f"{name}_{s}", parent, bones, length, base + u * width * a,
+                           rotation, curl, tags))
+    return out
+
+
+GENERATORS = {"chain": chain, "fan": fan, "skirt": skirt, "sheet": sheet}
 
 
 def part_bones(part: dict) -> list[BoneSpec]:
