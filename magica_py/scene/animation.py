@@ -35,7 +35,7 @@ edges (a walk that ends stays where it stopped). Oscillate and walk's bob / sway
 Driver parameters (angles in degrees, lengths in metres, times in seconds)
 --------------------------------------------------------------------------
 * ``keyframes: {keys: [{time, position?, rotation? (xyzw) | euler?, scale?}], interpolation:
-  linear | step | smooth, loop: false}``: local pose tracks; each channel uses the keys that
+  linear | step | smooth | cubic, loop: false}``: local pose tracks; each channel uses the keys that
   have it; vectors lerp, rotations slerp (shortest arc: add intermediate keys for turns over
   180 degrees); ``smooth`` eases each segment (smoothstep: starts and stops at every key);
   ``cubic`` passes smoothly through the keys (Catmull-Rom tangents for uneven key times,
@@ -46,8 +46,7 @@ Driver parameters (angles in degrees, lengths in metres, times in seconds)
   the parent's +X made orthogonal to the axis (+Z when the axis is along X). The rotation
   is positive about ``axis`` as in Unity (clockwise seen from the tip of the axis, since
   Unity is left-handed), the same sense as a positive ``spin``; a negative ``period`` runs
-  the other way. ``face_path`` sets the
-  rotation to +Z along the velocity and +Y along the axis.
+  the other way. ``face_path`` sets the rotation to +Z along the velocity, +Y along the axis.
 * ``oscillate: {property: position | rotation, axis, amplitude, frequency, phase=0}``:
   ``amplitude * sin(360 frequency tau + phase)`` metres along ``axis`` (parent space) or
   degrees about ``axis`` (the node's local axes).
