@@ -176,3 +176,41 @@ def test_a_childless_root_gets_a_7cm_virtual_tail(tmp_path):
 def test_file_without_vrm_data_is_rejected():
     with pytest.raises(AssetError, match=r"Fox\.glb: extensions: no VRM data"):
         load_vrm(DATA / "gltf" / "Fox.glb")
+
+
+def test_vrm1_capsules_along_an_axis_or_oblique_and_the_vrm1_humanoid(tmp_path):
+    doc = {
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"name": "hips", "translation": [0, 1, 0], "children": [1, 3]},
+                  {"name": "hair", "translation": [0.1, 0.5, 0], "children": [2]},
+                  {"name": "hair_end", "translation": [0, -0.2, 0]},
+                  {"name": "leg", "translation": [0.1, -0.1, 0]}],
+        "extensionsUsed": ["VRMC_vrm", "VRMC_springBone"],
+        "extensions": {
+            "VRMC_vrm": {"specVersion": "1.0", "humanoid": {"humanBones": {"hips": {"node": 0}, "leftUpperLeg": {"node": 3}}}},
+            "VRMC_springBone": {"specVersion": "1.0",
+                "colliders": [{"node": 3, "shape": {"capsule": {"offset": [0, 0, 0], "tail": [0, -0.3, 0], "radius": 0.05}}},
+                              {"node": 0, "shape": {"capsule": {"offset": [0, 0, 0], "tail": [0.1, 0.1, 0], "radius": 0.02}}}],
+                "colliderGroups": [{"colliders": [0, 1]}],
+                "springs": [{"name": "hair", "colliderGroups": [0],
+                             "joints": [{"node": 1, "hitRadius": 0.01, "stiffness": 1.0, "dragForce": 0.1, "gravityPower": 0.1,
+                                         "gravityDir": [1, 0, 0]}, {"node": 2}]}]}},
+    }
+    path = tmp_path / "capsules.gltf"
+    path.write_text(json.dumps(doc))
+    avatar = load_vrm(path)
+    assert avatar.humanoid == {"hips": "hips", "leftUpperLeg": "leg"}
+    assert avatar.chains[0].vrm["gravity_dir"] == (-1.0, 0.0, 0.0)      # glTF +X is Unity -X
+    leg, oblique = avatar.colliders
+    assert (leg.transform, leg.direction) == ("leg", "y")
+    assert leg.center == pytest.approx((0.0, -0.15, 0.0)) and leg.length == pytest.approx(0.4)
+    assert leg.to_entry()["capsule"] == {"radius": 0.05, "end_radius": 0.05, "length": pytest.approx(0.4), "direction": "y",
+                                         "reverse": False, "aligned_on_center": True}
+    assert oblique.transform == "hips#vrm_collider1" and oblique.direction == "y"
+    h = TransformHierarchy(avatar.bones)
+    axis = h.transform_direction(h.index(oblique.transform), [0, 1, 0])
+    assert np.allclose(axis, np.array([-1.0, 1.0, 0.0]) / np.sqrt(2))
+    assert np.allclose(h.world_position[h.index(oblique.transform)], [-0.05, 1.05, 0.0])
+    assert oblique.length == pytest.approx(np.sqrt(0.02) + 0.04)
+    entry = avatar.cloth_entries()[0]
+    assert entry["root_bones"] == ["hair"] and entry["colliders"] == [leg.name, oblique.name]

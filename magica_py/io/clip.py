@@ -147,14 +147,21 @@ class Clip:
         tangents. For large clips prefer handing the ``Clip`` itself to ``ClipDriver``.
         """
         key_name = {"translation": "position", "rotation": "rotation", "scale": "scale"}
+        duration = self.duration
         out = []
         for tr in self.tracks:
             times, values, interp = tr.times, tr.values, tr.interpolation
             if interp == "cubicspline":
                 n = max(2, int(math.ceil((times[-1] - times[0]) * resample_rate)) + 1)
                 times = np.linspace(times[0], times[-1], n)
-                values = np.array([tr.sample(t) for t in times])
+                values = sample_track_many(tr, times)
                 interp = "linear"
+            # the scene's keyframes loop each entry over its own keys: pad every track to the
+            # clip's [0, duration] (holding its end values) so all tracks loop together
+            if times[0] > 0.0:
+                times, values = np.concatenate([[0.0], times]), np.concatenate([values[:1], values])
+            if times[-1] < duration:
+                times, values = np.concatenate([times, [duration]]), np.concatenate([values, values[-1:]])
             keys = [{"time": float(t), key_name[tr.path]: [float(x) for x in v]} for t, v in zip(times, values)]
             out.append({"target": tr.node, "keyframes": {"interpolation": interp, "loop": loop, "keys": keys}})
         return out
