@@ -1,0 +1,185 @@
+"""The magica-py command line: help, exit codes, error reports without tracebacks, no partial output."""
+import io
+import subprocess
+import sys
+import types
+
+import pytest
+
+from magica_py import cli
+
+SCENE = """
+version: 1
+scene: {name: cli_test, fps: 60, frames: 4}
+rigs:
+  - name: r
+    bones: [{name: root, position: [0, 1, 0]}]
+    parts: [{chain: {name: tail, parent: root, bones: 3, length: 0.3}}]
+animation:
+  - {target: root, spin: {speed: 90}}
+colliders:
+  - {name: ball, transform: root, sphere: {radius: 0.05}}
+cloths:
+  - {name: tail, root_bones: [tail_0], preset: tail, colliders: [ball]}
+output: {rrd: OUT}
+"""
+
+BROKEN = SCENE.replace("radius: 0.05", "radius: -0.05").replace("preset: tail", "preset: tial")
+
+
+@pytest.fixture
+def scene_file(tmp_path):
+    path = tmp_path / "scene.yaml"
+    path.write_text(SCENE.replace("OUT", str(tmp_path / "out" / "cli_test.rrd")))
+    return path
+
+
+@pytest.fixture
+def broken_file(tmp_path):
+    path = tmp_path / "broken.yaml"
+    path.write_text(BROKEN.replace("OUT", str(tmp_path / "broken.rrd")))
+    return path
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["validate", "--help"], ["info", "--help"]])
+def test_help_everywhere(argv, capsys):
+    assert cli.main(argv) == 0
+    assert "usage: magica-py" in capsys.readouterr().out
+
+
+def test_help_is_fast_and_imports_nothing_heavy():
+    code = ("import sys, magica_py.cli as c; c.build_parser(); "
+            "print(sorted(m for m in ('numpy', 'numba', 'rerun', 'yaml') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_usage_error_exits_2(capsys):
+    assert cli.main(["run"]) == 2
+    assert "SCENE.yaml" in capsys.readouterr().err
+    assert cli.main(["run", "x.yaml", "--frames", "0"]) == 2
+
+
+def test_validate_ok(scene_file, capsys):
+    assert cli.main(["validate", str(scene_file)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"OK {scene_file}: scene 'cli_test': 4 bones, 1 colliders, 1 cloths")
+
+
+@pytest.mark.parametrize("command", ["validate", "info", "run"])
+def test_bad_input_exits_2_without_traceback(command, broken_file, tmp_path, capsys):
+    assert cli.main([command, str(broken_file)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert f"{broken_file}: 2 errors" in err
+    assert "colliders[0].sphere.radius: expected a number >= 0.001, got -0.05" in err
+    assert "cloths[0].preset: unknown preset 'tial' (did you mean 'tail'?)" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["broken.yaml"]  # nothing written
+
+
+def test_bad_override_exits_2_and_writes_nothing(scene_file, tmp_path, capsys):
+    assert cli.main(["run", str(scene_file), "--set", "cloths.tail.parameters.damping=5"]) == 2
+    err = capsys.readouterr().err
+    assert "cloths[0].parameters.damping" in err and "(from --set cloths.tail.parameters.damping=5)" in err
+    assert "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_unwritable_output_exits_2(scene_file, tmp_path, capsys):
+    target = tmp_path / "missing_folder" / "x.rrd"
+    assert cli.main(["run", str(scene_file), "--rrd", str(target)]) == 2
+    err = capsys.readouterr().err
+    assert "does not exist" in err and "Traceback" not in err
+    assert not target.parent.exists()
+
+
+def test_contradicting_output_flags(scene_file, tmp_path, capsys):
+    assert cli.main(["run", str(scene_file), "--no-rrd", "--rrd", str(tmp_path / "a.rrd")]) == 2
+    assert "contradict" in capsys.readouterr().err
+
+
+def test_run_without_recording_prints_summary(scene_file, tmp_path, capsys):
+    assert cli.main(["run", str(scene_file), "--no-rrd", "--frames", "3"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("cli_test: 3 frames, ")
+    assert "ms/frame" in out
+    assert not (tmp_path / "out").exists()
+
+
+def test_run_writes_the_scene_recording_and_creates_its_folder(scene_file, tmp_path, capsys):
+    assert cli.main(["run", str(scene_file), "--quiet"]) == 0
+    assert capsys.readouterr().out == ""
+    files = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert files == ["cli_test.rrd"]  # no temporary file left behind
+    assert (tmp_path / "out" / "cli_test.rrd").stat().st_size > 0
+
+
+def test_failed_run_leaves_no_partial_recording(scene_file, tmp_path, monkeypatch, capsys):
+    from magica_py.runtime.player import Player
+
+    real_step = Player.step
+    calls = {"n": 0}
+
+    def failing_step(self):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise RuntimeError("simulated crash in frame 3")
+        return real_step(self)
+
+    monkeypatch.setattr(Player, "step", failing_step)
+    target = tmp_path / "partial.rrd"
+    assert cli.main(["run", str(scene_file), "--rrd", str(target)]) == 1
+    err = capsys.readouterr().err
+    assert "simulated crash in frame 3" in err  # an internal error keeps its traceback
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.yaml"]
+
+
+def test_info_lists_bones_colliders_cloths(scene_file, capsys):
+    assert cli.main(["info", str(scene_file), "--bones"]) == 0
+    out = capsys.readouterr().out
+    assert "bones: 4 transforms in 1 rigs" in out
+    assert "ball: sphere on 'root', radius 0.05" in out
+    assert "'tail': line, preset tail, component 'root'" in out
+    assert "\n    root\n      tail_0\n        tail_1\n          tail_2\n" in out  # --bones: indented tree
+
+
+def test_registered_commands_are_imported_lazily(monkeypatch, capsys):
+    module = types.ModuleType("fake_magica_command")
+    seen = []
+    module.main_hello = lambda argv: seen.append(list(argv)) or 7
+    monkeypatch.setitem(sys.modules, "fake_magica_command", module)
+    monkeypatch.setitem(cli.COMMANDS, "hello", ("fake_magica_command", "main_hello", "say hello"))
+    assert cli.main(["hello", "a", "--b"]) == 7
+    assert seen == [["a", "--b"]]
+    assert cli.main(["--help"]) == 0
+    assert "say hello" in capsys.readouterr().out
+
+
+def test_unavailable_registered_command(monkeypatch, capsys):
+    monkeypatch.setitem(cli.COMMANDS, "ghost", ("magica_py.no_such_module", "main", "nothing"))
+    assert cli.main(["ghost"]) == 1
+    assert "not available" in capsys.readouterr().err
+
+
+def test_progress_bar_draws_after_delay_and_finishes_the_line():
+    stream = io.StringIO()
+    bar = cli.ProgressBar(10, stream=stream, delay=0.0, rate=1e9, force=True, width=10)
+    bar.update(5)
+    bar.update(10)
+    bar.close()
+    text = stream.getvalue()
+    assert "\r[#####.....] 5/10 frames" in text and "\r[##########] 10/10 frames" in text
+    assert text.endswith("\n")
+    quiet = io.StringIO()
+    slow = cli.ProgressBar(10, stream=quiet, delay=60.0, force=True)
+    slow.update(1)
+    slow.close()
+    assert quiet.getvalue() == ""  # runs shorter than the delay draw nothing
+
+
+def test_summary_counts_simulation_steps():
+    stats = cli.RunStats()
+    stats.frames, stats.steps, stats.steps_known, stats.wall_time = 60, 90.0, True, 0.5
+    scene = types.SimpleNamespace(name="s", cloths=[1])
+    line = cli._summary_line(scene, stats, True, None)
+    assert line == "s: 60 frames, 90 simulation steps, 8.33 ms/frame (wall 0.50 s)"
