@@ -45,7 +45,7 @@ class GltfRig:
     clips: dict[str, Clip]
     mirror_axis: str
     unit_scale: float
-    document: pygltflib.GLTF2
+    document: pygltflib.GLTF2       # scene graph, skins, animations, buffers, extensions (no meshes/accessors)
     extensions: dict = field(default_factory=dict)  # document-level extensions, raw JSON (file convention)
     notes: list[str] = field(default_factory=list)
 
@@ -69,8 +69,16 @@ class GltfRig:
 
 
 # ----------------------------------------------------------------------------- container
-def read_document(path) -> tuple[pygltflib.GLTF2, bytes | None]:
-    """Parse a .gltf / .glb / .vrm file; returns the document and the GLB binary chunk."""
+# Top-level glTF arrays handed to pygltflib. Accessors, buffer views and meshes stay raw JSON:
+# pygltflib's dataclass decoding costs about 1 ms per object (wuson.glb's 709 accessors and
+# 709 buffer views took 1 s) and a rig import only reads a few of them.
+_DOCUMENT_KEYS = ("asset", "scene", "scenes", "nodes", "skins", "animations", "buffers",
+                  "extensions", "extensionsUsed", "extensionsRequired", "extras")
+
+
+def read_document(path) -> tuple[pygltflib.GLTF2, bytes | None, dict]:
+    """Parse a .gltf / .glb / .vrm file: the pygltflib document (scene graph, skins,
+    animations, buffers, extensions), the GLB binary chunk and the raw JSON."""
     path = Path(path)
     try:
         data = path.read_bytes()
@@ -86,7 +94,7 @@ def read_document(path) -> tuple[pygltflib.GLTF2, bytes | None]:
     except json.JSONDecodeError as exc:
         raise AssetError(path, f"line {exc.lineno} column {exc.colno}", f"invalid glTF JSON: {exc.msg}") from None
     _check_top_level(path, raw)
-    return pygltflib.GLTF2.gltf_from_json(text), None
+    return _document(raw), None, raw
 
 
 def _read_glb(path: Path, data: bytes):
@@ -114,7 +122,11 @@ def _read_glb(path: Path, data: bytes):
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise AssetError(path, "GLB JSON chunk", f"invalid JSON ({exc})") from None
     _check_top_level(path, raw)
-    return pygltflib.GLTF2.gltf_from_json(json.dumps(raw)), chunks.get(b"BIN\x00")
+    return _document(raw), chunks.get(b"BIN\x00"), raw
+
+
+def _document(raw: dict) -> pygltflib.GLTF2:
+    return pygltflib.GLTF2.gltf_from_json(json.dumps({k: raw[k] for k in _DOCUMENT_KEYS if k in raw}))
 
 
 def _check_top_level(path: Path, raw) -> None:
@@ -133,8 +145,10 @@ def _check_top_level(path: Path, raw) -> None:
 class _Buffers:
     """Buffer bytes by index: the GLB binary chunk, data: URIs or files beside the document."""
 
-    def __init__(self, path: Path, doc: pygltflib.GLTF2, glb_bin: bytes | None):
+    def __init__(self, path: Path, doc: pygltflib.GLTF2, glb_bin: bytes | None, raw: dict):
         self.path, self.doc, self.glb_bin, self.cache = path, doc, glb_bin, {}
+        self.accessors = raw.get("accessors") or []
+        self.views = raw.get("bufferViews") or []
 
     def get(self, index: int) -> bytes:
         if index not in self.cache:
@@ -161,47 +175,52 @@ class _Buffers:
 
     def accessor(self, index: int, where: str) -> np.ndarray:
         """Accessor data as float64 (count, width) (normalized integers dequantized)."""
-        doc = self.doc
-        if not isinstance(index, int) or not 0 <= index < len(doc.accessors):
-            raise AssetError(self.path, where, f"accessor {index!r} does not exist")
-        acc = doc.accessors[index]
+        if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < len(self.accessors):
+            raise AssetError(self.path, where, f"accessor {index!r} does not exist ({len(self.accessors)} accessors)")
+        acc = self.accessors[index]
         where = f"accessors[{index}]"
-        if acc.sparse is not None:
+        if acc.get("sparse") is not None:
             raise AssetError(self.path, f"{where}.sparse", "sparse accessors are not supported for animation data")
-        width = _TYPE_WIDTH.get(acc.type)
-        dtype = _COMPONENT_DTYPE.get(acc.componentType)
-        if width is None or dtype is None:
-            raise AssetError(self.path, where, f"unsupported type {acc.type}/{acc.componentType}")
-        if acc.bufferView is None:
-            return np.zeros((acc.count, width))
-        view = doc.bufferViews[acc.bufferView]
-        data = self.get(view.buffer)
+        width = _TYPE_WIDTH.get(acc.get("type"))
+        dtype = _COMPONENT_DTYPE.get(acc.get("componentType"))
+        count = acc.get("count")
+        if width is None or dtype is None or not isinstance(count, int) or count < 0:
+            raise AssetError(self.path, where, f"unsupported or missing type/componentType/count "
+                             f"({acc.get('type')}/{acc.get('componentType')}/{count})")
+        if acc.get("bufferView") is None:
+            return np.zeros((count, width))
+        v = acc["bufferView"]
+        if not isinstance(v, int) or not 0 <= v < len(self.views):
+            raise AssetError(self.path, f"{where}.bufferView", f"buffer view {v!r} does not exist")
+        view = self.views[v]
+        data = self.get(view.get("buffer", 0))
         itemsize = np.dtype(dtype).itemsize
-        stride = view.byteStride or itemsize * width
-        start = (view.byteOffset or 0) + (acc.byteOffset or 0)
-        end = start + stride * (acc.count - 1) + itemsize * width if acc.count else start
-        if end > (view.byteOffset or 0) + view.byteLength or end > len(data):
+        stride = view.get("byteStride") or itemsize * width
+        start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+        end = start + stride * (count - 1) + itemsize * width if count else start
+        if end > view.get("byteOffset", 0) + view.get("byteLength", 0) or end > len(data):
             raise AssetError(self.path, where, f"reads bytes {start}..{end} beyond its buffer view / buffer")
-        raw = np.ndarray((acc.count, width), dtype=np.dtype(dtype).newbyteorder("<"), buffer=data,
-                         offset=start, strides=(stride, itemsize))
-        out = raw.astype(np.float64)
-        if acc.normalized and acc.componentType in _NORMALIZE_DIVISOR:
-            out = np.maximum(out / _NORMALIZE_DIVISOR[acc.componentType], -1.0)
+        values = np.ndarray((count, width), dtype=np.dtype(dtype).newbyteorder("<"), buffer=data,
+                            offset=start, strides=(stride, itemsize))
+        out = values.astype(np.float64)
+        if acc.get("normalized") and acc["componentType"] in _NORMALIZE_DIVISOR:
+            out = np.maximum(out / _NORMALIZE_DIVISOR[acc["componentType"]], -1.0)
         return out
 
 
 # ----------------------------------------------------------------------------- loading
 def load_gltf(path, *, unit_scale: float = 1.0, mirror_axis: str = "x", prefix: str = "",
-              load_animations: bool = True) -> GltfRig:
+              load_animations: bool = True, document=None) -> GltfRig:
     """Load the default scene of a glTF / GLB file as Unity-convention rig data.
 
     ``unit_scale`` multiplies every translation (0.01 for a centimetre asset such as the
     Khronos Fox); ``mirror_axis`` is the handedness conversion (see ``coords``);
-    ``prefix`` is prepended to every bone name (several copies of one asset in a scene).
+    ``prefix`` is prepended to every bone name (several copies of one asset in a scene);
+    ``document`` is a ``read_document(path)`` result already at hand (avoids a second parse).
     """
     path = Path(path)
-    doc, glb_bin = read_document(path)
-    buffers = _Buffers(path, doc, glb_bin)
+    doc, glb_bin, raw = document if document is not None else read_document(path)
+    buffers = _Buffers(path, doc, glb_bin, raw)
     names, parent, order = _scene_nodes(path, doc, prefix)
     bones = []
     for i in order:

@@ -36,7 +36,7 @@ import numpy as np
 
 from magica_py.io import coords
 from magica_py.io.errors import AssetError
-from magica_py.io.gltf import GltfRig, load_gltf
+from magica_py.io.gltf import GltfRig, load_gltf, read_document
 from magica_py.io.mapping import map_spring_parameters
 from magica_py.io.quat import qfrom_to
 from magica_py.scene.hierarchy import BoneSpec, TransformHierarchy
@@ -149,16 +149,15 @@ def load_vrm(path, *, oversized_colliders: str = "keep", leaf_tails: str = "root
     if leaf_tails not in ("roots", "all"):
         raise ValueError(f"leaf_tails must be 'roots' or 'all', got {leaf_tails!r}")
     path = Path(path)
-    from magica_py.io.gltf import read_document
-    doc, _ = read_document(path)
-    ext = doc.extensions or {}
+    document = read_document(path)
+    ext = document[0].extensions or {}
     if "VRMC_springBone" in ext or "VRMC_vrm" in ext:
         version, axis = "1.0", "x"
     elif "VRM" in ext:
         version, axis = "0.x", "z"
     else:
         raise AssetError(path, "extensions", "no VRM data: expected extensions.VRM (VRM 0.x) or VRMC_vrm / VRMC_springBone (VRM 1.0)")
-    rig = load_gltf(path, mirror_axis=axis, unit_scale=unit_scale, prefix=prefix)
+    rig = load_gltf(path, mirror_axis=axis, unit_scale=unit_scale, prefix=prefix, document=document)
     builder = _Builder(rig, unit_scale, oversized_colliders, leaf_tails)
     if version == "0.x":
         builder.read_vrm0(ext["VRM"])
