@@ -44,8 +44,9 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
               "re-simulate cloths on the animated pose recorded in an .rrd"),
 }
 
-# Names of per-frame metrics that count simulation steps (first one present wins).
-STEP_METRICS = ("solver.steps", "simulation.steps", "steps")
+# Per-frame metrics: simulation steps this frame (first one present wins) and particle-steps.
+STEP_METRICS = ("cloth.simulation_steps", "solver.steps", "simulation.steps")
+PARTICLE_STEP_METRIC = "cloth.steps"
 
 
 def register_command(name: str, module: str, function: str, help: str) -> None:
@@ -221,7 +222,8 @@ def cmd_run(args) -> int:
     frames = args.frames if args.frames is not None else scene.settings.frame_count()
     player = Player.for_scene(scene)  # default_schedule(scene) + the scene's time source
     notes = []
-    solver_attached = _attach_solver(player, scene, notes)
+    system = _attach_solver(player, scene, notes)
+    solver_attached = system is not None
     created_dir = _ensure_output_folder(scene, args)
     recorder = None
     ok = False
@@ -230,7 +232,7 @@ def cmd_run(args) -> int:
         if not args.quiet:
             for note in notes:
                 print(f"magica-py: {note}", file=sys.stderr)
-        summary = _play(player, scene, frames, quiet=args.quiet)
+        summary = _play(player, scene, frames, quiet=args.quiet, system=system)
         ok = True
     finally:
         if recorder is not None:
@@ -244,21 +246,23 @@ def cmd_run(args) -> int:
 
 
 # ----------------------------------------------------------------------------- run helpers
-def _attach_solver(player, scene, notes: list[str]) -> bool:
-    """``magica_py.solver.attach(player, scene)`` when the solver provides it."""
+def _attach_solver(player, scene, notes: list[str]):
+    """``magica_py.solver.attach(player, scene)`` when the solver provides it; returns the
+    attached system (or True when attach returns nothing), None when there is no solver."""
+    if not scene.cloths:
+        return None
     try:
         solver = importlib.import_module("magica_py.solver")
     except ImportError as exc:
         notes.append(f"cloth solver unavailable ({exc}); cloths are not simulated")
-        return False
+        return None
     attach = getattr(solver, "attach", None)
     if attach is None:
-        if scene.cloths:
-            notes.append("this installation's magica_py.solver has no attach(); cloths are not simulated "
-                         "(bones follow the animation only)")
-        return False
-    attach(player, scene)
-    return True
+        notes.append("this installation's magica_py.solver has no attach(); cloths are not simulated "
+                     "(bones follow the animation only)")
+        return None
+    system = attach(player, scene)
+    return system if system is not None else True
 
 
 def _attach_sink(player, scene, args, notes: list[str]):
@@ -347,12 +351,24 @@ class RunStats:
 
     def __init__(self):
         self.frames = 0
-        self.steps = 0.0
+        self.steps = 0.0            # simulation steps (the most any cloth ran in a frame, summed)
         self.steps_known = False
+        self.particle_steps = 0.0   # particles x steps, summed over cloths and frames
         self.wall_time = 0.0
 
 
-def _play(player, scene, frames: int | None, quiet: bool) -> RunStats:
+def _frame_steps(ctx, system) -> float | None:
+    """Simulation steps of this frame: a solver metric, else the solver's team time state."""
+    for name in STEP_METRICS:
+        if name in ctx.metrics:
+            return float(ctx.metrics[name])
+    counts = getattr(getattr(system, "time_state", None), "update_count", None)
+    if counts is not None and len(counts):
+        return float(max(counts))
+    return None
+
+
+def _play(player, scene, frames: int | None, quiet: bool, system=None) -> RunStats:
     """Step the player ``frames`` times (or, for a realtime clock with a duration, until that
     much unscaled time has passed), with the progress bar."""
     stats = RunStats()
@@ -365,11 +381,11 @@ def _play(player, scene, frames: int | None, quiet: bool) -> RunStats:
                 break
             ctx = player.step()
             stats.frames += 1
-            for name in STEP_METRICS:
-                if name in ctx.metrics:
-                    stats.steps += float(ctx.metrics[name])
-                    stats.steps_known = True
-                    break
+            steps = _frame_steps(ctx, system)
+            if steps is not None:
+                stats.steps += steps
+                stats.steps_known = True
+            stats.particle_steps += float(ctx.metrics.get(PARTICLE_STEP_METRIC, 0.0))
             if bar is not None:
                 bar.update(stats.frames)
             if duration is not None and ctx.time.unscaled_time >= duration:
@@ -385,9 +401,14 @@ def _summary_line(scene, stats: RunStats, solver_attached: bool, output) -> str:
     per_frame = 1000.0 * stats.wall_time / max(stats.frames, 1)
     if stats.steps_known:
         steps = f"{int(round(stats.steps))} simulation steps"
+        if stats.particle_steps:
+            steps += f" ({int(round(stats.particle_steps))} particle-steps)"
+    elif not scene.cloths:
+        steps = "no cloths"
+    elif not solver_attached:
+        steps = "no simulation steps (no cloth solver)"
     else:
-        steps = "no simulation steps (no cloth solver)" if not solver_attached or not scene.cloths \
-            else "simulation steps not reported"
+        steps = "simulation steps not reported"
     where = ""
     if output:
         text = os.path.relpath(output)

@@ -183,3 +183,16 @@ def test_summary_counts_simulation_steps():
     scene = types.SimpleNamespace(name="s", cloths=[1])
     line = cli._summary_line(scene, stats, True, None)
     assert line == "s: 60 frames, 90 simulation steps, 8.33 ms/frame (wall 0.50 s)"
+    stats.particle_steps = 720.0
+    assert "90 simulation steps (720 particle-steps)" in cli._summary_line(scene, stats, True, None)
+    stats.steps_known = False
+    assert "no simulation steps (no cloth solver)" in cli._summary_line(scene, stats, False, None)
+    assert "no cloths" in cli._summary_line(types.SimpleNamespace(name="s", cloths=[]), stats, False, None)
+
+
+def test_frame_steps_come_from_a_metric_or_the_solver_time_state():
+    ctx = types.SimpleNamespace(metrics={"cloth.simulation_steps": 2.0})
+    assert cli._frame_steps(ctx, None) == 2.0
+    system = types.SimpleNamespace(time_state=types.SimpleNamespace(update_count=[1, 3, 0]))
+    assert cli._frame_steps(types.SimpleNamespace(metrics={}), system) == 3.0
+    assert cli._frame_steps(types.SimpleNamespace(metrics={}), None) is None
