@@ -123,7 +123,7 @@ class Checker:
 
     def exactly_one(self, m: dict, keys, path: tuple, *, required: bool = True) -> str | None:
         """The one key of ``keys`` present in ``m`` (None when absent and not required)."""
-        present = [k for k in keys if k in m]
+        present = [k for k in keys if m.get(k) is not None]  # null = absent (e.g. --set scene.fps=null)
         if len(present) > 1:
             self.error(path + (present[1],), f"give only one of {', '.join(keys)}; found {', '.join(present)}")
             return present[0]
