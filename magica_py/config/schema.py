@@ -18,7 +18,7 @@ from magica_py.config.checker import ANY, NON_NEGATIVE, POSITIVE, REQUIRED, Chec
 FORMAT_VERSION = 1
 TOP_LEVEL_KEYS = ("version", "scene", "rigs", "animation", "colliders", "cloths", "output")
 UPDATE_MODES = ("normal", "unity_physics", "unscaled")
-TIMING_MODES = ("exact", "faithful")
+TIMING_MODES = ("exact", "faithful", "faithful32")  # runtime.team_time
 CONNECTION_MODES = ("line", "automatic_mesh", "sequential_loop_mesh", "sequential_non_loop_mesh")
 COLLISION_MODES = ("none", "point", "edge")
 BONE_ATTRIBUTES = ("fixed", "move", "invalid")
@@ -249,7 +249,8 @@ def check_document(c: Checker, data) -> NormalizedScene:
 
 # ----------------------------------------------------------------------------- scene
 SETTINGS_KEYS = ("name", "fps", "frame_times", "frame_times_cycle", "clock", "frames", "duration", "time_scale", "update_mode",
-                 "simulation_frequency", "max_steps_per_frame", "fixed_delta_time", "maximum_delta_time",
+                 "simulation_frequency", "max_steps_per_frame", "global_time_scale", "fixed_delta_time",
+                 "maximum_delta_time",
                  "gravity", "timing", "seed")
 
 
@@ -278,6 +279,7 @@ def check_settings(c: Checker, value, path: tuple) -> dict:
     s["update_mode"] = c.choice(m, "update_mode", path, UPDATE_MODES, "normal")
     s["simulation_frequency"] = c.integer(m, "simulation_frequency", path, 90, Range(30, 150))
     s["max_steps_per_frame"] = c.integer(m, "max_steps_per_frame", path, 3, Range(1, 5))
+    s["global_time_scale"] = c.number(m, "global_time_scale", path, 1.0, Range(0.0, 1.0))
     s["fixed_delta_time"] = c.number(m, "fixed_delta_time", path, 0.02, Range(0.0001, 10.0), units="s")
     s["maximum_delta_time"] = c.number(m, "maximum_delta_time", path, 1.0 / 3.0, Range(0.0001, 10.0), units="s")
     if s["maximum_delta_time"] < s["fixed_delta_time"]:
