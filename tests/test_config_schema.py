@@ -41,6 +41,9 @@ def all_schema_keys():
     keys |= set(schema.EVENT_KINDS)
     keys |= set(schema.CONNECTION_MODES) | set(schema.COLLISION_MODES) | set(schema.BONE_ATTRIBUTES)
     keys |= set(schema.UPDATE_MODES) | set(schema.TIMING_MODES)
+    from magica_py.config import imports
+
+    keys |= set(imports.RIG_FILE_KEYS) | set(imports.CLIP_KEYS) | set(imports.VRM_KEYS)
     return sorted(keys)
 
 

@@ -238,12 +238,32 @@ def check_document(c: Checker, data) -> NormalizedScene:
     if version != FORMAT_VERSION or isinstance(version, bool):
         c.error(("version",), f"unsupported format version {version!r}: this magica_py reads version {FORMAT_VERSION}")
     out.settings = check_settings(c, root.get("scene"), ("scene",))
-    sections = (("rigs", check_rig, 1), ("animation", check_animation_entry, 0),
-                ("colliders", check_collider, 0), ("cloths", check_cloth, 0))
-    for key, check, min_length in sections:
-        items = [check(c, item, (key, i)) for i, item in enumerate(c.sequence(root, key, (), min_length=min_length))]
-        setattr(out, key, [item for item in items if item is not None])
+    from magica_py.config import imports
+
+    out.rigs = _section(c, root, "rigs", 1, lambda item, p: [check_rig(c, item, p)])
+    out.animation = _section(c, root, "animation", 0, lambda item, p: (
+        [check_animation_entry(c, e, p) for e in imports.import_clip_entries(c, item, p, out.rigs)]
+        if isinstance(item, dict) and "clip" in item else [check_animation_entry(c, item, p)]))
+    out.colliders = _section(c, root, "colliders", 0, lambda item, p: [check_collider(c, item, p)])
+
+    def cloth_entries(item, p):
+        if not (isinstance(item, dict) and "from_vrm" in item):
+            return [check_cloth(c, item, p)]
+        colliders, cloths = imports.import_vrm_sections(c, item, p, out.rigs)
+        out.colliders.extend(k for k in (check_collider(c, e, p) for e in colliders) if k is not None)
+        return [check_cloth(c, e, p) for e in cloths]
+
+    out.cloths = _section(c, root, "cloths", 0, cloth_entries)
     out.output = check_output(c, root.get("output"), ("output",))
+    return out
+
+
+def _section(c: Checker, root: dict, key: str, min_length: int, check) -> list:
+    """Check every entry of a list section; ``check(item, path)`` returns normalized entries
+    (several when the entry imports a file)."""
+    out = []
+    for i, item in enumerate(c.sequence(root, key, (), min_length=min_length)):
+        out.extend(e for e in check(item, (key, i)) if e is not None)
     return out
 
 
@@ -305,11 +325,18 @@ def check_pose(c: Checker, m: dict, path: tuple, *, scale: bool = True) -> dict:
 
 
 def check_rig(c: Checker, value, path: tuple) -> dict | None:
-    m = c.mapping(value, path, ("name", "position", "rotation", "euler", "bones", "parts", "instances"))
+    from magica_py.config import imports
+
+    m = c.mapping(value, path, ("name", "position", "rotation", "euler", "bones", "parts", "instances")
+                  + imports.RIG_FILE_KEYS)
     if m is None:
         return None
     rig = {"name": c.text(m, "name", path, what="a rig name"), **check_pose(c, m, path, scale=False)}
     rig["bones"] = []
+    rig["file"] = rig["prefix"] = None
+    if "file" in m:
+        rig["bones"] = imports.import_rig_bones(c, m, path) or []
+        rig["file"], rig["prefix"] = m.get("file"), m.get("prefix") or ""
     for i, b in enumerate(c.sequence(m, "bones", path)):
         bp = path + ("bones", i)
         bm = c.mapping(b, bp, ("name", "parent", "position", "rotation", "euler", "scale"))
@@ -333,8 +360,8 @@ def check_rig(c: Checker, value, path: tuple) -> dict | None:
     rig["instances"] = None
     if m.get("instances") is not None:
         rig["instances"] = read_fields(c, m["instances"], path + ("instances",), INSTANCE_FIELDS)
-    if not m.get("bones") and not m.get("parts"):
-        c.error(path, "a rig needs bones and/or parts")
+    if not m.get("bones") and not m.get("parts") and not m.get("file"):
+        c.error(path, "a rig needs bones, parts and/or a file")
     rig["path"] = path
     return rig
 
