@@ -263,3 +263,19 @@ def test_source_text_reflects_overrides():
     assert "fps: 25" in s.source_text
     again = load_scene_text(s.source_text)
     assert again.settings.fps == 25.0 and again.hierarchy.names == s.hierarchy.names
+
+
+def test_cloth_outside_an_instanced_rig_collides_with_every_copy():
+    text = scene_text(INSTANCED).replace("output:", """  - {name: flag, root_bones: [flag_0], colliders: ["thigh_l"]}
+output:""")
+    text = text.replace("rigs:\n", "rigs:\n  - {name: pole, bones: [{name: pole}], parts: [{chain: {name: flag, parent: pole, bones: 3, length: 0.5}}]}\n", 1)
+    s = load_scene_text(text)
+    flag = s.cloth("flag")
+    assert flag.instance is None
+    assert [s.colliders.names[i] for i in flag.colliders] == ["thigh_l#0", "thigh_l#1", "thigh_l#2"]
+
+
+def test_set_parameter_event_for_one_instance():
+    text = scene_text(INSTANCED).replace("{cloth: skirt, key: damping", "{cloth: skirt#2, key: damping")
+    s = load_scene_text(text)
+    assert [e.payload["cloth"] for e in s.animation.events if e.kind == "set_parameter"] == ["skirt#2"]

@@ -424,7 +424,9 @@ def _resolve_cloths(c: Checker, cloths: list[dict], table: NameTable, colliders:
             indices = []
             for base_name in collider_names:
                 for inst_i, index in collider_groups[base_name]:
-                    if inst_i is None or inst_i == i:
+                    # an instance's cloth uses its own copy of a replicated collider; a cloth
+                    # outside the instanced rig collides with every copy
+                    if inst_i is None or i is None or inst_i == i:
                         indices.append(index)
             params = parameters
             changes = {key: inst(params[key]) for key in ("inertia.anchor", "culling.distance_culling_reference")
@@ -553,9 +555,10 @@ def _resolve_parameters(c: Checker, cloth: dict, settings: dict, table: NameTabl
 def _resolve_animation(c: Checker, entries: list[dict], table: NameTable, phases: dict,
                        cloths: list[dict], declared: set[str]) -> list[dict]:
     cloth_by_base: dict[str, list[dict]] = {}
-    for cl in cloths:
+    for cl in cloths:  # by YAML name (every instance) and by instance name (skirt#3)
         cloth_by_base.setdefault(cl["base_name"], []).append(cl)
-        cloth_by_base.setdefault(cl["name"], [cl]) if cl["instance"] is not None else None
+        if cl["instance"] is not None:
+            cloth_by_base[cl["name"]] = [cl]
     out = []
     for e in entries:
         path, kind, params = e["path"], e["kind"], e["params"]
