@@ -301,3 +301,45 @@ def test_empty_document_asks_for_rigs(tmp_path):
     with pytest.raises(ConfigError) as info:
         validate_file(path)
     assert info.value.paths() == ["rigs"]
+
+
+# ----------------------------------------------------------------------------- robustness
+def _paths(node, prefix=()):
+    yield prefix
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _paths(v, prefix + (k,))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from _paths(v, prefix + (i,))
+
+
+ALL_PATHS = [p for p in _paths(BASE) if p]
+
+
+def test_any_replaced_value_gives_a_config_error_never_a_crash():
+    from hypothesis import given, settings, strategies as st
+
+    from magica_py.config.document import Document
+    from magica_py.config.load import validate_document
+
+    scalars = st.one_of(st.none(), st.booleans(), st.integers(-5, 5), st.floats(allow_nan=True, allow_infinity=True),
+                        st.text(max_size=6), st.sampled_from(["root", "hips", "tail_*", "x#1", "sphere"]))
+    values = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=4),
+                                                           st.dictionaries(st.text(max_size=5), inner, max_size=3)),
+                          max_leaves=6)
+
+    @settings(max_examples=150, deadline=None, derandomize=True)
+    @given(st.sampled_from(ALL_PATHS), values)
+    def check(path, value):
+        doc = copy.deepcopy(BASE)
+        node = doc
+        for key in path[:-1]:
+            node = node[key]
+        node[path[-1]] = value
+        try:
+            validate_document(Document(doc, "fuzz.yaml"))
+        except ConfigError as exc:
+            assert exc.issues and all(i.message for i in exc.issues)
+
+    check()
