@@ -6,7 +6,7 @@ Commands (``magica-py COMMAND --help`` for each):
   [--connect ADDR] [--quiet]``: build the scene, the player (``default_schedule``), the
   cloth system (``magica_py.solver.attach(player, scene)`` when the solver provides it) and
   the sink (``magica_py.sinks.attach(player, scene, options)``), run, print a summary;
-* ``validate SCENE.yaml [--set ...]``: check everything (and build the cloths when
+* ``validate SCENE.yaml [SCENE.yaml ...] [--set ...]``: check everything (and build the cloths when
   ``magica_py.build`` is present), print ``OK`` or every problem;
 * ``info SCENE.yaml [--set ...] [--bones]``: settings, rigs, bones, colliders, cloths and,
   when ``magica_py.build`` is present, particles and constraints per cloth;
@@ -68,14 +68,17 @@ def build_parser() -> argparse.ArgumentParser:
                     "Scenes are YAML files (docs/scene-format.md); recordings open in the Rerun viewer.",
         epilog="Examples:\n  magica-py run configs/tail_orbit.yaml\n"
                "  magica-py run configs/character_walk.yaml --frames 120 --set cloths.skirt.parameters.damping=0.2\n"
-               "  magica-py validate configs/crowd.yaml\n  magica-py info configs/character_walk.yaml",
+               "  magica-py validate configs/*.yaml\n  magica-py info configs/character_walk.yaml",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"magica-py {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
-    def scene_args(p):
-        p.add_argument("scene", metavar="SCENE.yaml", help="scene file (format: docs/scene-format.md)")
+    def scene_args(p, many=False):
+        if many:
+            p.add_argument("scenes", metavar="SCENE.yaml", nargs="+", help="scene files (format: docs/scene-format.md)")
+        else:
+            p.add_argument("scene", metavar="SCENE.yaml", help="scene file (format: docs/scene-format.md)")
         p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                        help="override a value before validation, e.g. scene.fps=30, "
                             "cloths[0].parameters.damping=0.2 or cloths.tail.parameters.damping=0.2 "
@@ -92,10 +95,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--connect", metavar="ADDR", help="stream to a running Rerun viewer (host:port or URL)")
     run.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no summary")
 
-    validate = sub.add_parser("validate", help="check a scene file and report every problem",
-                              description="Check a scene file completely (and build its cloths when the build "
-                                          "module is available); print OK or every problem found.")
-    scene_args(validate)
+    validate = sub.add_parser("validate", help="check scene files and report every problem",
+                              description="Check scene files completely (and build their cloths when the build "
+                                          "module is available); print OK or every problem found. Exit code 2 "
+                                          "when any file has a problem.")
+    scene_args(validate, many=True)
     validate.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
 
     info = sub.add_parser("info", help="describe a scene: bones, colliders, cloths, particles, constraints",
@@ -183,17 +187,27 @@ def _format_input_error(exc: BaseException) -> str:
 def cmd_validate(args) -> int:
     from magica_py.config import load_scene
 
-    scene = load_scene(args.scene, args.overrides)
-    models = _build_models(scene)
-    if not args.quiet:
-        counts = scene.summary()
-        particles = ""
-        if models:
-            total = sum(models[spec.name].particle_count * _copies(scene, spec) for spec in _representative_cloths(scene))
-            particles = f", {total} particles"
-        print(f"OK {args.scene}: scene {scene.name!r}: {counts['bones']} bones, {counts['colliders']} colliders, "
-              f"{counts['cloths']} cloths{particles}")
-    return EXIT_OK
+    status = EXIT_OK
+    for path in args.scenes:
+        try:
+            scene = load_scene(path, args.overrides)
+            models = _build_models(scene)
+        except Exception as exc:  # noqa: BLE001 - report bad files, keep checking the others
+            if not _is_input_error(exc):
+                raise
+            print(_format_input_error(exc), file=sys.stderr)
+            status = EXIT_BAD_INPUT
+            continue
+        if not args.quiet:
+            counts = scene.summary()
+            particles = ""
+            if models:
+                total = sum(models[spec.name].particle_count * _copies(scene, spec)
+                            for spec in _representative_cloths(scene))
+                particles = f", {total} particles"
+            print(f"OK {path}: scene {scene.name!r}: {counts['bones']} bones, {counts['colliders']} colliders, "
+                  f"{counts['cloths']} cloths{particles}")
+    return status
 
 
 def cmd_info(args) -> int:

@@ -196,3 +196,10 @@ def test_frame_steps_come_from_a_metric_or_the_solver_time_state():
     system = types.SimpleNamespace(time_state=types.SimpleNamespace(update_count=[1, 3, 0]))
     assert cli._frame_steps(types.SimpleNamespace(metrics={}), system) == 3.0
     assert cli._frame_steps(types.SimpleNamespace(metrics={}), None) is None
+
+
+def test_validate_checks_every_file_and_fails_if_any_is_bad(scene_file, broken_file, capsys):
+    assert cli.main(["validate", str(scene_file), str(broken_file), str(scene_file)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.count("OK ") == 2
+    assert f"{broken_file}: 2 errors" in captured.err and "Traceback" not in captured.err
