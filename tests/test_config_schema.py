@@ -24,7 +24,8 @@ def test_documented_full_example_loads_and_uses_every_section():
     scene = load_scene_text(example_yaml(), source="docs/scene-format.md")
     assert scene.name == "example"
     assert {"tail_0", "hair_5_4", "skirt_11_3", "head"} <= set(scene.hierarchy.names)
-    assert [c.name for c in scene.cloths] == ["tail", "hair", "skirt"]
+    assert [c.name for c in scene.cloths] == ["tail", "hair", "skirt", "cape"]
+    assert [scene.hierarchy.names[i] for i in scene.cloth("cape").root_bones] == [f"cape_{s}_0" for s in range(5)]
     assert scene.cloth("tail").parameters["angle_limit.use"] is True
     assert len(scene.colliders) == 4
     assert sorted({e.kind for e in scene.animation.events}) == ["set_parameter", "teleport", "time_scale"]

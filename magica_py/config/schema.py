@@ -46,7 +46,7 @@ DEGREES_360 = Range(-360.0, 360.0)
 COUNT = Range(1)
 
 # -- rigs --------------------------------------------------------------------------------
-# Keys and defaults follow the generators of magica_py.scene.rigs (chain, fan, skirt).
+# Keys and defaults follow the generators of magica_py.scene.rigs (chain, fan, skirt, sheet).
 _STRAND_COMMON = {
     "curl": F("number", 0.0, DEGREES_360, doc="bend per bone about the bone's +X (degrees)"),
     "position": F("vec3", (0.0, 0.0, 0.0), doc="root position in the parent's space (m)"),
@@ -84,6 +84,17 @@ PART_FIELDS: dict[str, dict[str, Field]] = {
         "flare": F("number", 20.0, Range(-90.0, 90.0), doc="outward angle of each strand from the axis (degrees)"),
         "axis": F("dir3", (0.0, -1.0, 0.0), doc="direction the strands hang along (parent space)"),
         "facing": F("dir3", (0.0, 0.0, 1.0), doc="azimuth of strand 0 (parent space; default the front)"),
+        **_STRAND_COMMON,
+    },
+    "sheet": {
+        "name": F("name", doc="strand s, bone b is named <name>_<s>_<b>"),
+        "parent": F("name", doc="bone the sheet hangs from (e.g. the chest for a cape)"),
+        "strands": F("int", REQUIRED, COUNT, doc="parallel strands side by side"),
+        "bones": F("int", REQUIRED, COUNT, doc="bones per strand"),
+        "length": F("number", REQUIRED, POSITIVE, doc="strand length (m)"),
+        "width": F("number", REQUIRED, NON_NEGATIVE, doc="distance from the first strand root to the last (m)"),
+        "direction": F("dir3", (0.0, -1.0, 0.0), doc="direction every strand runs along (parent space)"),
+        "across": F("dir3", (1.0, 0.0, 0.0), doc="direction the strand roots are spaced along (not parallel to direction)"),
         **_STRAND_COMMON,
     },
 }
@@ -348,7 +359,7 @@ def check_rig(c: Checker, value, path: tuple) -> dict | None:
     rig["parts"] = []
     for i, p in enumerate(c.sequence(m, "parts", path)):
         pp = path + ("parts", i)
-        pm = c.mapping(p, pp, PART_FIELDS, what="a mapping with one generator: chain, fan or skirt")
+        pm = c.mapping(p, pp, PART_FIELDS, what="a mapping with one generator: chain, fan, skirt or sheet")
         if pm is None:
             continue
         kind = c.exactly_one(pm, tuple(PART_FIELDS), pp)
