@@ -59,3 +59,22 @@ def test_every_preset_is_documented():
 
     for name in PRESETS:
         assert f"`{name}`" in doc_text()
+
+
+def test_part_fields_match_the_rig_generators():
+    """The YAML keys of every generator are exactly its keyword arguments, with the same defaults."""
+    import inspect
+
+    from magica_py.scene import rigs
+
+    assert set(schema.PART_FIELDS) == set(rigs.GENERATORS)
+    for kind, fields in schema.PART_FIELDS.items():
+        params = inspect.signature(rigs.GENERATORS[kind]).parameters
+        assert set(fields) == set(params), kind
+        for key, field in fields.items():
+            default = params[key].default
+            if default is inspect.Parameter.empty:
+                assert field.default is schema.REQUIRED or key == "parent", (kind, key)
+            elif field.default is not schema.REQUIRED and field.default is not None and default is not None:
+                assert tuple(field.default) == tuple(default) if isinstance(default, tuple) \
+                    else field.default == default, (kind, key, field.default, default)
