@@ -78,3 +78,12 @@ def test_part_fields_match_the_rig_generators():
             elif field.default is not schema.REQUIRED and field.default is not None and default is not None:
                 assert tuple(field.default) == tuple(default) if isinstance(default, tuple) \
                     else field.default == default, (kind, key, field.default, default)
+
+
+def test_output_log_toggles_match_the_sinks():
+    import dataclasses
+
+    from magica_py.sinks.base import LogToggles
+
+    fields = {f.name: f.default for f in dataclasses.fields(LogToggles)}
+    assert {k: f.default for k, f in schema.OUTPUT_LOG_FIELDS.items()} == fields
