@@ -279,3 +279,16 @@ def test_set_parameter_event_for_one_instance():
     text = scene_text(INSTANCED).replace("{cloth: skirt, key: damping", "{cloth: skirt#2, key: damping")
     s = load_scene_text(text)
     assert [e.payload["cloth"] for e in s.animation.events if e.kind == "set_parameter"] == ["skirt#2"]
+
+
+def test_scene_settings_drive_the_runtime_clock():
+    from magica_py.runtime.player import Player
+
+    text = scene_text().replace("fps: 50, frames: 20", "frame_times: [0.01, 0.05], frames: 4, time_scale: 0.5, "
+                                                       "fixed_delta_time: 0.01, maximum_delta_time: 0.04")
+    s = load_scene_text(text)
+    player = Player.for_scene(s)
+    times = [player.step().time for _ in range(3)]
+    assert [t.unscaled_delta_time for t in times] == [0.01, 0.05, 0.01]
+    assert [t.delta_time for t in times] == pytest.approx([0.005, 0.02, 0.005])  # 0.05 capped at 0.04, x0.5
+    assert times[0].fixed_delta_time == 0.01
