@@ -1,0 +1,11 @@
+"""Build errors name the cloth and the offending bones (issue 3, "bad rigs")."""
+from __future__ import annotations
+
+
+class BuildError(ValueError):
+    """A cloth that cannot be built: ``cloth`` is the cloth's name, ``message`` what is wrong."""
+
+    def __init__(self, cloth: str, message: str):
+        self.cloth = cloth
+        self.message = message
+        super().__init__(f"cloth {cloth!r}: {message}")

@@ -1,0 +1,154 @@
+"""RenderSetupData: the transforms a BoneCloth collects at build time (ref §B.1).
+
+Vertex order is the reference's: every root is pushed on a LIFO stack in root-list order,
+then each popped transform is appended and its children pushed in sibling order.  So the
+*last* root is visited first and siblings come out in reverse order; parents always precede
+their descendants.  The solver's Gauss-Seidel sweeps run in this order.
+
+Arrays (N collected bones, all filled once here, read-only afterwards):
+
+=========================  ==========  =====  ===============================================
+transform_index            (N,) int32  index  hierarchy node of vertex i
+parent_vertex              (N,) int32  index  vertex of the parent transform, -1 if not collected
+world_position             (N, 3)      m      bone world position at build
+world_rotation             (N, 4)      xyzw   bone world rotation at build
+local_position/rotation    (N,3)/(N,4) m/xyzw bone local pose at build
+lossy_scale                (N, 3)      1      bone lossy scale at build
+root_vertices              (R,) int32  index  vertex of each root bone, **root-list order**
+=========================  ==========  =====  ===============================================
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from magica_py.build.errors import BuildError
+
+
+@dataclass(frozen=True)
+class RenderSetup:
+    cloth_name: str
+    transform_index: np.ndarray
+    parent_vertex: np.ndarray
+    world_position: np.ndarray
+    world_rotation: np.ndarray
+    local_position: np.ndarray
+    local_rotation: np.ndarray
+    lossy_scale: np.ndarray
+    root_vertices: np.ndarray
+    child_vertices: tuple   # per vertex: child vertices in the transforms' sibling order
+    bone_names: tuple
+    component_transform: int
+    init_render_local_to_world: np.ndarray  # (4,4) TRS(pos, rot, lossy scale) of the component
+    init_render_world_to_local: np.ndarray  # (4,4) its inverse: world -> cloth-local
+    init_render_rotation: np.ndarray        # (4,) component world rotation at build
+    init_scale: np.ndarray                  # (3,) component lossy scale at build
+
+    @property
+    def count(self) -> int:
+        return int(self.transform_index.shape[0])
+
+
+def trs_matrix(position, rotation, scale) -> np.ndarray:
+    """Unity TRS(position, rotation, scale) as a 4x4 matrix (column vectors)."""
+    x, y, z, w = (float(c) for c in rotation)
+    r = np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+    m = np.eye(4)
+    m[:3, :3] = r * np.asarray(scale, dtype=np.float64)[None, :]
+    m[:3, 3] = position
+    return m
+
+
+def collect_transforms(hierarchy, cloth_name: str, root_bones, component=None) -> RenderSetup:
+    """Collect the cloth's bones from ``hierarchy`` (a ``TransformHierarchy``), ref §B.1.
+
+    Raises ``BuildError`` for: no roots, a root index outside the hierarchy, a duplicate root,
+    a root that lies below another root (its bones would be reached from two roots), a root
+    with no child bones (nothing could move) and a zero lossy scale (no cloth-local space).
+    """
+    names = hierarchy.names
+    n_nodes = hierarchy.count
+    roots = [int(r) if r is not None else None for r in root_bones]
+    if not roots:
+        raise BuildError(cloth_name, "root_bones is empty: a BoneCloth needs at least one root bone")
+    seen: dict[int, int] = {}
+    for k, r in enumerate(roots):
+        if r is None or not (0 <= r < n_nodes):
+            raise BuildError(cloth_name, f"root_bones[{k}] = {r!r} is not a transform of the scene "
+                                         f"(expected an index in [0, {n_nodes}))")
+        if r in seen:
+            raise BuildError(cloth_name, f"root bone {names[r]!r} is listed twice "
+                                         f"(root_bones[{seen[r]}] and root_bones[{k}])")
+        seen[r] = k
+    # a root below another root would be collected twice (the reference silently drops it)
+    root_set = set(roots)
+    for r in roots:
+        p = int(hierarchy.parent[r])
+        while p >= 0:
+            if p in root_set:
+                raise BuildError(cloth_name, f"root bone {names[r]!r} lies below root bone {names[p]!r}: "
+                                             f"its bones would be reached from two roots; list only {names[p]!r}")
+            p = int(hierarchy.parent[p])
+    for r in roots:
+        if not hierarchy.children[r]:
+            raise BuildError(cloth_name, f"root bone {names[r]!r} has no child bones: nothing to simulate "
+                                         f"(a root is fixed; give it at least one child)")
+
+    # LIFO traversal (ref §B.1); visited set kept for fidelity although roots are disjoint now
+    order: list[int] = []
+    visited = set()
+    stack = list(roots)
+    children = hierarchy.children
+    while stack:
+        t = stack.pop()
+        if t in visited:
+            continue
+        visited.add(t)
+        order.append(t)
+        stack.extend(children[t])
+    transform_index = np.asarray(order, dtype=np.int32)
+    vertex_of = np.full(n_nodes, -1, dtype=np.int32)
+    vertex_of[transform_index] = np.arange(transform_index.size, dtype=np.int32)
+    hparent = hierarchy.parent[transform_index]
+    parent_vertex = np.where(hparent >= 0, vertex_of[np.maximum(hparent, 0)], -1).astype(np.int32)
+
+    lossy = hierarchy.lossy_scale[transform_index].copy()
+    tiny = np.nonzero(np.any(np.abs(lossy) < 1e-12, axis=1))[0]
+    if tiny.size:
+        bad = [names[transform_index[i]] for i in tiny[:5]]
+        raise BuildError(cloth_name, f"bones {bad} have a zero scale: their pose cannot be inverted")
+
+    if component is None:
+        p = int(hierarchy.parent[roots[0]])
+        component = p if p >= 0 else roots[0]
+    component = int(component)
+    if not (0 <= component < n_nodes):
+        raise BuildError(cloth_name, f"component transform {component!r} is not a transform of the scene")
+    c_scale = hierarchy.lossy_scale[component].copy()
+    if np.any(np.abs(c_scale) < 1e-12):
+        raise BuildError(cloth_name, f"component transform {names[component]!r} has a zero scale: "
+                                     "cloth-local space is undefined")
+    l2w = trs_matrix(hierarchy.world_position[component], hierarchy.world_rotation[component], c_scale)
+    return RenderSetup(
+        cloth_name=cloth_name,
+        transform_index=transform_index,
+        parent_vertex=parent_vertex,
+        world_position=hierarchy.world_position[transform_index].copy(),
+        world_rotation=hierarchy.world_rotation[transform_index].copy(),
+        local_position=hierarchy.local_position[transform_index].copy(),
+        local_rotation=hierarchy.local_rotation[transform_index].copy(),
+        lossy_scale=lossy,
+        root_vertices=vertex_of[np.asarray(roots)].astype(np.int32),
+        child_vertices=tuple([int(vertex_of[c]) for c in children[t]] for t in order),
+        bone_names=tuple(names[t] for t in order),
+        component_transform=component,
+        init_render_local_to_world=l2w,
+        init_render_world_to_local=np.linalg.inv(l2w),
+        init_render_rotation=hierarchy.world_rotation[component].copy(),
+        init_scale=c_scale,
+    )
