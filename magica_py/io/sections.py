@@ -28,8 +28,9 @@ GLTF_SUFFIXES = (".gltf", ".glb", ".vrm")
 
 
 def bone_entries(bones: list[BoneSpec]) -> list[dict]:
-    return [{"name": b.name, "parent": b.parent, "position": [float(x) for x in b.position],
-             "rotation": [float(x) for x in b.rotation], "scale": [float(x) for x in b.scale]} for b in bones]
+    return [{"name": b.name, "parent": b.parent, "position": [float(x) + 0.0 for x in b.position],
+             "rotation": [float(x) + 0.0 for x in b.rotation], "scale": [float(x) + 0.0 for x in b.scale]}
+            for b in bones]
 
 
 def is_vrm(path) -> bool:
@@ -95,37 +96,43 @@ def split_clip_reference(ref: str) -> tuple[str, str | None]:
     return file, (clip or None)
 
 
-def load_clip(ref, *, base_dir=".", target_bones: list[BoneSpec] | None = None, target_map="auto",
-              retarget_options: dict | None = None, drop=(), prefix: str = "", unit_scale: float = 1.0) -> Clip:
+def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, target_map="auto",
+              retarget_options: dict | None = None, drop=(), prefix: str = "", unit_scale=None,
+              units="auto") -> Clip:
     """``animation: - clip: ...`` → a ``Clip`` targeting the scene's bone names.
 
-    * ``file.glb#Name``: that glTF animation (the only one if ``#Name`` is omitted and the
-      file has exactly one); bone names get ``prefix`` (the rig's prefix).
-    * ``file.bvh``: the BVH clip. With ``target_bones`` (the rig it drives) it is retargeted
-      by humanoid names (``retarget_options``: source_map, source_overrides, target_overrides,
-      source_rest, root_translation, same_names).
-    * ``drop``: globs of bones whose channels are removed (bones the cloth simulates).
+    * ``file.glb#Name`` (also .gltf / .vrm): that glTF animation (the only one if ``#Name``
+      is omitted and the file has exactly one); ``unit_scale`` as for the rig.
+    * ``file.bvh``: the BVH clip (``units`` as in ``load_bvh``).
+    * Without ``retarget_to`` the clip drives bones named as in its own file, plus
+      ``prefix`` (the rig's prefix: the clip plays on the rig loaded from the same file).
+    * With ``retarget_to`` (the target rig's BoneSpecs) it is retargeted by humanoid names:
+      ``target_map`` (a scheme or the rig's humanoid dict) and ``retarget_options``
+      (source_map, source_overrides, target_overrides, source_rest, root_translation,
+      same_names, rate); the result targets ``retarget_to``'s names.
+    * ``drop``: globs of bones whose channels are removed (bones the cloth simulates),
+      matched against the final names.
     """
     file, clip_name = split_clip_reference(ref)
     path = Path(base_dir) / file
     options = dict(retarget_options or {})
     if path.suffix.lower() == ".bvh":
-        anim = load_bvh(path, units=options.pop("units", "auto"))
-        clip = anim.clip
-        if target_bones is not None:
-            clip = retarget(clip, anim.bones, target_bones, target_map=target_map, **options)
-        elif prefix:
-            clip = clip.renamed({n: prefix + n for n in clip.nodes()})
+        anim = load_bvh(path, units=units if unit_scale is None else unit_scale)
+        source_bones, clip = anim.bones, anim.clip
     else:
-        rig = load_gltf(path, prefix=prefix, unit_scale=unit_scale, mirror_axis="z" if _is_vrm0(path) else "x")
+        rig = load_gltf(path, unit_scale=1.0 if unit_scale is None else unit_scale,
+                        mirror_axis="z" if _is_vrm0(path) else "x")
         if clip_name is None:
             if len(rig.clips) != 1:
                 raise AssetError(path, "animations", f"name the clip with {file}#<name>; the file has {sorted(rig.clips) or 'none'}")
             clip = next(iter(rig.clips.values()))
         else:
             clip = rig.clip(clip_name)
-        if target_bones is not None and options:
-            clip = retarget(clip, rig.bones, target_bones, target_map=target_map, **options)
+        source_bones = rig.bones
+    if retarget_to is not None:
+        clip = retarget(clip, source_bones, retarget_to, target_map=target_map, **options)
+    elif prefix:
+        clip = clip.renamed({n: prefix + n for n in clip.nodes()})
     if drop:
         clip = clip.without(drop)
     return clip
