@@ -124,3 +124,26 @@ def test_a_skeleton_without_hips_cannot_be_retargeted(cmu):
     from magica_py.scene.hierarchy import BoneSpec
     with pytest.raises(RetargetError, match="target skeleton: no bone mapped to humanoid 'hips'"):
         retarget(clip, anim.bones, [BoneSpec("pelvis")], target_map="vrm")
+
+
+def test_rest_alignment_lets_an_a_pose_target_follow_a_t_pose_source(cmu):
+    anim, clip = cmu
+    down = np.array([0.0, 0.0, -np.sin(np.pi / 8), np.cos(np.pi / 8)])     # 45 deg about -Z: arm down
+    target = [replace(b, rotation=tuple(down)) if b.name == "LeftArm" else b for b in anim.bones]
+    src_h, tgt_h = TransformHierarchy(anim.bones), TransformHierarchy(target)
+    times = np.arange(0, 400, 50) * clip.frame_time
+    _, src_pos = pose_world(clip, src_h, times)
+
+    def arm_directions(positions, h):
+        a, b, c = (h.index(n) for n in ("LeftArm", "LeftForeArm", "LeftHand"))
+        d1, d2 = positions[:, b] - positions[:, a], positions[:, c] - positions[:, b]
+        return d1 / np.linalg.norm(d1, axis=1, keepdims=True), d2 / np.linalg.norm(d2, axis=1, keepdims=True)
+
+    want = arm_directions(src_pos, src_h)
+    _, aligned = pose_world(retarget(clip, anim.bones, target), tgt_h, times)
+    for got, ref in zip(arm_directions(aligned, tgt_h), want):
+        assert np.allclose(got, ref, atol=1e-9)
+    _, naive = pose_world(retarget(clip, anim.bones, target, align_rest=False), tgt_h, times)
+    upper = arm_directions(naive, tgt_h)[0]
+    angles = np.degrees(np.arccos(np.clip(np.sum(upper * want[0], axis=1), -1, 1)))
+    assert np.allclose(angles, 45.0, atol=1.0)      # without alignment the arm keeps its 45 deg offset

@@ -12,8 +12,12 @@ Method (world-space rotation deltas, the classic "rest-pose relative" transfer):
   by the ratio of leg lengths (upper + lower leg, mean of both sides):
   ``P_tgt(t) = P_tgt_rest + (P_src(t) - P_src_rest) · L_tgt / L_src``.
 
-This assumes both rest poses are the same posture (T-pose onto T-pose) and both skeletons
-face the same way (+Z after import); retargeting a clip onto its own skeleton reproduces it.
+Rest postures: with ``align_rest`` (default) each mapped target bone is first turned so its
+rest direction towards the next mapped humanoid bone matches the source's (``W_tgt_rest``
+becomes ``C · W_tgt_rest`` with ``C`` the shortest rotation between the two directions), so
+an A-pose target follows a T-pose source; twist about the bone is not aligned. Both
+skeletons must face the same way (+Z after import). Retargeting a clip onto its own
+skeleton reproduces it (every ``C`` is the identity).
 """
 from __future__ import annotations
 
@@ -77,9 +81,37 @@ def leg_length(names: dict[str, str], hierarchy: TransformHierarchy, world_pos: 
     return float(np.mean(lengths)) if lengths else 0.0
 
 
+# The next humanoid bone along each limb (first one mapped on both sides is used) that
+# defines a bone's direction for rest-posture alignment. The hips are not aligned.
+_NEXT = {
+    "spine": ("chest", "upperChest", "neck"), "chest": ("upperChest", "neck"), "upperChest": ("neck",),
+    "neck": ("head",),
+    **{f"{side}{a}": nxt for side in ("left", "right") for a, nxt in (
+        ("Shoulder", (f"{side}UpperArm",)), ("UpperArm", (f"{side}LowerArm",)), ("LowerArm", (f"{side}Hand",)),
+        ("UpperLeg", (f"{side}LowerLeg",)), ("LowerLeg", (f"{side}Foot",)), ("Foot", (f"{side}Toes",)))},
+}
+
+
+def _rest_alignment(src_names, tgt_names, src_h, tgt_h, src_rest_pos, tgt_rest_pos) -> dict[int, np.ndarray]:
+    """Target bone index → world rotation taking its rest bone direction onto the source's."""
+    from magica_py.io.quat import qfrom_to
+    out = {}
+    for human, candidates in _NEXT.items():
+        if human not in src_names or human not in tgt_names:
+            continue
+        nxt = next((c for c in candidates if c in src_names and c in tgt_names), None)
+        if nxt is None:
+            continue
+        s, sc = src_h.index(src_names[human]), src_h.index(src_names[nxt])
+        t, tc = tgt_h.index(tgt_names[human]), tgt_h.index(tgt_names[nxt])
+        out[t] = qfrom_to(tgt_rest_pos[tc] - tgt_rest_pos[t], src_rest_pos[sc] - src_rest_pos[s])
+    return out
+
+
 def retarget(clip: Clip, source_bones: list[BoneSpec], target_bones: list[BoneSpec], *,
              source_map="auto", target_map="auto", source_overrides=None, target_overrides=None,
-             source_rest="bind", root_translation: bool = True, same_names: bool = True, rate: float | None = None,
+             source_rest="bind", root_translation: bool = True, same_names: bool = True,
+             align_rest: bool = True, rate: float | None = None,
              name: str | None = None) -> Clip:
     """A clip for ``target_bones`` that moves them like ``clip`` moves ``source_bones``.
 
@@ -87,7 +119,10 @@ def retarget(clip: Clip, source_bones: list[BoneSpec], target_bones: list[BoneSp
     ``vrm``) or a dict humanoid → bone (e.g. ``VrmAvatar.humanoid``); ``*_overrides``: a
     dict or YAML file path. ``same_names``: also transfer bones named alike on both sides
     that the humanoid map leaves out (so a clip retargeted onto its own skeleton is
-    reproduced exactly, intermediate joints included). ``source_rest``: ``"bind"`` or a frame index. ``rate``: sampling
+    reproduced exactly, intermediate joints included). ``align_rest``: first turn each
+    mapped target bone so that its rest direction towards its next mapped humanoid bone is
+    the source's (an A-pose target follows a T-pose source; identity when the rest postures
+    already agree). ``source_rest``: ``"bind"`` or a frame index. ``rate``: sampling
     rate in Hz (default: the clip's frame rate, else 60 Hz).
     """
     src_h = TransformHierarchy(source_bones)
@@ -119,11 +154,13 @@ def retarget(clip: Clip, source_bones: list[BoneSpec], target_bones: list[BoneSp
 
     # target world rotations of mapped bones, then locals parents-first
     target_world = {}
+    align = _rest_alignment(src_names, tgt_names, src_h, tgt_h, rest_pos[0], tgt_rest_pos[0]) if align_rest else {}
     for source_bone, target_bone in pairs:
         s = src_h.index(source_bone)
         t = tgt_h.index(target_bone)
         delta = qmul(src_rot[:, s], qconj(rest_rot[0, s]))
-        target_world[t] = qnormalize(qmul(delta, tgt_rest_rot[0, t]))
+        rest = qmul(align[t], tgt_rest_rot[0, t]) if t in align else tgt_rest_rot[0, t]
+        target_world[t] = qnormalize(qmul(delta, rest))
     world = np.repeat(tgt_rest_rot, frames, axis=0)
     tracks = []
     for j in range(tgt_h.count):
