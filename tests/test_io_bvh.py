@@ -106,3 +106,13 @@ def test_unknown_channel_and_missing_brace_are_reported(tmp_path):
 def test_auto_units_pick_centimetres_for_a_170_unit_skeleton(tmp_path):
     path = _bvh(tmp_path, ["Zrotation"], ["Zrotation"], [[0, 0]], child_offset=(0, 170, 0))
     assert load_bvh(path).unit_scale == 0.01
+
+
+@needs_data
+def test_per_frame_arrays_of_the_cmu_clip():
+    anim = load_bvh(CMU)
+    rot = anim.local_rotations()
+    assert rot.shape == (2752, 31, 4) and np.allclose(np.linalg.norm(rot, axis=2), 1.0)
+    assert np.allclose(rot[:, 3], anim.clip.track("LeftLeg", "rotation").values)
+    root = anim.root_positions()
+    assert root.shape == (2752, 3) and np.allclose(root[0], np.array([-9.3722, 17.8693, -17.3198]) * UNITS["cmu"])

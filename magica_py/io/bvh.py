@@ -66,6 +66,25 @@ class BvhAnimation:
     def frame_count(self) -> int:
         return self.file.frame_count
 
+    def local_rotations(self) -> np.ndarray:
+        """(F, J, 4) per-frame local rotations xyzw of the joints (``bones`` order, end sites
+        excluded); identity for a joint without rotation channels."""
+        joints = [b for b in self.bones if "bvh_joint" in b.tags]
+        out = np.zeros((self.frame_count, len(joints), 4))
+        out[..., 3] = 1.0
+        for tr in self.clip.tracks:
+            if tr.path == "rotation":
+                out[:, next(j for j, b in enumerate(joints) if b.name == tr.node)] = tr.values
+        return out
+
+    def root_positions(self) -> np.ndarray:
+        """(F, 3) per-frame local position of the first root (metres, Unity axes)."""
+        root = self.bones[0]
+        try:
+            return self.clip.track(root.name, "translation").values.copy()
+        except KeyError:
+            return np.repeat(np.asarray(root.position)[None], self.frame_count, axis=0)
+
     @property
     def frame_time(self) -> float:
         return self.file.frame_time
