@@ -1,0 +1,297 @@
+"""Per-frame team stages before the steps (ref §C.1, §C.2, §C.4, §C.5, §H.1).
+
+``skin_team`` (C.1) computes every particle's animated base pose from the bones read this
+frame; ``center_and_inertia_team`` (C.2 + C.4) the center, anchor, teleport test, movement
+smoothing, world inertia and speed limits, producing the frame shift; ``reset_or_shift_team``
+(C.5) applies the reset or the shift to the particle history.
+"""
+from __future__ import annotations
+
+import math
+
+from magica_py.jit import kernel
+from magica_py.kernels.math3d import (
+    clamp_length, lerp, load3, load4, q_angle, q_from_to, q_inverse, q_mul, q_normal_axis,
+    q_rotate, q_slerp, q_tangent_axis, rot_from_normal_tangent, saturate, shift_position,
+    store3, store4, unlerp, v_add, v_length, v_lerp, v_normalize, v_scale, v_sub,
+)
+
+MOVE = 0x02
+IDENTITY = (0.0, 0.0, 0.0, 1.0)
+TELEPORT_RESET = 1
+TELEPORT_KEEP = 2
+
+
+@kernel
+def _transform_point(l2w, i, bind, p, v, w):
+    """(l2w[i] @ bind[p]) @ (v, w) without forming the product matrix."""
+    x = bind[p, 0, 0] * v[0] + bind[p, 0, 1] * v[1] + bind[p, 0, 2] * v[2] + bind[p, 0, 3] * w
+    y = bind[p, 1, 0] * v[0] + bind[p, 1, 1] * v[1] + bind[p, 1, 2] * v[2] + bind[p, 1, 3] * w
+    z = bind[p, 2, 0] * v[0] + bind[p, 2, 1] * v[1] + bind[p, 2, 2] * v[2] + bind[p, 2, 3] * w
+    h = bind[p, 3, 0] * v[0] + bind[p, 3, 1] * v[1] + bind[p, 3, 2] * v[2] + bind[p, 3, 3] * w
+    return (l2w[i, 0, 0] * x + l2w[i, 0, 1] * y + l2w[i, 0, 2] * z + l2w[i, 0, 3] * h,
+            l2w[i, 1, 0] * x + l2w[i, 1, 1] * y + l2w[i, 1, 2] * z + l2w[i, 1, 3] * h,
+            l2w[i, 2, 0] * x + l2w[i, 2, 1] * y + l2w[i, 2, 2] * z + l2w[i, 2, 3] * h)
+
+
+@kernel
+def skin_team(m, ps, local_to_world, team):
+    """C.1: one-bone skinning of every vertex with this frame's bone matrices."""
+    start = m.team_particle_start[team]
+    for p in range(start, start + m.team_particle_count[team]):
+        i = m.transform_index[p]
+        pos = _transform_point(local_to_world, i, m.skin_bind_pose, p, load3(m.local_position, p), 1.0)
+        nor = v_normalize(_transform_point(local_to_world, i, m.skin_bind_pose, p, load3(m.local_normal, p), 0.0))
+        tan = v_normalize(_transform_point(local_to_world, i, m.skin_bind_pose, p, load3(m.local_tangent, p), 0.0))
+        store3(ps.position, p, pos)
+        store4(ps.rotation, p, rot_from_normal_tangent(nor, tan))
+
+
+@kernel
+def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation, lossy_scale,
+                            frame_delta_time, now_time_scale, skip_count, running, dt):
+    """C.2 and C.4 for one team: center, anchor, teleport, smoothing, world inertia, shift."""
+    comp = m.team_component_transform[team]
+    cpos = load3(world_position, comp)
+    crot = load4(world_rotation, comp)
+    cscl = load3(lossy_scale, comp)
+    store3(ts.component_pos, team, cpos)
+    store4(ts.component_rot, team, crot)
+    store3(ts.component_scale, team, cscl)
+    init_len = v_length(load3(m.team_init_scale, team))
+    ratio = v_length(cscl) / init_len if init_len > 0.0 else 1.0
+    ts.component_scale_ratio[team] = ratio
+    # center (C.2)
+    c0 = m.team_center_start[team]
+    cn = m.team_center_count[team]
+    if cn > 0:
+        sp = (0.0, 0.0, 0.0)
+        sn = (0.0, 0.0, 0.0)
+        st = (0.0, 0.0, 0.0)
+        for k in range(c0, c0 + cn):
+            f = m.center_fixed[k]
+            sp = v_add(sp, load3(ps.position, f))
+            q = q_mul(load4(ps.rotation, f), load4(m.bind_rotation, f))
+            sn = v_add(sn, q_normal_axis(q))
+            st = v_add(st, q_tangent_axis(q))
+        center_pos = v_scale(sp, 1.0 / cn)
+        center_rot = rot_from_normal_tangent(v_normalize(sn), v_normalize(st))
+    else:
+        center_pos = cpos
+        center_rot = crot
+    store3(ts.frame_world_pos, team, center_pos)
+    store4(ts.frame_world_rot, team, center_rot)
+    store3(ts.frame_world_scale, team, cscl)
+
+    pivot = load3(ts.old_component_pos, team)      # raw previous component position
+    old_pos = pivot
+    old_rot = load4(ts.old_component_rot, team)
+    reset = ts.reset[team] != 0
+    shift = False
+    # 1. anchor
+    anchor_delta = (0.0, 0.0, 0.0)
+    anchor_rot = IDENTITY
+    anchor = prm.anchor_transform[team]
+    if anchor >= 0:
+        apos = load3(world_position, anchor)
+        arot = load4(world_rotation, anchor)
+        if reset or ts.anchor_valid[team] == 0:
+            store3(ts.anchor_component_local_pos, team, q_rotate(q_inverse(arot), v_sub(cpos, apos)))
+            store4(ts.old_anchor_rot, team, arot)
+            ts.anchor_valid[team] = 1
+        anchor_center = v_add(apos, q_rotate(arot, load3(ts.anchor_component_local_pos, team)))
+        a = prm.anchor_inertia[team]
+        anchor_delta = v_scale(v_sub(anchor_center, old_pos), 1.0 - a)
+        anchor_rot = q_slerp(IDENTITY, q_from_to(load4(ts.old_anchor_rot, team), arot), 1.0 - a)
+        old_pos = v_add(old_pos, anchor_delta)
+        old_rot = q_mul(anchor_rot, old_rot)
+        store4(ts.old_anchor_rot, team, arot)
+        shift = True
+    else:
+        ts.anchor_valid[team] = 0
+    # 2. teleport
+    keep = ts.keep_teleport[team] != 0
+    mode = prm.teleport_mode[team]
+    if mode != 0 and not reset:
+        delta = v_length(v_sub(cpos, old_pos))
+        angle = math.degrees(q_angle(old_rot, crot))
+        if delta >= prm.teleport_distance[team] * ratio or angle >= prm.teleport_rotation[team]:
+            if mode == TELEPORT_RESET:
+                reset = True
+                ts.reset[team] = 1
+            elif mode == TELEPORT_KEEP:
+                keep = True
+                ts.keep_teleport[team] = 1
+    # 3. movement smoothing
+    smooth_delta = (0.0, 0.0, 0.0)
+    s = prm.movement_smoothing[team]
+    limit = prm.movement_speed_limit[team]
+    if s >= 1e-6 and not reset and not keep:
+        if running:
+            v = (0.0, 0.0, 0.0)
+            if frame_delta_time > 0.0:
+                v = v_scale(v_sub(cpos, old_pos), 1.0 / frame_delta_time)
+            if limit >= 0.0:
+                v = clamp_length(v, limit * ratio)
+            a = saturate((1.0 - s) ** 3 * 0.99 + 0.01)
+            store3(ts.smoothing_velocity, team, v_lerp(load3(ts.smoothing_velocity, team), v, a))
+        smooth_pos = v_sub(cpos, v_scale(load3(ts.smoothing_velocity, team), frame_delta_time))
+        smooth_delta = v_sub(smooth_pos, old_pos)
+        old_pos = smooth_pos
+        shift = True
+    # 4. reset: every history value becomes the current one
+    if reset:
+        for c in range(3):
+            ts.old_frame_world_pos[team, c] = center_pos[c]
+            ts.now_world_pos[team, c] = center_pos[c]
+            ts.old_world_pos[team, c] = center_pos[c]
+            ts.old_frame_world_scale[team, c] = cscl[c]
+            ts.smoothing_velocity[team, c] = 0.0
+            ts.frame_shift_vector[team, c] = 0.0
+        store4(ts.old_frame_world_rot, team, center_rot)
+        store4(ts.now_world_rot, team, center_rot)
+        store4(ts.old_world_rot, team, center_rot)
+        store4(ts.frame_shift_rotation, team, IDENTITY)
+        ts.inertia_shift[team] = 0
+        ts.frame_moving_speed[team] = 0.0
+    else:
+        # 5. world shift
+        shift_vec = v_sub(cpos, old_pos)
+        shift_rot = q_from_to(old_rot, crot)
+        ms = 1.0 - prm.world_inertia[team]
+        rs = ms
+        if keep:
+            ms = 1.0
+            rs = 1.0
+        work_pos = old_pos
+        work_rot = old_rot
+        if ms > 1e-8 or rs > 1e-8:
+            shift = True
+            work_pos = v_lerp(old_pos, cpos, ms)
+            work_rot = q_slerp(old_rot, crot, rs)
+        if frame_delta_time > 0.0:
+            if limit >= 0.0:
+                speed = v_length(v_sub(cpos, work_pos)) / frame_delta_time
+                limit_s = limit * ratio
+                if speed > limit_s:
+                    k = saturate((speed - limit_s) / speed)
+                    ms = lerp(ms, 1.0, k)
+                    work_pos = v_lerp(work_pos, cpos, k)
+                    shift = True
+            rlimit = prm.rotation_speed_limit[team]
+            if rlimit >= 0.0:
+                speed = math.degrees(q_angle(work_rot, crot)) / frame_delta_time
+                if speed > rlimit:
+                    k = saturate((speed - rlimit) / speed)
+                    rs = lerp(rs, 1.0, k)
+                    work_rot = q_slerp(work_rot, crot, k)
+                    shift = True
+        o = 0.0
+        if skip_count > 0 and frame_delta_time * now_time_scale > 0.0:
+            o = lerp(o, 1.0, saturate(skip_count * dt / (frame_delta_time * now_time_scale)))
+        if ts.velocity_weight[team] < 1.0:
+            o = lerp(o, 1.0, 1.0 - ts.velocity_weight[team])
+        if now_time_scale < 1.0:
+            o = lerp(o, 1.0, 1.0 - now_time_scale)
+        if o > 0.0:
+            ms = lerp(ms, 1.0, o)
+            rs = lerp(rs, 1.0, o)
+            work_pos = v_lerp(work_pos, cpos, o)
+            work_rot = q_slerp(work_rot, crot, o)
+            shift = True
+        if shift:
+            vec = v_add(v_add(v_scale(shift_vec, ms), anchor_delta), smooth_delta)
+            rot = q_mul(anchor_rot, q_slerp(IDENTITY, shift_rot, rs))
+            store3(ts.frame_shift_vector, team, vec)
+            store4(ts.frame_shift_rotation, team, rot)
+            store3(ts.old_frame_world_pos, team, shift_position(load3(ts.old_frame_world_pos, team), pivot, vec, rot))
+            store4(ts.old_frame_world_rot, team, q_mul(rot, load4(ts.old_frame_world_rot, team)))
+            store3(ts.now_world_pos, team, shift_position(load3(ts.now_world_pos, team), pivot, vec, rot))
+            store4(ts.now_world_rot, team, q_mul(rot, load4(ts.now_world_rot, team)))
+            ts.inertia_shift[team] = 1
+        # 6. wind bookkeeping
+        speed = 0.0
+        if frame_delta_time > 0.0 and now_time_scale > 1e-6:
+            speed = v_length(v_sub(cpos, work_pos)) / frame_delta_time / now_time_scale
+        ts.frame_moving_speed[team] = speed
+    # 7. reset consequences
+    if reset or ts.time_reset[team] != 0:
+        ts.velocity_weight[team] = 0.0 if prm.stabilization_time[team] > 1e-6 else 1.0
+        ts.blend_weight[team] = ts.velocity_weight[team]
+
+
+@kernel
+def reset_or_shift_team(m, ps, ts, team):
+    """C.5: snap the particles to the base pose (Reset) or shift their history rigidly."""
+    start = m.team_particle_start[team]
+    end = start + m.team_particle_count[team]
+    if ts.reset[team] != 0:
+        for p in range(start, end):
+            pos = load3(ps.position, p)
+            rot = load4(ps.rotation, p)
+            for c in range(3):
+                ps.next_pos[p, c] = pos[c]
+                ps.old_pos[p, c] = pos[c]
+                ps.base_pos[p, c] = pos[c]
+                ps.old_position[p, c] = pos[c]
+                ps.velocity_pos[p, c] = pos[c]
+                ps.disp_pos[p, c] = pos[c]
+                ps.velocity[p, c] = 0.0
+                ps.real_velocity[p, c] = 0.0
+                ps.collision_normal[p, c] = 0.0
+            store4(ps.base_rot, p, rot)
+            store4(ps.old_rotation, p, rot)
+            ps.friction[p] = 0.0
+            ps.static_friction[p] = 0.0
+    elif ts.inertia_shift[team] != 0:
+        pivot = load3(ts.old_component_pos, team)
+        vec = load3(ts.frame_shift_vector, team)
+        rot = load4(ts.frame_shift_rotation, team)
+        for p in range(start, end):
+            store3(ps.old_pos, p, shift_position(load3(ps.old_pos, p), pivot, vec, rot))
+            store3(ps.old_position, p, shift_position(load3(ps.old_position, p), pivot, vec, rot))
+            store3(ps.disp_pos, p, shift_position(load3(ps.disp_pos, p), pivot, vec, rot))
+            store4(ps.old_rotation, p, q_mul(rot, load4(ps.old_rotation, p)))
+            store3(ps.velocity, p, q_rotate(rot, load3(ps.velocity, p)))
+            store3(ps.real_velocity, p, q_rotate(rot, load3(ps.real_velocity, p)))
+
+
+@kernel
+def distance_culling_team(prm, ts, team, world_position, component_transform):
+    """H.1 distance culling: returns True when the team is beyond the culling length, and
+    updates the fade weight ``distance_weight`` (1 inside, 0 at the limit)."""
+    length = prm.culling_length[team]
+    ref = prm.culling_reference[team]
+    if length < 0.0 or ref < 0:
+        ts.distance_weight[team] = 1.0
+        return False
+    d = v_length(v_sub(load3(world_position, component_transform), load3(world_position, ref)))
+    if d >= length:
+        ts.distance_weight[team] = 0.0
+        return True
+    fade = saturate(prm.culling_fade_ratio[team]) * length
+    ts.distance_weight[team] = 1.0 - saturate(unlerp(length - fade, length, d))
+    return False
+
+
+@kernel
+def end_frame_team(ts, team, running):
+    """A.7: remember this frame's component and center, clear the per-frame flags."""
+    for c in range(3):
+        ts.old_component_pos[team, c] = ts.component_pos[team, c]
+        ts.old_component_scale[team, c] = ts.component_scale[team, c]
+        if running:
+            ts.old_frame_world_pos[team, c] = ts.frame_world_pos[team, c]
+            ts.old_frame_world_scale[team, c] = ts.frame_world_scale[team, c]
+            ts.external_force[team, c] = 0.0
+    for c in range(4):
+        ts.old_component_rot[team, c] = ts.component_rot[team, c]
+        if running:
+            ts.old_frame_world_rot[team, c] = ts.frame_world_rot[team, c]
+    if running:
+        ts.external_force_mode[team] = 0
+    ts.reset[team] = 0
+    ts.time_reset[team] = 0
+    ts.keep_teleport[team] = 0
+    ts.inertia_shift[team] = 0
+    ts.running[team] = 0

@@ -1,0 +1,195 @@
+"""Collider poses per frame (ref §G.2) and per step (§G.3), one slot per (team, collider).
+
+``ColliderSlots`` maps the scene's ``ColliderSet`` onto per-team slots; the kernels keep
+each slot's frame history (shifted with the team's inertia shift, reset with the team) and
+build the step's work data (old/new endpoints, scaled radii, swept bounds) read by
+``constraints/collision.py``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from magica_py.jit import kernel
+from magica_py.kernels.math3d import (
+    load3, load4, q_inverse, q_mul, q_normalize, q_rotate, q_slerp, shift_position, store3,
+    store4, v_add, v_lerp, v_scale, v_sub,
+)
+
+SPHERE = 0
+CAPSULE = 1
+PLANE = 2
+
+
+@kernel
+def _sign(x):
+    return -1.0 if x < 0.0 else 1.0
+
+
+@kernel
+def collider_frame_team(cs, ts, team, world_position, world_rotation, lossy_scale):
+    """G.2 for the slots of one team: this frame's pose and the history update."""
+    reset = ts.reset[team] != 0
+    shift = ts.inertia_shift[team] != 0
+    pivot = load3(ts.old_component_pos, team)
+    vec = load3(ts.frame_shift_vector, team)
+    srot = load4(ts.frame_shift_rotation, team)
+    c0 = ts.collider_start[team]
+    for k in range(c0, c0 + ts.collider_count[team]):
+        i = cs.transform[k]
+        pos = load3(world_position, i)
+        rot = load4(world_rotation, i)
+        s = load3(lossy_scale, i)
+        suspend = False
+        sx = s[0]
+        sy = s[1]
+        sz = s[2]
+        if abs(sx) < 1e-6:
+            sx = 1e-6
+            suspend = True
+        if abs(sy) < 1e-6:
+            sy = 1e-6
+            suspend = True
+        if abs(sz) < 1e-6:
+            sz = 1e-6
+            suspend = True
+        cs.scale_suspend[k] = 1 if suspend else 0
+        center = (cs.local_center[k, 0] * _sign(sx), cs.local_center[k, 1] * _sign(sy),
+                  cs.local_center[k, 2] * _sign(sz))
+        rc = q_rotate(rot, center)
+        fpos = (pos[0] + rc[0] * abs(sx), pos[1] + rc[1] * abs(sy), pos[2] + rc[2] * abs(sz))
+        store3(cs.frame_pos, k, fpos)
+        store4(cs.frame_rot, k, rot)
+        store3(cs.frame_scale, k, (sx, sy, sz))
+        if reset or cs.first_frame[k] != 0 or suspend:
+            store3(cs.old_frame_pos, k, fpos)
+            store3(cs.now_pos, k, fpos)
+            store3(cs.old_pos, k, fpos)
+            store4(cs.old_frame_rot, k, rot)
+            store4(cs.now_rot, k, rot)
+            store4(cs.old_rot, k, rot)
+            cs.first_frame[k] = 0
+        elif shift:
+            store3(cs.old_frame_pos, k, shift_position(load3(cs.old_frame_pos, k), pivot, vec, srot))
+            store3(cs.now_pos, k, shift_position(load3(cs.now_pos, k), pivot, vec, srot))
+            store3(cs.old_pos, k, shift_position(load3(cs.old_pos, k), pivot, vec, srot))
+            store4(cs.old_frame_rot, k, q_mul(srot, load4(cs.old_frame_rot, k)))
+            store4(cs.now_rot, k, q_mul(srot, load4(cs.now_rot, k)))
+            store4(cs.old_rot, k, q_mul(srot, load4(cs.old_rot, k)))
+
+
+@kernel
+def _capsule_ends(cs, k, pos, rot):
+    """Start and end sphere centres of capsule slot k at pose (pos, rot) (G.3 steps 1-5)."""
+    d = cs.direction[k]
+    axis = (1.0, 0.0, 0.0) if d == 0 else ((0.0, 1.0, 0.0) if d == 1 else (0.0, 0.0, 1.0))
+    s = cs.frame_scale[k, d]
+    axis = v_scale(axis, _sign(s))
+    scale = abs(s)
+    if cs.reverse_direction[k] != 0:
+        axis = v_scale(axis, -1.0)
+    rs = cs.size[k, 0] * scale
+    re = cs.size[k, 1] * scale
+    length = cs.size[k, 2] * scale
+    if cs.aligned_on_center[k] != 0:
+        a = length * 0.5
+        b = length * 0.5
+    else:
+        a = 0.0
+        b = length - rs
+    a = max(a - rs, 0.0)
+    b = max(b - re, 0.0)
+    return (v_add(pos, q_rotate(rot, v_scale(axis, a))), v_sub(pos, q_rotate(rot, v_scale(axis, b))), rs, re)
+
+
+@kernel
+def collider_step_team(cs, ts, team, frame_interpolation):
+    """G.3 at the start of a step: step pose, local-inertia shift of the old pose, work data."""
+    t = frame_interpolation
+    mv = ts.step_move_inertia_ratio[team]
+    rv = ts.step_rotation_inertia_ratio[team]
+    c0 = ts.collider_start[team]
+    for k in range(c0, c0 + ts.collider_count[team]):
+        now_pos = v_lerp(load3(cs.old_frame_pos, k), load3(cs.frame_pos, k), t)
+        now_rot = q_normalize(q_slerp(load4(cs.old_frame_rot, k), load4(cs.frame_rot, k), t))
+        old_pos = v_lerp(load3(cs.old_pos, k), now_pos, mv)
+        old_rot = q_normalize(q_slerp(load4(cs.old_rot, k), now_rot, rv))
+        store3(cs.now_pos, k, now_pos)
+        store4(cs.now_rot, k, now_rot)
+        store3(cs.old_pos, k, old_pos)
+        store4(cs.old_rot, k, old_rot)
+        store4(cs.inverse_old_rot, k, q_inverse(old_rot))
+        shape = cs.shape[k]
+        if shape == SPHERE:
+            r = cs.size[k, 0] * abs(cs.frame_scale[k, 0])
+            cs.radius_start[k] = r
+            cs.radius_end[k] = r
+            store3(cs.start_old, k, old_pos)
+            store3(cs.end_old, k, old_pos)
+            store3(cs.start_new, k, now_pos)
+            store3(cs.end_new, k, now_pos)
+            for c in range(3):
+                cs.aabb_min[k, c] = min(old_pos[c], now_pos[c]) - r
+                cs.aabb_max[k, c] = max(old_pos[c], now_pos[c]) + r
+        elif shape == CAPSULE:
+            so, eo, rs, re = _capsule_ends(cs, k, old_pos, old_rot)
+            sn, en, rs, re = _capsule_ends(cs, k, now_pos, now_rot)
+            cs.radius_start[k] = rs
+            cs.radius_end[k] = re
+            store3(cs.start_old, k, so)
+            store3(cs.end_old, k, eo)
+            store3(cs.start_new, k, sn)
+            store3(cs.end_new, k, en)
+            for c in range(3):
+                cs.aabb_min[k, c] = min(min(so[c], sn[c]) - rs, min(eo[c], en[c]) - re)
+                cs.aabb_max[k, c] = max(max(so[c], sn[c]) + rs, max(eo[c], en[c]) + re)
+        else:
+            sy = _sign(cs.frame_scale[k, 1])
+            store3(cs.plane_normal, k, q_rotate(now_rot, (0.0, sy, 0.0)))
+            store3(cs.start_new, k, now_pos)
+            store3(cs.start_old, k, old_pos)
+
+
+@kernel
+def collider_end_step_team(cs, ts, team):
+    """G.3 end of step: old = now."""
+    c0 = ts.collider_start[team]
+    for k in range(c0, c0 + ts.collider_count[team]):
+        for c in range(3):
+            cs.old_pos[k, c] = cs.now_pos[k, c]
+        for c in range(4):
+            cs.old_rot[k, c] = cs.now_rot[k, c]
+
+
+@kernel
+def collider_end_frame_team(cs, ts, team, running):
+    """End of frame: if the team ran, the frame pose becomes the old frame pose."""
+    if not running:
+        return
+    c0 = ts.collider_start[team]
+    for k in range(c0, c0 + ts.collider_count[team]):
+        for c in range(3):
+            cs.old_frame_pos[k, c] = cs.frame_pos[k, c]
+        for c in range(4):
+            cs.old_frame_rot[k, c] = cs.frame_rot[k, c]
+
+
+def fill_slots(cs, team_slots: list[tuple[int, list[int]]], collider_set) -> None:
+    """Copy the static collider description into slots: ``team_slots`` is
+    ``[(team, [collider indices]), ...]`` in slot order."""
+    k = 0
+    for team, indices in team_slots:
+        for ci in indices:
+            cs.collider_index[k] = ci
+            cs.team[k] = team
+            cs.shape[k] = int(collider_set.shape[ci])
+            cs.transform[k] = int(collider_set.transform[ci])
+            cs.local_center[k] = np.asarray(collider_set.center[ci], dtype=np.float64)
+            radius = float(collider_set.radius[ci])
+            end = getattr(collider_set, "end_radius", None)
+            end_radius = float(end[ci]) if end is not None else radius
+            cs.size[k] = (radius, end_radius, float(collider_set.length[ci]))
+            cs.direction[k] = int(collider_set.direction[ci])
+            cs.reverse_direction[k] = 1 if collider_set.reverse_direction[ci] else 0
+            cs.aligned_on_center[k] = 1 if collider_set.aligned_on_center[ci] else 0
+            cs.first_frame[k] = 1
+            k += 1

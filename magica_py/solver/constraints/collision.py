@@ -1,0 +1,312 @@
+"""Collider collision (ref §D.8): point mode (particle spheres) and edge mode (proxy edges)
+against spheres, capsules with two radii and infinite planes, all as "moving planes" built
+from the collider's previous-step and current-step poses (``ColliderState`` work data, G.3).
+
+Point mode pushes ``next_pos`` directly (Gauss-Seidel); edge mode accumulates in fixed point
+and averages (Jacobi). Neither touches ``velocity_pos``: the push becomes velocity in full.
+Edge-mode friction is quantised to {0, 1} as MagicaCloth2's fixed-point max does (§0.2,
+Appendix 2.5): we reproduce it deliberately.
+"""
+from __future__ import annotations
+
+import math
+
+from magica_py.jit import kernel
+from magica_py.kernels.math3d import (
+    load3, load4, q_rotate, saturate, store3, v_add, v_dot, v_length, v_length_sq, v_lerp,
+    v_normalize, v_scale, v_sub,
+)
+from magica_py.solver.constraints.bending import FIXED_POINT
+from magica_py.solver.parameters import curve_at
+
+MOVE = 0x02
+INVALID_OR_NO_COLLISION = 0x10
+SPHERE = 0
+CAPSULE = 1
+PLANE = 2
+FAR = 1e30
+
+
+@kernel
+def plane_push(c, n, p):
+    """``IntersectPointPlaneDist``: push p onto the plane (c, n) when behind it; signed distance."""
+    v = v_sub(p, c)
+    d = v_dot(v, n)
+    g = v_scale(n, d)
+    if d < 0.0:
+        return -v_length(g), v_sub(p, g)
+    return v_length(g), p
+
+
+@kernel
+def segment_parameter(c, a, b):
+    """Parameter in [0, 1] of the point of segment ab closest to c (0 when a == b)."""
+    ab = v_sub(b, a)
+    l2 = v_length_sq(ab)
+    if l2 == 0.0:
+        return 0.0
+    return saturate(v_dot(v_sub(c, a), ab) / l2)
+
+
+@kernel
+def closest_segment_segment(p1, q1, p2, q2):
+    """Ericson's ClosestPtSegmentSegment (threshold 1e-8): (s, t, c1, c2)."""
+    eps = 1e-8
+    d1 = v_sub(q1, p1)
+    d2 = v_sub(q2, p2)
+    r = v_sub(p1, p2)
+    a = v_dot(d1, d1)
+    e = v_dot(d2, d2)
+    f = v_dot(d2, r)
+    if a <= eps and e <= eps:
+        s = 0.0
+        t = 0.0
+    elif a <= eps:
+        s = 0.0
+        t = saturate(f / e)
+    else:
+        c = v_dot(d1, r)
+        if e <= eps:
+            t = 0.0
+            s = saturate(-c / a)
+        else:
+            b = v_dot(d1, d2)
+            denom = a * e - b * b
+            s = saturate((b * f - c * e) / denom) if denom != 0.0 else 0.0
+            t = (b * s + f) / e
+            if t < 0.0:
+                t = 0.0
+                s = saturate(-c / a)
+            elif t > 1.0:
+                t = 1.0
+                s = saturate((b - c) / a)
+    return s, t, v_add(p1, v_scale(d1, s)), v_add(p2, v_scale(d2, t))
+
+
+@kernel
+def aabb_overlap(min_a, max_a, min_b, max_b):
+    return (min_a[0] <= max_b[0] and max_a[0] >= min_b[0] and min_a[1] <= max_b[1]
+            and max_a[1] >= min_b[1] and min_a[2] <= max_b[2] and max_a[2] >= min_b[2])
+
+
+@kernel
+def solve_point_collider(cs, k, x, r, bmin, bmax):
+    """One particle (x, radius r, bounds) against collider slot k: (distance, normal, pushed x)."""
+    z = (0.0, 0.0, 0.0)
+    shape = cs.shape[k]
+    if shape == PLANE:
+        n = load3(cs.plane_normal, k)
+        d, x2 = plane_push(v_add(load3(cs.start_new, k), v_scale(n, r)), n, x)
+        return d, n, x2
+    if not aabb_overlap(bmin, bmax, load3(cs.aabb_min, k), load3(cs.aabb_max, k)):
+        return FAR, z, x
+    if shape == SPHERE:
+        n = v_normalize(v_sub(x, load3(cs.start_old, k)))
+        c = v_add(load3(cs.start_new, k), v_scale(n, cs.radius_start[k] + r))
+        d, x2 = plane_push(c, n, x)
+        return d, n, x2
+    so = load3(cs.start_old, k)
+    eo = load3(cs.end_old, k)
+    t = segment_parameter(x, so, eo)
+    radius = cs.radius_start[k] + (cs.radius_end[k] - cs.radius_start[k]) * t
+    u = q_rotate(load4(cs.inverse_old_rot, k), v_sub(x, v_lerp(so, eo, t)))
+    n = v_normalize(q_rotate(load4(cs.now_rot, k), u))
+    c = v_add(v_lerp(load3(cs.start_new, k), load3(cs.end_new, k), t), v_scale(n, radius + r))
+    d, x2 = plane_push(c, n, x)
+    return d, n, x2
+
+
+@kernel
+def point_collision_team(m, ps, prm, ts, cs, team):
+    """D.8 point mode over one team's moving particles."""
+    start = m.team_particle_start[team]
+    scale = ts.scale_ratio[team]
+    c0 = ts.collider_start[team]
+    c1 = c0 + ts.collider_count[team]
+    for p in range(start, start + m.team_particle_count[team]):
+        attr = m.attribute[p]
+        if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
+            continue
+        r = max(curve_at(prm.radius_curve, team, m.depth[p]), 0.0001) * scale
+        cfr = r
+        x = load3(ps.next_pos, p)
+        ext = r + cfr
+        bmin = (x[0] - ext, x[1] - ext, x[2] - ext)
+        bmax = (x[0] + ext, x[1] + ext, x[2] + ext)
+        sum_push = (0.0, 0.0, 0.0)
+        sum_n = (0.0, 0.0, 0.0)
+        n_acc = (0.0, 0.0, 0.0)
+        cnt = 0
+        min_dist = FAR
+        touched = False
+        for k in range(c0, c1):
+            if cs.scale_suspend[k] != 0:
+                continue
+            d, n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
+            if d <= 0.0:
+                sum_push = v_add(sum_push, v_sub(x2, x))
+                sum_n = v_add(sum_n, n)
+                cnt += 1
+            if d <= cfr:
+                touched = True
+                n_acc = v_add(n_acc, n)
+                min_dist = min(min_dist, d)
+        if cnt > 0:
+            mag = v_length(v_scale(sum_n, 1.0 / cnt))
+            if mag >= 1e-8:
+                store3(ps.next_pos, p, v_add(x, v_scale(sum_push, min(mag, 1.0) / cnt)))
+        if touched and v_length_sq(n_acc) > 1e-6:
+            ps.friction[p] = max(ps.friction[p], 1.0 - saturate(min_dist / cfr))
+            n_acc = v_normalize(n_acc)
+        store3(ps.collision_normal, p, n_acc)
+
+
+@kernel
+def solve_edge_collider(cs, k, a, b, ra, rb, cfr, bmin, bmax):
+    """Edge (a, b) against collider slot k: (distance, normal, pushed a, pushed b)."""
+    z = (0.0, 0.0, 0.0)
+    shape = cs.shape[k]
+    if shape == PLANE:
+        n = load3(cs.plane_normal, k)
+        o = load3(cs.start_new, k)
+        da, a2 = plane_push(v_add(o, v_scale(n, ra)), n, a)
+        db, b2 = plane_push(v_add(o, v_scale(n, rb)), n, b)
+        return min(da, db), n, a2, b2
+    if not aabb_overlap(bmin, bmax, load3(cs.aabb_min, k), load3(cs.aabb_max, k)):
+        return FAR, z, a, b
+    if shape == SPHERE:
+        o_old = load3(cs.start_old, k)
+        o_new = load3(cs.start_new, k)
+        s = segment_parameter(o_old, a, b)
+        c = v_lerp(a, b, s)
+        v = v_sub(c, o_old)
+        vl = v_length(v)
+        if vl < 1e-9:
+            return FAR, z, a, b
+        n = v_scale(v, 1.0 / vl)
+        l = vl - v_dot(n, v_sub(o_new, o_old))
+        th = ra + (rb - ra) * s + cs.radius_start[k]
+        if l > th + cfr:
+            return FAR, z, a, b
+        l2 = v_dot(n, v_sub(c, o_new))
+    else:
+        so = load3(cs.start_old, k)
+        eo = load3(cs.end_old, k)
+        rs = cs.radius_start[k]
+        re = cs.radius_end[k]
+        s, t, ca, cb = closest_segment_segment(a, b, so, eo)
+        v = v_sub(ca, cb)
+        vl = v_length(v)
+        if vl < 1e-9:
+            return FAR, z, a, b
+        n = v_scale(v, 1.0 / vl)
+        if rs != re:  # tapered: closest points against the axis shifted onto the surface
+            s, t, _ca, _cb = closest_segment_segment(a, b, v_add(so, v_scale(n, rs)), v_add(eo, v_scale(n, re)))
+            ca = v_lerp(a, b, s)
+            cb = v_lerp(so, eo, t)
+            v = v_sub(ca, cb)
+            vl = v_length(v)
+            if vl < 1e-9:
+                return FAR, z, a, b
+            n = v_scale(v, 1.0 / vl)
+        ds = v_sub(load3(cs.start_new, k), so)
+        de = v_sub(load3(cs.end_new, k), eo)
+        l = vl - v_dot(n, v_lerp(ds, de, t))
+        th = ra + (rb - ra) * s + rs + (re - rs) * t
+        if l > th + cfr:
+            return FAR, z, a, b
+        d = v_lerp(load3(cs.start_new, k), load3(cs.end_new, k), t)
+        l2 = v_dot(n, v_sub(ca, d))
+    if l2 > th:
+        return l2 - th, n, a, b
+    depth = th - l2
+    b0 = 1.0 - s
+    b1 = s
+    sc = depth / (b0 * b0 + b1 * b1)
+    return -depth, n, v_add(a, v_scale(n, b0 * sc)), v_add(b, v_scale(n, b1 * sc))
+
+
+@kernel
+def edge_collision_team(m, ps, prm, ts, cs, team):
+    """D.8 edge mode over one team's edges (accumulate), then the sum step."""
+    scale = ts.scale_ratio[team]
+    c0 = ts.collider_start[team]
+    c1 = c0 + ts.collider_count[team]
+    e0 = m.team_edge_start[team]
+    for e in range(e0, e0 + m.team_edge_count[team]):
+        ia = m.edges[e, 0]
+        ib = m.edges[e, 1]
+        a_move = (m.attribute[ia] & MOVE) != 0
+        b_move = (m.attribute[ib] & MOVE) != 0
+        if not a_move and not b_move:
+            continue
+        ra = curve_at(prm.radius_curve, team, m.depth[ia]) * scale
+        rb = curve_at(prm.radius_curve, team, m.depth[ib]) * scale
+        cfr = (ra + rb) * 0.5
+        a = load3(ps.next_pos, ia)
+        b = load3(ps.next_pos, ib)
+        bmin = (min(a[0] - ra, b[0] - rb) - cfr, min(a[1] - ra, b[1] - rb) - cfr, min(a[2] - ra, b[2] - rb) - cfr)
+        bmax = (max(a[0] + ra, b[0] + rb) + cfr, max(a[1] + ra, b[1] + rb) + cfr, max(a[2] + ra, b[2] + rb) + cfr)
+        push_a = (0.0, 0.0, 0.0)
+        push_b = (0.0, 0.0, 0.0)
+        sum_n = (0.0, 0.0, 0.0)
+        n_acc = (0.0, 0.0, 0.0)
+        cnt = 0
+        min_dist = FAR
+        touched = False
+        for k in range(c0, c1):
+            if cs.scale_suspend[k] != 0:
+                continue
+            d, n, a2, b2 = solve_edge_collider(cs, k, a, b, ra, rb, cfr, bmin, bmax)
+            if d <= 0.0:
+                push_a = v_add(push_a, v_sub(a2, a))
+                push_b = v_add(push_b, v_sub(b2, b))
+                sum_n = v_add(sum_n, n)
+                cnt += 1
+            if d <= cfr:
+                touched = True
+                n_acc = v_add(n_acc, n)
+                min_dist = min(min_dist, d)
+        if cnt > 0:
+            mag = v_length(v_scale(sum_n, 1.0 / cnt))
+            if mag >= 1e-8:
+                f = min(mag, 1.0) / cnt
+                _accumulate(ps, ia, v_scale(push_a, f))
+                _accumulate(ps, ib, v_scale(push_b, f))
+        if touched:
+            # fixed-point max: the value is cast to an integer before scaling (quirk, §0.2)
+            recorded = float(math.trunc(1.0 - saturate(min_dist / cfr)))
+            if a_move:
+                ps.accum_friction[ia] = max(ps.accum_friction[ia], recorded)
+                store3(ps.accum_normal, ia, v_add(load3(ps.accum_normal, ia), n_acc))
+            if b_move:
+                ps.accum_friction[ib] = max(ps.accum_friction[ib], recorded)
+                store3(ps.accum_normal, ib, v_add(load3(ps.accum_normal, ib), n_acc))
+    # sum step
+    start = m.team_particle_start[team]
+    for p in range(start, start + m.team_particle_count[team]):
+        n = ps.accum_count[p]
+        if n > 0:
+            s = 1.0 / (n * FIXED_POINT)
+            ps.next_pos[p, 0] += ps.accum_vector[p, 0] * s
+            ps.next_pos[p, 1] += ps.accum_vector[p, 1] * s
+            ps.next_pos[p, 2] += ps.accum_vector[p, 2] * s
+        if ps.accum_friction[p] > 0.0:
+            ps.friction[p] = max(ps.friction[p], ps.accum_friction[p])
+        nsum = load3(ps.accum_normal, p)
+        if v_length_sq(nsum) > 0.0:
+            store3(ps.collision_normal, p, v_normalize(nsum))
+        ps.accum_vector[p, 0] = 0.0
+        ps.accum_vector[p, 1] = 0.0
+        ps.accum_vector[p, 2] = 0.0
+        ps.accum_count[p] = 0
+        ps.accum_friction[p] = 0.0
+        store3(ps.accum_normal, p, (0.0, 0.0, 0.0))
+
+
+@kernel
+def _accumulate(ps, p, v):
+    ps.accum_vector[p, 0] += float(math.trunc(v[0] * FIXED_POINT))
+    ps.accum_vector[p, 1] += float(math.trunc(v[1] * FIXED_POINT))
+    ps.accum_vector[p, 2] += float(math.trunc(v[2] * FIXED_POINT))
+    ps.accum_count[p] += 1

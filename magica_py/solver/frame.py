@@ -1,0 +1,160 @@
+"""The LATE_UPDATE frame of every team in one numba call (ref §A.3, §D.0 order).
+
+``simulate_frame`` runs, for all teams: scale suspension and distance culling, the runtime's
+team time (§A.4), skinning / center / inertia / reset-or-shift / collider frame (§C, §G.2),
+the steps (each: §A.6 time, §C.3 team update, §G.3 colliders, §D.1-§D.10), then guards,
+display (§E.1), rotations (§E.2/§E.3), transform data and write-back (§E.4) and the end of
+frame (§A.7). Within a team everything runs in particle order (Gauss-Seidel, §D.0).
+"""
+from __future__ import annotations
+
+from collections import namedtuple
+
+from magica_py.jit import kernel
+from magica_py.runtime.team_time import (
+    TeamTimeState, team_time_begin_step, team_time_end_frame, team_time_frame_update,
+)
+from magica_py.solver.center import (
+    center_and_inertia_team, distance_culling_team, end_frame_team, reset_or_shift_team, skin_team,
+)
+from magica_py.solver.colliders import (
+    collider_end_frame_team, collider_end_step_team, collider_frame_team, collider_step_team,
+)
+from magica_py.solver.constraints.angle import LIMIT_ATTENUATION, angle_team
+from magica_py.solver.constraints.bending import apply_accumulated, bending_team
+from magica_py.solver.constraints.collision import edge_collision_team, point_collision_team
+from magica_py.solver.constraints.distance import VELOCITY_ATTENUATION as DISTANCE_ATTENUATION
+from magica_py.solver.constraints.distance import distance_team
+from magica_py.solver.constraints.motion import VELOCITY_ATTENUATION as MOTION_ATTENUATION
+from magica_py.solver.constraints.motion import motion_team
+from magica_py.solver.constraints.tether import VELOCITY_ATTENUATION as TETHER_ATTENUATION
+from magica_py.solver.constraints.tether import tether_team
+from magica_py.solver.display import display_team
+from magica_py.solver.guards import check_team, reset_team_to_base
+from magica_py.solver.parameters import step_rate
+from magica_py.solver.rotations import line_rotations_team, triangle_rotations_team
+from magica_py.solver.step import end_step_team, predict_team, step_basic_pose_team, team_step_update
+from magica_py.solver.writeback import transform_data_team, write_transforms_team
+
+TimeArrays = namedtuple("TimeArrays", TeamTimeState.FIELDS)
+HierarchyArrays = namedtuple("HierarchyArrays", [
+    "parent", "local_position", "local_rotation", "world_position", "world_rotation",
+    "lossy_scale", "local_to_world"])
+# frame inputs: Unity time of the frame and the global simulation settings
+FrameInputs = namedtuple("FrameInputs", [
+    "delta_time", "unscaled_delta_time", "fixed_delta_time", "fixed_update_count",
+    "global_time_scale", "dt", "max_steps", "timing", "frequency_ratio",
+    "power_y", "power_z", "power_w"])
+
+
+def time_arrays(state: TeamTimeState) -> TimeArrays:
+    return TimeArrays(*(getattr(state, name) for name in TeamTimeState.FIELDS))
+
+
+def hierarchy_arrays(h) -> HierarchyArrays:
+    return HierarchyArrays(h.parent, h.local_position, h.local_rotation, h.world_position,
+                           h.world_rotation, h.lossy_scale, h.local_to_world)
+
+
+@kernel
+def prepare_teams(m, ts, prm, tt, h):
+    """Scale suspension (A.4) and distance culling (H.1) before the team time runs."""
+    for t in range(ts.enabled.shape[0]):
+        if ts.enabled[t] == 0:
+            tt.active[t] = False
+            continue
+        tt.active[t] = True
+        comp = m.team_component_transform[t]
+        smin = min(abs(h.lossy_scale[comp, 0]), min(abs(h.lossy_scale[comp, 1]), abs(h.lossy_scale[comp, 2])))
+        ts.scale_suspended[t] = 1 if smin < 1e-6 else 0
+        culled = distance_culling_team(prm, ts, t, h.world_position, comp)
+        if (1 if culled else 0) != ts.culled[t]:
+            ts.reset[t] = 1  # any visibility change forces a reset (H.1)
+        ts.culled[t] = 1 if culled else 0
+        suspended = ts.scale_suspended[t] != 0 or culled
+        tt.suspended[t] = suspended
+        ts.active[t] = 0 if suspended else 1
+
+
+@kernel
+def run_step(m, ps, prm, ts, cs, tt, t, fi):
+    """One simulation step of team t (ref §D.0 order) at frame interpolation fi."""
+    dt = fi.dt
+    ratio = fi.frequency_ratio
+    mode = prm.rate_mode[t]
+    frac = tt.frame_interpolation[t]
+    team_step_update(m, ts, prm, frac, t, dt)
+    collider_step_team(cs, ts, t, frac)
+    predict_team(m, ps, prm, ts, t, frac, dt, ratio, fi.power_z)
+    step_basic_pose_team(m, ps, prm, ts, t)
+    tether_team(m, ps, prm, t, step_rate(TETHER_ATTENUATION, ratio, 1.0, mode))
+    distance_attenuation = step_rate(DISTANCE_ATTENUATION, ratio, 1.0, mode)
+    distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
+    angle_team(m, ps, prm, ts, t, ratio, fi.power_w, step_rate(LIMIT_ATTENUATION, ratio, 1.0, mode),
+               step_rate(prm.restoration_attenuation[t], ratio, 1.0, mode))
+    if m.team_bend_count[t] > 0 or m.team_volume_count[t] > 0:
+        bending_team(m, ps, prm, ts, t, ratio, fi.power_y)
+        apply_accumulated(m, ps, t, True)
+    if ts.collider_count[t] > 0:
+        if prm.collision_mode[t] == 1:
+            point_collision_team(m, ps, prm, ts, cs, t)
+        elif prm.collision_mode[t] == 2:
+            edge_collision_team(m, ps, prm, ts, cs, t)
+    distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
+    motion_team(m, ps, prm, t, step_rate(MOTION_ATTENUATION, ratio, 1.0, mode))
+    end_step_team(m, ps, prm, ts, t, dt, ratio)
+    collider_end_step_team(cs, ts, t)
+
+
+@kernel
+def simulate_frame(m, ps, prm, ts, cs, tt, h, fi):
+    """The whole cloth frame for every team (see the module docstring)."""
+    team_count = ts.enabled.shape[0]
+    prepare_teams(m, ts, prm, tt, h)
+    team_time_frame_update(
+        tt.active, tt.suspended, tt.update_mode, tt.team_time_scale, tt.time, tt.old_time,
+        tt.now_update_time, tt.old_update_time, tt.frame_update_time, tt.frame_old_time,
+        tt.update_count, tt.skip_count, tt.frame_delta_time, tt.now_time_scale, tt.frame_add,
+        tt.running, fi.delta_time, fi.unscaled_delta_time, fi.fixed_delta_time,
+        fi.fixed_update_count, fi.global_time_scale, fi.dt, fi.max_steps, fi.timing)
+    max_count = 0
+    for t in range(team_count):
+        if ts.active[t] == 0:
+            continue
+        ts.running[t] = 1 if tt.running[t] else 0
+        skin_team(m, ps, h.local_to_world, t)
+        center_and_inertia_team(m, ps, prm, ts, t, h.world_position, h.world_rotation, h.lossy_scale,
+                                tt.frame_delta_time[t], tt.now_time_scale[t], tt.skip_count[t],
+                                tt.running[t], fi.dt)
+        reset_or_shift_team(m, ps, ts, t)
+        collider_frame_team(cs, ts, t, h.world_position, h.world_rotation, h.lossy_scale)
+        if tt.update_count[t] > max_count:
+            max_count = tt.update_count[t]
+    for step in range(max_count):
+        team_time_begin_step(step, tt.active, tt.update_count, tt.time, tt.now_update_time,
+                             tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
+        for t in range(team_count):
+            if ts.active[t] != 0 and tt.step_running[t]:
+                run_step(m, ps, prm, ts, cs, tt, t, fi)
+    for t in range(team_count):
+        if ts.active[t] == 0:
+            continue
+        code = check_team(m, ps, ts, t)
+        if code != 0:
+            reset_team_to_base(m, ps, ts, t)
+            ts.guard_code[t] = code
+        display_team(m, ps, ts, t, fi.dt, tt.time[t], tt.old_time[t], tt.now_update_time[t],
+                     tt.running[t])
+        line_rotations_team(m, ps, prm, ts, t)
+        triangle_rotations_team(m, ps, t)
+        if transform_data_team(m, ps, t):
+            write_transforms_team(m, ps, t, h.parent, h.world_rotation, h.lossy_scale,
+                                  h.local_position, h.local_rotation)
+        else:
+            reset_team_to_base(m, ps, ts, t)
+            ts.guard_code[t] = 1
+        end_frame_team(ts, t, tt.running[t])
+        collider_end_frame_team(cs, ts, t, tt.running[t])
+    team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
+                        tt.now_update_time, tt.old_update_time, tt.frame_update_time,
+                        tt.frame_old_time, fi.timing)

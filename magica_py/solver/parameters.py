@@ -1,0 +1,252 @@
+"""Per-team parameter table: ``params.ClothParameters`` converted to job data (ref §F.1).
+
+One row per team; kernels read ``prm.<field>[team]``. Conversions of §F.1 happen here once:
+damping and restoration stiffness tables are multiplied by 0.2, limits arrive as -1 when off,
+enums become small integers. Rewriting a row (``write_row``) is how a runtime parameter change
+takes effect at the next frame without touching the simulation state.
+
+Per-step rates (``rate_mode``): MagicaCloth2 tunes them for 90 Hz and patches other
+frequencies with SimulationPower (§A.3); ``frequency_consistent`` converts every per-step
+rate k with ``1 - (1 - k)^(90/f)`` instead (``step_rate`` below).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from magica_py.jit import kernel
+from magica_py.solver.fields import F64, I32, U8, allocate, make_soa
+
+CURVE = (16,)
+
+TEAM_PARAMETER_FIELDS = [
+    ("gravity", "team", (), F64, "m/s^2"),
+    ("gravity_direction", "team", (3,), F64, "unit world direction"),
+    ("gravity_falloff", "team", (), F64, ""),
+    ("stabilization_time", "team", (), F64, "s"),
+    ("blend_weight", "team", (), F64, ""),
+    ("animation_pose_ratio", "team", (), F64, ""),
+    ("rotational_interpolation", "team", (), F64, ""),
+    ("root_rotation", "team", (), F64, ""),
+    ("normal_axis", "team", (), I32, "0 right 1 up 2 forward 3 -right 4 -up 5 -forward"),
+    ("anchor_transform", "team", (), I32, "hierarchy node or -1"),
+    ("anchor_inertia", "team", (), F64, ""),
+    ("world_inertia", "team", (), F64, ""),
+    ("movement_smoothing", "team", (), F64, ""),
+    ("movement_speed_limit", "team", (), F64, "m/s or -1"),
+    ("rotation_speed_limit", "team", (), F64, "deg/s or -1"),
+    ("local_inertia", "team", (), F64, ""),
+    ("local_movement_speed_limit", "team", (), F64, "m/s or -1"),
+    ("local_rotation_speed_limit", "team", (), F64, "deg/s or -1"),
+    ("depth_inertia", "team", (), F64, ""),
+    ("centrifugal_acceleration", "team", (), F64, ""),
+    ("particle_speed_limit", "team", (), F64, "m/s or -1"),
+    ("teleport_mode", "team", (), I32, "0 none 1 reset 2 keep"),
+    ("teleport_distance", "team", (), F64, "m"),
+    ("teleport_rotation", "team", (), F64, "deg"),
+    ("tether_compression", "team", (), F64, ""),
+    ("bending_stiffness", "team", (), F64, ""),
+    ("use_restoration", "team", (), U8, ""),
+    ("restoration_attenuation", "team", (), F64, ""),
+    ("restoration_gravity_falloff", "team", (), F64, ""),
+    ("use_angle_limit", "team", (), U8, ""),
+    ("limit_stiffness", "team", (), F64, ""),
+    ("use_max_distance", "team", (), U8, ""),
+    ("use_backstop", "team", (), U8, ""),
+    ("backstop_radius", "team", (), F64, "m"),
+    ("motion_stiffness", "team", (), F64, ""),
+    ("collision_mode", "team", (), I32, "0 none 1 point 2 edge"),
+    ("friction", "team", (), F64, ""),
+    ("culling_length", "team", (), F64, "m or -1"),
+    ("culling_fade_ratio", "team", (), F64, ""),
+    ("culling_reference", "team", (), I32, "hierarchy node or -1"),
+    ("rate_mode", "team", (), I32, "0 magica, 1 frequency_consistent"),
+    # depth tables (§0.3)
+    ("damping_curve", "team", CURVE, F64, "x0.2 applied"),
+    ("radius_curve", "team", CURVE, F64, "m"),
+    ("distance_stiffness_curve", "team", CURVE, F64, ""),
+    ("restoration_stiffness_curve", "team", CURVE, F64, "x0.2 applied"),
+    ("limit_angle_curve", "team", CURVE, F64, "deg"),
+    ("max_distance_curve", "team", CURVE, F64, "m"),
+    ("backstop_distance_curve", "team", CURVE, F64, "m"),
+]
+TeamParameters = make_soa("TeamParameters", TEAM_PARAMETER_FIELDS)
+
+NORMAL_AXES = ("right", "up", "forward", "inverse_right", "inverse_up", "inverse_forward")
+TELEPORT_MODES = ("none", "reset", "keep")
+COLLISION_MODES = ("none", "point", "edge")
+RATE_MODES = ("magica", "frequency_consistent")
+
+# reference defaults (§F.1), used for keys a parameter mapping does not carry
+_DEFAULTS = {
+    "rotational_interpolation": 0.5, "root_rotation": 0.5, "animation_pose_ratio": 0.0,
+    "normal_axis": "up", "gravity": 5.0, "gravity_direction": (0.0, -1.0, 0.0),
+    "gravity_falloff": 0.0, "stabilization_time_after_reset": 0.1, "blend_weight": 1.0,
+    "damping": 0.05, "radius": 0.02, "inertia.anchor": None, "inertia.anchor_inertia": 0.0,
+    "inertia.world_inertia": 1.0, "inertia.movement_inertia_smoothing": 0.4,
+    "inertia.movement_speed_limit": 5.0, "inertia.rotation_speed_limit": 720.0,
+    "inertia.local_inertia": 1.0, "inertia.local_movement_speed_limit": -1.0,
+    "inertia.local_rotation_speed_limit": -1.0, "inertia.depth_inertia": 0.0,
+    "inertia.centrifugal_acceleration": 0.0, "inertia.particle_speed_limit": 4.0,
+    "inertia.teleport_mode": "none", "inertia.teleport_distance": 0.5,
+    "inertia.teleport_rotation": 90.0, "tether.distance_compression": 0.4,
+    "distance.stiffness": 1.0, "triangle_bending.stiffness": 1.0,
+    "angle_restoration.use": True, "angle_restoration.stiffness": None,
+    "angle_restoration.velocity_attenuation": 0.8, "angle_restoration.gravity_falloff": 0.0,
+    "angle_limit.use": False, "angle_limit.limit_angle": None, "angle_limit.stiffness": 1.0,
+    "motion.use_max_distance": False, "motion.max_distance": 0.3, "motion.use_backstop": False,
+    "motion.backstop_radius": 10.0, "motion.backstop_distance": 0.0, "motion.stiffness": 1.0,
+    "collider_collision.mode": "point", "collider_collision.friction": 0.05,
+    "culling.distance_culling_length": -1.0, "culling.distance_culling_fade_ratio": 0.2,
+    "culling.distance_culling_reference": None, "solver.rate_mode": "magica",
+}
+# curves whose default is a linear curve (value, start -> end), §F.1
+_LINEAR_DEFAULTS = {
+    "angle_restoration.stiffness": (0.2, 1.0, 0.2),
+    "angle_limit.limit_angle": (60.0, 0.0, 1.0),
+}
+
+
+def curve_table(value) -> np.ndarray:
+    """The 16-sample depth table of a ``Curve`` (``.samples``) or of a plain number."""
+    samples = getattr(value, "samples", None)
+    if samples is not None:
+        return np.asarray(samples, dtype=np.float64)
+    return np.full(16, float(value))
+
+
+def _lookup(parameters, key):
+    value = parameters.get(key, None) if hasattr(parameters, "get") else None
+    if value is None:
+        value = _DEFAULTS.get(key)
+        if value is None and key in _LINEAR_DEFAULTS:
+            v, s, e = _LINEAR_DEFAULTS[key]
+            return np.array([v * (s + (e - s) * i / 15.0) for i in range(16)])
+    return value
+
+
+def _limit(value) -> float:
+    if value is None or value is False:
+        return -1.0
+    return float(value)
+
+
+def _enum(value, choices, key) -> int:
+    name = str(value).lower()
+    if name == "animator_linkage":
+        name = "normal"
+    if name not in choices:
+        raise ValueError(f"parameter {key}: {value!r} is not one of {choices}")
+    return choices.index(name)
+
+
+def write_row(table, team: int, parameters, collision_mode: str | None = None,
+              resolve_transform=None) -> None:
+    """Convert one team's parameters (a mapping of dotted keys) into row ``team`` of ``table``.
+
+    ``resolve_transform(name) -> hierarchy index`` resolves transform-valued parameters
+    (anchor, culling reference); ``collision_mode`` (the cloth spec's) overrides the parameter.
+    """
+    g = lambda key: _lookup(parameters, key)  # noqa: E731
+    resolve = resolve_transform or (lambda name: -1)
+    t = team
+    table.gravity[t] = float(g("gravity"))
+    d = np.asarray(g("gravity_direction"), dtype=np.float64)
+    n = float(np.linalg.norm(d))
+    table.gravity_direction[t] = d / n if n > 1e-8 else 0.0
+    table.gravity_falloff[t] = float(g("gravity_falloff"))
+    table.stabilization_time[t] = float(g("stabilization_time_after_reset"))
+    table.blend_weight[t] = float(g("blend_weight"))
+    table.animation_pose_ratio[t] = float(g("animation_pose_ratio"))
+    table.rotational_interpolation[t] = float(g("rotational_interpolation"))
+    table.root_rotation[t] = float(g("root_rotation"))
+    table.normal_axis[t] = _enum(g("normal_axis"), NORMAL_AXES, "normal_axis")
+    anchor = g("inertia.anchor")
+    table.anchor_transform[t] = -1 if anchor is None else (anchor if isinstance(anchor, int) else resolve(anchor))
+    table.anchor_inertia[t] = float(g("inertia.anchor_inertia"))
+    table.world_inertia[t] = float(g("inertia.world_inertia"))
+    table.movement_smoothing[t] = float(g("inertia.movement_inertia_smoothing"))
+    table.movement_speed_limit[t] = _limit(g("inertia.movement_speed_limit"))
+    table.rotation_speed_limit[t] = _limit(g("inertia.rotation_speed_limit"))
+    table.local_inertia[t] = float(g("inertia.local_inertia"))
+    table.local_movement_speed_limit[t] = _limit(g("inertia.local_movement_speed_limit"))
+    table.local_rotation_speed_limit[t] = _limit(g("inertia.local_rotation_speed_limit"))
+    table.depth_inertia[t] = float(g("inertia.depth_inertia"))
+    table.centrifugal_acceleration[t] = float(g("inertia.centrifugal_acceleration"))
+    table.particle_speed_limit[t] = _limit(g("inertia.particle_speed_limit"))
+    table.teleport_mode[t] = _enum(g("inertia.teleport_mode"), TELEPORT_MODES, "inertia.teleport_mode")
+    table.teleport_distance[t] = float(g("inertia.teleport_distance"))
+    table.teleport_rotation[t] = float(g("inertia.teleport_rotation"))
+    table.tether_compression[t] = float(g("tether.distance_compression"))
+    table.bending_stiffness[t] = float(g("triangle_bending.stiffness"))
+    table.use_restoration[t] = 1 if g("angle_restoration.use") else 0
+    table.restoration_attenuation[t] = float(g("angle_restoration.velocity_attenuation"))
+    table.restoration_gravity_falloff[t] = float(g("angle_restoration.gravity_falloff"))
+    table.use_angle_limit[t] = 1 if g("angle_limit.use") else 0
+    table.limit_stiffness[t] = float(g("angle_limit.stiffness"))
+    table.use_max_distance[t] = 1 if g("motion.use_max_distance") else 0
+    table.use_backstop[t] = 1 if g("motion.use_backstop") else 0
+    table.backstop_radius[t] = float(g("motion.backstop_radius"))
+    table.motion_stiffness[t] = float(g("motion.stiffness"))
+    mode = collision_mode if collision_mode is not None else g("collider_collision.mode")
+    table.collision_mode[t] = _enum(mode, COLLISION_MODES, "collision_mode")
+    table.friction[t] = float(g("collider_collision.friction"))
+    table.culling_length[t] = _limit(g("culling.distance_culling_length"))
+    table.culling_fade_ratio[t] = float(g("culling.distance_culling_fade_ratio"))
+    ref = g("culling.distance_culling_reference")
+    table.culling_reference[t] = -1 if ref is None else (ref if isinstance(ref, int) else resolve(ref))
+    table.rate_mode[t] = _enum(g("solver.rate_mode"), RATE_MODES, "solver.rate_mode")
+    table.damping_curve[t] = curve_table(g("damping")) * 0.2
+    table.radius_curve[t] = curve_table(g("radius"))
+    table.distance_stiffness_curve[t] = curve_table(g("distance.stiffness"))
+    table.restoration_stiffness_curve[t] = curve_table(g("angle_restoration.stiffness")) * 0.2
+    table.limit_angle_curve[t] = curve_table(g("angle_limit.limit_angle"))
+    table.max_distance_curve[t] = curve_table(g("motion.max_distance"))
+    table.backstop_distance_curve[t] = curve_table(g("motion.backstop_distance"))
+
+
+def allocate_parameters(team_count: int):
+    return allocate(TeamParameters, {"team": team_count})
+
+
+# ----------------------------------------------------------------------------- kernels
+@kernel
+def curve_at(tables, row, depth):
+    """``EvaluateCurve`` of §0.3 on row ``row`` of a (T, 16) table (no clamp)."""
+    sd = 0.0 if depth < 0.0 else (1.0 if depth > 1.0 else depth)
+    i = int(sd * 15.0)
+    u = (depth - i / 15.0) * 15.0
+    j = i + 1 if i + 1 < 15 else 15
+    return tables[row, i] + (tables[row, j] - tables[row, i]) * u
+
+
+@kernel
+def curve_at_clamp01(tables, row, depth):
+    v = curve_at(tables, row, depth)
+    if v < 0.0:
+        return 0.0
+    if v > 1.0:
+        return 1.0
+    return v
+
+
+@kernel
+def step_rate(k, frequency_ratio, power, rate_mode):
+    """A per-step rate at the simulation frequency: ``k * power`` (MagicaCloth2) or
+    ``1 - (1 - k)^(90/f)`` (frequency-consistent; exactly k at 90 Hz)."""
+    if rate_mode == 0:
+        return k * power
+    if frequency_ratio == 1.0:
+        return k
+    kk = 0.0 if k < 0.0 else (1.0 if k > 1.0 else k)
+    return 1.0 - math.pow(1.0 - kk, frequency_ratio)
+
+
+@kernel
+def step_keep(keep, frequency_ratio, rate_mode):
+    """A per-step retention factor (e.g. friction x0.6): unchanged in MagicaCloth2 mode,
+    ``keep^(90/f)`` in frequency-consistent mode."""
+    if rate_mode == 0 or frequency_ratio == 1.0:
+        return keep
+    return math.pow(keep, frequency_ratio)

@@ -1,0 +1,123 @@
+"""Bone rotations from the display positions (ref §E.2 line mode, §E.3 triangle mode).
+
+E.2 walks each baseline parent-first: a moving bone takes the rest rotation carried by its
+parent, swung so the parent->bone edge matches the simulated one, then turns by
+``rotational_interpolation`` (fixed roots: ``root_rotation``) towards its children; the result
+is slerped from the animated rotation by ``blend_weight``. E.3 then overrides triangle
+vertices with the frame of their adjacent triangles' normals and tangents.
+"""
+from __future__ import annotations
+
+from magica_py.jit import kernel
+from magica_py.kernels.math3d import (
+    from_to_rotation, load3, load4, q_inverse, q_look_rotation, q_mul, q_rotate, q_slerp,
+    store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp, v_normalize, v_scale, v_sub,
+)
+
+FIXED = 0x01
+MOVE = 0x02
+ZERO_DISTANCE = 0x20
+INCLUDE_LINE = 0x01
+
+
+@kernel
+def line_rotations_team(m, ps, prm, ts, team):
+    """E.2 over the IncludeLine baselines of one team."""
+    if m.team_has_lines[team] == 0:
+        return
+    ri = prm.rotational_interpolation[team]
+    rr = prm.root_rotation[team]
+    a = prm.animation_pose_ratio[team]
+    bw = ts.blend_weight[team]
+    b0 = m.team_baseline_start[team]
+    for b in range(b0, b0 + m.team_baseline_count[team]):
+        if (m.baseline_flags[b] & INCLUDE_LINE) == 0:
+            continue
+        e0 = m.baseline_start[b]
+        for e in range(e0, e0 + m.baseline_count[b]):
+            x = m.baseline_data[e]
+            attr = m.attribute[x]
+            pos = load3(ps.position, x)
+            q = load4(ps.rotation, x)
+            bp = load3(ps.base_pos_buffer, x)
+            bq = load4(ps.base_rot_buffer, x)
+            cn = m.child_count[x]
+            if cn > 0 and (attr & (FIXED | MOVE)) != 0:
+                ibq = q_inverse(bq)
+                ctv = (0.0, 0.0, 0.0)
+                cv = (0.0, 0.0, 0.0)
+                c0 = m.child_start[x]
+                for k in range(c0, c0 + cn):
+                    c = m.child_data[k]
+                    lp = v_lerp(load3(m.baseline_local_position, c),
+                                q_rotate(ibq, v_sub(load3(ps.base_pos_buffer, c), bp)), a)
+                    lq = q_slerp(load4(m.baseline_local_rotation, c),
+                                 q_mul(ibq, load4(ps.base_rot_buffer, c)), a)
+                    zero = (m.attribute[c] & ZERO_DISTANCE) != 0
+                    tv = (0.0, 0.0, 0.0) if zero else q_rotate(q, lp)
+                    ctv = v_add(ctv, tv)
+                    if (m.attribute[c] & MOVE) != 0:
+                        cur = v_sub(load3(ps.position, c), pos)
+                        cv = v_add(cv, cur)
+                        qc = q_mul(q, lq)
+                        if not zero:
+                            qc = q_mul(from_to_rotation(tv, cur, 1.0), qc)
+                        store4(ps.rotation, c, qc)
+                    else:
+                        cv = v_add(cv, tv)
+                t = ri if (attr & MOVE) != 0 else rr
+                if v_length(ctv) >= 1e-8 and v_length(cv) >= 1e-8:
+                    q = q_mul(from_to_rotation(ctv, cv, t), q)
+            store4(ps.rotation, x, q_slerp(bq, q, bw))
+
+
+@kernel
+def triangle_rotations_team(m, ps, team):
+    """E.3: rotation of triangle vertices from their triangles' display normals and uv tangents."""
+    t0 = m.team_triangle_start[team]
+    if m.team_triangle_count[team] == 0:
+        return
+    start = m.team_particle_start[team]
+    for p in range(start, start + m.team_particle_count[team]):
+        n = m.vertex_triangle_count[p]
+        if n == 0:
+            continue
+        ns = (0.0, 0.0, 0.0)
+        ts_ = (0.0, 0.0, 0.0)
+        k0 = m.vertex_triangle_start[p]
+        for k in range(k0, k0 + n):
+            tri = m.vertex_triangle_data[k]
+            flip = m.vertex_triangle_flip[k]
+            tn, tt = triangle_frame(m, ps, tri)
+            ns = v_add(ns, v_scale(tn, -1.0 if (flip & 1) != 0 else 1.0))
+            ts_ = v_add(ts_, v_scale(tt, -1.0 if (flip & 2) != 0 else 1.0))
+        if v_length(ns) > 1e-6 and v_length(ts_) > 1e-6:
+            nn = v_normalize(ns)
+            tn = v_normalize(ts_)
+            d = v_dot(nn, tn)
+            if abs(d) < 1.0 - 1e-9:
+                binormal = v_normalize(v_cross(nn, tn))
+                store4(ps.rotation, p, q_look_rotation(binormal, nn))
+    return t0
+
+
+@kernel
+def triangle_frame(m, ps, tri):
+    """Normal and uv tangent of triangle ``tri`` at the display positions (0 when degenerate)."""
+    i0 = m.triangles[tri, 0]
+    i1 = m.triangles[tri, 1]
+    i2 = m.triangles[tri, 2]
+    p0 = load3(ps.position, i0)
+    e1 = v_sub(load3(ps.position, i1), p0)
+    e2 = v_sub(load3(ps.position, i2), p0)
+    n = v_cross(e1, e2)
+    normal = v_normalize(n) if v_length_sq(n) > 1e-16 else (0.0, 0.0, 0.0)
+    du1 = m.triangle_uv[tri, 1, 0] - m.triangle_uv[tri, 0, 0]
+    dv1 = m.triangle_uv[tri, 1, 1] - m.triangle_uv[tri, 0, 1]
+    du2 = m.triangle_uv[tri, 2, 0] - m.triangle_uv[tri, 0, 0]
+    dv2 = m.triangle_uv[tri, 2, 1] - m.triangle_uv[tri, 0, 1]
+    area = du1 * dv2 - du2 * dv1
+    r = 1.0 / area if area != 0.0 else 1.0
+    # standard uv tangent, negated for Unity's left-handed convention (B.4)
+    tangent = v_scale(v_sub(v_scale(e1, dv2), v_scale(e2, dv1)), -r)
+    return normal, v_normalize(tangent)

@@ -1,0 +1,167 @@
+"""Simulation state: preallocated structure-of-arrays for every team at once (ref §D.0, §C, §G).
+
+Three tables, all float64 / int32 / uint8, world space, metres and seconds:
+
+* ``ParticleState`` (one row per particle of every team; a team owns the contiguous rows
+  ``team_particle_start[t] : + team_particle_count[t]`` of the solver model);
+* ``TeamState`` (one row per team: center, inertia, flags, weights);
+* ``ColliderState`` (one row per collider *slot*: colliders are per team, ref §G.3, so a
+  collider shared by two cloths is simulated as two slots).
+
+A step never allocates: every buffer a kernel needs is a field here.
+"""
+from __future__ import annotations
+
+from magica_py.solver.fields import F64, I32, U8, allocate, make_soa
+
+V3 = (3,)
+Q4 = (4,)
+
+PARTICLE_FIELDS = [
+    # animated pose (C.1 writes position/rotation each frame; E.1 overwrites position with the display)
+    ("position", "particle", V3, F64, "m; base pose skinned this frame (C.1), then display position (E.1)"),
+    ("rotation", "particle", Q4, F64, "xyzw; base rotation (C.1), then simulated rotation (E.2/E.3)"),
+    ("base_pos_buffer", "particle", V3, F64, "m; animated pose of this frame kept for E.2 (E.1)"),
+    ("base_rot_buffer", "particle", Q4, F64, "xyzw; animated rotation of this frame kept for E.2 (E.1)"),
+    # simulation state (D.0)
+    ("next_pos", "particle", V3, F64, "m; prediction being corrected within a step"),
+    ("old_pos", "particle", V3, F64, "m; final position of the previous step (D.10)"),
+    ("velocity_pos", "particle", V3, F64, "m; reference position for the end-of-step velocity"),
+    ("velocity", "particle", V3, F64, "m/s; velocity carried to the next step (D.10)"),
+    ("real_velocity", "particle", V3, F64, "m/s; (next - old)/dt of the last step (D.10)"),
+    ("base_pos", "particle", V3, F64, "m; animated pose interpolated at this step (D.1)"),
+    ("base_rot", "particle", Q4, F64, "xyzw; animated rotation interpolated at this step (D.1)"),
+    ("old_position", "particle", V3, F64, "m; animated pose of the last frame that ran steps (E.1)"),
+    ("old_rotation", "particle", Q4, F64, "xyzw; same, rotation (E.1)"),
+    ("disp_pos", "particle", V3, F64, "m; display position (E.1)"),
+    ("friction", "particle", (), F64, "[0,1]; collision friction, decays x0.6 per step (D.8, D.10)"),
+    ("static_friction", "particle", (), F64, "[0,1]; static friction ramp (D.10)"),
+    ("collision_normal", "particle", V3, F64, "unit or 0; contact normal of the last step (D.8)"),
+    ("step_basic_pos", "particle", V3, F64, "m; rest reference of this step (D.2)"),
+    ("step_basic_rot", "particle", Q4, F64, "xyzw; rest reference rotation of this step (D.2)"),
+    # angle constraint buffers (D.5/D.6), zeroed after the routine
+    ("angle_length", "particle", (), F64, "m; segment length when the angle routine starts"),
+    ("angle_local_pos", "particle", V3, F64, "unit; rest edge direction in the parent's frame"),
+    ("angle_local_rot", "particle", Q4, F64, "xyzw; rest rotation relative to the parent"),
+    ("angle_rest_vector", "particle", V3, F64, "m; rest edge vector in world space (restoration)"),
+    ("angle_rotation", "particle", Q4, F64, "xyzw; working rotation of the limit pass"),
+    # fixed-point accumulators of bending and edge collision (ref §0.2; 1 unit = 1e-6 m)
+    ("accum_vector", "particle", V3, F64, "1e-6 m integer units summed as float64 (exact below 2^53)"),
+    ("accum_count", "particle", (), I32, "number of contributions"),
+    ("accum_friction", "particle", (), F64, "edge collision recorded friction (fixed-point max)"),
+    ("accum_normal", "particle", V3, F64, "edge collision normal sum"),
+    # transform data (E.4)
+    ("transform_position", "particle", V3, F64, "m; world position written to the bone (E.4)"),
+    ("transform_rotation", "particle", Q4, F64, "xyzw; world rotation written to the bone (E.4)"),
+]
+ParticleState = make_soa("ParticleState", PARTICLE_FIELDS)
+
+TEAM_FIELDS = [
+    # flags (A.7 clears reset, keep_teleport, inertia_shift, running at the end of a frame)
+    ("reset", "team", (), U8, "1: snap particles to the base pose this frame (C.5)"),
+    ("time_reset", "team", (), U8, "1: time counters were reset (build, ResetCloth)"),
+    ("keep_teleport", "team", (), U8, "1: carry the shape rigidly with the component this frame"),
+    ("inertia_shift", "team", (), U8, "1: a frame shift is applied this frame (C.4/C.5)"),
+    ("running", "team", (), U8, "1: the team runs at least one step this frame"),
+    ("active", "team", (), U8, "1: simulated this frame (enabled, not culled, not scale-suspended)"),
+    ("enabled", "team", (), U8, "1: component enabled (slot in use)"),
+    ("culled", "team", (), U8, "1: distance culled"),
+    ("scale_suspended", "team", (), U8, "1: component scale below 1e-6 (A.4)"),
+    ("guard_code", "team", (), I32, "0 ok, 1 non-finite, 2 speed bound exceeded (guards.py)"),
+    ("collider_start", "team", (), I32, "first collider slot of the team"),
+    ("collider_count", "team", (), I32, "collider slots of the team"),
+    # component pose (C.2)
+    ("component_pos", "team", V3, F64, "m; component world position read this frame"),
+    ("component_rot", "team", Q4, F64, "xyzw"),
+    ("component_scale", "team", V3, F64, "lossy scale"),
+    ("old_component_pos", "team", V3, F64, "m; last frame's component position (shift pivot)"),
+    ("old_component_rot", "team", Q4, F64, "xyzw"),
+    ("old_component_scale", "team", V3, F64, ""),
+    ("component_scale_ratio", "team", (), F64, "|scale|/|init scale|"),
+    # center (C.2, C.3)
+    ("frame_world_pos", "team", V3, F64, "m; center of this frame"),
+    ("frame_world_rot", "team", Q4, F64, "xyzw"),
+    ("frame_world_scale", "team", V3, F64, ""),
+    ("old_frame_world_pos", "team", V3, F64, "m; center of the last frame that ran steps"),
+    ("old_frame_world_rot", "team", Q4, F64, ""),
+    ("old_frame_world_scale", "team", V3, F64, ""),
+    ("now_world_pos", "team", V3, F64, "m; center interpolated at this step"),
+    ("now_world_rot", "team", Q4, F64, ""),
+    ("old_world_pos", "team", V3, F64, "m; center at the previous step"),
+    ("old_world_rot", "team", Q4, F64, ""),
+    ("step_vector", "team", V3, F64, "m; center motion of this step"),
+    ("step_rotation", "team", Q4, F64, "center rotation of this step"),
+    ("inertia_vector", "team", V3, F64, "m; part of step_vector removed rigidly (C.3)"),
+    ("inertia_rotation", "team", Q4, F64, ""),
+    ("step_move_inertia_ratio", "team", (), F64, "C.3 m"),
+    ("step_rotation_inertia_ratio", "team", (), F64, "C.3 r"),
+    ("angular_velocity", "team", (), F64, "rad/s of the center this step"),
+    ("rotation_axis", "team", V3, F64, "unit axis of the center rotation this step, or 0"),
+    ("scale_ratio", "team", (), F64, "max(|scale|/|init scale|, 1e-6) at this step"),
+    ("gravity_dot", "team", (), F64, "C.3"),
+    ("gravity_ratio", "team", (), F64, "C.3"),
+    ("velocity_weight", "team", (), F64, "stabilisation ramp after a reset [0,1]"),
+    ("blend_weight", "team", (), F64, "[0,1] display blend (C.3, H.3)"),
+    ("distance_weight", "team", (), F64, "[0,1] distance-culling fade (H.1)"),
+    ("smoothing_velocity", "team", V3, F64, "m/s; smoothed component velocity (C.4)"),
+    ("frame_shift_vector", "team", V3, F64, "m; rigid shift of this frame (C.4)"),
+    ("frame_shift_rotation", "team", Q4, F64, ""),
+    ("frame_moving_speed", "team", (), F64, "m/s (C.4 wind bookkeeping)"),
+    # anchor (C.4.1)
+    ("anchor_pos", "team", V3, F64, "m; anchor pose of this frame"),
+    ("anchor_rot", "team", Q4, F64, ""),
+    ("old_anchor_rot", "team", Q4, F64, ""),
+    ("anchor_component_local_pos", "team", V3, F64, "component position in anchor space"),
+    ("anchor_valid", "team", (), U8, "1: anchor pose stored"),
+    # external force (D.1), applied on every step of the next frame that runs
+    ("external_force", "team", V3, F64, "m/s^2 impact force direction * speed"),
+    ("external_force_mode", "team", (), I32, "0 none, 1 add, 2 add w/o depth, 3 change, 4 change w/o depth"),
+]
+TeamState = make_soa("TeamState", TEAM_FIELDS)
+
+COLLIDER_FIELDS = [
+    ("collider_index", "slot", (), I32, "index into the scene ColliderSet"),
+    ("team", "slot", (), I32, "team owning this slot"),
+    ("shape", "slot", (), I32, "0 sphere, 1 capsule, 2 plane"),
+    ("transform", "slot", (), I32, "hierarchy node carrying the collider"),
+    ("local_center", "slot", V3, F64, "m; local offset (G.1)"),
+    ("size", "slot", V3, F64, "m; (start radius, end radius, length) as G.1"),
+    ("direction", "slot", (), I32, "capsule axis 0 X, 1 Y, 2 Z"),
+    ("reverse_direction", "slot", (), U8, ""),
+    ("aligned_on_center", "slot", (), U8, ""),
+    ("first_frame", "slot", (), U8, "1 until the first frame pose is stored"),
+    ("scale_suspend", "slot", (), U8, "1: scale below 1e-6 this frame: skipped (G.2)"),
+    ("frame_pos", "slot", V3, F64, "m; pose read this frame (G.2)"),
+    ("frame_rot", "slot", Q4, F64, ""),
+    ("frame_scale", "slot", V3, F64, ""),
+    ("old_frame_pos", "slot", V3, F64, "m; pose of the last frame that ran steps"),
+    ("old_frame_rot", "slot", Q4, F64, ""),
+    ("now_pos", "slot", V3, F64, "m; pose at this step (G.3)"),
+    ("now_rot", "slot", Q4, F64, ""),
+    ("old_pos", "slot", V3, F64, "m; pose at the previous step (after the local inertia shift)"),
+    ("old_rot", "slot", Q4, F64, ""),
+    # work data of this step (G.3)
+    ("start_old", "slot", V3, F64, "m; sphere centre / capsule start, previous step"),
+    ("end_old", "slot", V3, F64, "m; capsule end, previous step"),
+    ("start_new", "slot", V3, F64, "m; sphere centre / capsule start / plane point, this step"),
+    ("end_new", "slot", V3, F64, "m; capsule end, this step"),
+    ("radius_start", "slot", (), F64, "m; scaled radius (sphere, capsule start)"),
+    ("radius_end", "slot", (), F64, "m; scaled capsule end radius"),
+    ("plane_normal", "slot", V3, F64, "unit; plane normal this step"),
+    ("inverse_old_rot", "slot", Q4, F64, "qinv(old rotation)"),
+    ("aabb_min", "slot", V3, F64, "m; swept bounds"),
+    ("aabb_max", "slot", V3, F64, "m"),
+]
+ColliderState = make_soa("ColliderState", COLLIDER_FIELDS)
+
+
+def allocate_state(particle_count: int, team_count: int, slot_count: int):
+    """Fresh state tables sized for the given counts (every team starts with Reset)."""
+    particles = allocate(ParticleState, {"particle": particle_count})
+    teams = allocate(TeamState, {"team": team_count},
+                     fill={"reset": 1, "time_reset": 1, "scale_ratio": 1.0, "gravity_ratio": 1.0,
+                           "gravity_dot": 1.0, "distance_weight": 1.0, "component_scale_ratio": 1.0,
+                           "component_scale": 1.0, "old_component_scale": 1.0,
+                           "frame_world_scale": 1.0, "old_frame_world_scale": 1.0})
+    colliders = allocate(ColliderState, {"slot": slot_count}, fill={"first_frame": 1, "frame_scale": 1.0})
+    return particles, teams, colliders
