@@ -214,3 +214,19 @@ def test_vrm1_capsules_along_an_axis_or_oblique_and_the_vrm1_humanoid(tmp_path):
     assert oblique.length == pytest.approx(np.sqrt(0.02) + 0.04)
     entry = avatar.cloth_entries()[0]
     assert entry["root_bones"] == ["hair"] and entry["colliders"] == [leg.name, oblique.name]
+
+
+def test_springs_with_the_same_name_stay_separate_cloths(tmp_path):
+    for f in ("sphere-collider.gltf", "sphere_mesh.bin"):
+        shutil.copy(EXAMPLES / f, tmp_path / f)
+    path = tmp_path / "sphere-collider.gltf"
+    doc = json.loads(path.read_text())
+    springs = doc["extensions"]["VRMC_springBone"]["springs"]
+    first = dict(springs[0], name="Hair", joints=springs[0]["joints"][:3])
+    second = dict(springs[0], name="Hair", joints=[dict(j, stiffness=0.5) for j in springs[0]["joints"][2:]])
+    doc["extensions"]["VRMC_springBone"]["springs"] = [first, second]
+    path.write_text(json.dumps(doc))
+    entries = load_vrm(path).cloth_entries()
+    assert [e["name"] for e in entries] == ["vrm_Hair", "vrm_Hair_1"]
+    assert [e["root_bones"] for e in entries] == [["Spring A"], ["Spring C"]]
+    assert entries[0]["parameters"] != entries[1]["parameters"]

@@ -183,6 +183,11 @@ class _Builder:
         self.skipped: list[str] = []
 
     # -- helpers
+    def unique_label(self, label: str, index: int) -> str:
+        """Group / spring names become cloth names: two springs both called "Hair" stay apart."""
+        used = {c.group for c in self.chains}
+        return label if label not in used else f"{label}_{index}"
+
     def node(self, index, where: str) -> str:
         return self.rig.node_name(index, where)
 
@@ -287,7 +292,7 @@ class _Builder:
             group_colliders.append(names)
         for g, group in enumerate(sec.get("boneGroups") or []):
             where = f"{base}.secondaryAnimation.boneGroups[{g}]"
-            label = group.get("comment") or f"group{g}"
+            label = self.unique_label(group.get("comment") or f"group{g}", g)
             center_index = group.get("center", -1)
             center = None if center_index in (None, -1) else self.node(center_index, f"{where}.center")
             params = {
@@ -336,7 +341,7 @@ class _Builder:
             where = f"{base}.springs[{s}]"
             raw_joints = spring.get("joints") or []
             joints = [self.node(j.get("node"), f"{where}.joints[{k}].node") for k, j in enumerate(raw_joints)]
-            label = spring.get("name") or f"spring{s}"
+            label = self.unique_label(spring.get("name") or f"spring{s}", s)
             if len(joints) < 2:
                 self.skipped.append(f"{where}: {len(joints)} joint(s), a VRM 1.0 spring needs a root and a tail")
                 continue
