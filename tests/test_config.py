@@ -292,3 +292,22 @@ def test_scene_settings_drive_the_runtime_clock():
     assert [t.unscaled_delta_time for t in times] == [0.01, 0.05, 0.01]
     assert [t.delta_time for t in times] == pytest.approx([0.005, 0.02, 0.005])  # 0.05 capped at 0.04, x0.5
     assert times[0].fixed_delta_time == 0.01
+
+
+def test_yaml_merge_keys_reuse_definitions_and_own_keys_win():
+    text = """
+version: 1
+scene: {fps: 60, frames: 3}
+rigs:
+  - name: r
+    bones: [{name: root}, {name: a, parent: root}, {name: b, parent: root}]
+colliders:
+  - &ball {name: ball_a, transform: a, sphere: {radius: 0.1}}
+  - {<<: *ball, name: ball_b, transform: b}
+"""
+    s = load_scene_text(text)
+    assert s.colliders.names == ("ball_a", "ball_b")
+    assert [s.hierarchy.names[i] for i in s.colliders.transform] == ["a", "b"]
+    assert s.colliders.radius.tolist() == [0.1, 0.1]
+    with pytest.raises(ConfigError, match="duplicate key"):
+        load_scene_text(text.replace("name: ball_b, transform: b", "name: ball_b, name: ball_c"))

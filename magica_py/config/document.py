@@ -6,6 +6,7 @@ reader composes the node tree (``yaml.compose``) and converts it itself so that
 * ``Document.lines[path]`` is the 1-based line of the value at ``path`` (a tuple of keys and
   list indices, e.g. ``("cloths", 1, "parameters", "damping")``), used in error messages;
 * a duplicate key in a mapping is an error (it is nearly always a copy-paste mistake);
+  YAML merge keys (``<<: *defaults``) work, the mapping's own keys overriding merged ones;
 * scalars are resolved exactly as ``yaml.safe_load`` does (``.nan``, ``.inf``, ``null``,
   ``yes``/``no`` stay YAML 1.1), so the schema sees ordinary ints, floats, bools and strings.
 """
@@ -106,8 +107,10 @@ def read_document(path: str | pathlib.Path) -> Document:
 def _convert(loader, node, path: Path, lines: dict, issues: list) -> object:
     lines[path] = node.start_mark.line + 1
     if isinstance(node, yaml.MappingNode):
-        loader.flatten_mapping(node)  # YAML merge keys (<<: *anchor)
+        explicit = {id(k) for k, _ in node.value if k.tag != "tag:yaml.org,2002:merge"}
+        loader.flatten_mapping(node)  # YAML merge keys (<<: *anchor): merged pairs first
         out: dict = {}
+        merged: set = set()  # keys whose current value came from a merge (overridable)
         for key_node, value_node in node.value:
             key = loader.construct_object(key_node, deep=True)
             if not isinstance(key, str):
@@ -117,10 +120,14 @@ def _convert(loader, node, path: Path, lines: dict, issues: list) -> object:
                     issues.append(Issue(format_path(path), f"mapping keys must be text, got {key!r}",
                                         key_node.start_mark.line + 1))
                     continue
-            if key in out:
+            if key in out and key not in merged and id(key_node) in explicit:
                 issues.append(Issue(format_path(path + (key,)), "duplicate key (it appears twice in this mapping)",
                                     key_node.start_mark.line + 1))
                 continue
+            if id(key_node) in explicit:
+                merged.discard(key)
+            else:
+                merged.add(key)
             out[key] = _convert(loader, value_node, path + (key,), lines, issues)
             lines[path + (key,)] = key_node.start_mark.line + 1
         return out
