@@ -488,9 +488,33 @@ def describe_scene(scene, list_bones: bool = False) -> list[str]:
         out.append(f"    roots: {shown}")
         cols_text = ", ".join(scene.colliders.names[i] for i in spec.colliders) or "none"
         out.append(f"    colliders ({spec.collision_mode}): {cols_text}")
+        changes = _parameter_changes(scene, spec)
+        if changes:
+            out.append(f"    parameters beyond the preset: {', '.join(changes)}")
         if spec.bone_attributes:
             attrs = ", ".join(f"{h.names[i]}={a}" for i, a in list(spec.bone_attributes.items())[:8])
             out.append(f"    bone attributes: {attrs}")
+    return out
+
+
+def _parameter_changes(scene, spec) -> list[str]:
+    """``key=value`` for every parameter that differs from the cloth's preset (or defaults),
+    scene-level defaults (gravity direction, update mode) included."""
+    try:
+        from magica_py.params import resolve_parameters
+
+        base = resolve_parameters(spec.preset, {"update_mode": "normal"})
+    except (ImportError, ValueError):
+        return []
+    out = []
+    for key, value in spec.parameters.items():
+        if key in base and base[key] != value:
+            shown = value.value if hasattr(value, "value") and hasattr(value, "use_curve") else value
+            if isinstance(shown, tuple):
+                shown = "(" + ", ".join(f"{x:.4g}" for x in shown) + ")"
+            elif isinstance(shown, float):
+                shown = "off" if shown == -1.0 and "limit" in key else f"{shown:g}"
+            out.append(f"{key}={shown}")
     return out
 
 

@@ -143,6 +143,14 @@ def test_info_lists_bones_colliders_cloths(scene_file, capsys):
     assert "\n    root\n      tail_0\n        tail_1\n          tail_2\n" in out  # --bones: indented tree
 
 
+def test_info_shows_parameters_beyond_the_preset(scene_file, capsys):
+    argv = ["info", str(scene_file), "--set", "cloths.tail.parameters.inertia.world_inertia=0.5",
+            "--set", "cloths.tail.parameters.inertia.particle_speed_limit=false"]
+    assert cli.main(argv) == 0
+    out = capsys.readouterr().out
+    assert "parameters beyond the preset: inertia.world_inertia=0.5, inertia.particle_speed_limit=off" in out
+
+
 def test_registered_commands_are_imported_lazily(monkeypatch, capsys):
     module = types.ModuleType("fake_magica_command")
     seen = []
