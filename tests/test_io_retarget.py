@@ -147,3 +147,19 @@ def test_rest_alignment_lets_an_a_pose_target_follow_a_t_pose_source(cmu):
     upper = arm_directions(naive, tgt_h)[0]
     angles = np.degrees(np.arccos(np.clip(np.sum(upper * want[0], axis=1), -1, 1)))
     assert np.allclose(angles, 45.0, atol=1.0)      # without alignment the arm keeps its 45 deg offset
+
+
+def test_generic_names_of_a_hand_named_rig_find_its_humanoid_bones():
+    import warnings
+    from magica_py.io.vrm import load_vrm
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        avatar = load_vrm(DATA / "vrm" / "Godette_vrm_v4.vrm")
+    names = [b.name for b in avatar.bones]
+    assert detect_scheme(names) == "generic"
+    found = humanoid_map(names)
+    # every bone the generic matcher finds agrees with the file's own VRM humanoid
+    assert len(found) == 21 and all(avatar.humanoid[h] == bone for h, bone in found.items())
+    assert humanoid_map(["Root", "Pelvis", "Spine_01", "UpperArm_L", "lowerarm.R", "LeftThigh", "calf_r", "Head"]) == {
+        "hips": "Pelvis", "spine": "Spine_01", "leftUpperArm": "UpperArm_L", "rightLowerArm": "lowerarm.R", "leftUpperLeg": "LeftThigh",
+        "rightLowerLeg": "calf_r", "head": "Head"}

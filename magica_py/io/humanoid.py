@@ -1,5 +1,6 @@
 """Humanoid bone naming: VRM humanoid names as the common vocabulary, default tables for
-CMU (cgspeed BVH), Mixamo-like rigs and skeletons already named with VRM names, plus
+CMU (cgspeed BVH), Mixamo-like rigs and skeletons already named with VRM names, a generic
+word/synonym matcher for hand-named rigs (``thigh.l``, ``UpperArm_R``, ``pelvis``), plus
 user overrides (a dict or a YAML file ``{humanoid_name: bone_name}``).
 
 Matching ignores case, a ``prefix:`` namespace (``mixamorig:``, ``mixamorig1:``) and the
@@ -51,6 +52,52 @@ VRM_NAMES = {h: h for h in HUMANOID_BONES}
 SCHEMES = {"cmu": CMU, "mixamo": MIXAMO, "vrm": VRM_NAMES}
 
 
+# Generic matching for rigs named by hand (Blender, Godot, VRoid exports, ...): split a name
+# into lower-case words (camelCase, '.', '_', '-', ':' and spaces), read the side from a
+# left/right/l/r word, drop filler words and look the rest up in these synonyms.
+_GENERIC_CENTRE = {
+    "hips": ("hips", "hip", "pelvis"), "spine": ("spine", "tummy", "abdomen", "waist", "lowerback", "spine0"),
+    "chest": ("chest", "spine1", "spine2", "thorax", "ribcage"), "upperChest": ("upperchest", "spine3"),
+    "neck": ("neck",), "head": ("head",),
+}
+_GENERIC_SIDED = {
+    "Shoulder": ("shoulder", "clavicle", "collar", "collarbone"), "UpperArm": ("upperarm", "arm", "uparm"),
+    "LowerArm": ("lowerarm", "forearm", "elbow"), "Hand": ("hand", "wrist"),
+    "UpperLeg": ("upperleg", "thigh", "upleg"), "LowerLeg": ("lowerleg", "shin", "calf", "leg", "knee"),
+    "Foot": ("foot", "ankle"), "Toes": ("toes", "toe", "toebase"),
+}
+_FILLER = {"armature", "mixamorig", "bip01", "bip", "def", "jnt", "joint", "bone", "j", "b", "mch", "org"}
+
+
+def _words(name: str) -> list[str]:
+    name = re.sub(r"([a-z0-9])([A-Z])", r"\1 \2", name.rsplit(":", 1)[-1])
+    return [w for w in re.split(r"[\s_.\-]+", name.lower()) if w]
+
+
+def generic_map(bone_names) -> dict[str, str]:
+    """humanoid → bone by words and synonyms (first match in skeleton order wins)."""
+    lookup = {syn: human for human, syns in _GENERIC_CENTRE.items() for syn in syns}
+    sided = {syn: part for part, syns in _GENERIC_SIDED.items() for syn in syns}
+    out: dict[str, str] = {}
+    for name in bone_names:
+        words = [w for w in _words(name) if w not in _FILLER and not w.isdigit()]
+        side = None
+        rest = []
+        for w in words:
+            if w in ("l", "left") and side is None:
+                side = "left"
+            elif w in ("r", "right") and side is None:
+                side = "right"
+            else:
+                rest.append(w)
+        key = "".join(rest)
+        if side is None and key in lookup:
+            out.setdefault(lookup[key], name)
+        elif side is not None and key in sided:
+            out.setdefault(f"{side}{sided[key]}", name)
+    return out
+
+
 def normalize(name: str) -> str:
     return re.sub(r"[\s_.\-]", "", name.rsplit(":", 1)[-1]).lower()
 
@@ -63,7 +110,9 @@ def detect_scheme(bone_names) -> str:
         return "mixamo"
     if "leftupperleg" in keys and "hips" in keys:
         return "vrm"
-    return "mixamo" if "leftupleg" in keys else "unknown"
+    if "leftupleg" in keys:
+        return "mixamo"
+    return "generic"
 
 
 def load_overrides(source) -> dict[str, str]:
@@ -98,10 +147,13 @@ def humanoid_map(bone_names, scheme: str | dict = "auto", overrides=None) -> dic
         table, direct = scheme, True
     else:
         chosen = detect_scheme(names) if scheme == "auto" else scheme
-        if chosen not in SCHEMES:
-            raise ValueError(f"cannot tell the naming scheme of bones {names[:6]}...; pass scheme= one of "
-                             f"{sorted(SCHEMES)} or a humanoid mapping")
-        table, direct = SCHEMES[chosen], False
+        if chosen == "generic":
+            table, direct = generic_map(names), True
+        elif chosen not in SCHEMES:
+            raise ValueError(f"unknown naming scheme {chosen!r}; expected auto, generic, {', '.join(sorted(SCHEMES))} "
+                             f"or a humanoid mapping")
+        else:
+            table, direct = SCHEMES[chosen], False
     out = {}
     for human, bone in table.items():
         if human not in HUMANOID_BONES:

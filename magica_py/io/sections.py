@@ -98,7 +98,7 @@ def split_clip_reference(ref: str) -> tuple[str, str | None]:
 
 def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, target_map="auto",
               retarget_options: dict | None = None, drop=(), prefix: str = "", unit_scale=None,
-              units="auto") -> Clip:
+              units="auto", target_bones: list[BoneSpec] | None = None) -> Clip:
     """``animation: - clip: ...`` → a ``Clip`` targeting the scene's bone names.
 
     * ``file.glb#Name`` (also .gltf / .vrm): that glTF animation (the only one if ``#Name``
@@ -112,7 +112,10 @@ def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, t
       same_names, rate); the result targets ``retarget_to``'s names.
     * ``drop``: globs of bones whose channels are removed (bones the cloth simulates),
       matched against the final names.
+    * ``target_bones`` is the former name of ``retarget_to`` (kept for callers).
     """
+    if retarget_to is None:
+        retarget_to = target_bones
     file, clip_name = split_clip_reference(ref)
     path = Path(base_dir) / file
     options = dict(retarget_options or {})
