@@ -211,3 +211,17 @@ def test_unknown_clip_name_lists_the_clips(tmp_path):
     f = _animated_gltf(tmp_path, "LINEAR", [0.0, 1.0], [[0, 0, 0], [1, 1, 1]])
     with pytest.raises(AssetError, match=r"no animation named 'Walk'; the file has \['clip'\]"):
         load_gltf(f).clip("Walk")
+
+
+@needs_data
+@pytest.mark.parametrize("file, scale, head, tail, left_foot", [
+    ("Fox.glb", 0.01, "b_Head_05", "b_Tail03_014", "b_LeftFoot02_018"),
+    ("wuson.glb", 1.0, "Neck", "Tail06", "HindLeg_L_04"),
+])
+def test_animals_face_plus_z_with_their_left_at_minus_x(file, scale, head, tail, left_foot):
+    rig = load_gltf(DATA / "gltf" / file, unit_scale=scale)
+    h = TransformHierarchy(rig.bones)
+    p = {n: h.world_position[h.index(n)] for n in (head, tail, left_foot)}
+    assert p[head][2] - p[tail][2] > 0.9          # head in front (+Z) of the tail tip
+    assert p[left_foot][0] < -0.05                # glTF left (+X) mirrored to Unity's -X
+    assert p[left_foot][1] < p[head][1]
