@@ -5,6 +5,7 @@ The runs go through the real command line (``magica_py.cli.main``, in process) w
 """
 import pathlib
 
+import numpy as np
 import pytest
 
 from magica_py import cli
@@ -82,3 +83,19 @@ def test_crowd_has_100_characters_with_their_own_cloths():
     assert sum(1 for c in scene.cloths if c.name.startswith("skirt#")) == 100
     offsets = scene.animation.phase_offset[scene.animation.kind == 4]  # walk drivers
     assert len(offsets) == 100 and len(set(offsets.tolist())) == 100  # not in lockstep
+
+
+def test_crowd_instances_keep_their_own_spot_while_walking():
+    from magica_py.runtime.player import Player
+
+    scene = load_scene(pathlib.Path(__file__).resolve().parents[1] / "configs" / "crowd.yaml")
+    h = scene.hierarchy
+    roots = [h.index(f"root#{i}") for i in range(100)]
+    start = h.world_position[roots].copy()
+    player = Player.for_scene(scene)
+    for _ in range(30):
+        player.step()
+    moved = h.world_position[roots] - start
+    assert np.abs(moved).max() < 5.0                       # everyone walks a few metres at most...
+    spread = h.world_position[roots].max(axis=0) - h.world_position[roots].min(axis=0)
+    assert spread[0] > 15.0 and spread[2] > 15.0            # ...and the 10 x 10 grid (2 m) stays spread out
