@@ -9,6 +9,13 @@ Zero-length and coincident bones: a bone whose position equals its parent's gets
 ZeroDistance attribute and a distance link of rest 0 (ref §B.7, §B.9); no NaN is produced
 (vertex frames come from the bone axes, depth uses arc length, degenerate triangles are
 dropped by the 1e-6 squared-length test of §B.3 and skipped in bending).
+
+Deviations from the reference, deliberate and documented:
+* collinear candidate triangles (sin of the corner angle < 1e-6) are not created: the
+  reference would keep a zero-area triangle whose normal is undefined;
+* a root listed below another root, a root without children, a zero scale and more than
+  127 bones on one hierarchy level (mesh modes) raise ``BuildError`` instead of being
+  silently dropped or overflowing a fixed-size list; links beyond 31 per vertex are dropped.
 """
 from __future__ import annotations
 

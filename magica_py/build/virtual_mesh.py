@@ -258,6 +258,9 @@ def connect_mesh(cloth_name: str, mode: str, pos: np.ndarray, parent_vertex: np.
     ok = (la >= 1e-6) & (lb >= 1e-6)
     cosang = np.clip((va * vb).sum(axis=1) / np.sqrt(np.maximum(la * lb, 1e-300)), -1.0, 1.0)
     ok &= np.degrees(np.arccos(cosang)) < TRIANGLE_MAX_ANGLE
+    # deviation: the reference keeps collinear (zero-area) triangles; their normal is undefined
+    cr = np.cross(va, vb)
+    ok &= (cr * cr).sum(axis=1) > 1e-12 * la * lb
     ri, ra, rb = root_line[ti], root_line[ta], root_line[tb]
     ok &= ~((ri != ra) & (ri != rb) & (ra != rb))
 
