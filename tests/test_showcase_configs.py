@@ -99,3 +99,31 @@ def test_crowd_instances_keep_their_own_spot_while_walking():
     assert np.abs(moved).max() < 5.0                       # everyone walks a few metres at most...
     spread = h.world_position[roots].max(axis=0) - h.world_position[roots].min(axis=0)
     assert spread[0] > 15.0 and spread[2] > 15.0            # ...and the 10 x 10 grid (2 m) stays spread out
+
+
+def _penetration(p, shapes, k, particle_radius):
+    """How far a particle sphere at p overlaps collider k (<= 0: no contact)."""
+    shape = int(shapes.shape[k])
+    if shape == 0:
+        return shapes.radius[k] + particle_radius - np.linalg.norm(p - shapes.position[k])
+    if shape == 1:
+        a, b = shapes.start[k], shapes.end[k]
+        ab = b - a
+        t = np.clip(np.dot(p - a, ab) / max(np.dot(ab, ab), 1e-12), 0.0, 1.0)
+        r = shapes.radius[k] + t * (shapes.end_radius[k] - shapes.radius[k])
+        return r + particle_radius - np.linalg.norm(p - (a + t * ab))
+    return particle_radius - np.dot(p - shapes.position[k], shapes.normal[k])
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_no_moving_bone_starts_inside_its_colliders(config):
+    scene = load_scene(config)
+    h = scene.hierarchy
+    shapes = scene.colliders.world_shapes(h)
+    for spec in scene.cloths[:4]:  # instances are copies: the first few are enough
+        radius = spec.parameters["radius"].value
+        moving = {i for r in spec.root_bones for i in h.descendants(r)} - set(spec.root_bones)
+        for i in moving:
+            for k in spec.colliders:
+                depth = _penetration(h.world_position[i], shapes, k, radius)
+                assert depth <= 0.0, (spec.name, h.names[i], scene.colliders.names[k], depth)
