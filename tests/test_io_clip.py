@@ -70,3 +70,23 @@ def test_keyframe_entries_pad_short_tracks_to_the_clip_span():
     assert [k["time"] for k in keys] == [0.0, 0.5, 1.0, 3.0]
     assert keys[0]["position"] == [1.0, 0.0, 0.0] and keys[-1]["position"] == [2.0, 0.0, 0.0]
     assert entries[1]["keyframes"]["keys"][0] == {"time": 0.0, "scale": [1.0, 1.0, 1.0]}
+
+
+def test_trimming_keeps_the_motion_inside_the_window():
+    tr = Track("b", "translation", np.array([0.0, 1.0, 2.0, 3.0]), np.array([[0.0, 0, 0], [1, 0, 0], [4, 0, 0], [9, 0, 0]]))
+    q = Track("b", "rotation", np.array([0.0, 3.0]), qnormalize(np.array([[0, 0, 0, 1.0], [0, 1, 0, 1.0]])))
+    clip = Clip("c", [tr, q])
+    cut = clip.trimmed(0.5, 2.5)
+    assert cut.duration == pytest.approx(2.0)
+    for t in (0.0, 0.4, 1.0, 1.7, 2.0):
+        assert np.allclose(cut.track("b", "translation").sample(t), tr.sample(t + 0.5))
+        assert abs(np.dot(cut.track("b", "rotation").sample(t), q.sample(t + 0.5))) == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="expected 0 <= start < end"):
+        clip.trimmed(2.0, 1.0)
+
+
+def test_resampling_is_exact_for_piecewise_linear_motion_at_the_new_keys():
+    tr = Track("b", "translation", np.array([0.0, 1.0, 2.0]), np.array([[0.0, 0, 0], [1, 0, 0], [1, 2, 0]]))
+    fine = Clip("c", [tr]).resampled(4.0)
+    assert len(fine.tracks[0].times) == 9 and fine.frame_time == 0.25
+    assert np.allclose(fine.tracks[0].values[[0, 2, 4, 6, 8]], [[0, 0, 0], [0.5, 0, 0], [1, 0, 0], [1, 1, 0], [1, 2, 0]])

@@ -62,3 +62,12 @@ def test_bvh_clip_retargeted_onto_a_vrm_rig_section():
     assert clip.frame_time == 0.0083333 and len(clip.tracks[0].times) == 2752
     assert "pelvis_Armature" in clip.nodes() and "head_Armature" in clip.nodes()
     assert all(np.all(np.isfinite(t.values)) for t in clip.tracks)
+
+
+def test_a_long_capture_can_be_trimmed_and_resampled():
+    clip = load_clip("cmu_01_01.bvh", base_dir=DATA / "bvh", trim=[2.0, 4.0], rate=30.0, prefix="cmu_")
+    assert clip.duration == pytest.approx(2.0) and len(clip.tracks[0].times) == 61
+    assert all(n.startswith("cmu_") for n in clip.nodes())
+    full = load_clip("cmu_01_01.bvh", base_dir=DATA / "bvh")
+    ref = full.track("Hips", "translation").sample(3.0)
+    assert np.allclose(clip.track("cmu_Hips", "translation").sample(1.0), ref, atol=1e-9)

@@ -130,6 +130,33 @@ class Clip:
                 if not (tr.path in paths and any(fnmatch.fnmatchcase(tr.node, p) for p in pats))]
         return replace(self, tracks=keep, notes=self.notes + [f"dropped {paths} of {pats}"])
 
+    def trimmed(self, start: float, end: float | None = None) -> "Clip":
+        """The part [start, end] of the clip, re-timed to begin at 0 (end values sampled)."""
+        end = self.duration if end is None else float(end)
+        if not 0.0 <= start < end:
+            raise ValueError(f"clip {self.name!r}: expected 0 <= start < end, got [{start}, {end}]")
+        tracks = []
+        for tr in self.tracks:
+            inside = (tr.times > start) & (tr.times < end)
+            times = np.concatenate([[start], tr.times[inside], [end]])
+            if tr.interpolation == "cubicspline":   # keep it simple and exact at the keys: resample
+                times = np.union1d(times, np.linspace(start, end, max(2, int((end - start) * 60) + 1)))
+                values, interp = sample_track_many(tr, times), "linear"
+                tracks.append(Track(tr.node, tr.path, times - start, values, interp))
+                continue
+            values = sample_track_many(tr, times)
+            if tr.interpolation == "step":   # the value holding at start, then the keys inside
+                values[0] = sample_track_many(tr, [start])[0]
+            tracks.append(Track(tr.node, tr.path, times - start, values, tr.interpolation))
+        return replace(self, tracks=tracks, notes=self.notes + [f"trimmed to [{start:g}, {end:g}] s"])
+
+    def resampled(self, rate: float) -> "Clip":
+        """Linear tracks sampled at ``rate`` Hz (fewer keys for YAML entries; exact at the ends)."""
+        duration = self.duration
+        times = np.linspace(0.0, duration, max(2, int(round(duration * rate)) + 1))
+        tracks = [Track(tr.node, tr.path, times, sample_track_many(tr, times), "linear") for tr in self.tracks]
+        return replace(self, tracks=tracks, frame_time=1.0 / rate, notes=self.notes + [f"resampled at {rate:g} Hz"])
+
     def renamed(self, mapping: dict[str, str]) -> "Clip":
         """A copy whose tracks target ``mapping.get(node, node)`` (prefixing, instancing)."""
         return replace(self, tracks=[replace(tr, node=mapping.get(tr.node, tr.node)) for tr in self.tracks])

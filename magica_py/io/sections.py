@@ -98,7 +98,7 @@ def split_clip_reference(ref: str) -> tuple[str, str | None]:
 
 def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, target_map="auto",
               retarget_options: dict | None = None, drop=(), prefix: str = "", unit_scale=None,
-              units="auto", target_bones: list[BoneSpec] | None = None) -> Clip:
+              units="auto", target_bones: list[BoneSpec] | None = None, trim=None, rate: float | None = None) -> Clip:
     """``animation: - clip: ...`` → a ``Clip`` targeting the scene's bone names.
 
     * ``file.glb#Name`` (also .gltf / .vrm): that glTF animation (the only one if ``#Name``
@@ -112,6 +112,9 @@ def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, t
       same_names, rate); the result targets ``retarget_to``'s names.
     * ``drop``: globs of bones whose channels are removed (bones the cloth simulates),
       matched against the final names.
+    * ``trim``: ``[start, end]`` seconds of the source clip to keep (re-timed from 0);
+      ``rate``: resample every track linearly at that rate (Hz), e.g. 30 to shrink a 120 Hz
+      capture before turning it into YAML keyframe entries.
     * ``target_bones`` is the former name of ``retarget_to`` (kept for callers).
     """
     if retarget_to is None:
@@ -132,6 +135,12 @@ def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, t
         else:
             clip = rig.clip(clip_name)
         source_bones = rig.bones
+    if trim is not None:
+        if not (isinstance(trim, (list, tuple)) and len(trim) == 2):
+            raise ValueError(f"{ref}: trim must be [start, end] in seconds, got {trim!r}")
+        clip = clip.trimmed(float(trim[0]), None if trim[1] is None else float(trim[1]))
+    if rate is not None:
+        clip = clip.resampled(float(rate))
     if retarget_to is not None:
         clip = retarget(clip, source_bones, retarget_to, target_map=target_map, **options)
     elif prefix:
