@@ -15,10 +15,10 @@ Conventions (see docs/import.md):
   way the root becomes a MagicaCloth root bone (Fixed; its rotation follows its child via
   ``root_rotation`` = 1) and the descendants become Move particles. VRM 1.0 descendants of
   the root that are not joints are marked ``invalid``.
-* Tail convention: UniVRM gives a childless joint a virtual tail 7 cm beyond it along the
-  parent→joint direction. A root bone without children would have no particle to move, so
-  a synthetic ``<bone>_vrm_tail`` node is added there (``leaf_tails="all"`` adds one to
-  every leaf, as UniVRM does).
+* Tail convention: UniVRM gives a childless joint a virtual tail 0.07 m (times the joint's
+  world scale) beyond it along the parent→joint direction. A root bone without children
+  would have no particle to move, so a synthetic ``<bone>_vrm_tail`` node is added there
+  (``leaf_tails="all"`` adds one to every leaf, as UniVRM does).
 * Radii: VRM 0.x radii are in the collider node's space, like MagicaCloth's (``r·|S.x|``);
   VRM 1.0 radii are world lengths at load (three-vrm's examples are authored so), so they
   are divided by the node's rest scale.
