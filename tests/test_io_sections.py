@@ -71,3 +71,13 @@ def test_a_long_capture_can_be_trimmed_and_resampled():
     full = load_clip("cmu_01_01.bvh", base_dir=DATA / "bvh")
     ref = full.track("Hips", "translation").sample(3.0)
     assert np.allclose(clip.track("cmu_Hips", "translation").sample(1.0), ref, atol=1e-9)
+
+
+def test_rig_sections_of_a_glb_and_a_bvh():
+    fox = rig_section(DATA / "gltf" / "Fox.glb", unit_scale=0.01, prefix="fox_")
+    assert fox["name"] == "Fox" and len(fox["bones"]) == 26 and len(fox["joints"]) == 24
+    assert fox["joints"][0].startswith("fox_") and fox["humanoid"] == {}
+    cmu = rig_section(DATA / "bvh" / "cmu_01_01.bvh")
+    assert len(cmu["bones"]) == 31 and cmu["bones"][0]["parent"] is None and cmu["joints"] == []
+    with pytest.raises(AssetError, match=r"unknown rig file type '\.fbx'"):
+        rig_section(DATA / "gltf" / "Fox.fbx")
