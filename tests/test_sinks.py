@@ -53,8 +53,8 @@ def test_entity_paths_follow_the_documented_layout(recorded):
     expected = {"/world", "/world/rig/joints", "/world/rig/bones", "/world/colliders/spheres",
                 "/world/colliders/capsules", "/world/colliders/planes", "/events",
                 "/world/cloths/tail/particles", "/world/cloths/tail/edges", "/world/cloths/tail/baselines",
-                "/world/cloths/tail/base_pose", "/world/cloths/skirt_1/particles",
-                "/world/cloths/skirt_1/triangles", "/metrics/steps", "/metrics/max_edge_stretch",
+                "/world/cloths/tail/base_pose", "/world/cloths/skirt/particles",
+                "/world/cloths/skirt/triangles", "/metrics/steps", "/metrics/max_edge_stretch",
                 "/metrics/max_penetration", "/metrics/max_speed", "/metrics/time/late_update",
                 "/replay/pose", "/replay/time", "/replay/scene", "/replay/nodes", "/replay/events"}
     assert expected <= set(rec.entities)
@@ -73,7 +73,7 @@ def test_every_frame_is_on_both_timelines_in_every_batch(recorded):
 def test_particle_and_joint_positions_are_the_simulation_arrays_as_float32_bit_for_bit(recorded):
     rec, traj = recorded
     _, tail = rec.stacked("/world/cloths/tail/particles", "Points3D:positions")
-    _, skirt = rec.stacked("/world/cloths/skirt_1/particles", "Points3D:positions")
+    _, skirt = rec.stacked("/world/cloths/skirt/particles", "Points3D:positions")
     _, joints = rec.stacked("/world/rig/joints", "Points3D:positions")
     for f, (j, t, s) in enumerate(traj):
         assert tail[f].dtype == np.float32
@@ -85,7 +85,7 @@ def test_particle_and_joint_positions_are_the_simulation_arrays_as_float32_bit_f
 
 def test_edges_baselines_and_bones_are_segments_between_the_logged_points(recorded):
     rec, traj = recorded
-    _, edges = rec.rows("/world/cloths/skirt_1/edges", "LineStrips3D:strips")
+    _, edges = rec.rows("/world/cloths/skirt/edges", "LineStrips3D:strips")
     skirt = traj[5][2]
     want = skirt[np.array([[0, 1], [0, 2], [1, 3], [2, 3], [1, 2]])].reshape(-1, 3).astype(np.float32)
     np.testing.assert_array_equal(edges[5], want)
@@ -109,9 +109,9 @@ def test_particle_colours_follow_fixed_and_move_attributes(recorded):
 
 def test_triangles_are_a_mesh_with_static_indices(recorded):
     rec, traj = recorded
-    tri = rec.static_value("/world/cloths/skirt_1/triangles", "Mesh3D:triangle_indices")
+    tri = rec.static_value("/world/cloths/skirt/triangles", "Mesh3D:triangle_indices")
     assert tri.tolist() == [[0, 2, 1], [1, 2, 3]]
-    _, verts = rec.rows("/world/cloths/skirt_1/triangles", "Mesh3D:vertex_positions")
+    _, verts = rec.rows("/world/cloths/skirt/triangles", "Mesh3D:vertex_positions")
     np.testing.assert_array_equal(verts[9], traj[9][2].astype(np.float32))
 
 

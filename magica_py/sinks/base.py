@@ -71,7 +71,13 @@ class ClothFrame:
 
 @runtime_checkable
 class SnapshotProvider(Protocol):
-    """Anything that can describe the cloths (the solver's ClothSystem adapter, test fakes)."""
+    """Anything that can describe the cloths (the solver's ClothSystem adapter, test fakes).
+
+    ``cloth_frames()`` returns one ``ClothFrame`` per topology. A provider whose particles
+    already sit in one array may instead (or also) define ``particle_positions()`` ->
+    (P, 3), ``particle_base_positions()`` -> (P, 3) | None and ``steps()`` -> int: the
+    sink then copies one array per frame whatever the number of cloths (crowds).
+    """
 
     def cloth_topologies(self) -> list[ClothTopology]: ...
 
@@ -161,14 +167,19 @@ class ReplayFrame:
 
 @dataclass
 class FrameData:
+    """One rendered frame. ``positions`` holds every cloth's particles concatenated in the
+    order of ``SceneStatics.cloths`` (P = sum of particle counts), world space, m."""
+
     frame: int
     sim_time: float
     delta_time: float
     joint_positions: np.ndarray           # (n, 3) world
-    cloths: list[ClothFrame]
+    positions: np.ndarray                 # (P, 3) display positions of all cloths
     colliders: ColliderShapes
     metrics: dict[str, float]
     events: list[tuple[str, Any]]
+    base_positions: np.ndarray | None = None   # (P, 3) animated base pose, or None
+    steps: int = 0                        # simulation steps this frame (max over teams)
     replay: ReplayFrame | None = None
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from magica_py.sinks.base import (ClothFrame, ClothTopology, ColliderShapes, FrameData, LogToggles,
+from magica_py.sinks.base import (ClothTopology, ColliderShapes, FrameData, LogToggles,
                                   ReplayFrame, SceneStatics)
 
 JOINT_NAMES = ["root", "a0", "a1", "a2", "b0", "b1"]
@@ -49,7 +49,7 @@ def trajectory(frames, seed=0):
 def frame_data(f, joints, tail, skirt, dt=1 / 60):
     return FrameData(
         frame=f, sim_time=f * dt, delta_time=dt, joint_positions=joints,
-        cloths=[ClothFrame(tail, base_positions=tail * 0.5, steps=2), ClothFrame(skirt, steps=1)],
+        positions=np.vstack([tail, skirt]), base_positions=np.vstack([tail, skirt]) * 0.5, steps=2,
         colliders=colliders_frame(f),
         metrics={"time.late_update": 0.002, "time.update": 0.001},
         events=[("teleport", {"target": "root", "frame": f})] if f == 3 else [],

@@ -49,15 +49,23 @@ def scene_frames(scene) -> int:
 
 
 def attach_solver(player, scene):
-    """The solver's LATE_UPDATE system, when the solver package provides ``attach``."""
+    """Add the solver's LATE_UPDATE system: ``magica_py.solver.attach(player, scene)`` when the
+    solver package exports it, else its ``ClothSystem`` directly; None when there is no solver."""
+    if not getattr(scene, "cloths", None):
+        return None
     try:
         from magica_py import solver
     except ImportError:
         return None
     attach = getattr(solver, "attach", None)
-    if attach is None or not getattr(scene, "cloths", None):
+    if attach is not None:
+        return attach(player, scene)
+    try:
+        from magica_py.solver.system import ClothSystem
+    except ImportError:
         return None
-    return attach(player, scene)
+    system = ClothSystem(scene.hierarchy, scene.cloths, getattr(scene, "colliders", None), scene.settings)
+    return system.attach(player, scene)
 
 
 def record_scene(scene, rrd, *, frames=None, batch_frames=None, spawn=False, connect=None, progress=None,

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from magica_py.sinks.base import (ClothFrame, FrameData, LogToggles, NullSink, ReplayFrame, SceneStatics,
+from magica_py.sinks.base import (ClothFrame, ColliderShapes, FrameData, LogToggles, NullSink, ReplayFrame, SceneStatics,
                                   SnapshotProvider)
 from magica_py.sinks.shapes import collider_shapes, shape_slots
 
@@ -165,21 +165,36 @@ class Recorder:
         if self.sink is None:
             self.open()
         hierarchy = self.scene.hierarchy
-        cloths = list(self.provider.cloth_frames())
+        positions, base, steps = self._particles()
+        shapes = collider_shapes(self.colliders, hierarchy) if (self.toggles.colliders or self.toggles.metrics) \
+            else ColliderShapes.empty()
         data = FrameData(
             frame=ctx.frame, sim_time=float(ctx.time.time), delta_time=float(ctx.time.delta_time),
-            joint_positions=hierarchy.world_position, cloths=cloths,
-            colliders=collider_shapes(self.colliders, hierarchy) if self.toggles.colliders or self.toggles.metrics
-            else None,
+            joint_positions=hierarchy.world_position, positions=positions, colliders=shapes,
             metrics={k: float(v) for k, v in ctx.metrics.items() if _is_number(v)},
-            events=list(ctx.events), replay=self.pending_replay)
-        if data.colliders is None:
-            from magica_py.sinks.base import ColliderShapes
-            data.colliders = ColliderShapes.empty()
+            events=list(ctx.events), base_positions=base, steps=steps, replay=self.pending_replay)
         self.sink.begin_frame(ctx.frame, data.sim_time)
         self.sink.log(data)
         self.sink.end_frame()
         self.pending_replay = None
+
+    def _particles(self):
+        """(positions (P,3), base positions or None, steps) of every cloth, topology order."""
+        prov = self.provider
+        if hasattr(prov, "particle_positions"):
+            base = prov.particle_base_positions() if self.toggles.base_pose else None
+            return prov.particle_positions(), base, int(prov.steps())
+        frames = list(prov.cloth_frames())
+        if not frames:
+            return _NO_PARTICLES, None, 0
+        positions = np.concatenate([f.positions for f in frames])
+        base = None
+        if self.toggles.base_pose and all(f.base_positions is not None for f in frames):
+            base = np.concatenate([f.base_positions for f in frames])
+        return positions, base, max(int(f.steps) for f in frames)
+
+
+_NO_PARTICLES = np.zeros((0, 3))
 
 
 def attach(player, scene, options: SinkOptions | dict | None = None) -> Recorder:

@@ -86,19 +86,79 @@ def default_blueprint():
     )
 
 
-class _Columns:
-    """Preallocated per-entity column buffers, flushed with send_columns."""
+class _Group:
+    """The cloths drawn as one entity set: a cloth and its instances (`skirt#0`, `skirt#1`...)."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.particles: list[np.ndarray] = []    # global particle indices per member
+        self.edges: list[np.ndarray] = []
+        self.triangles: list[np.ndarray] = []    # group-local indices
+        self.baselines: list[np.ndarray] = []    # (k, 2) global parent/child
+        self.radius: list[np.ndarray] = []
+        self.attribute: list[np.ndarray] = []
+        self.count = 0
+
+    def add(self, topo, offset: int) -> None:
+        n = topo.particle_count
+        self.particles.append(np.arange(offset, offset + n))
+        self.edges.append(np.asarray(topo.edges, np.int64).reshape(-1, 2) + offset)
+        self.triangles.append(np.asarray(topo.triangles, np.int64).reshape(-1, 3) + self.count)
+        parent = np.asarray(topo.parent, np.int64)
+        child = np.flatnonzero(parent >= 0)
+        self.baselines.append(np.stack([parent[child], child], axis=1) + offset)
+        self.radius.append(np.asarray(topo.radius, np.float64))
+        self.attribute.append(np.asarray(topo.attribute, np.uint8))
+        self.count += n
+
+    def freeze(self) -> None:
+        cat = np.concatenate
+        self.particles = cat(self.particles)
+        self.edges = cat(self.edges)
+        self.triangles = cat(self.triangles)
+        self.baselines = cat(self.baselines)
+        self.radius = cat(self.radius)
+        self.attribute = cat(self.attribute)
+        # contiguous members: a slice is cheaper than a gather
+        first = int(self.particles[0]) if self.count else 0
+        contiguous = self.count and np.array_equal(self.particles, np.arange(first, first + self.count))
+        self.slice = slice(first, first + self.count) if contiguous else None
+
+    def take(self, x: np.ndarray) -> np.ndarray:
+        return x[:, self.slice] if self.slice is not None else x[:, self.particles]
+
+
+def cloth_groups(cloths) -> list[_Group]:
+    """Group cloths by name without the instance suffix (`hair#3` -> `hair`), in first-seen order."""
+    groups: dict[str, _Group] = {}
+    offset = 0
+    for topo in cloths:
+        key = L.entity_name(topo.name.split("#")[0])
+        groups.setdefault(key, _Group(key)).add(topo, offset)
+        offset += topo.particle_count
+    for g in groups.values():
+        g.freeze()
+    return list(groups.values())
+
+
+class _Buffers:
+    """Preallocated float64 per-frame buffers (rows = frames of one batch)."""
 
     def __init__(self, rows: int):
         self.rows = rows
-        self.buffers: dict[tuple[str, str], np.ndarray] = {}
+        self.arrays: dict[str, np.ndarray] = {}
 
-    def put(self, entity: str, component: str, row: int, values: np.ndarray, dtype=np.float32) -> None:
-        key = (entity, component)
-        buf = self.buffers.get(key)
-        if buf is None:
-            buf = self.buffers[key] = np.empty((self.rows,) + values.shape, dtype)
+    def put(self, key: str, row: int, values: np.ndarray) -> None:
+        buf = self.arrays.get(key)
+        if buf is None or buf.shape[1:] != np.shape(values):
+            if buf is not None and row:
+                raise ValueError(f"sink: {key} changed shape from {buf.shape[1:]} to {np.shape(values)} mid-batch")
+            buf = self.arrays[key] = np.empty((self.rows,) + np.shape(values), np.float64)
         buf[row] = values
+
+
+_COLLIDER_FIELDS = ("sphere_center", "sphere_radius", "capsule_start", "capsule_end", "capsule_start_radius",
+                    "capsule_end_radius", "plane_point", "plane_normal")
 
 
 class RerunSink:
@@ -138,17 +198,17 @@ class RerunSink:
             raise OutputError(f"cannot open the recording: {exc}") from exc
         self.closed = False
         self.frames = 0
-        self._new_buffers()
         self.scalar_rows: dict[str, list[tuple[int, float]]] = {}
         self.replay_event_rows: list[tuple[int, str]] = []
-        parent = statics.joint_parent
+        self._new_buffers()
+        parent = np.asarray(statics.joint_parent, np.int64)
         self.bone_child = np.flatnonzero(parent >= 0)
-        self.bone_parent = parent[self.bone_child].astype(np.int64)
+        self.bone_parent = parent[self.bone_child]
+        self.groups = cloth_groups(statics.cloths)
+        self.particle_count = sum(c.particle_count for c in statics.cloths)
         self.metrics = FrameMetrics(statics.cloths,
                                     collider_kind if collider_kind is not None else np.zeros(0, np.int64),
                                     collider_slot if collider_slot is not None else np.zeros(0, np.int64))
-        self.baseline_child = [np.flatnonzero(c.parent >= 0) for c in statics.cloths]
-        self.cloth_positions = np.zeros((self.metrics.particle_count, 3))
         self._log_statics()
         self.seconds += time.perf_counter() - t0
 
@@ -157,30 +217,29 @@ class RerunSink:
         rr, rec, s, tg = self.rr, self.rec, self.statics, self.toggles
         rec.log(L.WORLD, rr.ViewCoordinates.LEFT_HAND_Y_UP, static=True)
         if tg.skeleton:
-            rec.log(L.RIG_JOINTS, rr.Points3D.from_fields(radii=JOINT_RADIUS, colors=L.COLOR_JOINT,
-                                                          labels=None), static=True)
+            rec.log(L.RIG_JOINTS, rr.Points3D.from_fields(radii=JOINT_RADIUS, colors=L.COLOR_JOINT), static=True)
             rec.log(L.RIG_BONES, rr.LineStrips3D.from_fields(radii=BONE_RADIUS, colors=L.COLOR_BONE), static=True)
-        for cloth in s.cloths:
-            colors = np.empty((cloth.particle_count, 4), np.uint8)
+        for g in self.groups:
+            colors = np.empty((g.count, 4), np.uint8)
             colors[:] = L.COLOR_MOVE
-            colors[(cloth.attribute & 0x01) != 0] = L.COLOR_FIXED
-            colors[(cloth.attribute & 0x08) != 0] = L.COLOR_INVALID
+            colors[(g.attribute & 0x01) != 0] = L.COLOR_FIXED
+            colors[(g.attribute & 0x08) != 0] = L.COLOR_INVALID
             if tg.particles:
-                rec.log(L.cloth_path(cloth.name, "particles"),
-                        rr.Points3D.from_fields(radii=np.asarray(cloth.radius, np.float32), colors=colors), static=True)
-            if tg.edges and len(cloth.edges):
-                rec.log(L.cloth_path(cloth.name, "edges"),
+                rec.log(L.cloth_path(g.name, "particles"),
+                        rr.Points3D.from_fields(radii=g.radius.astype(np.float32), colors=colors), static=True)
+            if tg.edges and len(g.edges):
+                rec.log(L.cloth_path(g.name, "edges"),
                         rr.LineStrips3D.from_fields(radii=EDGE_RADIUS, colors=L.COLOR_EDGE), static=True)
-            if tg.triangles and len(cloth.triangles):
-                rec.log(L.cloth_path(cloth.name, "triangles"),
-                        rr.Mesh3D.from_fields(triangle_indices=np.asarray(cloth.triangles, np.uint32),
+            if tg.triangles and len(g.triangles):
+                rec.log(L.cloth_path(g.name, "triangles"),
+                        rr.Mesh3D.from_fields(triangle_indices=g.triangles.astype(np.uint32),
                                               albedo_factor=[110, 170, 230, 140]), static=True)
-            if tg.baselines:
-                rec.log(L.cloth_path(cloth.name, "baselines"),
+            if tg.baselines and len(g.baselines):
+                rec.log(L.cloth_path(g.name, "baselines"),
                         rr.LineStrips3D.from_fields(radii=EDGE_RADIUS, colors=L.COLOR_BASELINE), static=True)
             if tg.base_pose:
-                rec.log(L.cloth_path(cloth.name, "base_pose"),
-                        rr.Points3D.from_fields(radii=np.asarray(cloth.radius, np.float32) * 0.5,
+                rec.log(L.cloth_path(g.name, "base_pose"),
+                        rr.Points3D.from_fields(radii=(g.radius * 0.5).astype(np.float32),
                                                 colors=L.COLOR_BASE_POSE), static=True)
         if tg.colliders:
             rec.log(L.COLLIDER_SPHERES, rr.Ellipsoids3D.from_fields(colors=L.COLOR_COLLIDER, fill_mode="solid"),
@@ -195,82 +254,44 @@ class RerunSink:
                                                  time_fields=list(s.time_fields) or [""]), static=True)
             rec.log(L.REPLAY_NODES, rr.AnyValues(names=list(s.replay_node_names) or [""]), static=True)
 
-    # ------------------------------------------------------------------ per frame
+    # ------------------------------------------------------------------ per frame: copies only
     def begin_frame(self, frame: int, sim_time: float) -> None:
         self.frame_index[self.row] = frame
         self.frame_time[self.row] = sim_time
 
     def log(self, data: FrameData) -> None:
         t0 = time.perf_counter()
-        cols, row, tg = self.cols, self.row, self.toggles
+        buf, row, tg = self.buf, self.row, self.toggles
         self.frame_index[row] = data.frame
         self.frame_time[row] = data.sim_time
-        joints = data.joint_positions
+        self.delta_time[row] = data.delta_time
         if tg.skeleton:
-            cols.put(L.RIG_JOINTS, "positions", row, joints)
-            seg = cols.buffers.get((L.RIG_BONES, "strips"))
-            if seg is None:
-                cols.put(L.RIG_BONES, "strips", row, np.zeros((self.bone_child.size, 2, 3)))
-                seg = cols.buffers[(L.RIG_BONES, "strips")]
-            seg[row, :, 0] = joints[self.bone_parent]
-            seg[row, :, 1] = joints[self.bone_child]
-        offset = 0
-        for k, (topo, cf) in enumerate(zip(self.statics.cloths, data.cloths)):
-            x = cf.positions
-            n = topo.particle_count
-            self.cloth_positions[offset:offset + n] = x
-            offset += n
-            if tg.particles:
-                cols.put(L.cloth_path(topo.name, "particles"), "positions", row, x)
-            if tg.edges and len(topo.edges):
-                cols.put(L.cloth_path(topo.name, "edges"), "strips", row, x[topo.edges])
-            if tg.triangles and len(topo.triangles):
-                cols.put(L.cloth_path(topo.name, "triangles"), "vertex_positions", row, x)
-            if tg.baselines and self.baseline_child[k].size:
-                child = self.baseline_child[k]
-                cols.put(L.cloth_path(topo.name, "baselines"), "strips", row,
-                         np.stack([x[topo.parent[child]], x[child]], axis=1))
-            if tg.base_pose and cf.base_positions is not None:
-                cols.put(L.cloth_path(topo.name, "base_pose"), "positions", row, cf.base_positions)
-        if tg.colliders:
-            self._put_colliders(data, row)
+            buf.put("joints", row, data.joint_positions)
+        if self.particle_count:
+            buf.put("positions", row, data.positions)
+            if tg.base_pose and data.base_positions is not None:
+                buf.put("base_positions", row, data.base_positions)
+        if tg.colliders or tg.metrics:
+            for name in _COLLIDER_FIELDS:
+                values = getattr(data.colliders, name)
+                if len(values):
+                    buf.put(name, row, values)
         if tg.metrics:
-            values = dict(data.metrics)
-            values.setdefault("steps", float(max((c.steps for c in data.cloths), default=0)))
-            values.update(self.metrics.compute(self.cloth_positions, data.colliders, data.delta_time))
-            for key, value in values.items():
+            self.scalar_rows.setdefault("steps", []).append((row, float(data.steps)))
+            for key, value in data.metrics.items():
                 scaled = float(value) * 1000.0 if key.startswith("time.") else float(value)
                 self.scalar_rows.setdefault(key, []).append((row, scaled))
         if tg.events and data.events:
             self._log_events(data)
         if tg.replay and data.replay is not None:
             r = data.replay
-            cols.put(L.REPLAY_POSE, "local_position", row, r.local_position, np.float64)
-            cols.put(L.REPLAY_POSE, "local_rotation", row, r.local_rotation, np.float64)
-            cols.put(L.REPLAY_POSE, "local_scale", row, r.local_scale, np.float64)
-            cols.put(L.REPLAY_TIME, "values", row, r.time_values, np.float64)
+            buf.put("replay.local_position", row, r.local_position)
+            buf.put("replay.local_rotation", row, r.local_rotation)
+            buf.put("replay.local_scale", row, r.local_scale)
+            buf.put("replay.time", row, r.time_values)
             if r.events_json:
                 self.replay_event_rows.append((row, r.events_json))
         self.seconds += time.perf_counter() - t0
-
-    def _put_colliders(self, data: FrameData, row: int) -> None:
-        sh, cols = data.colliders, self.cols
-        if len(sh.sphere_radius):
-            cols.put(L.COLLIDER_SPHERES, "centers", row, sh.sphere_center)
-            cols.put(L.COLLIDER_SPHERES, "half_sizes", row, np.repeat(sh.sphere_radius[:, None], 3, axis=1))
-        if len(sh.capsule_start):
-            length, quat = capsule_pose(sh.capsule_start, sh.capsule_end)
-            cols.put(L.COLLIDER_CAPSULES, "translations", row, sh.capsule_start)
-            cols.put(L.COLLIDER_CAPSULES, "quaternions", row, quat)
-            cols.put(L.COLLIDER_CAPSULES, "lengths", row, length)
-            # rerun capsules have one radius: the larger cap (tapered capsules are drawn fat)
-            cols.put(L.COLLIDER_CAPSULES, "radii", row, np.maximum(sh.capsule_start_radius, sh.capsule_end_radius))
-        if len(sh.plane_point):
-            half = np.zeros((len(sh.plane_point), 3))
-            half[:, 0] = half[:, 2] = PLANE_HALF_SIZE
-            cols.put(L.COLLIDER_PLANES, "centers", row, sh.plane_point)
-            cols.put(L.COLLIDER_PLANES, "half_sizes", row, half)
-            cols.put(L.COLLIDER_PLANES, "quaternions", row, from_y_rotation(sh.plane_normal))
 
     def _log_events(self, data: FrameData) -> None:
         rr, rec = self.rr, self.rec
@@ -288,55 +309,106 @@ class RerunSink:
             self.flush()
             self.seconds += time.perf_counter() - t0
 
-    # ------------------------------------------------------------------ sending
+    # ------------------------------------------------------------------ sending: whole batches
+    def _send(self, entity: str, archetype: str, count: int, **components) -> None:
+        """One send_columns call: components are (n, count, ...) arrays for n frames."""
+        rr, n = self.rr, self.row
+        flat = {k: np.ascontiguousarray(v, dtype=np.float32).reshape((n * count,) + v.shape[2:])
+                for k, v in components.items()}
+        if "strips" in flat:
+            flat["strips"] = _segment_array(flat["strips"])
+        columns = getattr(rr, archetype).columns(**flat).partition([count] * n)
+        self.rec.send_columns(entity, indexes=self._index(), columns=columns)
+
+    def _index(self, rows=slice(None)):
+        rr = self.rr
+        return [rr.TimeColumn(L.TIMELINE_FRAME, sequence=self.frame_index[:self.row][rows]),
+                rr.TimeColumn(L.TIMELINE_SIM_TIME, duration=self.frame_time[:self.row][rows])]
+
     def flush(self) -> None:
-        """Send the buffered frames as columns (one send_columns call per entity)."""
-        rr, rec, n = self.rr, self.rec, self.row
+        """Send the buffered frames as columns (one send_columns call per entity and batch)."""
+        rr, rec, n, tg = self.rr, self.rec, self.row, self.toggles
         if n == 0:
             return
-        frames, times = self.frame_index[:n], self.frame_time[:n]
-
-        def index(rows=slice(None)):
-            return [rr.TimeColumn(L.TIMELINE_FRAME, sequence=frames[rows]),
-                    rr.TimeColumn(L.TIMELINE_SIM_TIME, duration=times[rows])]
-
-        by_entity: dict[str, dict[str, np.ndarray]] = {}
-        for (entity, component), buf in self.cols.buffers.items():
-            by_entity.setdefault(entity, {})[component] = buf[:n]
-        for entity, comps in by_entity.items():
-            archetype, per_row = _ARCHETYPES[entity.rsplit("/", 1)[-1]] if entity.startswith(L.CLOTHS) \
-                else _ARCHETYPES[entity]
-            if archetype == "AnyValues":
-                for name, values in comps.items():  # one call each: row sizes differ per component
-                    columns = rr.AnyValues.columns(**{name: values.reshape(-1)}).partition([values[0].size] * n)
-                    rec.send_columns(entity, indexes=index(), columns=columns)
-                continue
-            cls = getattr(rr, archetype)
-            first = comps[next(iter(comps))]
-            count = first.shape[1]
-            flat = {k: v.reshape((n * count,) + v.shape[2:]) for k, v in comps.items()}
-            columns = cls.columns(**flat)
-            if per_row:
-                columns = columns.partition([count] * n)
-            rec.send_columns(entity, indexes=index(), columns=columns)
-        for key, rows in self.scalar_rows.items():
-            sel = np.array([r for r, _ in rows], np.int64)
-            values = np.array([v for _, v in rows], np.float64)
-            rec.send_columns(L.metric_path(key), indexes=index(sel), columns=rr.Scalars.columns(scalars=values))
-        for r, text in self.replay_event_rows:
-            rec.set_time(L.TIMELINE_FRAME, sequence=int(frames[r]))
-            rec.set_time(L.TIMELINE_SIM_TIME, duration=float(times[r]))
-            rec.log(L.REPLAY_EVENTS, rr.AnyValues(events=text))
-        self.scalar_rows.clear()
-        self.replay_event_rows.clear()
+        a = {k: v[:n] for k, v in self.buf.arrays.items()}
+        if tg.skeleton and "joints" in a:
+            joints = a["joints"]
+            self._send(L.RIG_JOINTS, "Points3D", joints.shape[1], positions=joints)
+            if self.bone_child.size:
+                strips = np.stack([joints[:, self.bone_parent], joints[:, self.bone_child]], axis=2)
+                self._send(L.RIG_BONES, "LineStrips3D", self.bone_child.size, strips=strips)
+        x = a.get("positions")
+        if x is not None:
+            for g in self.groups:
+                gx = g.take(x)
+                if tg.particles:
+                    self._send(L.cloth_path(g.name, "particles"), "Points3D", g.count, positions=gx)
+                if tg.edges and len(g.edges):
+                    strips = np.stack([x[:, g.edges[:, 0]], x[:, g.edges[:, 1]]], axis=2)
+                    self._send(L.cloth_path(g.name, "edges"), "LineStrips3D", len(g.edges), strips=strips)
+                if tg.triangles and len(g.triangles):
+                    self._send(L.cloth_path(g.name, "triangles"), "Mesh3D", g.count, vertex_positions=gx)
+                if tg.baselines and len(g.baselines):
+                    strips = np.stack([x[:, g.baselines[:, 0]], x[:, g.baselines[:, 1]]], axis=2)
+                    self._send(L.cloth_path(g.name, "baselines"), "LineStrips3D", len(g.baselines), strips=strips)
+                if tg.base_pose and "base_positions" in a:
+                    self._send(L.cloth_path(g.name, "base_pose"), "Points3D", g.count,
+                               positions=g.take(a["base_positions"]))
+        if tg.colliders:
+            self._send_colliders(a)
+        if tg.metrics:
+            if x is not None:
+                values = self.metrics.compute(x, a, self.delta_time[:n])
+                for key, series in values.items():
+                    self.scalar_rows[key] = list(enumerate(series.tolist()))
+            for key, rows in self.scalar_rows.items():
+                sel = np.array([r for r, _ in rows], np.int64)
+                vals = np.array([v for _, v in rows], np.float64)
+                rec.send_columns(L.metric_path(key), indexes=self._index(sel), columns=rr.Scalars.columns(scalars=vals))
+        if tg.replay and "replay.time" in a:
+            for key, component in (("replay.local_position", "local_position"),
+                                   ("replay.local_rotation", "local_rotation"),
+                                   ("replay.local_scale", "local_scale"), ("replay.time", "values")):
+                values = np.ascontiguousarray(a[key])   # float64 kept: resim needs the exact bits
+                entity = L.REPLAY_TIME if key == "replay.time" else L.REPLAY_POSE
+                columns = rr.AnyValues.columns(**{component: values.reshape(-1)}).partition([values[0].size] * n)
+                rec.send_columns(entity, indexes=self._index(), columns=columns)
+            for r, text in self.replay_event_rows:
+                rec.set_time(L.TIMELINE_FRAME, sequence=int(self.frame_index[r]))
+                rec.set_time(L.TIMELINE_SIM_TIME, duration=float(self.frame_time[r]))
+                rec.log(L.REPLAY_EVENTS, rr.AnyValues(events=text))
+        self.scalar_rows = {}
+        self.replay_event_rows = []
         self._new_buffers()
+
+    def _send_colliders(self, a) -> None:
+        if "sphere_center" in a:
+            r = a["sphere_radius"]
+            self._send(L.COLLIDER_SPHERES, "Ellipsoids3D", r.shape[1], centers=a["sphere_center"],
+                       half_sizes=np.repeat(r[..., None], 3, axis=2))
+        if "capsule_start" in a:
+            start, end = a["capsule_start"], a["capsule_end"]
+            n, c = start.shape[:2]
+            length, quat = capsule_pose(start.reshape(-1, 3), end.reshape(-1, 3))
+            # rerun capsules have one radius: the larger cap (tapered capsules are drawn fat)
+            radius = np.maximum(a["capsule_start_radius"], a["capsule_end_radius"])
+            self._send(L.COLLIDER_CAPSULES, "Capsules3D", c, translations=start, quaternions=quat.reshape(n, c, 4),
+                       lengths=length.reshape(n, c), radii=radius)
+        if "plane_point" in a:
+            point = a["plane_point"]
+            n, c = point.shape[:2]
+            half = np.zeros((n, c, 3))
+            half[..., 0] = half[..., 2] = PLANE_HALF_SIZE
+            quat = from_y_rotation(a["plane_normal"].reshape(-1, 3)).reshape(n, c, 4)
+            self._send(L.COLLIDER_PLANES, "Boxes3D", c, centers=point, half_sizes=half, quaternions=quat)
 
     def _new_buffers(self) -> None:
         # rerun keeps zero-copy references to the numpy arrays it was given and encodes them
         # later on its own thread: never refill a buffer that was sent, start fresh ones
-        self.cols = _Columns(self.batch)
+        self.buf = _Buffers(self.batch)
         self.frame_index = np.zeros(self.batch, np.int64)
         self.frame_time = np.zeros(self.batch, np.float64)
+        self.delta_time = np.zeros(self.batch, np.float64)
         self.row = 0
 
     def close(self, success: bool = True) -> None:
@@ -371,21 +443,18 @@ class RerunSink:
         return False
 
 
-# archetype per entity (cloth entities by their last path part); True: several instances per row
-_ARCHETYPES = {
-    L.RIG_JOINTS: ("Points3D", True),
-    L.RIG_BONES: ("LineStrips3D", True),
-    "particles": ("Points3D", True),
-    "base_pose": ("Points3D", True),
-    "edges": ("LineStrips3D", True),
-    "baselines": ("LineStrips3D", True),
-    "triangles": ("Mesh3D", True),
-    L.COLLIDER_SPHERES: ("Ellipsoids3D", True),
-    L.COLLIDER_CAPSULES: ("Capsules3D", True),
-    L.COLLIDER_PLANES: ("Boxes3D", True),
-    L.REPLAY_POSE: ("AnyValues", False),
-    L.REPLAY_TIME: ("AnyValues", False),
-}
+def _segment_array(segments: np.ndarray):
+    """(k, 2, 3) float32 segments -> the arrow array of k two-point line strips.
+
+    rerun's numpy path for LineStrips3D computes the list offsets in a Python loop (about
+    1.5 s for 500k strips); building the arrow array directly takes milliseconds."""
+    import pyarrow as pa
+    from rerun.components import LineStrip3DBatch
+
+    list_type = LineStrip3DBatch._ARROW_DATATYPE
+    points = pa.FixedSizeListArray.from_arrays(pa.array(segments.reshape(-1)), type=list_type.value_type)
+    offsets = pa.array(np.arange(0, 2 * segments.shape[0] + 1, 2, dtype=np.int32))
+    return pa.ListArray.from_arrays(offsets, points, type=list_type)
 
 
 def _event_text(payload) -> str:

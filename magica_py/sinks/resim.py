@@ -158,12 +158,9 @@ def build_player(replay: ReplayData, scene):
     schedule.add(Phase.UPDATE, System(PLAYBACK_SYSTEM, playback_system(replay, scene)))
     clock = RecordedTime(replay)
     player = Player(scene, schedule, clock, clock)
-    try:
-        from magica_py import solver
-    except ImportError:
-        solver = None
-    if solver is not None and hasattr(solver, "attach") and getattr(scene, "cloths", None):
-        solver.attach(player, scene)
+    from magica_py.sinks.record_all import attach_solver
+
+    attach_solver(player, scene)
     return player
 
 
