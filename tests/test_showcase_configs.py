@@ -127,3 +127,17 @@ def test_no_moving_bone_starts_inside_its_colliders(config):
             for k in spec.colliders:
                 depth = _penetration(h.world_position[i], shapes, k, radius)
                 assert depth <= 0.0, (spec.name, h.names[i], scene.colliders.names[k], depth)
+
+
+def test_hitches_and_events_fires_every_event_within_the_run():
+    from magica_py.runtime.player import Player
+
+    scene = load_scene(pathlib.Path(__file__).resolve().parents[1] / "configs" / "hitches_and_events.yaml")
+    player = Player.for_scene(scene)
+    fired, deltas = [], []
+    for _ in range(scene.settings.frame_count()):
+        ctx = player.step()
+        fired += [kind for kind, _ in ctx.events]
+        deltas.append(ctx.time.unscaled_delta_time)
+    assert fired == ["teleport", "time_scale", "time_scale", "set_parameter"]
+    assert max(deltas) == 0.5 and 0.1 in deltas  # the two hitches
