@@ -84,7 +84,8 @@ def build_cloth(hierarchy, spec) -> ClothModel:
                                                             child_start, child_count, child_data)
     bind_rotation = np.empty((n, 4))
     v2t = np.empty((n, 4))
-    proxy.vertex_rotations(normal, tangent, setup.world_rotation, setup.init_render_rotation, bind_rotation, v2t)
+    proxy.vertex_rotations(normal, tangent, setup.component_rotation, np.array([0.0, 0.0, 0.0, 1.0]),
+                           bind_rotation, v2t)
     bl_pos = np.zeros((n, 3))
     bl_rot = np.zeros((n, 4))
     bl_rot[:, 3] = 1.0

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from magica_py.build.errors import BuildError
+from magica_py.scene.hierarchy import propagate_world
 
 
 @dataclass(frozen=True)
@@ -44,6 +45,11 @@ class RenderSetup:
     init_render_world_to_local: np.ndarray  # (4,4) its inverse: world -> cloth-local
     init_render_rotation: np.ndarray        # (4,) component world rotation at build
     init_scale: np.ndarray                  # (3,) component lossy scale at build
+    # Bone pose in the component's frame, chained from the local poses below the component
+    # (so identical rigs placed anywhere give bit-identical values); cloth-local position =
+    # component_position, cloth-local directions = S_c^-1 (component_rotation · axis).
+    component_position: np.ndarray          # (N,3) m
+    component_rotation: np.ndarray          # (N,4) xyzw
 
     @property
     def count(self) -> int:
@@ -134,6 +140,12 @@ def collect_transforms(hierarchy, cloth_name: str, root_bones, component=None) -
         raise BuildError(cloth_name, f"component transform {names[component]!r} has a zero scale: "
                                      "cloth-local space is undefined")
     l2w = trs_matrix(hierarchy.world_position[component], hierarchy.world_rotation[component], c_scale)
+    rel_position, rel_rotation = _component_relative_pose(hierarchy, transform_index, roots, component)
+    if rel_position is None:  # component not above the roots (or sheared): go through world space
+        w2l = np.linalg.inv(l2w)
+        rel_position = hierarchy.world_position[transform_index] @ w2l[:3, :3].T + w2l[:3, 3]
+        rel_rotation = _q_mul_many(_q_conj(hierarchy.world_rotation[component]),
+                                   hierarchy.world_rotation[transform_index])
     return RenderSetup(
         cloth_name=cloth_name,
         transform_index=transform_index,
@@ -151,4 +163,55 @@ def collect_transforms(hierarchy, cloth_name: str, root_bones, component=None) -
         init_render_world_to_local=np.linalg.inv(l2w),
         init_render_rotation=hierarchy.world_rotation[component].copy(),
         init_scale=c_scale,
+        component_position=rel_position,
+        component_rotation=rel_rotation,
     )
+
+
+def _component_relative_pose(hierarchy, transform_index, roots, component):
+    """Chain the local TRS of every node from below the component down to each bone (one
+    ``propagate_world`` pass over a sub-hierarchy).  Returns (None, None) when a root is not
+    below (or equal to) the component, or the component's matrix is not a plain TRS."""
+    l2w = hierarchy.local_to_world[component]
+    trs = trs_matrix(hierarchy.world_position[component], hierarchy.world_rotation[component],
+                     hierarchy.lossy_scale[component])
+    if not np.allclose(l2w, trs, rtol=1e-9, atol=1e-12):
+        return None, None  # sheared component: cloth-local space is TRS, not the full matrix
+    path: set[int] = set()
+    for r in roots:
+        node = r
+        chain = []
+        while node != component:
+            chain.append(node)
+            node = int(hierarchy.parent[node])
+            if node < 0:
+                return None, None
+        path.update(chain)
+    path.difference_update(int(t) for t in transform_index)
+    nodes = np.concatenate([np.asarray(sorted(path), dtype=np.int32), transform_index]).astype(np.int32)
+    local_of = {int(t): k for k, t in enumerate(nodes)}
+    hparent = hierarchy.parent[nodes]
+    parent = np.asarray([local_of.get(int(p), -1) for p in hparent], dtype=np.int32)
+    n = nodes.shape[0]
+    wp = np.zeros((n, 3))
+    wr = np.zeros((n, 4))
+    lossy = np.zeros((n, 3))
+    m = np.zeros((n, 4, 4))
+    propagate_world(parent, hierarchy.local_position[nodes].copy(), hierarchy.local_rotation[nodes].copy(),
+                    hierarchy.local_scale[nodes].copy(), wp, wr, lossy, m)
+    k = n - transform_index.shape[0]
+    return wp[k:].copy(), wr[k:].copy()
+
+
+def _q_conj(q):
+    return np.array([-q[0], -q[1], -q[2], q[3]])
+
+
+def _q_mul_many(a, b):
+    """a (4,) times each row of b (N,4), Unity order (b applied first)."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b[:, 0], b[:, 1], b[:, 2], b[:, 3]
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz], axis=1)

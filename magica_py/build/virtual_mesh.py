@@ -78,16 +78,25 @@ def import_bone_vertices(world_position, world_rotation, lossy_scale, w2l, l2w,
 
 
 def import_bones(setup):
-    """Bone import (ref §B.2): returns (local_position, local_normal, local_tangent, skin_bind_pose)."""
+    """Bone import (ref §B.2): returns (local_position, local_normal, local_tangent, skin_bind_pose).
+
+    Positions and axes come from the bone pose chained below the component
+    (``setup.component_position/rotation``): the same numbers as ``W2L · P`` up to rounding,
+    but bit-identical for identical rigs wherever they stand, so crowds share one topology."""
     n = setup.count
-    local_position = np.empty((n, 3))
     local_normal = np.empty((n, 3))
     local_tangent = np.empty((n, 3))
     skin_bind_pose = np.empty((n, 4, 4))
+    scratch = np.empty((n, 3))
     import_bone_vertices(setup.world_position, setup.world_rotation, setup.lossy_scale,
                          setup.init_render_world_to_local, setup.init_render_local_to_world,
-                         local_position, local_normal, local_tangent, skin_bind_pose)
-    return local_position, local_normal, local_tangent, skin_bind_pose
+                         scratch, local_normal, local_tangent, skin_bind_pose)
+    inv_scale = np.eye(4)
+    inv_scale[0, 0], inv_scale[1, 1], inv_scale[2, 2] = 1.0 / setup.init_scale
+    import_bone_vertices(setup.component_position, setup.component_rotation, setup.lossy_scale,
+                         inv_scale, setup.init_render_local_to_world,
+                         scratch, local_normal, local_tangent, np.empty((n, 4, 4)))
+    return setup.component_position.copy(), local_normal, local_tangent, skin_bind_pose
 
 
 # ----------------------------------------------------------------------------- line mode
