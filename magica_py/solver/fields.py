@@ -9,6 +9,7 @@ that writes it.
 """
 from __future__ import annotations
 
+import sys
 from collections import namedtuple
 
 import numpy as np
@@ -19,8 +20,13 @@ U8 = np.uint8
 
 
 def make_soa(type_name: str, fields: list[tuple]):
-    """The namedtuple class of a field table, with the table attached as ``FIELDS``."""
-    cls = namedtuple(type_name, [f[0] for f in fields])
+    """The namedtuple class of a field table, with the table attached as ``FIELDS``.
+
+    The class is attributed to the calling module (where it must be bound under
+    ``type_name``) so that numba's on-disk cache can pickle kernel signatures by reference.
+    """
+    module = sys._getframe(1).f_globals["__name__"]
+    cls = namedtuple(type_name, [f[0] for f in fields], module=module)
     cls.FIELDS = tuple(fields)
     cls.__doc__ = type_name + ":\n" + "\n".join(
         f"  {name:28s} ({per}{', ' + ','.join(map(str, shape)) if shape else ''}) {np.dtype(dt).name}: {doc}"
