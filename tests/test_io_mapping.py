@@ -62,3 +62,25 @@ def test_center_maps_to_an_anchor_and_everything_validates():
 def test_hit_radius_is_kept_within_magica_range():
     assert _map(hit_radius=0.0).parameters["radius"]["value"] == 0.001
     assert _map(hit_radius=0.3).parameters["radius"]["value"] == 0.3
+
+
+def _vrm_segment_rest_angle(stiffness, gravity_power, drag, length, fps=60.0, frames=4000):
+    """UniVRM's per-frame Verlet spring for one segment with a horizontal rest direction."""
+    import numpy as np
+    dt = 1.0 / fps
+    rest = np.array([1.0, 0.0, 0.0])
+    cur = prev = rest * length
+    for _ in range(frames):
+        nxt = cur + (cur - prev) * (1.0 - drag) + rest * stiffness * dt + np.array([0.0, -1.0, 0.0]) * gravity_power * dt
+        nxt = nxt / np.linalg.norm(nxt) * length
+        prev, cur = cur, nxt
+    return float(np.arctan2(-cur[1], cur[0]))
+
+
+@pytest.mark.parametrize("stiffness, power, drag, length", [(1.0, 0.2, 0.4, 0.1), (4.0, 1.0, 0.1, 0.3), (2.5, 2.5, 0.7, 0.05)])
+def test_vrm_rest_angle_is_atan_of_gravity_over_stiffness(stiffness, power, drag, length):
+    """The VRM equilibrium the gravity rule matches does not depend on length, drag or rate."""
+    import math
+    angle = _vrm_segment_rest_angle(stiffness, power, drag, length)
+    assert angle == pytest.approx(math.atan(power / stiffness), abs=1e-6)
+    assert _vrm_segment_rest_angle(stiffness, power, drag, length, fps=30.0) == pytest.approx(angle, abs=1e-6)

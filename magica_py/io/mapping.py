@@ -17,8 +17,9 @@ frame-rate dependent, assumed 60 Hz), MagicaCloth2 steps at 90 Hz (ref §A.5):
   dt_mc²``. Equal ω² gives ``value = stiffness·dt_mc² / (0.48·L·dt_vrm)``, clamped to [0, 1],
   flat over depth (VRM has one stiffness per joint, no depth curve).
 * ``gravity`` from ``gravityPower``: chosen so the static sag angle of a segment matches.
-  In VRM gravity and stiffness are both displacements per frame, so the equilibrium angle
-  is ``θ ≈ gravityPower / stiffness``; in MagicaCloth it is ``θ ≈ g / (ω²·L)``, so
+  In VRM gravity and stiffness are both displacements per frame, so a segment rests where
+  their sum is radial: ``θ = atan(gravityPower / stiffness)`` below its rest direction
+  (for a horizontal rest direction and any L, drag or frame rate); in MagicaCloth it is ``θ ≈ g / (ω²·L)``, so
   ``g = θ·ω²_mc·L`` with the (possibly clamped) ω² of the chosen restoration value, clamped
   to [0, 20] m/s². With no stiffness, ``g = gravityPower / dt_vrm``.
 * ``gravity_direction`` = ``gravityDir`` (converted to Unity axes by the caller).
