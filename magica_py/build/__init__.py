@@ -19,7 +19,10 @@ Deviations from the reference, deliberate and documented:
 """
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import math
+from collections.abc import Hashable
 from types import MappingProxyType
 
 import numpy as np
@@ -30,7 +33,7 @@ from magica_py.build.model import ClothModel, describe, topology_hash
 from magica_py.build.render_setup import collect_transforms
 from magica_py.build.teams import TeamRegistry
 
-__all__ = ["BuildError", "ClothModel", "TeamRegistry", "build_cloth", "describe"]
+__all__ = ["BuildError", "ClothModel", "ModelCache", "TeamRegistry", "build_cloth", "describe"]
 
 MAX_PROXY_COUNT = 32767  # MaxProxyMeshVertexCount / Edge / Triangle (ref §0.4)
 EXPANDED_COLLIDER_COUNT = 8
@@ -42,17 +45,79 @@ def _check_limit(cloth, what, count, names):
                                 f"(roots {list(names)[:4]}); split the cloth into several cloths")
 
 
-def build_cloth(hierarchy, spec) -> ClothModel:
+class ModelCache:
+    """Reuses the build of identical cloths (crowds of instanced rigs).
+
+    Two cloths share an entry when everything the build reads is bit-identical: the bones'
+    pose chained below the component, the tree, root order, mode, attributes (per vertex),
+    parameters, colliders and the component's scale.  A hit costs the bone collection plus
+    the per-instance fields (transforms, skin bind poses, world-space rest volumes), and gives
+    exactly the arrays a fresh build would give.  Parameters that are not hashable disable
+    the cache for that cloth."""
+
+    def __init__(self):
+        self.models: dict[str, ClothModel] = {}
+        self.hits = 0
+        self.misses = 0
+
+
+def build_cloth(hierarchy, spec, cache: ModelCache | None = None) -> ClothModel:
     """Build the read-only model of one BoneCloth from the hierarchy's current (rest) pose."""
     name = str(getattr(spec, "name", "cloth"))
     mode = str(getattr(spec, "connection_mode", "line"))
     if mode not in virtual_mesh.CONNECTION_MODES:
         raise BuildError(name, f"connection_mode {mode!r}: expected one of {virtual_mesh.CONNECTION_MODES}")
-    params = getattr(spec, "parameters", None)
     setup = collect_transforms(hierarchy, name, getattr(spec, "root_bones", ()), getattr(spec, "component", None))
-    n = setup.count
     root_names = [setup.bone_names[v] for v in setup.root_vertices]
-    _check_limit(name, "bones (proxy vertices)", n, root_names)
+    _check_limit(name, "bones (proxy vertices)", setup.count, root_names)
+    key = _cache_key(setup, spec, mode) if cache is not None else None
+    if key is not None and key in cache.models:
+        cache.hits += 1
+        return _instance_of(cache.models[key], setup)
+    model = _build(setup, spec, name, mode, root_names)
+    if key is not None:
+        cache.misses += 1
+        cache.models[key] = model
+    return model
+
+
+def _cache_key(setup, spec, mode):
+    params = getattr(spec, "parameters", None)
+    vertex_of = {int(t): i for i, t in enumerate(setup.transform_index)}
+    attributes = tuple(sorted((vertex_of.get(int(k), -1 - int(k)), str(v))
+                              for k, v in (getattr(spec, "bone_attributes", None) or {}).items()))
+    try:
+        param_key = hash(params if params is None or isinstance(params, Hashable)
+                         else frozenset(params.items()))
+    except TypeError:
+        return None
+    h = hashlib.blake2b(digest_size=20)
+    for a in (setup.component_position, setup.component_rotation, setup.parent_vertex,
+              setup.root_vertices, setup.init_scale):
+        h.update(np.ascontiguousarray(a).tobytes())
+    h.update(repr((setup.child_vertices, mode, attributes, param_key, repr(params),
+                   tuple(getattr(spec, "colliders", ()) or ()), getattr(spec, "collision_mode", "point"))).encode())
+    return h.hexdigest()
+
+
+def _instance_of(model: ClothModel, setup) -> ClothModel:
+    """A cached model re-targeted at another instance's transforms."""
+    _, _, _, skin_bind_pose = virtual_mesh.import_bones(setup)
+    return dataclasses.replace(
+        model, name=setup.cloth_name, transform_index=setup.transform_index,
+        component_transform=setup.component_transform, bone_names=setup.bone_names,
+        skin_bind_pose=skin_bind_pose,
+        init_render_local_to_world=setup.init_render_local_to_world,
+        init_render_world_to_local=setup.init_render_world_to_local,
+        init_render_rotation=setup.init_render_rotation, init_scale=setup.init_scale,
+        volume_rest=constraints.rest_volumes(model.local_position, model.volume_vertices,
+                                             setup.init_render_local_to_world),
+    )
+
+
+def _build(setup, spec, name, mode, root_names) -> ClothModel:
+    params = getattr(spec, "parameters", None)
+    n = setup.count
 
     # §B.2 import, §B.3 connection
     pos, normal, tangent, skin_bind_pose = virtual_mesh.import_bones(setup)

@@ -133,3 +133,14 @@ def bending_and_volume(attribute, triangles, pos_local, local_to_world, want_vol
     nb, nv = bending_pairs(pos_local, world, triangles, edge_pairs, et_start, et_count, et_data,
                            valid, move, want_volume, bend, angle, sign, vol, vol_rest)
     return bend[:nb].copy(), angle[:nb].copy(), sign[:nb].copy(), vol[:nv].copy(), vol_rest[:nv].copy()
+
+
+def rest_volumes(pos_local, volume_vertices, local_to_world) -> np.ndarray:
+    """1000 x signed tetrahedron volume of each volume pair in world space (ref §D.7); the same
+    formula as ``bending_pairs`` (used when a cached model is re-targeted to another instance)."""
+    world = pos_local @ local_to_world[:3, :3].T + local_to_world[:3, 3]
+    v = volume_vertices
+    if v.shape[0] == 0:
+        return np.zeros(0)
+    w0, w1, w2, w3 = world[v[:, 0]], world[v[:, 1]], world[v[:, 2]], world[v[:, 3]]
+    return 1000.0 / 6.0 * (np.cross(w1 - w0, w2 - w0) * (w3 - w0)).sum(axis=1)

@@ -303,7 +303,10 @@ def _unique_rows_in_order(rows: np.ndarray) -> np.ndarray:
     """Unique rows of an int array, kept in order of first appearance (insertion-ordered set)."""
     if rows.shape[0] == 0:
         return rows.reshape(0, rows.shape[1]).astype(np.int64)
-    _, first = np.unique(rows, axis=0, return_index=True)
+    key = np.zeros(rows.shape[0], dtype=np.int64)
+    for c in range(rows.shape[1]):  # indices < 32768: one int64 key per row
+        key = key * 32768 + rows[:, c]
+    _, first = np.unique(key, return_index=True)
     return rows[np.sort(first)]
 
 
