@@ -21,8 +21,9 @@ def crowd(count, turn=True):
                 bones.append(BoneSpec(f"c{c}s{k}_{b}", parent, p if b == 0 else (0.0, -0.1, 0.0)))
                 parent = f"c{c}s{k}_{b}"
     h = TransformHierarchy(bones)
+    # every character has its own collider: same topology, different collider index
     return h, [Spec(f"skirt{c}", tuple(h.index(f"c{c}s{k}_0") for k in range(4)), "sequential_loop_mesh",
-                    parameters=resolve_parameters(None, {})) for c in range(count)]
+                    parameters=resolve_parameters(None, {}), colliders=(c,)) for c in range(count)]
 
 
 def test_cached_instances_equal_fresh_builds_array_for_array():
@@ -41,18 +42,19 @@ def test_cached_instances_equal_fresh_builds_array_for_array():
     # instances really differ where they should
     assert cached[0].transform_index[0] != cached[1].transform_index[0]
     assert not np.array_equal(cached[0].init_render_rotation, cached[1].init_render_rotation)
+    assert [m.collider_index.tolist() for m in cached] == [[0], [1], [2], [3]]
 
 
 def test_cache_misses_when_parameters_or_attributes_differ():
     h, specs = crowd(3, turn=False)
     cache = ModelCache()
     build_cloth(h, specs[0], cache)
-    stiff = Spec(specs[1].name, specs[1].root_bones, specs[1].connection_mode,
+    stiff = Spec(specs[1].name, specs[1].root_bones, specs[1].connection_mode, colliders=(1,),
                  parameters=resolve_parameters(None, {"triangle_bending": {"stiffness": 0.0}}))
     m = build_cloth(h, stiff, cache)
     assert len(m.bend_vertices) == 0
     pinned = Spec(specs[2].name, specs[2].root_bones, specs[2].connection_mode, parameters=specs[2].parameters,
-                  bone_attributes={h.index("c2s0_1"): "fixed"})
+                  colliders=(2,), bone_attributes={h.index("c2s0_1"): "fixed"})
     m = build_cloth(h, pinned, cache)
     assert (cache.misses, cache.hits) == (3, 0)
     assert m.attribute[list(m.bone_names).index("c2s0_1")] & 0x03 == 0x01  # fixed, not move

@@ -73,7 +73,7 @@ def build_cloth(hierarchy, spec, cache: ModelCache | None = None) -> ClothModel:
     key = _cache_key(setup, spec, mode) if cache is not None else None
     if key is not None and key in cache.models:
         cache.hits += 1
-        return _instance_of(cache.models[key], setup)
+        return _instance_of(cache.models[key], setup, spec)
     model = _build(setup, spec, name, mode, root_names)
     if key is not None:
         cache.misses += 1
@@ -96,15 +96,18 @@ def _cache_key(setup, spec, mode):
               setup.root_vertices, setup.init_scale):
         h.update(np.ascontiguousarray(a).tobytes())
     h.update(repr((setup.child_vertices, mode, attributes, param_key, repr(params),
-                   tuple(getattr(spec, "colliders", ()) or ()), getattr(spec, "collision_mode", "point"))).encode())
+                   len(tuple(getattr(spec, "colliders", ()) or ())), getattr(spec, "collision_mode", "point"))).encode())
     return h.hexdigest()
 
 
-def _instance_of(model: ClothModel, setup) -> ClothModel:
-    """A cached model re-targeted at another instance's transforms."""
+def _instance_of(model: ClothModel, setup, spec) -> ClothModel:
+    """A cached model re-targeted at another instance's transforms and colliders."""
     _, _, _, skin_bind_pose = virtual_mesh.import_bones(setup)
+    colliders = model.collider_index
+    if len(colliders):
+        colliders = np.asarray(tuple(spec.colliders), dtype=np.int32).reshape(-1)
     return dataclasses.replace(
-        model, name=setup.cloth_name, transform_index=setup.transform_index,
+        model, collider_index=colliders, name=setup.cloth_name, transform_index=setup.transform_index,
         component_transform=setup.component_transform, bone_names=setup.bone_names,
         skin_bind_pose=skin_bind_pose,
         init_render_local_to_world=setup.init_render_local_to_world,

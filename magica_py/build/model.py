@@ -101,19 +101,20 @@ TOPOLOGY_FIELDS = ("attribute", "parent", "root_index", "child_start", "child_co
                    "edges", "lines", "triangles", "neighbor_start", "neighbor_count", "neighbor_data",
                    "vertex_triangle_start", "vertex_triangle_count", "vertex_triangle_data",
                    "vertex_triangle_flip", "distance_start", "distance_count", "distance_target",
-                   "bend_vertices", "volume_vertices", "collider_index")
+                   "bend_vertices", "volume_vertices")
 
 
 def topology_hash(arrays: dict, features: dict) -> str:
-    """Hash of the index arrays and built features: equal keys mean teams that one batched
-    kernel can process side by side (tech-notes LAYOUT)."""
+    """Hash of the index arrays, built features and collider count: equal keys mean teams
+    that one batched kernel can process side by side (tech-notes LAYOUT)."""
     h = hashlib.blake2b(digest_size=16)
     for name in TOPOLOGY_FIELDS:
         a = np.ascontiguousarray(arrays[name])
         h.update(name.encode())
         h.update(str((a.dtype.str, a.shape)).encode())
         h.update(a.tobytes())
-    h.update(repr(sorted(features.items())).encode())
+    # which colliders a team uses is per instance; only how many shapes the kernel
+    h.update(repr((sorted(features.items()), len(arrays["collider_index"]))).encode())
     return h.hexdigest()
 
 
