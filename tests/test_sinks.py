@@ -250,3 +250,32 @@ def test_null_sink_counts_frames_and_keeps_nothing():
         sink.end_frame()
     sink.close()
     assert sink.frames == 3
+
+
+def test_instances_of_a_cloth_share_one_entity_in_team_order(tmp_path):
+    from dataclasses import replace
+
+    from magica_py.sinks.base import FrameData, SceneStatics
+    from magica_py.sinks.fakes import colliders_frame, topologies
+
+    tail, skirt = topologies()
+    cloths = [replace(tail, name="hair#0"), replace(skirt, name="skirt#0"), replace(tail, name="hair#1")]
+    st = SceneStatics(name="inst", joint_names=["r"], joint_parent=np.array([-1], np.int32), cloths=cloths,
+                      toggles=LogToggles(replay=False))
+    x = np.arange(30, dtype=np.float64).reshape(10, 3) / 7.0
+    sink = RerunSink(st, rrd_path=tmp_path / "inst.rrd", collider_kind=np.array([0, 1, 2]),
+                     collider_slot=np.array([0, 0, 0]))
+    for f in range(3):
+        sink.begin_frame(f, f * 0.1)
+        sink.log(FrameData(frame=f, sim_time=f * 0.1, delta_time=0.1, joint_positions=np.zeros((1, 3)),
+                           positions=x + f, colliders=colliders_frame(f), metrics={}, events=[]))
+        sink.end_frame()
+    sink.close()
+    rec = Recording(tmp_path / "inst.rrd")
+    assert sorted(e for e in rec.entities if e.endswith("/particles")) == \
+        ["/world/cloths/hair/particles", "/world/cloths/skirt/particles"]
+    _, hair = rec.stacked("/world/cloths/hair/particles", "Points3D:positions")
+    np.testing.assert_array_equal(hair[2], (x[[0, 1, 2, 7, 8, 9]] + 2).astype(np.float32))
+    _, edges = rec.rows("/world/cloths/hair/edges", "LineStrips3D:strips")
+    want = (x[[0, 1, 1, 2, 7, 8, 8, 9]] + 1).astype(np.float32)   # hair#1's edges offset to its particles
+    np.testing.assert_array_equal(edges[1], want)

@@ -39,13 +39,12 @@ class RecordResult:
 
 
 def scene_frames(scene) -> int:
+    """The scene's frame count (``SceneSettings.frame_count()``: frames, or duration at fps)."""
     s = scene.settings
-    if getattr(s, "frames", None):
-        return int(s.frames)
-    duration, fps = getattr(s, "duration", None), getattr(s, "fps", None)
-    if duration and fps:
-        return int(round(duration * fps))
-    raise ValueError(f"scene {scene.name!r}: no frame count (give scene.frames, or duration with fps)")
+    count = s.frame_count() if hasattr(s, "frame_count") else getattr(s, "frames", None)
+    if not count:
+        raise ValueError(f"scene {scene.name!r}: no frame count (a realtime clock needs --frames)")
+    return int(count)
 
 
 def attach_solver(player, scene):

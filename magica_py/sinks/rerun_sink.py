@@ -1,10 +1,15 @@
 """The Rerun sink: writes the layout of ``layout.py`` to an .rrd file and/or a live viewer.
 
 Cost (tech-notes §3): the Python overhead per rerun call (~50–90 µs) dominates, the data is
-almost free. So every frame only *copies* its arrays into preallocated column buffers
-(``batch_frames`` rows, float32 for geometry, float64 for replay data), and every
-``batch_frames`` frames one ``send_columns`` call per entity sends them all. Live streams
+almost free. So a frame only *copies* a few whole arrays (joint positions, every cloth's
+particles as one (P, 3) array, collider shapes, replay pose) into float64 batch buffers;
+every ``batch_frames`` frames ``flush`` derives everything else for the whole batch at once
+(bone and edge segments, per-cloth slices, the quality metrics with numba kernels), casts
+geometry to float32 and makes one ``send_columns`` call per entity. Live streams
 (``--spawn`` / ``--connect``) use ``batch_frames=1`` so the viewer follows the simulation.
+
+Cloths are grouped by name without the instance suffix: the 100 ``skirt#i`` of a crowd are
+one ``world/cloths/skirt`` entity set (fewer calls, and a usable entity tree in the viewer).
 
 Files are written to a hidden temporary name next to the target and renamed on a
 successful ``close``; a failed run (``close(success=False)`` or an exception) deletes it, so
