@@ -10,7 +10,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from magica_py.build.proxy import FIXED, MOVE, _starts
-from magica_py.build.topology import bending_pairs, edge_triangles, shear_links
+from magica_py.build.topology import bending_pairs, edge_triangles, key_table, shear_links
 
 CURVE_SAMPLES = 16
 ZERO_DISTANCE = 1e-8
@@ -100,7 +100,7 @@ def distance_links(attribute, parent, pos, neighbor_start, neighbor_count, neigh
         out_src = np.empty(worst, dtype=np.int64)
         out_dst = np.empty(worst, dtype=np.int64)
         k = shear_links(pos, triangles, tri_normals, edge_pairs, et_start, et_count, et_data,
-                        valid, move, src, dst, out_src, out_dst)
+                        valid, move, src, dst, out_src, out_dst, key_table(src.shape[0] + worst))
         shear_src, shear_dst = out_src[:k], out_dst[:k]
     src = np.concatenate([src, shear_src])
     dst = np.concatenate([dst, shear_dst])
@@ -131,7 +131,7 @@ def bending_and_volume(attribute, triangles, pos_local, local_to_world, want_vol
     vol = np.empty((worst, 4), dtype=np.int32)
     vol_rest = np.empty(worst)
     nb, nv = bending_pairs(pos_local, world, triangles, edge_pairs, et_start, et_count, et_data,
-                           valid, move, want_volume, bend, angle, sign, vol, vol_rest)
+                           valid, move, want_volume, bend, angle, sign, vol, vol_rest, key_table(worst))
     return bend[:nb].copy(), angle[:nb].copy(), sign[:nb].copy(), vol[:nv].copy(), vol_rest[:nv].copy()
 
 

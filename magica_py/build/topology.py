@@ -48,6 +48,43 @@ def edge_triangles(triangles: np.ndarray, n: int):
     return edge_pairs, et_start, et_count, et_data, edge_id.reshape(T, 3).astype(np.int32)
 
 
+def key_table(capacity: int) -> np.ndarray:
+    """Empty open-addressing set for non-negative int64 keys holding up to ``capacity`` keys
+    (a plain array: compiles much faster in numba than a typed set)."""
+    size = 16
+    while size < 2 * capacity + 1:
+        size *= 2
+    return np.full(size, -1, dtype=np.int64)
+
+
+@kernel
+def key_insert(table, key):
+    """Insert ``key`` (>= 0); True when it was not there yet."""
+    mask = table.shape[0] - 1
+    h = (key * 2654435761) & mask
+    while True:
+        k = table[h]
+        if k == key:
+            return False
+        if k < 0:
+            table[h] = key
+            return True
+        h = (h + 1) & mask
+
+
+@kernel
+def key_contains(table, key):
+    mask = table.shape[0] - 1
+    h = (key * 2654435761) & mask
+    while True:
+        k = table[h]
+        if k == key:
+            return True
+        if k < 0:
+            return False
+        h = (h + 1) & mask
+
+
 @kernel
 def opposite_vertex(triangles, t, a, b):
     for k in range(3):
@@ -104,10 +141,9 @@ def segment_segment_params(p1, q1, p2, q2):
 
 
 @kernel
-def remove_duplicate_quads(pos, triangles, edge_pairs, et_start, et_count, et_data, max_angle, removed):
-    """Mark in ``removed`` one triangulation of every quad triangulated along both diagonals."""
-    quads = set()
-    quads.add(np.int64(-1))
+def remove_duplicate_quads(pos, triangles, edge_pairs, et_start, et_count, et_data, max_angle, removed, quads):
+    """Mark in ``removed`` one triangulation of every quad triangulated along both diagonals
+    (``quads``: a ``key_table`` sized for every triangle pair)."""
     for e in range(edge_pairs.shape[0]):
         if et_count[e] < 2:
             continue
@@ -136,11 +172,9 @@ def remove_duplicate_quads(pos, triangles, edge_pairs, et_start, et_count, et_da
                 m1 = min(lo[1], hi[0])
                 m2 = max(lo[1], hi[0])
                 key = ((np.int64(lo[0]) * 32768 + m1) * 32768 + m2) * 32768 + hi[1]
-                if key in quads:
+                if not key_insert(quads, key):
                     removed[t1] = True
                     removed[t2] = True
-                else:
-                    quads.add(key)
 
 
 @kernel
@@ -207,16 +241,14 @@ def orient_flood_fill(pos, triangles, normals, tri_edges, edge_pairs, et_start, 
 
 @kernel
 def shear_links(pos, triangles, normals, edge_pairs, et_start, et_count, et_data, valid, move,
-                link_src, link_dst, out_src, out_dst):
+                link_src, link_dst, out_src, out_dst, connected):
     """Shear links p3<->p4 across near-flat, near-square quads (ref §B.9 step 2).
 
     ``link_src/link_dst`` are the existing links; returns how many entries of out_src/out_dst
-    (sized for the worst case) were written."""
+    (sized for the worst case) were written; ``connected`` is a ``key_table`` for all links."""
     n = pos.shape[0]
-    connected = set()
-    connected.add(np.int64(-1))
     for k in range(link_src.shape[0]):
-        connected.add(np.int64(link_src[k]) * n + link_dst[k])
+        key_insert(connected, np.int64(link_src[k]) * n + link_dst[k])
     count = 0
     for e in range(edge_pairs.shape[0]):
         if et_count[e] < 2:
@@ -241,11 +273,9 @@ def shear_links(pos, triangles, normals, edge_pairs, et_start, et_count, et_data
                 ratio = v_length(v_sub(load3(pos, p3), load3(pos, p4))) / edge_len
                 if abs(ratio - 1.0) > SHEAR_SQUARE_TOLERANCE:
                     continue
-                key = np.int64(p3) * n + p4
-                if key in connected:
+                if not key_insert(connected, np.int64(p3) * n + p4):
                     continue
-                connected.add(key)
-                connected.add(np.int64(p4) * n + p3)
+                key_insert(connected, np.int64(p4) * n + p3)
                 out_src[count] = p3
                 out_dst[count] = p4
                 out_src[count + 1] = p4
@@ -256,14 +286,13 @@ def shear_links(pos, triangles, normals, edge_pairs, et_start, et_count, et_data
 
 @kernel
 def bending_pairs(pos, world, triangles, edge_pairs, et_start, et_count, et_data, valid, move,
-                  want_volume, bend_vertices, bend_angle, bend_sign, volume_vertices, volume_rest):
+                  want_volume, bend_vertices, bend_angle, bend_sign, volume_vertices, volume_rest, seen):
     """Bending and volume pairs per edge and triangle pair (ref §D.7 "Build").
 
-    Returns (bending count, volume count) written into the worst-case sized outputs."""
+    Returns (bending count, volume count) written into the worst-case sized outputs; ``seen``
+    is a ``key_table`` for the registered volume vertex sets."""
     nb = 0
     nv = 0
-    seen = set()
-    seen.add(np.int64(-1))
     deg = 180.0 / math.pi
     for e in range(edge_pairs.shape[0]):
         v2 = edge_pairs[e, 0]
@@ -310,9 +339,8 @@ def bending_pairs(pos, world, triangles, edge_pairs, et_start, et_count, et_data
                     hi0 = min(a1, b1)
                     hi1 = max(a1, b1)
                     key = ((np.int64(lo0) * 32768 + min(lo1, hi0)) * 32768 + max(lo1, hi0)) * 32768 + hi1
-                    if key in seen:
+                    if not key_insert(seen, key):
                         continue
-                    seen.add(key)
                     w0 = load3(world, v0)
                     volume_vertices[nv, 0] = v0
                     volume_vertices[nv, 1] = v1

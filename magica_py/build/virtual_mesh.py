@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from magica_py.build.errors import BuildError
-from magica_py.build.topology import edge_triangles, remove_duplicate_quads
+from magica_py.build.topology import edge_triangles, key_table, remove_duplicate_quads
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_rotate, q_to_matrix, store3, v_length, v_normalize
 
@@ -293,8 +293,9 @@ def connect_mesh(cloth_name: str, mode: str, pos: np.ndarray, parent_vertex: np.
     triangles = triangles.astype(np.int32).reshape(-1, 3)
     edge_pairs, et_start, et_count, et_data, _ = edge_triangles(triangles, n)
     removed = np.zeros(triangles.shape[0], dtype=np.bool_)
+    pairs = int((et_count.astype(np.int64) * (et_count - 1) // 2).sum())
     remove_duplicate_quads(pos, triangles, edge_pairs, et_start, et_count, et_data,
-                           math.radians(TRIANGLE_PAIR_ANGLE), removed)
+                           math.radians(TRIANGLE_PAIR_ANGLE), removed, key_table(pairs))
     triangles = triangles[~removed]
     return lines.astype(np.int32).reshape(-1, 2), triangles, root_line
 
