@@ -109,6 +109,8 @@ def main_record_all(argv=None) -> int:
                         help="record only this config (file stem); repeatable")
     parser.add_argument("--frames", type=int, help="override every scene's frame count")
     parser.add_argument("--batch-frames", type=int, help="frames per columnar send (default 64)")
+    parser.add_argument("--warmup", type=int, default=0, metavar="N",
+                        help="first run N frames without output so JIT compilation is not in the timings")
     args = parser.parse_args(argv)
     from magica_py.config import ConfigError, load_scene
 
@@ -128,6 +130,8 @@ def main_record_all(argv=None) -> int:
     results, failures = [], 0
     for path in configs:
         try:
+            if args.warmup > 0:
+                record_scene(load_scene(path), None, frames=args.warmup)
             scene = load_scene(path)
             result = record_scene(scene, out / f"{path.stem}.rrd", frames=args.frames,
                                   batch_frames=args.batch_frames)

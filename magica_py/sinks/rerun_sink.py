@@ -25,6 +25,7 @@ import uuid
 
 import numpy as np
 
+from magica_py.jit import kernel
 from magica_py.sinks import layout as L
 from magica_py.sinks.base import FrameData, SceneStatics
 from magica_py.sinks.metrics import FrameMetrics
@@ -207,8 +208,14 @@ class RerunSink:
         self.replay_event_rows: list[tuple[int, str]] = []
         self._new_buffers()
         parent = np.asarray(statics.joint_parent, np.int64)
-        self.bone_child = np.flatnonzero(parent >= 0)
-        self.bone_parent = parent[self.bone_child]
+        # links between two cloth particles are drawn as the cloth's edges: not again as bones
+        cloth_node = np.zeros(parent.size, bool)
+        for c in statics.cloths:
+            cloth_node[np.asarray(c.transform_index, np.int64)] = True
+        child = np.flatnonzero(parent >= 0)
+        child = child[~(cloth_node[child] & cloth_node[parent[child]])]
+        self.bone_child = child
+        self.bone_parent = parent[child]
         self.groups = cloth_groups(statics.cloths)
         self.particle_count = sum(c.particle_count for c in statics.cloths)
         self.metrics = FrameMetrics(statics.cloths,
@@ -318,10 +325,8 @@ class RerunSink:
     def _send(self, entity: str, archetype: str, count: int, **components) -> None:
         """One send_columns call: components are (n, count, ...) arrays for n frames."""
         rr, n = self.rr, self.row
-        flat = {k: np.ascontiguousarray(v, dtype=np.float32).reshape((n * count,) + v.shape[2:])
+        flat = {k: v if k == "strips" else np.ascontiguousarray(v, dtype=np.float32).reshape((n * count,) + v.shape[2:])
                 for k, v in components.items()}
-        if "strips" in flat:
-            flat["strips"] = _segment_array(flat["strips"])
         columns = getattr(rr, archetype).columns(**flat).partition([count] * n)
         self.rec.send_columns(entity, indexes=self._index(), columns=columns)
 
@@ -340,8 +345,8 @@ class RerunSink:
             joints = a["joints"]
             self._send(L.RIG_JOINTS, "Points3D", joints.shape[1], positions=joints)
             if self.bone_child.size:
-                strips = np.stack([joints[:, self.bone_parent], joints[:, self.bone_child]], axis=2)
-                self._send(L.RIG_BONES, "LineStrips3D", self.bone_child.size, strips=strips)
+                self._send(L.RIG_BONES, "LineStrips3D", self.bone_child.size,
+                           strips=_segments(joints, self.bone_parent, self.bone_child))
         x = a.get("positions")
         if x is not None:
             for g in self.groups:
@@ -349,13 +354,13 @@ class RerunSink:
                 if tg.particles:
                     self._send(L.cloth_path(g.name, "particles"), "Points3D", g.count, positions=gx)
                 if tg.edges and len(g.edges):
-                    strips = np.stack([x[:, g.edges[:, 0]], x[:, g.edges[:, 1]]], axis=2)
-                    self._send(L.cloth_path(g.name, "edges"), "LineStrips3D", len(g.edges), strips=strips)
+                    self._send(L.cloth_path(g.name, "edges"), "LineStrips3D", len(g.edges),
+                               strips=_segments(x, g.edges[:, 0], g.edges[:, 1]))
                 if tg.triangles and len(g.triangles):
                     self._send(L.cloth_path(g.name, "triangles"), "Mesh3D", g.count, vertex_positions=gx)
                 if tg.baselines and len(g.baselines):
-                    strips = np.stack([x[:, g.baselines[:, 0]], x[:, g.baselines[:, 1]]], axis=2)
-                    self._send(L.cloth_path(g.name, "baselines"), "LineStrips3D", len(g.baselines), strips=strips)
+                    self._send(L.cloth_path(g.name, "baselines"), "LineStrips3D", len(g.baselines),
+                               strips=_segments(x, g.baselines[:, 0], g.baselines[:, 1]))
                 if tg.base_pose and "base_positions" in a:
                     self._send(L.cloth_path(g.name, "base_pose"), "Points3D", g.count,
                                positions=g.take(a["base_positions"]))
@@ -448,18 +453,34 @@ class RerunSink:
         return False
 
 
-def _segment_array(segments: np.ndarray):
-    """(k, 2, 3) float32 segments -> the arrow array of k two-point line strips.
+@kernel
+def gather_segments(x, start, end, out):
+    """out[(b*S + s)*2 + {0,1}] = float32 x[b, start[s]] and x[b, end[s]]: segments of a batch."""
+    count = start.shape[0]
+    for b in range(x.shape[0]):
+        for k in range(count):
+            row = (b * count + k) * 2
+            i, j = start[k], end[k]
+            for c in range(3):
+                out[row, c] = np.float32(x[b, i, c])
+                out[row + 1, c] = np.float32(x[b, j, c])
+
+
+def _segments(x: np.ndarray, start: np.ndarray, end: np.ndarray):
+    """(B, P, 3) positions and (S,) endpoint indices -> the arrow array of B*S two-point strips.
 
     rerun's numpy path for LineStrips3D computes the list offsets in a Python loop (about
     1.5 s for 500k strips); building the arrow array directly takes milliseconds."""
     import pyarrow as pa
     from rerun.components import LineStrip3DBatch
 
+    points = np.empty((x.shape[0] * start.size * 2, 3), np.float32)
+    gather_segments(np.ascontiguousarray(x, np.float64), np.ascontiguousarray(start, np.int64),
+                    np.ascontiguousarray(end, np.int64), points)
     list_type = LineStrip3DBatch._ARROW_DATATYPE
-    points = pa.FixedSizeListArray.from_arrays(pa.array(segments.reshape(-1)), type=list_type.value_type)
-    offsets = pa.array(np.arange(0, 2 * segments.shape[0] + 1, 2, dtype=np.int32))
-    return pa.ListArray.from_arrays(offsets, points, type=list_type)
+    values = pa.FixedSizeListArray.from_arrays(pa.array(points.reshape(-1)), type=list_type.value_type)
+    offsets = pa.array(np.arange(0, points.shape[0] + 1, 2, dtype=np.int32))
+    return pa.ListArray.from_arrays(offsets, values, type=list_type)
 
 
 def _event_text(payload) -> str:
