@@ -32,7 +32,7 @@ def test_cached_instances_equal_fresh_builds_array_for_array():
     cached = [build_cloth(h, s, cache) for s in specs]
     assert (cache.misses, cache.hits) == (1, 3)
     for spec, m in zip(specs, cached):
-        fresh = build_cloth(h, spec)
+        fresh = build_cloth(h, spec, cache=None)
         assert m.name == fresh.name and m.bone_names == fresh.bone_names
         assert m.topology_key == fresh.topology_key
         for name, value in vars(fresh).items():
@@ -58,3 +58,18 @@ def test_cache_misses_when_parameters_or_attributes_differ():
     m = build_cloth(h, pinned, cache)
     assert (cache.misses, cache.hits) == (3, 0)
     assert m.attribute[list(m.bone_names).index("c2s0_1")] & 0x03 == 0x01  # fixed, not move
+
+
+def test_default_cache_is_transparent_and_bounded():
+    from magica_py.build import DEFAULT_CACHE, ModelCache as MC
+
+    h, specs = crowd(3)
+    before = DEFAULT_CACHE.hits
+    models = [build_cloth(h, s) for s in specs]
+    assert DEFAULT_CACHE.hits - before >= 2
+    assert [m.name for m in models] == ["skirt0", "skirt1", "skirt2"]
+    small = MC(max_entries=1)
+    build_cloth(h, specs[0], small)
+    other = Spec("tail", specs[0].root_bones, "line", parameters=specs[0].parameters, colliders=(0,))
+    build_cloth(h, other, small)
+    assert len(small.models) == 1 and small.misses == 2

@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+from collections import OrderedDict
 from collections.abc import Hashable
 from types import MappingProxyType
 
@@ -50,19 +51,43 @@ class ModelCache:
 
     Two cloths share an entry when everything the build reads is bit-identical: the bones'
     pose chained below the component, the tree, root order, mode, attributes (per vertex),
-    parameters, colliders and the component's scale.  A hit costs the bone collection plus
-    the per-instance fields (transforms, skin bind poses, world-space rest volumes), and gives
-    exactly the arrays a fresh build would give.  Parameters that are not hashable disable
-    the cache for that cloth."""
+    parameters, collider count and the component's scale.  A hit costs the bone collection
+    plus the per-instance fields (transforms, colliders, skin bind poses, world-space rest
+    volumes) and gives exactly the arrays a fresh build would give (tests/test_build_cache.py).
+    Parameters that are not hashable disable the cache for that cloth.  At most
+    ``max_entries`` models are kept (least recently used dropped first)."""
 
-    def __init__(self):
-        self.models: dict[str, ClothModel] = {}
+    def __init__(self, max_entries: int = 64):
+        self.models: OrderedDict[str, ClothModel] = OrderedDict()
+        self.max_entries = max_entries
         self.hits = 0
         self.misses = 0
 
+    def get(self, key):
+        model = self.models.get(key)
+        if model is not None:
+            self.models.move_to_end(key)
+            self.hits += 1
+        return model
 
-def build_cloth(hierarchy, spec, cache: ModelCache | None = None) -> ClothModel:
-    """Build the read-only model of one BoneCloth from the hierarchy's current (rest) pose."""
+    def put(self, key, model) -> None:
+        self.misses += 1
+        self.models[key] = model
+        while len(self.models) > self.max_entries:
+            self.models.popitem(last=False)
+
+
+DEFAULT_CACHE = ModelCache()
+_DEFAULT = object()
+
+
+def build_cloth(hierarchy, spec, cache=_DEFAULT) -> ClothModel:
+    """Build the read-only model of one BoneCloth from the hierarchy's current (rest) pose.
+
+    ``cache``: a ``ModelCache`` (default: the module's ``DEFAULT_CACHE``), or None to always
+    build from scratch."""
+    if cache is _DEFAULT:
+        cache = DEFAULT_CACHE
     name = str(getattr(spec, "name", "cloth"))
     mode = str(getattr(spec, "connection_mode", "line"))
     if mode not in virtual_mesh.CONNECTION_MODES:
@@ -71,13 +96,12 @@ def build_cloth(hierarchy, spec, cache: ModelCache | None = None) -> ClothModel:
     root_names = [setup.bone_names[v] for v in setup.root_vertices]
     _check_limit(name, "bones (proxy vertices)", setup.count, root_names)
     key = _cache_key(setup, spec, mode) if cache is not None else None
-    if key is not None and key in cache.models:
-        cache.hits += 1
-        return _instance_of(cache.models[key], setup, spec)
+    cached = cache.get(key) if key is not None else None
+    if cached is not None:
+        return _instance_of(cached, setup, spec)
     model = _build(setup, spec, name, mode, root_names)
     if key is not None:
-        cache.misses += 1
-        cache.models[key] = model
+        cache.put(key, model)
     return model
 
 
@@ -177,6 +201,9 @@ def _build(setup, spec, name, mode, root_names) -> ClothModel:
              "angle_restoration.use is off" if not use_restoration else "no baselines")
     _feature(features, skipped, "angle_limit", use_limit and len(bl_start) > 0,
              "angle_limit.use is off" if not use_limit else "no baselines")
+    _feature(features, skipped, "angle", features["angle_restoration"] or features["angle_limit"],
+             "angle_restoration.use and angle_limit.use are off" if not (use_restoration or use_limit)
+             else "no baselines")
     stiffness = float(constraints.parameter(params, "triangle_bending.stiffness"))
     empty4 = np.zeros((0, 4), dtype=np.int32)
     bend = (empty4, np.zeros(0), np.zeros(0), empty4, np.zeros(0))
@@ -208,7 +235,10 @@ def _build(setup, spec, name, mode, root_names) -> ClothModel:
 
     g = np.asarray(constraints.parameter(params, "gravity_direction"), dtype=np.float64)
     g_len = float(np.linalg.norm(g))
-    gravity_dir = g / g_len if (len(center_fixed) and g_len > 1e-8) else np.array([0.0, -1.0, 0.0])
+    if not len(center_fixed):
+        gravity_dir = np.array([0.0, -1.0, 0.0])  # ref §C.2: constant without a center
+    else:  # the world gravity direction taken as a center-local vector (zero if too short)
+        gravity_dir = g / g_len if g_len > 1e-8 else np.zeros(3)
 
     arrays = dict(
         attribute=attribute, parent=parent, root_index=root_index, root_length=root_length,
