@@ -30,7 +30,7 @@ class ClothModel:
     root_length: np.ndarray            # (N,) float64 m arc length to root_index (cloth-local)
     child_start: np.ndarray            # (N,) int32 CSR into child_data
     child_count: np.ndarray            # (N,) int32
-    child_data: np.ndarray             # (N-?,) int32 children, increasing vertex index
+    child_data: np.ndarray             # (N - roots,) int32 children, increasing vertex index
     depth: np.ndarray                  # (N,) float64 normalised arc length from the root, [0, 1]
     local_position: np.ndarray         # (N,3) float64 m cloth-local build position
     local_normal: np.ndarray           # (N,3) unit cloth-local normal (bone +Y, or triangle normal)
@@ -140,12 +140,20 @@ def describe(model: ClothModel) -> list[str]:
         "tether": f"{int(np.count_nonzero(model.root_index >= 0))} particles",
         "bending": f"{len(model.bend_vertices)} pairs",
         "volume": f"{len(model.volume_vertices)} pairs",
-        "collision_point": f"{len(model.collider_index)} colliders",
-        "collision_edge": f"{len(model.collider_index)} colliders, {len(model.edges)} edges",
+        "collision_point": _plural(len(model.collider_index), "collider"),
+        "collision_edge": f"{_plural(len(model.collider_index), 'collider')}, {len(model.edges)} edges",
+        "angle": " + ".join(k.split("_")[1] for k in ("angle_restoration", "angle_limit")
+                            if model.features.get(k)) + f" over {len(model.baseline_start)} baselines",
     }
+    parts = ("angle_restoration", "angle_limit")  # summarised by "angle"
     for feature, built in model.features.items():
-        if built:
+        if built and feature not in parts:
             out.append(f"  built   {feature}" + (f": {counts[feature]}" if feature in counts else ""))
     for feature, reason in model.skipped.items():
-        out.append(f"  skipped {feature}: {reason}")
+        if feature == "angle" or feature not in parts or model.features.get("angle"):
+            out.append(f"  skipped {feature}: {reason}")
     return out
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}" + ("" if n == 1 else "s")
