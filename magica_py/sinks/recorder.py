@@ -46,17 +46,21 @@ class SinkOptions:
 
 
 def driven_nodes(scene, player) -> np.ndarray:
-    """Transforms whose local pose can change before LATE_UPDATE: every node the cloth systems
-    do not restore (animation may drive any of them; teleports move roots), plus the restored
-    ones that animation targets. Recording all of them (float64) makes resim exact without
-    knowing the drivers' internals."""
+    """Transforms whose local pose can change before LATE_UPDATE, recorded for ``resim``.
+
+    When the scene's animation lists what it writes (``Animation.driven``: driver targets and
+    teleport targets, scene/animation.py) that list is exact: every other node keeps its rest
+    local pose, or is a cloth bone that RESTORE resets and the solver rewrites. Otherwise
+    (another animation source) every node the cloth systems do not restore is recorded."""
+    animation = getattr(scene, "animation", None)
+    for name in ("driven", "targets"):
+        listed = getattr(animation, name, None)
+        if listed is not None:
+            return np.unique(np.asarray(listed, dtype=np.int64).reshape(-1))
     n = scene.hierarchy.count
     restored = np.asarray(getattr(player, "restored_bones", np.zeros(0)), dtype=np.int64)
     mask = np.ones(n, bool)
     mask[restored] = False
-    targets = getattr(getattr(scene, "animation", None), "targets", None)
-    if targets is not None:
-        mask[np.asarray(list(targets), dtype=np.int64)] = True
     return np.flatnonzero(mask).astype(np.int64)
 
 

@@ -192,16 +192,16 @@ class RerunSink:
         if self.final_path is not None:
             self.temp_path = self.final_path.with_name(f".{self.final_path.stem}.{os.getpid()}.partial.rrd")
             sinks.append(rr.FileSink(str(self.temp_path)))
-        if spawn:
-            rr.spawn(connect=False)
-            sinks.append(rr.GrpcSink())
-        if connect is not None:
-            sinks.append(rr.GrpcSink(grpc_url(connect)))
         try:
+            if spawn:   # the viewer bundled with rerun-sdk; needs a display (tech-notes §6)
+                rr.spawn(connect=False)
+                sinks.append(rr.GrpcSink())
+            if connect is not None:
+                sinks.append(rr.GrpcSink(grpc_url(connect)))
             self.rec.set_sinks(*sinks, default_blueprint=default_blueprint())
         except Exception as exc:  # noqa: BLE001 - rerun raises plain RuntimeError
             self._discard()
-            raise OutputError(f"cannot open the recording: {exc}") from exc
+            raise OutputError(f"cannot open the recording output: {exc}") from exc
         self.closed = False
         self.frames = 0
         self.scalar_rows: dict[str, list[tuple[int, float]]] = {}
