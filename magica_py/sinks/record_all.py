@@ -24,13 +24,14 @@ class RecordResult:
     path: pathlib.Path | None
     frames: int
     wall_seconds: float        # whole run including the sink and the file close
-    sink_seconds: float        # time inside the sink
+    sink_seconds: float        # time inside the sink (copying, sending, closing the file)
+    import_seconds: float      # one-time import of rerun (not in sink_seconds)
     particles: int
     bytes: int
 
     @property
     def sim_seconds(self) -> float:
-        return self.wall_seconds - self.sink_seconds
+        return self.wall_seconds - self.sink_seconds - self.import_seconds
 
     @property
     def sink_ratio(self) -> float:
@@ -89,6 +90,7 @@ def record_scene(scene, rrd, *, frames=None, batch_frames=None, spawn=False, con
     out = recorder.output_path
     particles = sum(t.particle_count for t in recorder.provider.cloth_topologies())
     return RecordResult(name=scene.name, path=out, frames=n, wall_seconds=wall, sink_seconds=recorder.seconds,
+                        import_seconds=recorder.import_seconds,
                         particles=particles, bytes=os.path.getsize(out) if out is not None and out.exists() else 0)
 
 
@@ -142,7 +144,8 @@ def main_record_all(argv=None) -> int:
         results.append(result)
         print(f"{path.stem:<20} {result.frames:>6} frames {result.particles:>7} particles  "
               f"sim {result.sim_seconds:7.2f} s  sink {result.sink_seconds:6.2f} s "
-              f"({100 * result.sink_ratio:5.1f} % of sim)  {result.bytes / 1e6:7.1f} MB -> {result.path}",
+              f"({100 * result.sink_ratio:5.1f} % of sim, {1000 * result.sink_seconds / max(result.frames, 1):.2f} ms/frame)"
+              f"  {result.bytes / 1e6:7.1f} MB -> {result.path}",
               flush=True)
     return 1 if failures else 0
 

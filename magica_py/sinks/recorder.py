@@ -147,6 +147,11 @@ class Recorder:
         return float(getattr(self.sink, "seconds", 0.0))
 
     @property
+    def import_seconds(self) -> float:
+        """One-time cost of importing rerun (not in ``seconds``)."""
+        return float(getattr(self.sink, "import_seconds", 0.0))
+
+    @property
     def output_path(self):
         return getattr(self.sink, "final_path", None)
 

@@ -173,15 +173,18 @@ class RerunSink:
     def __init__(self, statics: SceneStatics, *, rrd_path=None, spawn: bool = False, connect: str | None = None,
                  batch_frames: int | None = None, recording_id: str | None = None,
                  collider_kind: np.ndarray | None = None, collider_slot: np.ndarray | None = None):
+        t_import = time.perf_counter()
         import rerun as rr
+        import rerun.blueprint  # noqa: F401 - one-time import cost, kept out of `seconds`
 
         if rrd_path is None and not spawn and connect is None:
             raise OutputError("RerunSink needs at least one of rrd_path, spawn, connect")
         self.rr = rr
         self.statics = statics
         self.toggles = statics.toggles
-        self.seconds = 0.0                      # wall time spent in this sink (cost figure)
         t0 = time.perf_counter()
+        self.import_seconds = t0 - t_import     # importing rerun (once per process)
+        self.seconds = 0.0                      # wall time spent in this sink (cost figure)
         self.final_path = check_output_path(rrd_path) if rrd_path is not None else None
         self.temp_path = None
         live = spawn or connect is not None
