@@ -4,7 +4,9 @@ Commands (``magica-py COMMAND --help`` for each):
 
 * ``run SCENE.yaml [--frames N] [--rrd PATH] [--no-rrd] [--set K=V ...] [--spawn]
   [--connect ADDR] [--quiet]``: build the scene, the player (``default_schedule``), the
-  cloth system (``magica_py.solver.attach(player, scene)`` when the solver provides it) and
+  cloth system (``magica_py.solver.attach(player, scene)`` when the solver provides it, else
+  ``solver.system.ClothSystem(hierarchy, cloths, colliders, settings).attach(player, scene)``
+  as ``magica-py record-all`` does) and
   the sink (``magica_py.sinks.attach(player, scene, options)``), run, print a summary;
 * ``validate SCENE.yaml [SCENE.yaml ...] [--set ...]``: check everything (and build the cloths when
   ``magica_py.build`` is present), print ``OK`` or every problem;
@@ -93,6 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-rrd", action="store_true", help="do not write a recording file")
     run.add_argument("--spawn", action="store_true", help="stream to a new Rerun viewer")
     run.add_argument("--connect", metavar="ADDR", help="stream to a running Rerun viewer (host:port or URL)")
+    run.add_argument("--no-simulation", action="store_true",
+                     help="animate only: do not attach the cloth solver (a quick preview of the motion)")
     run.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no summary")
 
     validate = sub.add_parser("validate", help="check scene files and report every problem",
@@ -235,13 +239,14 @@ def cmd_run(args) -> int:
     scene = load_scene(args.scene, args.overrides)
     frames = args.frames if args.frames is not None else scene.settings.frame_count()
     player = Player.for_scene(scene)  # default_schedule(scene) + the scene's time source
-    notes = []
-    system = _attach_solver(player, scene, notes)
-    solver_attached = system is not None
     created_dir = _ensure_output_folder(scene, args)
     recorder = None
     ok = False
     try:
+        _check_output_path(scene, args)  # fail before the (slow to compile) solver is built
+        notes: list[str] = []
+        system = None if args.no_simulation else _attach_solver(player, scene, notes)
+        solver_attached = system is not None
         recorder = _attach_sink(player, scene, args, notes)
         if not args.quiet:
             for note in notes:
@@ -271,10 +276,14 @@ def _attach_solver(player, scene, notes: list[str]):
         notes.append(f"cloth solver unavailable ({exc}); cloths are not simulated")
         return None
     attach = getattr(solver, "attach", None)
-    if attach is None:
-        notes.append("this installation's magica_py.solver has no attach(); cloths are not simulated "
-                     "(bones follow the animation only)")
-        return None
+    if attach is None:  # the solver package without its hook: use its ClothSystem directly
+        try:
+            from magica_py.solver.system import ClothSystem
+        except ImportError:
+            notes.append("this installation's magica_py.solver has no attach() and no ClothSystem; cloths are "
+                         "not simulated (bones follow the animation only)")
+            return None
+        return ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player, scene)
     system = attach(player, scene)
     return system if system is not None else True
 
@@ -294,6 +303,20 @@ def _attach_sink(player, scene, args, notes: list[str]):
     options = {"rrd": args.rrd, "no_rrd": bool(args.no_rrd), "spawn": bool(args.spawn), "connect": args.connect}
     options_type = getattr(sinks, "SinkOptions", None)
     return attach(player, scene, options_type(**options) if options_type else options)
+
+
+def _check_output_path(scene, args) -> None:
+    """The sink's own path check (``sinks.rerun_sink.check_output_path``), run early."""
+    if args.no_rrd:
+        return
+    path = args.rrd or scene.output.rrd
+    if path is None:
+        return
+    try:
+        from magica_py.sinks.rerun_sink import check_output_path
+    except ImportError:
+        return  # the sink checks again when it is attached
+    check_output_path(path, "--rrd" if args.rrd else "output.rrd")
 
 
 def _ensure_output_folder(scene, args):
@@ -420,7 +443,7 @@ def _summary_line(scene, stats: RunStats, solver_attached: bool, output) -> str:
     elif not scene.cloths:
         steps = "no cloths"
     elif not solver_attached:
-        steps = "no simulation steps (no cloth solver)"
+        steps = "no simulation steps (cloth solver not attached)"
     else:
         steps = "simulation steps not reported"
     where = ""

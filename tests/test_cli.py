@@ -99,7 +99,7 @@ def test_contradicting_output_flags(scene_file, tmp_path, capsys):
 
 
 def test_run_without_recording_prints_summary(scene_file, tmp_path, capsys):
-    assert cli.main(["run", str(scene_file), "--no-rrd", "--frames", "3"]) == 0
+    assert cli.main(["run", str(scene_file), "--no-rrd", "--frames", "3", "--no-simulation"]) == 0
     out = capsys.readouterr().out
     assert out.startswith("cli_test: 3 frames, ")
     assert "ms/frame" in out
@@ -107,7 +107,7 @@ def test_run_without_recording_prints_summary(scene_file, tmp_path, capsys):
 
 
 def test_run_writes_the_scene_recording_and_creates_its_folder(scene_file, tmp_path, capsys):
-    assert cli.main(["run", str(scene_file), "--quiet"]) == 0
+    assert cli.main(["run", str(scene_file), "--quiet", "--no-simulation"]) == 0
     assert capsys.readouterr().out == ""
     files = sorted(p.name for p in (tmp_path / "out").iterdir())
     assert files == ["cli_test.rrd"]  # no temporary file left behind
@@ -128,7 +128,7 @@ def test_failed_run_leaves_no_partial_recording(scene_file, tmp_path, monkeypatc
 
     monkeypatch.setattr(Player, "step", failing_step)
     target = tmp_path / "partial.rrd"
-    assert cli.main(["run", str(scene_file), "--rrd", str(target)]) == 1
+    assert cli.main(["run", str(scene_file), "--rrd", str(target), "--no-simulation"]) == 1
     err = capsys.readouterr().err
     assert "simulated crash in frame 3" in err  # an internal error keeps its traceback
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.yaml"]
@@ -194,7 +194,7 @@ def test_summary_counts_simulation_steps():
     stats.particle_steps = 720.0
     assert "90 simulation steps (720 particle-steps)" in cli._summary_line(scene, stats, True, None)
     stats.steps_known = False
-    assert "no simulation steps (no cloth solver)" in cli._summary_line(scene, stats, False, None)
+    assert "no simulation steps (cloth solver not attached)" in cli._summary_line(scene, stats, False, None)
     assert "no cloths" in cli._summary_line(types.SimpleNamespace(name="s", cloths=[]), stats, False, None)
 
 
