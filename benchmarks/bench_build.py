@@ -59,11 +59,13 @@ def character_specs(h: TransformHierarchy, prefix: str, strands=40):
 
 
 def best_of(fn, repeats):
-    best = math.inf
+    """Best wall time and the CPU time of that run (the machine may be shared: CPU time
+    shows the cost without the waiting)."""
+    best = (math.inf, math.inf)
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         fn()
-        best = min(best, time.perf_counter() - t0)
+        best = min(best, (time.perf_counter() - t0, time.process_time() - c0))
     return best
 
 
@@ -71,8 +73,9 @@ def main():
     h1 = TransformHierarchy(character_bones("", 0.0))
     skirt = character_specs(h1, "")[0]
     build_cloth(h1, skirt)  # JIT warm-up
-    t_one = best_of(lambda: build_cloth(h1, skirt), 7)
-    print(f"1,000-bone skirt (40x25, sequential_loop_mesh): {t_one * 1e3:.1f} ms (target < 50 ms)")
+    t_one, c_one = best_of(lambda: build_cloth(h1, skirt, cache=None), 7)
+    print(f"1,000-bone skirt (40x25, sequential_loop_mesh): {t_one * 1e3:.1f} ms wall, "
+          f"{c_one * 1e3:.1f} ms CPU (target < 50 ms)")
 
     bones = []
     for c in range(100):
@@ -83,15 +86,16 @@ def main():
     def build_crowd(cache):
         registry = TeamRegistry()
         for spec in specs:
-            registry.add(build_cloth(crowd, spec, ModelCache() if cache is None else cache))
+            registry.add(build_cloth(crowd, spec, cache))
         return registry
 
     bones_per_character = 40 * 25 + 2 * 8 + 12
-    t_fresh = best_of(lambda: build_crowd(None), 2)
+    t_fresh, c_fresh = best_of(lambda: build_crowd(None), 2)
     print(f"100 characters ({len(specs)} cloths, {100 * bones_per_character} cloth bones), every cloth "
-          f"built from scratch and registered: {t_fresh:.2f} s (target < 2 s)")
-    t_cached = best_of(lambda: build_crowd(ModelCache()), 3)
-    print(f"same crowd with a ModelCache (instanced rigs share one build): {t_cached:.2f} s (target < 2 s)")
+          f"built from scratch and registered: {t_fresh:.2f} s wall, {c_fresh:.2f} s CPU (target < 2 s)")
+    t_cached, c_cached = best_of(lambda: build_crowd(ModelCache()), 3)
+    print(f"same crowd with a ModelCache (instanced rigs share one build): {t_cached:.2f} s wall, "
+          f"{c_cached:.2f} s CPU (target < 2 s)")
 
 
 if __name__ == "__main__":
