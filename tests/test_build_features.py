@@ -164,3 +164,33 @@ def test_bone_attribute_overrides_make_invalid_and_extra_fixed_bones():
     # baseline starts at the fixed c1, the invalid tip is not followed
     assert m.baseline_data.tolist() == [1, 2]
     assert m.center_fixed.tolist() == [1, 3]  # c1 has a Move neighbour; c3 is not Move and touches c2
+
+
+def test_cloth_local_pose_equals_the_world_to_local_transform_of_the_reference():
+    # ref §B.2: localPos = W2L·P, localNormal = normalize(W2L·(R·up)); our chained pose must agree
+    rng = np.random.default_rng(11)
+
+    def q(v):
+        v = np.asarray(v, dtype=float)
+        return tuple(v / np.linalg.norm(v))
+
+    bones = [BoneSpec("root", None, (0.3, 1.2, -0.4), q(rng.normal(size=4))),
+             BoneSpec("body", "root", (0.1, 0.2, 0.3), q(rng.normal(size=4)), (1.5, 0.7, 1.1))]
+    for s in range(3):
+        parent = "body"
+        for k in range(4):
+            bones.append(BoneSpec(f"s{s}_{k}", parent, tuple(rng.normal(0, 0.1, 3)), q(rng.normal(size=4))))
+            parent = f"s{s}_{k}"
+    h = TransformHierarchy(bones)
+    m = build_cloth(h, Spec("c", tuple(h.index(f"s{s}_0") for s in range(3))), cache=None)
+    assert m.component_transform == h.index("body")
+    w2l = m.init_render_world_to_local
+    world = h.world_position[m.transform_index]
+    np.testing.assert_allclose(m.local_position, world @ w2l[:3, :3].T + w2l[:3, 3], atol=1e-12)
+    for i, t in enumerate(m.transform_index):
+        up = h.transform_direction(t, (0, 1, 0))
+        fw = h.transform_direction(t, (0, 0, 1))
+        n = w2l[:3, :3] @ up
+        f = w2l[:3, :3] @ fw
+        np.testing.assert_allclose(m.local_normal[i], n / np.linalg.norm(n), atol=1e-12)
+        np.testing.assert_allclose(m.local_tangent[i], f / np.linalg.norm(f), atol=1e-12)
