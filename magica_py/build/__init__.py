@@ -15,7 +15,18 @@ Deviations from the reference, deliberate and documented:
   reference would keep a zero-area triangle whose normal is undefined;
 * a root listed below another root, a root without children, a zero scale and more than
   127 bones on one hierarchy level (mesh modes) raise ``BuildError`` instead of being
-  silently dropped or overflowing a fixed-size list; links beyond 31 per vertex are dropped.
+  silently dropped or overflowing a fixed-size list; links beyond 31 per vertex are dropped;
+* cloth-local positions and bone axes are chained from the local poses below the component
+  instead of ``W2L · P`` (equal up to rounding, tests/test_build_features.py) so that
+  identical rigs give bit-identical models wherever they stand (crowds share a
+  ``topology_key`` and the ``ModelCache``); the world path is used when the component is
+  not above the roots;
+* ``MathUtility.TriangleAngle`` is taken as the fold angle of the pair (0 when flat), and
+  the stable orders the reference leaves to C# hash sets are insertion orders.
+
+Modules: ``render_setup`` (§B.1), ``virtual_mesh`` (§B.2-B.3), ``topology`` (edge-triangle
+maps and the triangle-pair kernels), ``proxy`` (§B.4-B.8), ``constraints`` (§B.9, §D.7,
+§0.3), ``model`` (``ClothModel``, ``describe``), ``teams`` (``TeamRegistry``).
 """
 from __future__ import annotations
 
