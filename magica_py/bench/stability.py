@@ -43,7 +43,7 @@ class HardCase:
     scale: float = 1.0                # scene scale (rest speed, penetration and bounds scale with it)
     raw_parameters: dict = field(default_factory=dict)
     time_scale_actions: tuple = ()    # ((unscaled time, Unity timeScale), ...) applied by the harness
-    short_duration: float = 2.0       # s, for the CI test
+    short_duration: float | None = None  # s, for the CI test (None: the whole scene)
     clock: str = "unscaled"           # "scaled": disturbance_end, settling and speeds in game time
     note: str = ""
 
@@ -57,31 +57,37 @@ class HardCase:
 
 
 CASES: tuple[HardCase, ...] = (
-    HardCase("teleport_100m_reset", "teleport_100m_reset.yaml", 1.0, 1.0, short_duration=2.0),
-    HardCase("teleport_100m_off", "teleport_100m_off.yaml", 1.0, 3.0, max_stretch=2.0, short_duration=2.0,
-             note="no detection: the 100 m jump drags the chain; world inertia 1 and the 5 m/s movement "
-                  "limit decide how far it swings"),
-    HardCase("spin_180", "spin_180.yaml", 1.0, 3.0, short_duration=2.0),
-    HardCase("hitch", "hitch.yaml", 1.5, 3.0, short_duration=2.0),
-    HardCase("random_frame_times", "random_frame_times.yaml", 3.0, 3.0, short_duration=2.0),
-    HardCase("time_scale", "time_scale.yaml", 0.5, 4.5, time_scale_actions=((0.25, 0.0), (0.75, 1.0)),
-             short_duration=12.0, clock="scaled",
+    # name, scene, disturbance_end (s), settle_within (s, measured + ~30 %)
+    HardCase("teleport_100m_reset", "teleport_100m_reset.yaml", 1.0, 7.0,
+             note="Reset snaps to the build pose, which is not the equilibrium under gravity: the chain "
+                  "then swings down like at the start"),
+    HardCase("teleport_100m_off", "teleport_100m_off.yaml", 1.0, 7.0,
+             note="no detection: the 5 m/s movement speed limit turns all but 5 m/s of the jump into a "
+                  "rigid shift, so the chain barely notices"),
+    HardCase("spin_180", "spin_180.yaml", 1.0, 6.0),
+    HardCase("hitch", "hitch.yaml", 1.5, 7.0),
+    HardCase("random_frame_times", "random_frame_times.yaml", 3.0, 7.0),
+    HardCase("time_scale", "time_scale.yaml", 0.5, 7.0, time_scale_actions=((0.25, 0.0), (0.75, 1.0)),
+             clock="scaled",
              note="game time: paused 0.25-0.75 s (unscaled), x0.1 from 1.0 s of game time on; settling "
                   "and speeds are measured in game time"),
-    HardCase("chain_200", "chain_200.yaml", 0.5, 3.5, short_duration=1.0),
-    HardCase("chains_1000", "chains_1000.yaml", 0.5, 2.5, short_duration=0.5),
-    HardCase("zero_length_bones", "zero_length_bones.yaml", 0.5, 3.5, short_duration=1.5),
-    HardCase("scale_0_01", "scale_0_01.yaml", 0.5, 3.5, scale=0.01, short_duration=1.5),
-    HardCase("scale_100", "scale_100.yaml", 0.5, 3.5, scale=100.0, max_speed=1000.0, short_duration=1.5),
-    HardCase("engulfing_collider", "engulfing_collider.yaml", 1.0, 3.0, short_duration=2.0),
-    HardCase("extreme_parameters", "extreme_parameters.yaml", 0.5, 3.5, max_speed=50.0, short_duration=1.5,
+    HardCase("chain_200", "chain_200.yaml", 0.5, 40.0, max_stretch=1.4, short_duration=2.0,
+             note="finding: edges near the tip stretch by up to 110 % while the 4 m chain swings, and the "
+                  "chain still stretches 5 % on average (11 % max) when hanging; MagicaCloth2's soft "
+                  "distance constraint (ref Appendix 4)"),
+    HardCase("chains_1000", "chains_1000.yaml", 0.5, 6.0, short_duration=1.0),
+    HardCase("zero_length_bones", "zero_length_bones.yaml", 0.5, 3.5),
+    HardCase("scale_0_01", "scale_0_01.yaml", 0.5, 1.0, scale=0.01),
+    HardCase("scale_100", "scale_100.yaml", 0.5, 3.5, scale=100.0, max_speed=1000.0),
+    HardCase("engulfing_collider", "engulfing_collider.yaml", 1.0, 6.0),
+    HardCase("extreme_parameters", "extreme_parameters.yaml", 0.5, 3.5, max_speed=50.0,
              note="damping 0: only the constraints' velocity attenuation takes energy out"),
-    HardCase("extreme_gravity_100", "extreme_parameters.yaml", 0.5, 3.5, max_speed=100.0, max_stretch=2.0,
-             raw_parameters={"gravity": 100.0}, short_duration=1.5,
+    HardCase("extreme_gravity_100", "extreme_parameters.yaml", 0.5, 2.0, max_speed=100.0, max_stretch=2.0,
+             raw_parameters={"gravity": 100.0},
              note="gravity 100 m/s^2 is past MagicaCloth2's validated range [0, 20] (ref F.1): written "
                   "into the solver's parameter table after validation"),
-    HardCase("speed_limit_off", "speed_limit_off.yaml", 2.0, 3.0, max_speed=50.0, short_duration=1.5),
-    HardCase("violent_50rad", "violent_50rad.yaml", 2.0, 3.0, max_stretch=2.0, short_duration=1.5),
+    HardCase("speed_limit_off", "speed_limit_off.yaml", 2.0, 6.0, max_speed=50.0),
+    HardCase("violent_50rad", "violent_50rad.yaml", 2.0, 7.0, max_stretch=2.0),
 )
 
 
