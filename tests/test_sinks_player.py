@@ -243,3 +243,14 @@ def test_only_the_nodes_the_animation_drives_are_recorded_and_resim_stays_exact(
     _, a = Recording(path).stacked("/world/rig/joints", "Points3D:positions")
     _, b = Recording(out).stacked("/world/rig/joints", "Points3D:positions")
     np.testing.assert_array_equal(a, b)
+
+
+def test_a_run_of_zero_frames_still_writes_a_readable_recording(tmp_path):
+    scene = make_scene(tmp_path / "empty.rrd")
+    player = Player(scene, default_schedule(scene), FrameTimeList(FRAME_TIMES), TimeManager())
+    recorder = attach(player, scene, SinkOptions(snapshots=KinematicCloth(scene)))
+    player.run(0)
+    recorder.close(success=True)
+    rec = Recording(tmp_path / "empty.rrd")
+    assert rec.timeline_values("frame").size == 0 and rec.blueprint_count == 1
+    assert "/world/cloths/tail/particles" in rec.entities

@@ -138,6 +138,9 @@ class Recorder:
                               collider_kind=self.collider_kind, collider_slot=self.collider_slot)
 
     def close(self, success: bool = True) -> None:
+        """End the recording: a successful run of zero frames still leaves a (static-only) file."""
+        if self.sink is None and success:
+            self.open()
         if self.sink is not None:
             self.sink.close(success)
 
