@@ -281,3 +281,11 @@ def test_instances_of_a_cloth_share_one_entity_in_team_order(tmp_path):
     _, edges = rec.rows("/world/cloths/hair/edges", "LineStrips3D:strips")
     want = (x[[0, 1, 1, 2, 7, 8, 8, 9]] + 1).astype(np.float32)   # hair#1's edges offset to its particles
     np.testing.assert_array_equal(edges[1], want)
+
+
+@pytest.mark.parametrize("batch", [1, 3, 64])
+def test_every_batch_size_records_the_same_frames(tmp_path, batch):
+    traj = record(tmp_path / "b.rrd", frames=7, batch=batch)
+    frames, tail = Recording(tmp_path / "b.rrd").stacked("/world/cloths/tail/particles", "Points3D:positions")
+    assert frames.tolist() == list(range(7))
+    np.testing.assert_array_equal(tail, np.array([t for _, t, _ in traj]).astype(np.float32))

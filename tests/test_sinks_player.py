@@ -254,3 +254,10 @@ def test_a_run_of_zero_frames_still_writes_a_readable_recording(tmp_path):
     rec = Recording(tmp_path / "empty.rrd")
     assert rec.timeline_values("frame").size == 0 and rec.blueprint_count == 1
     assert "/world/cloths/tail/particles" in rec.entities
+
+
+def test_the_runs_overrides_are_recorded_for_resim(tmp_path):
+    scene = make_scene(tmp_path / "ov.rrd")
+    scene.overrides = ("cloths.tail.parameters.gravity=9",)
+    run(scene, None, frames=2, options=SinkOptions(snapshots=KinematicCloth(scene)))
+    assert load_replay(tmp_path / "ov.rrd").scene_overrides == ("cloths.tail.parameters.gravity=9",)

@@ -151,6 +151,7 @@ class SceneStatics:
     replay_node_names: list[str] = field(default_factory=list)
     replay_scene_text: str = ""           # YAML text of the scene, so `resim` can rebuild it
     replay_scene_source: str = ""
+    replay_scene_overrides: list[str] = field(default_factory=list)   # `--set` overrides of the run
     time_fields: tuple[str, ...] = ()     # UnityTime field names recorded per frame
 
 

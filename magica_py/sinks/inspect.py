@@ -22,7 +22,10 @@ def summarize(path) -> dict:
     times = rec.timeline_values(L.TIMELINE_SIM_TIME)
     entities = {}
     for entity in rec.entities:
-        rows = sum(b.num_rows for b in rec.temporal.get(entity, []))
+        # frames with data (components sent separately would double-count rows)
+        logged = [b.column(L.TIMELINE_FRAME).to_numpy() for b in rec.temporal.get(entity, [])
+                  if L.TIMELINE_FRAME in b.schema.names]
+        rows = np.unique(np.concatenate(logged)).size if logged else 0
         entities[entity] = {"rows": int(rows), "static": bool(rec.static.get(entity))}
     cloths = {}
     prefix = f"/{L.CLOTHS}/"

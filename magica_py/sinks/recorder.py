@@ -126,6 +126,7 @@ class Recorder:
             cloths=list(self.provider.cloth_topologies()), toggles=self.toggles,
             replay_node_names=[names[i] for i in self.replay_nodes],
             replay_scene_text=_scene_text(scene), replay_scene_source=str(getattr(scene, "source", "") or ""),
+            replay_scene_overrides=[str(o) for o in (getattr(scene, "overrides", None) or ())],
             time_fields=self.time_fields)
         rrd = None if opts.no_rrd else (opts.rrd if opts.rrd is not None else _scene_rrd(scene))
         if rrd is None and not opts.spawn and opts.connect is None:

@@ -266,7 +266,8 @@ class RerunSink:
             rec.log(L.REPLAY_SCENE, rr.AnyValues(name=s.name, source=s.replay_scene_source,
                                                  yaml=s.replay_scene_text,
                                                  format_version=L.REPLAY_FORMAT_VERSION,
-                                                 time_fields=list(s.time_fields) or [""]), static=True)
+                                                 time_fields=list(s.time_fields) or [""],
+                                                 overrides=list(s.replay_scene_overrides) or [""]), static=True)
             rec.log(L.REPLAY_NODES, rr.AnyValues(names=list(s.replay_node_names) or [""]), static=True)
 
     # ------------------------------------------------------------------ per frame: copies only

@@ -46,6 +46,7 @@ class ReplayData:
     scene_text: str
     scene_source: str
     scene_name: str
+    scene_overrides: tuple[str, ...] = ()   # `--set` overrides of the recorded run
 
     @property
     def frame_count(self) -> int:
@@ -77,11 +78,15 @@ def load_replay(path) -> ReplayData:
         return values[0] if values else ""
 
     fields = [x for x in rec.static_value(f"/{L.REPLAY_SCENE}", "time_fields") if x]
+    try:
+        overrides = tuple(x for x in rec.static_value(f"/{L.REPLAY_SCENE}", "overrides") if x)
+    except RecordingError:
+        overrides = ()
     return ReplayData(frames=frames, node_names=names, local_position=pos.reshape(f, d, 3),
                       local_rotation=rot.reshape(f, d, 4), local_scale=scl.reshape(f, d, 3),
                       time_fields=fields, time_values=tvals.reshape(f, -1), events=events,
                       scene_text=scene_value("yaml"), scene_source=scene_value("source"),
-                      scene_name=scene_value("name"))
+                      scene_name=scene_value("name"), scene_overrides=overrides)
 
 
 class RecordedTime:
@@ -171,7 +176,9 @@ def load_scene_for(replay: ReplayData, scene_path=None, overrides=()):
         return load_scene(scene_path, overrides)
     if not replay.scene_text:
         raise RecordingError("the recording does not embed its scene: pass --scene SCENE.yaml")
-    return load_scene_text(replay.scene_text, overrides, source=replay.scene_source or "<recording>")
+    # the embedded scene is re-read with the recorded run's overrides, then the new ones
+    return load_scene_text(replay.scene_text, tuple(replay.scene_overrides) + tuple(overrides),
+                           source=replay.scene_source or "<recording>")
 
 
 def resimulate(recording, scene, output=None, *, spawn=False, connect=None, snapshots=None, batch_frames=None,
