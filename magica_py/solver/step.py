@@ -106,7 +106,10 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
     start = m.team_particle_start[team]
     for p in range(start, start + m.team_particle_count[team]):
         base_pos = v_lerp(load3(ps.old_position, p), load3(ps.position, p), t)
-        base_rot = q_normalize(q_slerp(load4(ps.old_rotation, p), load4(ps.rotation, p), t))
+        if t == 1.0:  # the last step of a frame: slerp(a, b, 1) == b
+            base_rot = load4(ps.rotation, p)
+        else:
+            base_rot = q_normalize(q_slerp(load4(ps.old_rotation, p), load4(ps.rotation, p), t))
         store3(ps.base_pos, p, base_pos)
         store4(ps.base_rot, p, base_rot)
         store3(ps.step_basic_pos, p, base_pos)
@@ -118,8 +121,12 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
         old_pos = load3(ps.old_pos, p)
         depth = m.depth[p]
         k = depth_inertia * (1.0 - depth * depth)
-        iv = v_lerp(inertia_vector, step_vector, k)
-        iq = q_slerp(inertia_rotation, step_rotation, k)
+        if k == 0.0:  # depth inertia off: lerp/slerp at 0 are the first argument
+            iv = inertia_vector
+            iq = inertia_rotation
+        else:
+            iv = v_lerp(inertia_vector, step_vector, k)
+            iq = q_slerp(inertia_rotation, step_rotation, k)
         w = v_add(v_add(old_world_pos, q_rotate(iq, v_sub(old_pos, old_world_pos))), iv)
         velocity_pos = w  # old_pos + (w - old_pos)
         velocity = q_rotate(iq, load3(ps.velocity, p))

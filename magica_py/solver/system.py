@@ -27,7 +27,9 @@ import numpy as np
 from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, update_mode_code
 from magica_py.solver.colliders import fill_slots
 from magica_py.solver.fields import F64
-from magica_py.solver.frame import FrameInputs, hierarchy_arrays, simulate_frame, time_arrays
+from magica_py.solver.frame import (
+    FrameInputs, bundle_tables, hierarchy_arrays, simulate_bundled_frame, time_arrays,
+)
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
 from magica_py.solver.layout import build_solver_model
 from magica_py.solver.parameters import allocate_parameters, write_row
@@ -91,6 +93,7 @@ class ClothSystem:
         self._hierarchy = hierarchy_arrays(hierarchy)
         self.frame_count = 0
         self._entry_point = None
+        self._bundle = None
 
     # ------------------------------------------------------------------ registration
     def attach(self, player, scene=None) -> "ClothSystem":
@@ -217,18 +220,17 @@ class ClothSystem:
 
     # ------------------------------------------------------------------ internals
     def _call_frame(self, fi) -> None:
-        """Call ``simulate_frame``; after the first call, through the compiled entry point of
-        its signature, which skips numba's per-call typing of ~250 arrays (~20 us -> ~5 us
-        per 60 arrays, measured). Array identities never change, so the types do not either."""
-        args = (self.model, self.particles, self.parameters, self.teams, self.collider_state,
-                self._time, self._hierarchy, fi)
-        if self._entry_point is None:
-            simulate_frame(*args)
+        """One numba call: the tables go in as one ``FrameData`` pointer (built on first use)
+        and later calls use the compiled entry point directly (skipping argument typing)."""
+        if self._bundle is None:
+            self._bundle = bundle_tables(self.model, self.particles, self.parameters, self.teams,
+                                         self.collider_state, self._time, self._hierarchy)
+            simulate_bundled_frame(self._bundle, fi)
             from numba import typeof
-            key = tuple(typeof(a) for a in args)
-            self._entry_point = simulate_frame.overloads[key].entry_point
+            key = (typeof(self._bundle), typeof(fi))
+            self._entry_point = simulate_bundled_frame.overloads[key].entry_point
             return
-        self._entry_point(*args)
+        self._entry_point(self._bundle, fi)
 
     def _parameter(self, team, key, default):
         params = self.team_parameters[team]

@@ -1,0 +1,69 @@
+"""Solver benchmark: per-frame wall time by phase and particle-steps per second.
+
+    python benchmarks/bench_solver.py [--frames N] [--scenes tail_orbit crowd ...]
+
+For each scene (``configs/<name>.yaml``): load, build the ``ClothSystem``, attach it to a
+``Player`` (no recording sink), warm up (JIT from the cache, first frames), then time
+``--frames`` frames. Reported per frame: the whole loop (restore to write-back, i.e. the
+player's frame minus nothing: there is no sink), each phase, the cloth kernel and the
+hierarchy propagation; and particle-steps per second of the cloth kernel (particles x steps
+run / kernel time) and of the whole frame.
+"""
+from __future__ import annotations
+
+import argparse
+import pathlib
+import sys
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+
+
+def bench(name: str, frames: int, warmup: int = 30) -> dict:
+    from magica_py.config import load_scene
+    from magica_py.runtime.player import Player
+    from magica_py.solver.system import ClothSystem
+
+    scene = load_scene(ROOT / "configs" / f"{name}.yaml")
+    player = Player.for_scene(scene)
+    t0 = time.perf_counter()
+    system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player)
+    build = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    player.run(warmup)
+    warm = time.perf_counter() - t0
+    totals: dict[str, float] = {}
+    wall = time.perf_counter()
+    for _ in range(frames):
+        ctx = player.step()
+        for k, v in ctx.metrics.items():
+            totals[k] = totals.get(k, 0.0) + float(v)
+    wall = time.perf_counter() - wall
+    particles = int(system.model.transform_index.shape[0])
+    return {"scene": name, "teams": len(system.models), "particles": particles, "build_s": build,
+            "warmup_s": warm, "frames": frames, "frame_us": wall / frames * 1e6,
+            "phases_us": {k: v / frames * 1e6 for k, v in totals.items() if k.startswith(("time.", "cloth.k", "cloth.p"))},
+            "steps_per_frame": totals.get("cloth.steps", 0.0) / frames,
+            "kernel_pss": totals.get("cloth.steps", 0.0) / max(totals.get("cloth.kernel", 1e-12), 1e-12),
+            "frame_pss": totals.get("cloth.steps", 0.0) / wall}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=300)
+    ap.add_argument("--scenes", nargs="+", default=["tail_orbit", "character_walk", "crowd"])
+    args = ap.parse_args(argv)
+    for name in args.scenes:
+        r = bench(name, args.frames)
+        print(f"== {r['scene']}: {r['teams']} teams, {r['particles']} particles, "
+              f"build {r['build_s']:.2f} s, warm-up {r['warmup_s']:.2f} s")
+        print(f"   whole frame {r['frame_us']:9.1f} us   particle-steps/frame {r['steps_per_frame']:.0f}")
+        for k, v in sorted(r["phases_us"].items()):
+            print(f"   {k:22s} {v:9.1f} us")
+        print(f"   particle-steps/s: kernel {r['kernel_pss']:.3g}, whole frame {r['frame_pss']:.3g}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(ROOT))
+    raise SystemExit(main())
