@@ -289,3 +289,14 @@ def test_every_batch_size_records_the_same_frames(tmp_path, batch):
     frames, tail = Recording(tmp_path / "b.rrd").stacked("/world/cloths/tail/particles", "Points3D:positions")
     assert frames.tolist() == list(range(7))
     np.testing.assert_array_equal(tail, np.array([t for _, t, _ in traj]).astype(np.float32))
+
+
+def test_scene_description_is_recorded_even_without_replay_data(tmp_path):
+    from magica_py.sinks.resim import load_replay
+
+    path = tmp_path / "noreplay.rrd"
+    record(path, frames=2, toggles=LogToggles(replay=False))
+    rec = Recording(path)
+    assert rec.static_value("/replay/scene", "name") == ["fake"]
+    with pytest.raises(RecordingError, match="no replay data"):
+        load_replay(rec)

@@ -262,12 +262,12 @@ class RerunSink:
             rec.log(L.COLLIDER_CAPSULES, rr.Capsules3D.from_fields(colors=L.COLOR_COLLIDER, fill_mode="solid"),
                     static=True)
             rec.log(L.COLLIDER_PLANES, rr.Boxes3D.from_fields(colors=L.COLOR_PLANE), static=True)
+        rec.log(L.REPLAY_SCENE, rr.AnyValues(name=s.name, source=s.replay_scene_source,
+                                             yaml=s.replay_scene_text,
+                                             format_version=L.REPLAY_FORMAT_VERSION,
+                                             time_fields=list(s.time_fields) or [""],
+                                             overrides=list(s.replay_scene_overrides) or [""]), static=True)
         if tg.replay:
-            rec.log(L.REPLAY_SCENE, rr.AnyValues(name=s.name, source=s.replay_scene_source,
-                                                 yaml=s.replay_scene_text,
-                                                 format_version=L.REPLAY_FORMAT_VERSION,
-                                                 time_fields=list(s.time_fields) or [""],
-                                                 overrides=list(s.replay_scene_overrides) or [""]), static=True)
             rec.log(L.REPLAY_NODES, rr.AnyValues(names=list(s.replay_node_names) or [""]), static=True)
 
     # ------------------------------------------------------------------ per frame: copies only
