@@ -261,3 +261,15 @@ def test_the_runs_overrides_are_recorded_for_resim(tmp_path):
     scene.overrides = ("cloths.tail.parameters.gravity=9",)
     run(scene, None, frames=2, options=SinkOptions(snapshots=KinematicCloth(scene)))
     assert load_replay(tmp_path / "ov.rrd").scene_overrides == ("cloths.tail.parameters.gravity=9",)
+
+
+def test_an_animation_driving_nothing_records_empty_pose_rows(tmp_path):
+    scene = make_scene(tmp_path / "still.rrd")
+
+    class Still(Wiggle):
+        driven = np.zeros(0, np.int32)
+
+    scene.animation = Still()
+    run(scene, None, frames=3, options=SinkOptions(snapshots=KinematicCloth(scene)))
+    replay = load_replay(tmp_path / "still.rrd")
+    assert replay.node_names == [] and replay.local_position.shape == (3, 0, 3)
