@@ -210,6 +210,9 @@ CASES = [
     ("keys not increasing", _set(("animation", 0), {"target": "root", "keyframes": {"keys": [
         {"time": 1.0, "position": [0, 0, 0]}, {"time": 0.5, "position": [0, 0, 1]}]}}),
      "animation[0].keyframes.keys[1].time", ["must increase"]),
+    ("empty key", _set(("animation", 0), {"target": "root", "keyframes": {"keys": [
+        {"time": 0.0, "position": [0, 0, 0]}, {"time": 1.0}]}}),
+     "animation[0].keyframes.keys[1]", ["at least one of position, rotation"]),
     ("collision mode contradiction", lambda d: d["cloths"][0].update(
         collision_mode="edge", parameters={"collider_collision": {"mode": "point"}}),
      "cloths[0].collision_mode", ["contradicts"]),

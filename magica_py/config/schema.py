@@ -454,7 +454,7 @@ def check_keys(c: Checker, m: dict, path: tuple) -> list[dict]:
                "position": c.vector(km, "position", kp, 3, None),
                "rotation": c.rotation(km, kp) if ("rotation" in km or "euler" in km) else None,
                "scale": c.vector(km, "scale", kp, 3, None)}
-        if key["position"] is None and key["rotation"] is None and key["scale"] is None and not c.issues:
+        if not any(km.get(k) is not None for k in ("position", "rotation", "euler", "scale")):
             c.error(kp, "a key needs at least one of position, rotation (or euler), scale")
         keys.append(key)
     return keys
