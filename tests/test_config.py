@@ -311,3 +311,18 @@ colliders:
     assert s.colliders.radius.tolist() == [0.1, 0.1]
     with pytest.raises(ConfigError, match="duplicate key"):
         load_scene_text(text.replace("name: ball_b, transform: b", "name: ball_b, name: ball_c"))
+
+
+def test_cloth_on_one_named_instance_defaults_its_component_to_that_instance():
+    text = scene_text(INSTANCED).replace('root_bones: [hair_2_0, hair_0_0]', 'root_bones: ["hair_*_0#1"]')
+    s = load_scene_text(text)
+    hair = s.cloth("hair")
+    assert hair.instance is None
+    assert [s.hierarchy.names[i] for i in hair.root_bones] == ["hair_0_0#1", "hair_1_0#1", "hair_2_0#1"]
+    assert s.hierarchy.names[hair.component] == "head#1"
+
+
+def test_instance_globs_follow_hierarchy_order():
+    text = scene_text(INSTANCED).replace('root_bones: ["skirt_*_0"]', 'root_bones: ["skirt_*_0#2"]')
+    s = load_scene_text(text)
+    assert [s.hierarchy.names[i] for i in s.cloth("skirt").root_bones] == [f"skirt_{k}_0#2" for k in range(12)]

@@ -73,8 +73,14 @@ class NameTable:
 
     def match(self, pattern: str) -> list[str]:
         """Base names matching a glob, in hierarchy order (final names if it names an instance)."""
-        if "#" in pattern:
-            return [n for n in sorted(self.final) if fnmatch.fnmatchcase(n, pattern)]
+        if "#" in pattern:  # instance names: instance by instance, each in hierarchy order
+            position = {n: k for k, n in enumerate(self.base_order)}
+            found = []
+            for n in self.final:
+                if fnmatch.fnmatchcase(n, pattern):
+                    base, _, index = n.rpartition("#")
+                    found.append((int(index) if index.isdigit() else -1, position.get(base, -1), n))
+            return [n for _, _, n in sorted(found)]
         return [n for n in self.base_order if fnmatch.fnmatchcase(n, pattern)]
 
     def subtree(self, name: str) -> list[str]:
@@ -365,8 +371,7 @@ def _resolve_cloths(c: Checker, cloths: list[dict], table: NameTable, colliders:
             if component is not None:
                 component_name = component.in_instance(i)
             else:
-                parent = parent_of.get(roots[0])
-                component_name = inst(parent) if parent is not None else root_names[0]
+                component_name = _default_component(roots[0], root_names[0], parent_of, inst)
             indices = []
             for base_name in collider_names:
                 for inst_i, index in collider_groups[base_name]:
@@ -386,6 +391,19 @@ def _resolve_cloths(c: Checker, cloths: list[dict], table: NameTable, colliders:
                         "instance": i, "preset": cloth["preset"], "base_name": cloth["name"],
                         "document_path": format_path(path)})
     return out
+
+
+def _default_component(root: str, root_name: str, parent_of: dict, inst) -> str:
+    """The first root's parent (the root itself when it has none); ``hips#3`` for a root
+    named with its instance (``tail_0#3``)."""
+    if root in parent_of:
+        parent = parent_of[root]
+        return inst(parent) if parent is not None else root_name
+    base, _, index = root.rpartition("#")
+    parent = parent_of.get(base)
+    if parent is None or not index.isdigit():
+        return root_name
+    return instance_name(parent, int(index))
 
 
 def _resolve_bone_attributes(c: Checker, cloth: dict, roots: list[str], table: NameTable) -> dict[str, str]:
