@@ -325,4 +325,7 @@ def test_cloth_on_one_named_instance_defaults_its_component_to_that_instance():
 def test_instance_globs_follow_hierarchy_order():
     text = scene_text(INSTANCED).replace('root_bones: ["skirt_*_0"]', 'root_bones: ["skirt_*_0#2"]')
     s = load_scene_text(text)
-    assert [s.hierarchy.names[i] for i in s.cloth("skirt").root_bones] == [f"skirt_{k}_0#2" for k in range(12)]
+    skirt = s.cloth("skirt")
+    assert [s.hierarchy.names[i] for i in skirt.root_bones] == [f"skirt_{k}_0#2" for k in range(12)]
+    # bone_attributes {"skirt_0_*": fixed} reach the whole strand of that instance
+    assert sorted(s.hierarchy.names[i] for i in skirt.bone_attributes) == ["skirt_0_0#2", "skirt_0_1#2", "skirt_0_2#2"]

@@ -84,7 +84,12 @@ class NameTable:
         return [n for n in self.base_order if fnmatch.fnmatchcase(n, pattern)]
 
     def subtree(self, name: str) -> list[str]:
-        """Base names of ``name``'s subtree (pre-order), or [name] for a final-only name."""
+        """Names of ``name``'s subtree (pre-order): base names, or instance names for a bone
+        named with its instance (``skirt_0_0#2``)."""
+        if name not in self.base_rig and "#" in name:
+            base, _, index = name.rpartition("#")
+            if base in self.base_rig and index.isdigit():
+                return [instance_name(n, int(index)) for n in self.subtree(base)]
         out, stack = [], [name]
         while stack:
             n = stack.pop()
