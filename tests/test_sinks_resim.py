@@ -55,7 +55,7 @@ def test_resim_with_the_same_scene_reproduces_particles_bit_for_bit(original, tm
     np.testing.assert_array_equal(xa, xb)
     _, ja = Recording(path).stacked("/world/rig/joints", "Points3D:positions")
     _, jb = Recording(out).stacked("/world/rig/joints", "Points3D:positions")
-    np.testing.assert_array_equal(ja, jb)        # written-back bones too
+    np.testing.assert_array_equal(ja, jb)        # the rig (non-cloth joints) too
 
 
 def test_resim_with_other_parameters_changes_the_cloth_but_not_the_animated_pose(original, tmp_path):

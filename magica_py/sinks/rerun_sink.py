@@ -215,6 +215,8 @@ class RerunSink:
         cloth_node = np.zeros(parent.size, bool)
         for c in statics.cloths:
             cloth_node[np.asarray(c.transform_index, np.int64)] = True
+        # cloth bones sit on their particles (ref §E.4): the rig's points are the other joints
+        self.joint_nodes = None if not cloth_node.any() else np.flatnonzero(~cloth_node)
         child = np.flatnonzero(parent >= 0)
         child = child[~(cloth_node[child] & cloth_node[parent[child]])]
         self.bone_child = child
@@ -347,7 +349,8 @@ class RerunSink:
         a = {k: v[:n] for k, v in self.buf.arrays.items()}
         if tg.skeleton and "joints" in a:
             joints = a["joints"]
-            self._send(L.RIG_JOINTS, "Points3D", joints.shape[1], positions=joints)
+            shown = joints if self.joint_nodes is None else joints[:, self.joint_nodes]
+            self._send(L.RIG_JOINTS, "Points3D", shown.shape[1], positions=shown)
             if self.bone_child.size:
                 self._send(L.RIG_BONES, "LineStrips3D", self.bone_child.size,
                            strips=_segments(joints, self.bone_parent, self.bone_child))
