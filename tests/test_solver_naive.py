@@ -39,7 +39,8 @@ def test_numba_step_matches_the_numpy_reference(frames, overrides):
     M, S, P, T, C = (table(x) for x in (s.model, s.particles, s.parameters, s.teams, s.collider_state))
     naive_step(M, S, P, T, C, 0, frac, 1.0 / 90.0)
     fi = FrameInputs(1 / 60, 1 / 60, 0.02, 0, 1.0, 1.0 / 90.0, 3, 0, 1.0, 1.0, 1.0, 1.0)
-    run_step(s.model, s.particles, s.parameters, s.teams, s.collider_state, s._time, 0, fi)
+    m, ps, prm, ts, cs, tt, _h = s.kernel_tables()
+    run_step(m, ps, prm, ts, cs, tt, 0, fi)
     for name in ("next_pos", "old_pos", "velocity_pos", "velocity", "real_velocity", "base_pos",
                  "step_basic_pos", "friction", "static_friction", "collision_normal"):
         np.testing.assert_allclose(getattr(s.particles, name), S[name], rtol=0, atol=1e-10, err_msg=name)
@@ -48,6 +49,6 @@ def test_numba_step_matches_the_numpy_reference(frames, overrides):
     for name in ("now_pos", "old_pos", "radius_start"):
         np.testing.assert_allclose(getattr(s.collider_state, name), C[name], rtol=0, atol=1e-12, err_msg=name)
     # the scene is not trivial: particles touch a collider and move
-    if frames >= 25:
+    if frames >= 25 and not overrides:      # (max distance keeps the tail off the colliders)
         assert np.abs(s.particles.collision_normal).sum() > 0.0
     assert np.abs(s.particles.velocity).max() > 0.01

@@ -28,7 +28,7 @@ from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, u
 from magica_py.solver.colliders import fill_slots
 from magica_py.solver.fields import F64
 from magica_py.solver.frame import (
-    FrameInputs, bundle_tables, hierarchy_arrays, simulate_bundled_frame, time_arrays,
+    FrameInputs, as_kernel_table, hierarchy_arrays, simulate_frame, time_arrays,
 )
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
 from magica_py.solver.layout import build_solver_model
@@ -93,7 +93,7 @@ class ClothSystem:
         self._hierarchy = hierarchy_arrays(hierarchy)
         self.frame_count = 0
         self._entry_point = None
-        self._bundle = None
+        self._tables = None
 
     # ------------------------------------------------------------------ registration
     def attach(self, player, scene=None) -> "ClothSystem":
@@ -219,18 +219,26 @@ class ClothSystem:
         return self.particles.position[self.team_particles(self.teams_of(cloth)[0])].copy()
 
     # ------------------------------------------------------------------ internals
+    def kernel_tables(self) -> tuple:
+        """The seven tables as the StructRefs the kernels take (built on first use): model,
+        particles, parameters, teams, colliders, team time, hierarchy."""
+        if self._tables is None:
+            self._tables = tuple(as_kernel_table(t) for t in (
+                self.model, self.particles, self.parameters, self.teams, self.collider_state,
+                self._time, self._hierarchy))
+        return self._tables
+
     def _call_frame(self, fi) -> None:
-        """One numba call: the tables go in as one ``FrameData`` pointer (built on first use)
-        and later calls use the compiled entry point directly (skipping argument typing)."""
-        if self._bundle is None:
-            self._bundle = bundle_tables(self.model, self.particles, self.parameters, self.teams,
-                                         self.collider_state, self._time, self._hierarchy)
-            simulate_bundled_frame(self._bundle, fi)
+        """One numba call per frame; after the first, through the compiled entry point of its
+        signature (skips numba's argument typing; the table types never change)."""
+        tables = self.kernel_tables()
+        if self._entry_point is None:
+            simulate_frame(*tables, fi)
             from numba import typeof
-            key = (typeof(self._bundle), typeof(fi))
-            self._entry_point = simulate_bundled_frame.overloads[key].entry_point
+            key = tuple(typeof(a) for a in tables) + (typeof(fi),)
+            self._entry_point = simulate_frame.overloads[key].entry_point
             return
-        self._entry_point(self._bundle, fi)
+        self._entry_point(*tables, fi)
 
     def _parameter(self, team, key, default):
         params = self.team_parameters[team]
