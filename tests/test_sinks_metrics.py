@@ -96,3 +96,32 @@ def test_particles_outside_every_collider_report_zero_penetration():
     sh = {"sphere_center": np.zeros((1, 1, 3)), "sphere_radius": np.full((1, 1), 0.1),
           "plane_point": np.zeros((1, 1, 3)), "plane_normal": np.array([[[0.0, 1.0, 0.0]]])}
     assert metrics.compute(x, sh, np.array([0.1]))["max_penetration"][0] == 0.0
+
+
+def test_batched_collider_shapes_equal_the_per_frame_world_shapes():
+    from magica_py.scene.colliders import ColliderSet
+    from magica_py.scene.hierarchy import BoneSpec, TransformHierarchy
+    from magica_py.sinks.shapes import ColliderBatch, collider_shapes
+
+    h = TransformHierarchy([BoneSpec("a"), BoneSpec("b", "a", (0, 1, 0), scale=(1.5, 0.5, 2.0)), BoneSpec("c", "b")])
+    colliders = ColliderSet.from_specs([
+        {"name": "s", "transform": "b", "center": [0.1, 0, 0], "sphere": {"radius": 0.2}},
+        {"name": "k", "transform": "c", "capsule": {"radius": 0.1, "end_radius": 0.05, "length": 0.5,
+                                                    "direction": "z", "reverse": True, "aligned_on_center": False}},
+        {"name": "p", "transform": "a", "plane": {}},
+        {"name": "s2", "transform": "c", "sphere": {"radius": 0.3}}], h)
+    batch = ColliderBatch(colliders)
+    rng = np.random.default_rng(5)
+    poses, expected = [], []
+    for _ in range(4):
+        q = rng.normal(size=(3, 4))
+        h.local_rotation[:] = q / np.linalg.norm(q, axis=1, keepdims=True)
+        h.local_position[:] = rng.normal(size=(3, 3))
+        h.propagate()
+        poses.append(batch.capture(h))
+        expected.append(collider_shapes(colliders, h))
+    got = batch.shapes(*(np.stack([p[i] for p in poses]) for i in range(3)))
+    for f, want in enumerate(expected):
+        for name, values in got.items():
+            np.testing.assert_allclose(values[f], getattr(want, name), rtol=0, atol=1e-15)
+    assert got["sphere_center"].shape == (4, 2, 3) and got["capsule_start"].shape == (4, 1, 3)

@@ -182,6 +182,9 @@ class FrameData:
     base_positions: np.ndarray | None = None   # (P, 3) animated base pose, or None
     steps: int = 0                        # simulation steps this frame (max over teams)
     replay: ReplayFrame | None = None
+    # instead of ``colliders``: world position, rotation, lossy scale of each collider's
+    # transform ((C,3), (C,4), (C,3)), evaluated per batch by a sink given the ColliderSet
+    collider_pose: tuple | None = None
 
 
 class Sink(Protocol):

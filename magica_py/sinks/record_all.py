@@ -11,6 +11,7 @@ import argparse
 import os
 import pathlib
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 
@@ -132,8 +133,9 @@ def main_record_all(argv=None) -> int:
     results, failures = [], 0
     for path in configs:
         try:
-            if args.warmup > 0:
-                record_scene(load_scene(path), None, frames=args.warmup)
+            if args.warmup > 0:   # JIT and rerun's lazy start-up, recorded to a scratch file
+                with tempfile.TemporaryDirectory() as scratch:
+                    record_scene(load_scene(path), pathlib.Path(scratch) / "warmup.rrd", frames=args.warmup)
             scene = load_scene(path)
             result = record_scene(scene, out / f"{path.stem}.rrd", frames=args.frames,
                                   batch_frames=args.batch_frames)

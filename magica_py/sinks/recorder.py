@@ -136,7 +136,8 @@ class Recorder:
 
         self.sink = RerunSink(statics, rrd_path=rrd, spawn=opts.spawn, connect=opts.connect,
                               batch_frames=opts.batch_frames, recording_id=opts.recording_id,
-                              collider_kind=self.collider_kind, collider_slot=self.collider_slot)
+                              collider_kind=self.collider_kind, collider_slot=self.collider_slot,
+                              collider_set=self.colliders)
 
     def close(self, success: bool = True) -> None:
         """End the recording: a successful run of zero frames still leaves a (static-only) file."""
@@ -179,13 +180,18 @@ class Recorder:
             self.open()
         hierarchy = self.scene.hierarchy
         positions, base, steps = self._particles()
-        shapes = collider_shapes(self.colliders, hierarchy) if (self.toggles.colliders or self.toggles.metrics) \
-            else ColliderShapes.empty()
+        shapes, pose = ColliderShapes.empty(), None
+        if self.colliders is not None and len(self.colliders.names) and (self.toggles.colliders or self.toggles.metrics):
+            if getattr(self.sink, "collider_batch", None) is not None:
+                pose = self.sink.collider_batch.capture(hierarchy)   # evaluated per batch by the sink
+            else:
+                shapes = collider_shapes(self.colliders, hierarchy)
         data = FrameData(
             frame=ctx.frame, sim_time=float(ctx.time.time), delta_time=float(ctx.time.delta_time),
             joint_positions=hierarchy.world_position, positions=positions, colliders=shapes,
             metrics={k: float(v) for k, v in ctx.metrics.items() if _is_number(v)},
-            events=list(ctx.events), base_positions=base, steps=steps, replay=self.pending_replay)
+            events=list(ctx.events), base_positions=base, steps=steps, replay=self.pending_replay,
+            collider_pose=pose)
         self.sink.begin_frame(ctx.frame, data.sim_time)
         self.sink.log(data)
         self.sink.end_frame()

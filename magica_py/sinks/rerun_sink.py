@@ -29,7 +29,7 @@ from magica_py.jit import kernel
 from magica_py.sinks import layout as L
 from magica_py.sinks.base import FrameData, SceneStatics
 from magica_py.sinks.metrics import FrameMetrics
-from magica_py.sinks.shapes import capsule_pose, from_y_rotation
+from magica_py.sinks.shapes import ColliderBatch, capsule_pose, from_y_rotation
 
 FILE_BATCH_FRAMES = 64
 PLANE_HALF_SIZE = 2.0       # m: planes are infinite; draw a 4 m square patch
@@ -172,7 +172,8 @@ class RerunSink:
 
     def __init__(self, statics: SceneStatics, *, rrd_path=None, spawn: bool = False, connect: str | None = None,
                  batch_frames: int | None = None, recording_id: str | None = None,
-                 collider_kind: np.ndarray | None = None, collider_slot: np.ndarray | None = None):
+                 collider_kind: np.ndarray | None = None, collider_slot: np.ndarray | None = None,
+                 collider_set=None):
         t_import = time.perf_counter()
         import rerun as rr
         import rerun.blueprint  # noqa: F401 - one-time import cost, kept out of `seconds`
@@ -223,6 +224,8 @@ class RerunSink:
         self.bone_parent = parent[child]
         self.groups = cloth_groups(statics.cloths)
         self.particle_count = sum(c.particle_count for c in statics.cloths)
+        self.collider_batch = ColliderBatch(collider_set) if collider_set is not None and len(collider_set.names) \
+            else None
         self.metrics = FrameMetrics(statics.cloths,
                                     collider_kind if collider_kind is not None else np.zeros(0, np.int64),
                                     collider_slot if collider_slot is not None else np.zeros(0, np.int64))
@@ -289,7 +292,12 @@ class RerunSink:
             buf.put("positions", row, data.positions)
             if tg.base_pose and data.base_positions is not None:
                 buf.put("base_positions", row, data.base_positions)
-        if tg.colliders or tg.metrics:
+        if (tg.colliders or tg.metrics) and data.collider_pose is not None and self.collider_batch is not None:
+            position, rotation, scale = data.collider_pose
+            buf.put("collider.position", row, position)
+            buf.put("collider.rotation", row, rotation)
+            buf.put("collider.scale", row, scale)
+        elif tg.colliders or tg.metrics:
             for name in _COLLIDER_FIELDS:
                 values = getattr(data.colliders, name)
                 if len(values):
@@ -347,6 +355,8 @@ class RerunSink:
         if n == 0:
             return
         a = {k: v[:n] for k, v in self.buf.arrays.items()}
+        if "collider.position" in a:
+            a.update(self.collider_batch.shapes(a["collider.position"], a["collider.rotation"], a["collider.scale"]))
         if tg.skeleton and "joints" in a:
             joints = a["joints"]
             shown = joints if self.joint_nodes is None else joints[:, self.joint_nodes]
