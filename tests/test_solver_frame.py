@@ -177,3 +177,66 @@ def test_zero_component_scale_suspends_the_team():
     run(s, 10)
     assert s.teams.scale_suspended[0] == 1 and s.time_state.time[0] == t
     assert np.isfinite(h.world_position).all()
+
+
+def test_negative_scale_is_rejected_at_build_with_a_clear_error():
+    from magica_py.scene import rigs
+    from magica_py.scene.hierarchy import TransformHierarchy
+    from magica_py.solver.system import ClothSystem
+    from solver_scenes import Spec
+
+    bones = [BoneSpec("root", None, (0.0, 1.0, 0.0), scale=(-1.0, 1.0, 1.0))] + rigs.chain("tail", "root", 3, 0.3)
+    h = TransformHierarchy(bones)
+    spec = Spec("tail", (h.index("tail_0"),), h.index("root"), "line", params())
+    with pytest.raises(ValueError, match=r"cloth 'tail': transform 'tail_0' has a negative scale"):
+        ClothSystem(h, [spec])
+
+
+def test_negative_component_scale_at_run_time_suspends_the_team():
+    s, h = chain_system(bones=5, length=0.5, direction=(0.0, 0.0, -1.0))
+    run(s, 30)
+    t = s.time_state.time[0]
+    h.local_scale[h.index("root")] = (1.0, -1.0, 1.0)
+    run(s, 5)
+    assert s.teams.scale_suspended[0] == 1 and s.time_state.time[0] == t
+    h.local_scale[h.index("root")] = (1.0, 1.0, 1.0)
+    run(s, 5)
+    assert s.teams.scale_suspended[0] == 0 and s.time_state.time[0] > t
+
+
+def test_anchor_with_zero_anchor_inertia_removes_the_anchor_motion():
+    # the tail hangs from `root`, whose motion comes from its parent `vehicle` (the anchor):
+    # with anchor_inertia 0 the vehicle's motion is not felt at all (carried rigidly)
+    vehicle = [BoneSpec("vehicle", None, (0.0, 0.0, 0.0))]
+    prm = params(inertia__anchor="vehicle", inertia__anchor_inertia=0.0,
+                 inertia__movement_inertia_smoothing=0.0)
+    from magica_py.scene import rigs
+    from magica_py.scene.hierarchy import TransformHierarchy
+    from magica_py.solver.system import ClothSystem
+    from solver_scenes import Settings, Spec
+
+    bones = vehicle + [BoneSpec("root", "vehicle", (0.0, 1.0, 0.0))] + rigs.chain("tail", "root", 5, 0.5)
+    h = TransformHierarchy(bones)
+    spec = Spec("tail", (h.index("tail_0"),), h.index("root"), "line", prm)
+    s = ClothSystem(h, [spec], settings=Settings())
+    run(s, 600)
+    shape0 = s.particles.position - s.particles.position[0]
+    v = h.index("vehicle")
+
+    def drive(f):
+        h.local_position[v] = (0.05 * (f + 1), 0.0, 0.0)
+    run(s, 30, before=drive)
+    shape1 = s.particles.position - s.particles.position[0]
+    assert np.abs(shape1 - shape0).max() < 1e-6
+    # with anchor inertia 1 the same motion is felt: the tail lags
+    s2 = ClothSystem(TransformHierarchy(bones), [Spec("tail", spec.root_bones, spec.component, "line",
+                     params(inertia__anchor="vehicle", inertia__anchor_inertia=1.0,
+                            inertia__movement_inertia_smoothing=0.0))], settings=Settings())
+    h2 = s2.hierarchy
+    run(s2, 600)
+
+    def drive2(f):
+        h2.local_position[v] = (0.05 * (f + 1), 0.0, 0.0)
+    run(s2, 30, before=drive2)
+    lag = s2.particles.position[0, 0] - s2.particles.position[4, 0]
+    assert lag > 0.01

@@ -70,7 +70,10 @@ def prepare_teams(m, ts, prm, tt, h):
         tt.active[t] = True
         comp = m.team_component_transform[t]
         smin = min(abs(h.lossy_scale[comp, 0]), min(abs(h.lossy_scale[comp, 1]), abs(h.lossy_scale[comp, 2])))
-        ts.scale_suspended[t] = 1 if smin < 1e-6 else 0
+        negative = h.lossy_scale[comp, 0] < 0.0 or h.lossy_scale[comp, 1] < 0.0 or h.lossy_scale[comp, 2] < 0.0
+        # a tiny scale suspends the team (A.4); so does a negative one: the negative-scale
+        # teleport of H.7 is not modelled (negative scale is rejected at build)
+        ts.scale_suspended[t] = 1 if (smin < 1e-6 or negative) else 0
         culled = distance_culling_team(prm, ts, t, h.world_position, comp)
         if (1 if culled else 0) != ts.culled[t]:
             ts.reset[t] = 1  # any visibility change forces a reset (H.1)

@@ -60,6 +60,7 @@ class ClothSystem:
         if models is None:
             models = [build_cloth(hierarchy, spec) for spec in self.specs]
         self.models = list(models)
+        self._check_positive_scale(hierarchy)
         self.team_names = [str(getattr(s, "name", f"cloth{i}")) for i, s in enumerate(self.specs)]
         self.model = build_solver_model(self.models)
         team_count = len(self.models)
@@ -247,6 +248,18 @@ class ClothSystem:
         except AttributeError:
             value = default
         return default if value is None else value
+
+    def _check_positive_scale(self, hierarchy) -> None:
+        """Negative scale is rejected (ref §H.7 allows a Python port to assume positive scale)."""
+        for spec, model in zip(self.specs, self.models):
+            nodes = list(np.asarray(model.transform_index)) + [int(model.component_transform)]
+            for node in nodes:
+                if (hierarchy.lossy_scale[node] < 0.0).any():
+                    where = getattr(spec, "document_path", "") or f"cloth {getattr(spec, 'name', '?')!r}"
+                    raise ValueError(
+                        f"{where}: transform {hierarchy.names[node]!r} has a negative scale "
+                        f"{tuple(float(x) for x in hierarchy.lossy_scale[node])}; negative scale is not "
+                        f"supported (MagicaCloth2 refuses it at build too, ref §H.7): use positive scales")
 
     def _write_parameters(self, team: int) -> None:
         def resolve(name):
