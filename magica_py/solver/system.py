@@ -16,6 +16,7 @@ Runtime control (all take effect at the next frame, none resets the simulation u
 
 Guards: a team reset by ``solver/guards.py`` raises ``("cloth_reset", {"cloth", "team",
 "reason"})`` in ``ctx.events``. Metrics: ``cloth.steps`` (particle-steps this frame),
+``cloth.simulation_steps`` (the most steps any team ran this frame),
 ``cloth.kernel`` (s in the numba call), ``cloth.propagate`` (s).
 """
 from __future__ import annotations
@@ -148,6 +149,7 @@ class ClothSystem:
         if metrics is not None:
             steps = int(np.dot(self.time_state.update_count, self.model.team_particle_count))
             metrics["cloth.steps"] = float(steps)
+            metrics["cloth.simulation_steps"] = float(self.time_state.update_count.max(initial=0))
             metrics["cloth.kernel"] = t1 - t0
             metrics["cloth.propagate"] = t2 - t1
 
