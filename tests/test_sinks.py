@@ -300,3 +300,13 @@ def test_scene_description_is_recorded_even_without_replay_data(tmp_path):
     assert rec.static_value("/replay/scene", "name") == ["fake"]
     with pytest.raises(RecordingError, match="no replay data"):
         load_replay(rec)
+
+
+def test_a_failure_while_opening_leaves_no_temporary_file(tmp_path, monkeypatch):
+    def broken(self):
+        raise RuntimeError("cannot log statics")
+
+    monkeypatch.setattr(RerunSink, "_log_statics", broken)
+    with pytest.raises(RuntimeError, match="cannot log statics"):
+        RerunSink(statics(), rrd_path=tmp_path / "x.rrd")
+    assert list(tmp_path.iterdir()) == []

@@ -134,6 +134,8 @@ class FrameMetrics:
             attribute = np.asarray(c.attribute)
             movable = np.flatnonzero(((attribute & MOVE) != 0) & ((attribute & INVALID) == 0)) + offsets[i]
             for col in np.asarray(c.colliders, dtype=np.int64):
+                if not 0 <= col < len(collider_kind):   # a collider the sink was not told about
+                    continue
                 kind = int(collider_kind[col])
                 pairs[kind][0].append(movable)
                 pairs[kind][1].append(np.full(movable.size, collider_slot[col], np.int64))

@@ -207,6 +207,15 @@ class RerunSink:
             self._discard()
             raise OutputError(f"cannot open the recording output: {exc}") from exc
         self.closed = False
+        try:
+            self._prepare(statics, collider_kind, collider_slot, collider_set)
+        except Exception:
+            self.close(success=False)   # no temporary file left behind
+            raise
+        self.seconds += time.perf_counter() - t0
+
+    def _prepare(self, statics, collider_kind, collider_slot, collider_set) -> None:
+        """Static index arrays, buffers, and the static part of the recording."""
         self.frames = 0
         self.scalar_rows: dict[str, list[tuple[int, float]]] = {}
         self.replay_event_rows: list[tuple[int, str]] = []
@@ -230,7 +239,6 @@ class RerunSink:
                                     collider_kind if collider_kind is not None else np.zeros(0, np.int64),
                                     collider_slot if collider_slot is not None else np.zeros(0, np.int64))
         self._log_statics()
-        self.seconds += time.perf_counter() - t0
 
     # ------------------------------------------------------------------ statics
     def _log_statics(self) -> None:

@@ -21,7 +21,6 @@ import argparse
 import json
 import pathlib
 import sys
-import tempfile
 import time
 from dataclasses import dataclass
 
