@@ -9,15 +9,36 @@ vertices with the frame of their adjacent triangles' normals and tangents.
 from __future__ import annotations
 
 from magica_py.jit import kernel
+import math
+
 from magica_py.kernels.math3d import (
-    from_to_rotation, load3, load4, q_inverse, q_look_rotation, q_mul, q_rotate, q_slerp,
-    store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp, v_normalize, v_scale, v_sub,
+    from_to_rotation, from_to_rotation_unit, load3, load4, q_inverse, q_look_rotation, q_mul,
+    q_rotate, q_slerp, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp,
+    v_normalize, v_scale, v_sub,
 )
 
 FIXED = 0x01
 MOVE = 0x02
 ZERO_DISTANCE = 0x20
 INCLUDE_LINE = 0x01
+
+
+@kernel
+def full_swing(a, b):
+    """``fromto_v(a, b, 1)`` for unit a, b without trigonometry: the half-angle quaternion
+    ``normalize(a x b, 1 + a.b)`` is the same rotation; the reference's degenerate cases
+    (opposite: pi about the fallback axis; within 1e-6 of parallel: identity) are kept."""
+    c = v_dot(a, b)
+    if c > 1.0:
+        c = 1.0
+    elif c < -1.0:
+        c = -1.0
+    if abs(1.0 + c) < 1e-6 or abs(1.0 - c) < 1e-6:
+        return from_to_rotation_unit(a, b, 1.0)
+    x = v_cross(a, b)
+    w = 1.0 + c
+    inv = 1.0 / math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + w * w)
+    return (x[0] * inv, x[1] * inv, x[2] * inv, w * inv)
 
 
 @kernel
@@ -51,8 +72,11 @@ def line_rotations_team(m, ps, prm, ts, team):
                     c = m.child_data[k]
                     lp = v_lerp(load3(m.baseline_local_position, c),
                                 q_rotate(ibq, v_sub(load3(ps.base_pos_buffer, c), bp)), a)
-                    lq = q_slerp(load4(m.baseline_local_rotation, c),
-                                 q_mul(ibq, load4(ps.base_rot_buffer, c)), a)
+                    if a == 0.0:  # slerp at 0 is its first argument
+                        lq = load4(m.baseline_local_rotation, c)
+                    else:
+                        lq = q_slerp(load4(m.baseline_local_rotation, c),
+                                     q_mul(ibq, load4(ps.base_rot_buffer, c)), a)
                     zero = (m.attribute[c] & ZERO_DISTANCE) != 0
                     tv = (0.0, 0.0, 0.0) if zero else q_rotate(q, lp)
                     ctv = v_add(ctv, tv)
@@ -61,14 +85,14 @@ def line_rotations_team(m, ps, prm, ts, team):
                         cv = v_add(cv, cur)
                         qc = q_mul(q, lq)
                         if not zero:
-                            qc = q_mul(from_to_rotation(tv, cur, 1.0), qc)
+                            qc = q_mul(full_swing(v_normalize(tv), v_normalize(cur)), qc)
                         store4(ps.rotation, c, qc)
                     else:
                         cv = v_add(cv, tv)
                 t = ri if (attr & MOVE) != 0 else rr
                 if v_length(ctv) >= 1e-8 and v_length(cv) >= 1e-8:
                     q = q_mul(from_to_rotation(ctv, cv, t), q)
-            store4(ps.rotation, x, q_slerp(bq, q, bw))
+            store4(ps.rotation, x, q if bw == 1.0 else q_slerp(bq, q, bw))
 
 
 @kernel

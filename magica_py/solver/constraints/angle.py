@@ -15,6 +15,7 @@ from magica_py.kernels.math3d import (
     v_scale, v_sub,
 )
 from magica_py.solver.parameters import curve_at, curve_at_clamp01, step_rate
+from magica_py.solver.rotations import full_swing
 
 MOVE = 0x02
 ITERATIONS = 3               # AngleLimitIteration
@@ -151,7 +152,7 @@ def _limit_pass(m, ps, prm, team, c, p, cp, pp, wc, wp, p_move, limit_stiffness,
     ul = v_length(u)
     if ul < 1e-8:
         return cp, pp
-    rot = q_mul(from_to_rotation_unit(tn, v_scale(u, 1.0 / ul), 1.0),
+    rot = q_mul(full_swing(tn, v_scale(u, 1.0 / ul)),
                 q_mul(load4(ps.angle_rotation, p), load4(ps.angle_local_rot, c)))
     store4(ps.angle_rotation, c, rot)
     return cp, pp
