@@ -310,3 +310,22 @@ def test_a_failure_while_opening_leaves_no_temporary_file(tmp_path, monkeypatch)
     with pytest.raises(RuntimeError, match="cannot log statics"):
         RerunSink(statics(), rrd_path=tmp_path / "x.rrd")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_spawn_and_connect_choose_live_sinks_with_one_frame_batches(tmp_path, monkeypatch):
+    """Wiring only: the viewer start and the gRPC sink are replaced, nothing leaves the process."""
+    calls = {}
+
+    class FakeGrpc:
+        def __init__(self, url=None):
+            calls.setdefault("grpc", []).append(url)
+
+    monkeypatch.setattr(rr, "spawn", lambda **kw: calls.setdefault("spawn", []).append(kw))
+    monkeypatch.setattr(rr, "GrpcSink", FakeGrpc)
+    monkeypatch.setattr(rr.RecordingStream, "set_sinks",
+                        lambda self, *sinks, default_blueprint=None: calls.setdefault("sinks", sinks))
+    sink = RerunSink(statics(), spawn=True, connect="10.0.0.7:9999")
+    assert calls["spawn"] == [{"connect": False}]
+    assert calls["grpc"] == [None, "rerun+http://10.0.0.7:9999/proxy"]
+    assert len(calls["sinks"]) == 2 and sink.batch == 1 and sink.final_path is None
+    sink.close()
