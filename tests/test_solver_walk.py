@@ -76,3 +76,27 @@ def test_walking_character_runs_without_guard_resets(walk):
     system, scene, worst, events = walk
     assert [e for e in events if e[0] == "cloth_reset"] == []
     assert system.frame_count == scene.settings.frame_count()
+
+
+def test_timed_events_reach_the_solver_through_the_player():
+    # configs/hitches_and_events.yaml: frame-time hitches, a teleport at 2 s (keep mode),
+    # slow motion from 3 to 3.25 s and a set_parameter (damping 0.4) at 3.75 s
+    from magica_py.config import load_scene
+    from magica_py.runtime.player import Player
+    from magica_py.solver import attach
+
+    scene = load_scene(ROOT / "configs" / "hitches_and_events.yaml")
+    player = Player.for_scene(scene)
+    system = attach(player, scene)
+    team = system.teams_of("ponytail")[0]
+    before = system.parameters.damping_curve[team].copy()
+    changed_at = None
+    for _ in range(scene.settings.frame_count()):
+        ctx = player.step()
+        assert not [e for e in ctx.events if e[0] == "cloth_reset"]
+        if changed_at is None and system.parameters.damping_curve[team, 0] != before[0]:
+            changed_at = ctx.time.time
+            assert system.teams.velocity_weight[team] == 1.0     # applied without a reset
+    np.testing.assert_allclose(system.parameters.damping_curve[team], 0.4 * 0.2)
+    assert changed_at is not None and 3.75 <= changed_at < 3.75 + 0.1
+    assert np.isfinite(scene.hierarchy.world_position).all()
