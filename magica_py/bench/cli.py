@@ -73,14 +73,14 @@ def main_bench(argv) -> int:
     from magica_py.bench import metrics as M
     from magica_py.bench import report as R
     from magica_py.bench.reference import CHECK_FREQUENCY, REFERENCE_FREQUENCY, fit_order, resolved_error
-    from magica_py.bench.variants import Variant, resolve_scene_path, run_variant, time_variant
+    from magica_py.bench.variants import Variant, resolve_scene_path, run_variant, time_interleaved
 
     p = argparse.ArgumentParser(prog="magica-py bench", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenes", default=",".join(SCENES), help="comma-separated showcase scenes or YAML paths")
     p.add_argument("--frequencies", default=",".join(map(str, FREQUENCIES)), help="simulation Hz to sweep")
     p.add_argument("--modes", default=",".join(MODES), help="parameter modes (solver.rate_mode values)")
-    p.add_argument("--repeats", type=int, default=3, help="timed runs per variant (median)")
+    p.add_argument("--repeats", type=int, default=9, help="timed runs per variant (median)")
     p.add_argument("--duration", type=float, default=None, help="seconds per run (default: the scene's)")
     p.add_argument("--out", default=None, help="report folder (default: reports/)")
     p.add_argument("--skip", default="", help="comma-separated parts to skip: fps,numpy,features,crowd")
@@ -124,16 +124,19 @@ def main_bench(argv) -> int:
         residuals.append({"scene": scene_name, "residual_rms": float(np.sqrt(np.mean(res_rms ** 2))) * 100,
                           "residual_max": float(res_max.max()) * 100, "chain_length": g.chain_length,
                           "frames": ref.frames, "ref_stretch": float(ref.edge_stretch.max()) * 100})
+        runs = []
         for v in sweep:
             run = run_variant(v, progress=progress.run_callback())
             err_rms, err_max = M.frame_errors(run.positions, ref.positions, g.length_scale, moving)
+            run.positions = None                  # keep memory flat over the sweep
+            runs.append((v, run, err_rms, err_max))
+        timings = time_interleaved(sweep, repeats=args.repeats, progress=lambda v: progress.add(frames))
+        for (v, run, err_rms, err_max), (sec, rate, fastest) in zip(runs, timings):
             window = resolved_error(err_rms, err_max, res_rms)
-            ms, rate = time_variant(v, repeats=args.repeats)
-            progress.add(frames * args.repeats)
             settle = M.settling_time(run.display_speed, run.times, REST_SPEED)
             rows.append({
                 "scene": scene_name, "family": v.family, "frequency": run.frequency,
-                "ms_per_frame": 1000 * ms, "particle_steps_per_s": rate,
+                "ms_per_frame": 1000 * sec, "particle_steps_per_s": rate, "ms_per_frame_min": 1000 * fastest,
                 "rms_error": 100 * window.rms if window.resolved else None,
                 "max_error": 100 * window.max if window.resolved else None,
                 "coverage": 100 * window.coverage,
@@ -172,7 +175,7 @@ def main_bench(argv) -> int:
         extra["crowd"] = crowd_speed(say)
 
     out.mkdir(parents=True, exist_ok=True)
-    R.write_csv(out / "bench.csv", rows, R.BENCH_COLUMNS + (("rms_error_all", "", ""),))
+    R.write_csv(out / "bench.csv", rows, R.BENCH_COLUMNS + (("ms_per_frame_min", "", ""), ("rms_error_all", "", "")))
     R.pareto_plot(out / "pareto.png", rows)
     text = bench_markdown(rows, orders, spreads, residuals, extra, time.perf_counter() - started)
     (out / "bench.md").write_text(text)
@@ -185,16 +188,18 @@ def main_bench(argv) -> int:
 def numpy_comparison(repeats: int, say) -> dict:
     """The single tail: magica_py's whole frame loop against the plain-numpy step."""
     from magica_py.bench.numpy_baseline import run_numpy_tail
-    from magica_py.bench.variants import Variant, load_variant_scene, resolve_scene_path, time_variant
+    from magica_py.bench.variants import Variant, load_variant_scene, resolve_scene_path, time_once
 
     v = Variant("tail_orbit/numpy", resolve_scene_path("tail_orbit"), frequency=90)
-    ours, rate = time_variant(v, repeats=repeats)
-    walls, numpy_only = [], []
-    for _ in range(max(1, repeats)):
+    ours_samples, walls, numpy_only = [], [], []
+    for _ in range(max(1, repeats)):          # alternate the two so that machine load hits both
+        ours_samples.append(time_once(v))
         scene = load_variant_scene(v)
         out = run_numpy_tail(scene, scene.settings.frame_count())
         walls.append(float(np.mean(out["wall"])))
         numpy_only.append(float(np.mean(out["numpy_wall"])))
+    ours = float(np.median([o[0] for o in ours_samples]))
+    rate = float(np.median([o[1] for o in ours_samples]))
     theirs = float(np.median(walls))
     result = {"ours_ms": 1000 * ours, "numpy_ms": 1000 * theirs, "numpy_step_ms": 1000 * float(np.median(numpy_only)),
               "ratio": theirs / ours if ours > 0 else math.nan, "ours_steps_per_s": rate}
@@ -213,7 +218,7 @@ EXTRA_COLLIDERS = [
 
 def feature_costs(repeats: int, say) -> list[dict]:
     """Time per frame of the character scene with one feature changed at a time."""
-    from magica_py.bench.variants import Variant, resolve_scene_path, time_variant
+    from magica_py.bench.variants import Variant, resolve_scene_path, time_interleaved
 
     path = resolve_scene_path("character_walk")
     base = Variant("character", path, frequency=90, family="feature")
@@ -236,13 +241,13 @@ def feature_costs(repeats: int, say) -> list[dict]:
         ("angle restoration off", base.with_(parameters={"angle_restoration.use": False})),
     ]
     del base_cols
+    timings = time_interleaved([v for _, v in cases], repeats=repeats)
     rows = []
-    ref_ms = None
-    for label, v in cases:
-        ms, rate = time_variant(v, repeats=repeats)
-        ref_ms = ms if ref_ms is None else ref_ms
-        rows.append({"feature": label, "ms_per_frame": 1000 * ms, "relative": ms / ref_ms, "steps_per_s": rate})
-        say(f"  feature cost: {label}: {1000 * ms:.3f} ms/frame")
+    ref_min = timings[0][2]
+    for (label, _), (sec, rate, fastest) in zip(cases, timings):
+        rows.append({"feature": label, "ms_per_frame": 1000 * sec, "ms_min": 1000 * fastest,
+                     "relative": fastest / ref_min, "steps_per_s": rate})
+        say(f"  feature cost: {label}: {1000 * sec:.3f} ms/frame (min {1000 * fastest:.3f})")
     return rows
 
 
@@ -304,8 +309,10 @@ def bench_markdown(rows, orders, spreads, residuals, extra, elapsed) -> str:
                   f"(numpy step alone {n['numpy_step_ms']:.3f}); ratio x{n['ratio']:.1f}"]
     if "features" in extra:
         lines += ["", "## Feature cost (character_walk, 90 Hz, magica mode)", "",
-                  "| configuration | ms/frame | relative | particle-steps/s |", "|---|---|---|---|"]
-        lines += [f"| {f['feature']} | {f['ms_per_frame']:.3f} | {f['relative']:.2f} | {f['steps_per_s']:.3g} |"
+                  "| configuration | ms/frame (median) | ms/frame (min) | relative (min) | particle-steps/s |",
+                  "|---|---|---|---|---|"]
+        lines += [f"| {f['feature']} | {f['ms_per_frame']:.3f} | {f['ms_min']:.3f} | {f['relative']:.2f} | "
+                  f"{f['steps_per_s']:.3g} |"
                   for f in extra["features"]]
     if "crowd" in extra:
         c = extra["crowd"]
@@ -367,4 +374,8 @@ def stability_row(r) -> dict:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main_bench(sys.argv[1:]))
+    # python -m magica_py.bench.cli [bench|stability] ARGS (until the magica-py commands are registered)
+    argv = sys.argv[1:]
+    if argv and argv[0] == "stability":
+        raise SystemExit(main_stability(argv[1:]))
+    raise SystemExit(main_bench(argv[1:] if argv and argv[0] == "bench" else argv))

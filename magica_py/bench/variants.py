@@ -213,6 +213,10 @@ def run_variant(variant: Variant, record_positions: bool = True, progress=None,
     team_cols = [list(getattr(spec, "colliders", ()) or ()) if getattr(spec, "collision_mode", "none") != "none"
                  else [] for spec in system.specs]
     pairs = M.particle_collider_pairs(geometry.team, team_cols)
+    # only moving particles collide (fixed bones follow the animation; DisableCollision 0x10)
+    collides = geometry.moving & ((np.asarray(model.attribute) & 0x10) == 0)
+    keep = collides[pairs[0]]
+    pairs = (pairs[0][keep], pairs[1][keep])
     has_colliders = pairs[0].shape[0] > 0
     children = np.asarray(model.child_count)
     tips = np.nonzero(geometry.moving & (children == 0))[0]
@@ -287,25 +291,44 @@ def run_variant(variant: Variant, record_positions: bool = True, progress=None,
                      geometry, n, events)
 
 
-def time_variant(variant: Variant, repeats: int = 3, frames: int | None = None) -> tuple[float, float]:
-    """Median over ``repeats`` fresh runs of the mean wall time per frame of ``player.step()``
-    (s), and particle-steps per second; nothing but the player runs in the timed loop."""
-    per_frame, rates = [], []
+def time_once(variant: Variant, frames: int | None = None) -> tuple[float, float]:
+    """One fresh run of ``variant``: mean wall time per frame of ``player.step()`` (s) and
+    particle-steps per second; nothing but the player runs in the timed loop."""
+    p = prepare(variant)
+    count = p.frames if frames is None else min(frames, p.frames)
+    steps = 0.0
+    clock = _time.perf_counter
+    step = p.player.step
+    start = clock()
+    for _ in range(count):
+        steps += step().metrics.get("cloth.steps", 0.0)
+    elapsed = clock() - start
+    return elapsed / count, (steps / elapsed if elapsed > 0 else math.nan)
+
+
+def time_interleaved(variants: list, repeats: int = 9, frames: int | None = None, progress=None) -> list:
+    """Median over ``repeats`` of ``time_once`` for each variant, the repeats taken round
+    robin (variant 1, 2, ..., n, then again) so that load from other processes on a shared
+    machine spreads over all variants instead of biasing one. Returns ``[(median s/frame,
+    particle-steps/s of that run, minimum s/frame)]`` in the order of ``variants`` (the
+    minimum is the better estimate of the cost when other processes only add time)."""
+    samples = [[] for _ in variants]
     for _ in range(max(1, repeats)):
-        p = prepare(variant)
-        count = p.frames if frames is None else min(frames, p.frames)
-        steps = 0.0
-        clock = _time.perf_counter
-        step = p.player.step
-        start = clock()
-        for _ in range(count):
-            steps += step().metrics.get("cloth.steps", 0.0)
-        elapsed = clock() - start
-        per_frame.append(elapsed / count)
-        rates.append(steps / elapsed if elapsed > 0 else math.nan)
-    order = np.argsort(per_frame)
-    mid = int(order[len(order) // 2])
-    return float(per_frame[mid]), float(rates[mid])
+        for i, v in enumerate(variants):
+            samples[i].append(time_once(v, frames))
+            if progress is not None:
+                progress(v)
+    out = []
+    for s in samples:
+        per_frame = [x[0] for x in s]
+        mid = int(np.argsort(per_frame)[len(per_frame) // 2])
+        out.append((s[mid][0], s[mid][1], min(per_frame)))
+    return out
+
+
+def time_variant(variant: Variant, repeats: int = 3, frames: int | None = None) -> tuple[float, float]:
+    """Median over ``repeats`` fresh runs of ``time_once`` (s/frame, particle-steps/s)."""
+    return time_interleaved([variant], repeats, frames)[0][:2]
 
 
 def resolve_scene_path(name: str) -> str:
