@@ -52,3 +52,23 @@ def test_bending_stiffness_changes_the_droop():
     run(soft, 90)
     run(stiff, 90)
     assert np.abs(soft.particles.position - stiff.particles.position).max() > 1e-4
+
+
+def spun_skirt_radius(centrifugal):
+    s, h = skirt_system(gravity=5.0, inertia__centrifugal_acceleration=centrifugal,
+                        inertia__rotation_speed_limit=False)
+    hips = h.index("hips")
+    run(s, 60)
+
+    def spin(f):  # 1 turn per second about Y
+        a = 2.0 * np.pi * (f + 1) / 60.0
+        h.local_rotation[hips] = (0.0, np.sin(a / 2), 0.0, np.cos(a / 2))
+    run(s, 120, before=spin)
+    tips = [h.index(f"skirt_{i}_3") for i in range(8)]
+    return float(np.linalg.norm(h.world_position[tips][:, [0, 2]], axis=1).mean())
+
+
+def test_centrifugal_acceleration_flares_a_spinning_skirt():
+    r0 = spun_skirt_radius(0.0)
+    r1 = spun_skirt_radius(1.0)
+    assert r1 > r0 + 0.005          # the term pushes particles outwards while the center rotates

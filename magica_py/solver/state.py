@@ -45,6 +45,8 @@ PARTICLE_FIELDS = [
     ("angle_local_rot", "particle", Q4, F64, "xyzw; rest rotation relative to the parent"),
     ("angle_rest_vector", "particle", V3, F64, "m; rest edge vector in world space (restoration)"),
     ("angle_rotation", "particle", Q4, F64, "xyzw; working rotation of the limit pass"),
+    ("angle_limit", "particle", (), F64, "rad; limit angle at the particle's depth (per step)"),
+    ("angle_limit_cos", "particle", (), F64, "cos of angle_limit: the no-violation test without acos"),
     # fixed-point accumulators of bending and edge collision (ref §0.2; 1 unit = 1e-6 m)
     ("accum_vector", "particle", V3, F64, "1e-6 m integer units summed as float64 (exact below 2^53)"),
     ("accum_count", "particle", (), I32, "number of contributions"),

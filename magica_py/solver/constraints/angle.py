@@ -11,7 +11,7 @@ import math
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     angle_between_vectors, clamp_angle, from_to_rotation_unit, inverse_mass_friction, lerp,
-    load3, load4, q_inverse, q_mul, q_rotate, saturate, store3, store4, v_add, v_length,
+    load3, load4, q_inverse, q_mul, q_rotate, saturate, store3, store4, v_add, v_dot, v_length,
     v_scale, v_sub,
 )
 from magica_py.solver.parameters import curve_at, curve_at_clamp01, step_rate
@@ -68,6 +68,10 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
                 store3(ps.angle_local_pos, c, q_rotate(iq, v_scale(bv, 1.0 / blen)))
                 store4(ps.angle_local_rot, c, q_mul(iq, load4(ps.step_basic_rot, c)))
             store3(ps.angle_rest_vector, c, bv)
+            if use_limit:
+                max_angle = math.radians(curve_at(prm.limit_angle_curve, team, m.depth[c]))
+                ps.angle_limit[c] = max_angle
+                ps.angle_limit_cos[c] = math.cos(max_angle)
         for k in range(ITERATIONS):
             rest_pivot = lerp(0.1, 0.5, k / 2.0)
             for e in range(e0 + 1, e1):
@@ -135,11 +139,13 @@ def _limit_pass(m, ps, prm, team, c, p, cp, pp, wc, wp, p_move, limit_stiffness,
     if lb < 1e-8 or lc < 1e-8:
         return cp, pp
     v = v_scale(vn, lc)
-    max_angle = math.radians(curve_at(prm.limit_angle_curve, team, m.depth[c]))
-    alpha = angle_between_vectors(v, tn)
     r = v
-    if alpha > max_angle:
-        r = clamp_angle(v, tn, lerp(alpha, max_angle, limit_stiffness))
+    # alpha > max angle  <=>  cos(alpha) < cos(max angle): acos only for a violation
+    if v_dot(vn, tn) < ps.angle_limit_cos[c]:
+        alpha = angle_between_vectors(v, tn)
+        max_angle = ps.angle_limit[c]
+        if alpha > max_angle:
+            r = clamp_angle(v, tn, lerp(alpha, max_angle, limit_stiffness))
     dp, dc = solve_pivot_pair(pp, cp, v, r, LIMIT_PIVOT, wp, wc)
     cp = v_add(cp, dc)
     store3(ps.next_pos, c, cp)
