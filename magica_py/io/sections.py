@@ -44,7 +44,10 @@ def is_vrm(path) -> bool:
 
 
 def load_rig(path, *, prefix: str = "", unit_scale: float = 1.0):
-    """The importer result for a rig file: ``VrmAvatar``, ``GltfRig`` or ``BvhAnimation``."""
+    """The importer result for a rig file: ``VrmAvatar``, ``GltfRig`` or ``BvhAnimation``.
+
+    For a BVH, ``unit_scale`` 1.0 means automatic units (``load_bvh(units="auto")``); any
+    other value is metres per file unit."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".bvh":
