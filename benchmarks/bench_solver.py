@@ -1,6 +1,6 @@
 """Solver benchmark: per-frame wall time by phase and particle-steps per second.
 
-    python benchmarks/bench_solver.py [--frames N] [--scenes tail_orbit crowd ...]
+    python benchmarks/bench_solver.py [--frames N] [--scenes tail_orbit crowd ...] [--parallel]
 
 For each scene (``configs/<name>.yaml``): load, build the ``ClothSystem``, attach it to a
 ``Player`` (no recording sink), warm up (JIT from the cache, first frames), then time
@@ -19,7 +19,7 @@ import time
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 
-def bench(name: str, frames: int, warmup: int = 30) -> dict:
+def bench(name: str, frames: int, warmup: int = 30, parallel: bool = False) -> dict:
     from magica_py.config import load_scene
     from magica_py.runtime.player import Player
     from magica_py.solver.system import ClothSystem
@@ -27,7 +27,8 @@ def bench(name: str, frames: int, warmup: int = 30) -> dict:
     scene = load_scene(ROOT / "configs" / f"{name}.yaml")
     player = Player.for_scene(scene)
     t0 = time.perf_counter()
-    system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player)
+    system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings,
+                         parallel=parallel).attach(player)
     build = time.perf_counter() - t0
     t0 = time.perf_counter()
     player.run(warmup)
@@ -52,10 +53,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--scenes", nargs="+", default=["tail_orbit", "character_walk", "crowd"])
+    ap.add_argument("--parallel", action="store_true", help="teams spread over numba threads")
     args = ap.parse_args(argv)
     for name in args.scenes:
-        r = bench(name, args.frames)
-        print(f"== {r['scene']}: {r['teams']} teams, {r['particles']} particles, "
+        r = bench(name, args.frames, parallel=args.parallel)
+        print(f"== {r['scene']}{' (parallel)' if args.parallel else ''}: {r['teams']} teams, {r['particles']} particles, "
               f"build {r['build_s']:.2f} s, warm-up {r['warmup_s']:.2f} s")
         print(f"   whole frame {r['frame_us']:9.1f} us   particle-steps/frame {r['steps_per_frame']:.0f}")
         for k, v in sorted(r["phases_us"].items()):

@@ -240,3 +240,33 @@ def test_anchor_with_zero_anchor_inertia_removes_the_anchor_motion():
     run(s2, 30, before=drive2)
     lag = s2.particles.position[0, 0] - s2.particles.position[4, 0]
     assert lag > 0.01
+
+
+def test_parallel_kernel_is_bit_identical_to_the_serial_one_on_several_teams():
+    from magica_py.scene import rigs
+    from magica_py.scene.hierarchy import TransformHierarchy
+    from magica_py.solver.system import ClothSystem
+    from solver_scenes import Settings, Spec
+
+    def build(parallel):
+        bones = []
+        for i in range(3):
+            bones += [BoneSpec(f"root{i}", None, (i * 1.0, 1.0, 0.0))]
+            bones += rigs.chain(f"tail{i}", f"root{i}", 4 + i, 0.4, direction=(0.0, 0.0, -1.0))
+        h = TransformHierarchy(bones)
+        specs = [Spec(f"tail{i}", (h.index(f"tail{i}_0"),), h.index(f"root{i}"), "line",
+                      params("skirt" if i == 1 else None)) for i in range(3)]
+        return ClothSystem(h, specs, settings=Settings(), parallel=parallel), h
+
+    out = []
+    for parallel in (False, True):
+        s, h = build(parallel)
+        frames = []
+        for f in range(90):
+            def move(_f, f=f):
+                h.local_position[h.index("root1")] = (1.0 + 0.3 * math.sin(f / 10.0), 1.0, 0.0)
+            run(s, 1, before=move)
+            frames.append(np.concatenate([h.world_position.ravel(), h.world_rotation.ravel()]))
+        out.append(np.array(frames))
+    assert np.array_equal(out[0], out[1])
+    assert np.abs(np.diff(out[0], axis=0)).max() > 1e-3   # it moved

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections import namedtuple
 
-from numba import types
+from numba import prange, types
 from numba.core.extending import overload
 from numba.experimental import structref
 
@@ -114,54 +114,101 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi):
 
 
 @kernel
-def simulate_frame(m, ps, prm, ts, cs, tt, h, fi):
-    """The whole cloth frame for every team (see the module docstring)."""
-    team_count = ts.enabled.shape[0]
-    prepare_teams(m, ts, prm, tt, h)
+def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t):
+    """Per-frame stages of team t before the steps (C.1, C.2/C.4, C.5, G.2)."""
+    ts.running[t] = 1 if tt.running[t] else 0
+    skin_team(m, ps, h.local_to_world, t)
+    center_and_inertia_team(m, ps, prm, ts, t, h.world_position, h.world_rotation, h.lossy_scale,
+                            tt.frame_delta_time[t], tt.now_time_scale[t], tt.skip_count[t],
+                            tt.running[t], fi.dt)
+    reset_or_shift_team(m, ps, ts, t)
+    collider_frame_team(cs, ts, t, h.world_position, h.world_rotation, h.lossy_scale)
+
+
+@kernel
+def end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t):
+    """Per-frame stages of team t after the steps: guards, E.1-E.4, A.7."""
+    code = check_team(m, ps, ts, t)
+    if code != 0:
+        reset_team_to_base(m, ps, ts, t)
+        ts.guard_code[t] = code
+    display_team(m, ps, ts, t, fi.dt, tt.time[t], tt.old_time[t], tt.now_update_time[t],
+                 tt.running[t])
+    line_rotations_team(m, ps, prm, ts, t)
+    triangle_rotations_team(m, ps, t)
+    if transform_data_team(m, ps, t):
+        write_transforms_team(m, ps, t, h.parent, h.world_rotation, h.lossy_scale,
+                              h.local_position, h.local_rotation)
+    else:
+        reset_team_to_base(m, ps, ts, t)
+        ts.guard_code[t] = 1
+    end_frame_team(ts, t, tt.running[t])
+    collider_end_frame_team(cs, ts, t, tt.running[t])
+
+
+@kernel
+def _time_frame_update(tt, fi):
     team_time_frame_update(
         tt.active, tt.suspended, tt.update_mode, tt.team_time_scale, tt.time, tt.old_time,
         tt.now_update_time, tt.old_update_time, tt.frame_update_time, tt.frame_old_time,
         tt.update_count, tt.skip_count, tt.frame_delta_time, tt.now_time_scale, tt.frame_add,
         tt.running, fi.delta_time, fi.unscaled_delta_time, fi.fixed_delta_time,
         fi.fixed_update_count, fi.global_time_scale, fi.dt, fi.max_steps, fi.timing)
+
+
+@kernel
+def _max_update_count(ts, tt):
     max_count = 0
-    for t in range(team_count):
-        if ts.active[t] == 0:
-            continue
-        ts.running[t] = 1 if tt.running[t] else 0
-        skin_team(m, ps, h.local_to_world, t)
-        center_and_inertia_team(m, ps, prm, ts, t, h.world_position, h.world_rotation, h.lossy_scale,
-                                tt.frame_delta_time[t], tt.now_time_scale[t], tt.skip_count[t],
-                                tt.running[t], fi.dt)
-        reset_or_shift_team(m, ps, ts, t)
-        collider_frame_team(cs, ts, t, h.world_position, h.world_rotation, h.lossy_scale)
-        if tt.update_count[t] > max_count:
+    for t in range(ts.enabled.shape[0]):
+        if ts.active[t] != 0 and tt.update_count[t] > max_count:
             max_count = tt.update_count[t]
-    for step in range(max_count):
+    return max_count
+
+
+@kernel
+def simulate_frame(m, ps, prm, ts, cs, tt, h, fi):
+    """The whole cloth frame for every team (see the module docstring)."""
+    team_count = ts.enabled.shape[0]
+    prepare_teams(m, ts, prm, tt, h)
+    _time_frame_update(tt, fi)
+    for t in range(team_count):
+        if ts.active[t] != 0:
+            begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t)
+    for step in range(_max_update_count(ts, tt)):
         team_time_begin_step(step, tt.active, tt.update_count, tt.time, tt.now_update_time,
                              tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
         for t in range(team_count):
             if ts.active[t] != 0 and tt.step_running[t]:
                 run_step(m, ps, prm, ts, cs, tt, t, fi)
     for t in range(team_count):
-        if ts.active[t] == 0:
-            continue
-        code = check_team(m, ps, ts, t)
-        if code != 0:
-            reset_team_to_base(m, ps, ts, t)
-            ts.guard_code[t] = code
-        display_team(m, ps, ts, t, fi.dt, tt.time[t], tt.old_time[t], tt.now_update_time[t],
-                     tt.running[t])
-        line_rotations_team(m, ps, prm, ts, t)
-        triangle_rotations_team(m, ps, t)
-        if transform_data_team(m, ps, t):
-            write_transforms_team(m, ps, t, h.parent, h.world_rotation, h.lossy_scale,
-                                  h.local_position, h.local_rotation)
-        else:
-            reset_team_to_base(m, ps, ts, t)
-            ts.guard_code[t] = 1
-        end_frame_team(ts, t, tt.running[t])
-        collider_end_frame_team(cs, ts, t, tt.running[t])
+        if ts.active[t] != 0:
+            end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t)
+    team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
+                        tt.now_update_time, tt.old_update_time, tt.frame_update_time,
+                        tt.frame_old_time, fi.timing)
+
+
+@kernel(parallel=True)
+def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, fi):
+    """``simulate_frame`` with teams spread over threads (opt-in: ``ClothSystem(parallel=True)``).
+
+    Teams are independent and each runs in its own order, so the results are bit-identical
+    to the serial kernel (element-wise, no reductions)."""
+    team_count = ts.enabled.shape[0]
+    prepare_teams(m, ts, prm, tt, h)
+    _time_frame_update(tt, fi)
+    for t in prange(team_count):
+        if ts.active[t] != 0:
+            begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t)
+    for step in range(_max_update_count(ts, tt)):
+        team_time_begin_step(step, tt.active, tt.update_count, tt.time, tt.now_update_time,
+                             tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
+        for t in prange(team_count):
+            if ts.active[t] != 0 and tt.step_running[t]:
+                run_step(m, ps, prm, ts, cs, tt, t, fi)
+    for t in prange(team_count):
+        if ts.active[t] != 0:
+            end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t)
     team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
                         tt.now_update_time, tt.old_update_time, tt.frame_update_time,
                         tt.frame_old_time, fi.timing)

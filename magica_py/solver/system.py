@@ -29,7 +29,7 @@ from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, u
 from magica_py.solver.colliders import fill_slots
 from magica_py.solver.fields import F64
 from magica_py.solver.frame import (
-    FrameInputs, as_kernel_table, hierarchy_arrays, simulate_frame, time_arrays,
+    FrameInputs, as_kernel_table, hierarchy_arrays, simulate_frame, simulate_frame_parallel, time_arrays,
 )
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
 from magica_py.solver.layout import build_solver_model
@@ -46,11 +46,14 @@ class ClothSystem:
 
     ``models`` may be given (prebuilt ``build.ClothModel`` in the same order); otherwise each
     spec is built with ``build.build_cloth`` from the hierarchy's current (rest) pose.
+    ``parallel=True`` spreads teams over numba threads (same results bit for bit; worth it
+    for crowds on idle cores only, tech-notes §8: off by default).
     """
 
     name = "cloth"
 
-    def __init__(self, hierarchy, cloth_specs, colliders=None, settings=None, models=None):
+    def __init__(self, hierarchy, cloth_specs, colliders=None, settings=None, models=None,
+                 parallel: bool = False):
         from magica_py.build import build_cloth
 
         self.hierarchy = hierarchy
@@ -96,6 +99,7 @@ class ClothSystem:
         self.frame_count = 0
         self._entry_point = None
         self._tables = None
+        self._kernel = simulate_frame_parallel if parallel else simulate_frame
 
     # ------------------------------------------------------------------ registration
     def attach(self, player, scene=None) -> "ClothSystem":
@@ -236,10 +240,10 @@ class ClothSystem:
         signature (skips numba's argument typing; the table types never change)."""
         tables = self.kernel_tables()
         if self._entry_point is None:
-            simulate_frame(*tables, fi)
+            self._kernel(*tables, fi)
             from numba import typeof
             key = tuple(typeof(a) for a in tables) + (typeof(fi),)
-            self._entry_point = simulate_frame.overloads[key].entry_point
+            self._entry_point = self._kernel.overloads[key].entry_point
             return
         self._entry_point(*tables, fi)
 
