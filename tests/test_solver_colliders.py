@@ -106,3 +106,26 @@ def test_edge_mode_catches_a_thin_capsule_that_point_mode_misses():
     # edge mode: the edge never crosses the capsule and the tail drapes over it
     assert segment_clearance(edge).min() > -0.1 * PARTICLE_RADIUS
     assert edge[-1, 3, 2] < where[2] and edge[-1, 2, 1] > where[1] - 0.1
+
+
+def test_edge_mode_friction_is_quantised_to_zero_or_one_as_in_magicacloth2():
+    # The fixed-point max of ref §0.2 casts to an integer before scaling, so an edge records
+    # friction 1 when a collider pushed it and 0 otherwise (Appendix 2.5); D.10 then decays it
+    # by 0.6 per step: every friction value is 0 or a power of 0.6.
+    a = math.radians(40.0)
+    rr = 0.3125
+    where = (0.0, 1.0 - rr * math.sin(a), -rr * math.cos(a))
+    s, h = chain_system(bones=5, length=0.5, direction=(0.0, 0.0, -1.0),
+                        extra_bones=[BoneSpec("col", None, where)],
+                        collider_specs=[{"name": "col", "transform": "col",
+                                         "capsule": {"radius": 0.005, "length": 0.6, "direction": "x"}}],
+                        collision_mode="edge")
+    seen = set()
+    for _ in range(200):
+        run(s, 1, dt=1.0 / 90.0)
+        for f in s.particles.friction:
+            if f > 0.0:
+                k = math.log(f) / math.log(0.6)
+                assert abs(k - round(k)) < 1e-9
+                seen.add(round(k))
+    assert 1 in seen                     # contact happened (friction 1 then x0.6)
