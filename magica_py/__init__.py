@@ -9,24 +9,50 @@ from __future__ import annotations
 import hashlib
 import os
 import pathlib
+import re
 import sys
 
 __version__ = "0.1.0"
 
 
+def _kernel_sources(root: pathlib.Path) -> list[pathlib.Path]:
+    """The modules that define numba kernels, plus every package module they import.
+
+    Only these can make a cached kernel stale (a kernel freezes the helpers and module
+    constants it uses); editing the CLI, the YAML loader, the importers or the sinks keeps
+    the compiled cache. Orchestration packages are followed only where they define kernels.
+    """
+    texts = {path: path.read_text(encoding="utf-8") for path in root.rglob("*.py")}
+    orchestration = ("config", "cli.py", "bench", "io", "sinks")
+    wanted = [path for path, text in texts.items() if "@kernel" in text or "@numba." in text or "@njit" in text]
+    seen: set[pathlib.Path] = set()
+    while wanted:
+        path = wanted.pop()
+        if path in seen:
+            continue
+        seen.add(path)
+        for module in re.findall(r"(?:from|import)\s+magica_py\.([\w.]+)", texts[path]):
+            base = root.joinpath(*module.split("."))
+            for candidate in (base.with_suffix(".py"), base / "__init__.py"):
+                if candidate in texts and candidate not in seen and (
+                        candidate.relative_to(root).parts[0] not in orchestration):
+                    wanted.append(candidate)
+    return sorted(seen)
+
+
 def _configure_numba_cache() -> None:
-    """Point NUMBA_CACHE_DIR at a folder keyed by a hash of this package's sources.
+    """Point NUMBA_CACHE_DIR at a folder keyed by a hash of the kernel sources.
 
     numba keys its cache on the kernel's own file only, so a kernel whose helper lives in
     another module keeps returning stale results after the helper changes (tech-notes §7).
-    Keying the whole cache folder on the package's sources makes any edit start a fresh
-    cache. A user-set NUMBA_CACHE_DIR is respected.
+    Keying the cache folder on every kernel module (and what they import) makes any such
+    edit start a fresh cache. A user-set NUMBA_CACHE_DIR is respected.
     """
     if os.environ.get("NUMBA_CACHE_DIR"):
         return
     root = pathlib.Path(__file__).resolve().parent
     digest = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
+    for path in _kernel_sources(root):
         digest.update(path.relative_to(root).as_posix().encode())
         digest.update(path.read_bytes())
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
