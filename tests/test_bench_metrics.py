@@ -205,3 +205,29 @@ def test_numpy_baseline_chain_hangs_straight_and_keeps_its_lengths():
     lengths = np.linalg.norm(np.diff(p, axis=0), axis=1)
     assert np.abs(lengths / 0.1 - 1).max() < 0.03                 # tether + two Jacobi passes
     assert np.isfinite(p).all()
+
+
+# ----------------------------------------------------------------------------- end to end (small)
+def test_bench_cli_writes_table_csv_and_plot_with_an_extra_family(tmp_path, capsys):
+    from magica_py.bench.cli import main_bench
+
+    code = main_bench(["--scenes", "tail_orbit", "--frequencies", "45,90", "--modes", "frequency_consistent",
+                       "--family", "tight:solver.rate_mode=frequency_consistent,tether.distance_compression=0.05",
+                       "--repeats", "1", "--duration", "0.5", "--skip", "fps,numpy,features,crowd",
+                       "--out", str(tmp_path), "--quiet"])
+    assert code == 0
+    rows = (tmp_path / "bench.csv").read_text().splitlines()
+    assert len(rows) == 1 + 4                                   # 2 families x 2 frequencies
+    assert {r.split(",")[1] for r in rows[1:]} == {"frequency_consistent", "tight"}
+    text = (tmp_path / "bench.md").read_text()
+    assert "| tail_orbit | frequency_consistent | 90 |" in text and "residual RMS" in text
+    assert (tmp_path / "pareto.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_stability_cli_reports_a_case_and_exits_zero_within_bounds(tmp_path):
+    from magica_py.bench.cli import main_stability
+
+    assert main_stability(["--case", "scale_0_01", "--out", str(tmp_path), "--quiet"]) == 0
+    table = (tmp_path / "stability.md").read_text()
+    assert "| scale_0_01 | yes |" in table and "| ok |" in table
+    assert main_stability(["--case", "no_such_case", "--quiet"]) == 2

@@ -80,6 +80,10 @@ def main_bench(argv) -> int:
     p.add_argument("--scenes", default=",".join(SCENES), help="comma-separated showcase scenes or YAML paths")
     p.add_argument("--frequencies", default=",".join(map(str, FREQUENCIES)), help="simulation Hz to sweep")
     p.add_argument("--modes", default=",".join(MODES), help="parameter modes (solver.rate_mode values)")
+    p.add_argument("--family", action="append", default=[], metavar="NAME:KEY=VALUE[,KEY=VALUE...]",
+                   help="an extra series swept like the modes, e.g. a quality-mode candidate: "
+                        "'tight_tether:solver.rate_mode=frequency_consistent,tether.distance_compression=0.1' "
+                        "(values parsed as YAML; repeatable)")
     p.add_argument("--repeats", type=int, default=9, help="timed runs per variant (median)")
     p.add_argument("--duration", type=float, default=None, help="seconds per run (default: the scene's)")
     p.add_argument("--out", default=None, help="report folder (default: reports/)")
@@ -91,6 +95,10 @@ def main_bench(argv) -> int:
     freqs = [int(f) for f in args.frequencies.split(",") if f]
     modes = [m for m in args.modes.split(",") if m]
     skip = set(s for s in args.skip.split(",") if s)
+    families = {m: {"solver.rate_mode": m} for m in modes}
+    for text in args.family:
+        name, params = parse_family(text)
+        families[name] = params
     started = time.perf_counter()
 
     def say(text):
@@ -109,8 +117,8 @@ def main_bench(argv) -> int:
         ref_v = base.with_(label=f"{scene_name}@ref", frequency=REFERENCE_FREQUENCY,
                            parameters={"solver.rate_mode": "frequency_consistent"}, family="reference")
         frames = _variant_frames(ref_v)
-        sweep = [base.with_(label=f"{scene_name}/{m}/{f}", frequency=f, parameters={"solver.rate_mode": m},
-                            family=m) for m in modes for f in freqs]
+        sweep = [base.with_(label=f"{scene_name}/{m}/{f}", frequency=f, parameters=dict(params), family=m)
+                 for m, params in families.items() for f in freqs]
         total = frames * (2 + len(sweep) * (1 + args.repeats))
         say(f"{scene_name}: reference {REFERENCE_FREQUENCY} Hz, check {CHECK_FREQUENCY} Hz, {len(sweep)} variants, "
             f"{frames} frames each")
@@ -148,7 +156,7 @@ def main_bench(argv) -> int:
                 "settle_s": settle,
             })
         progress.close()
-        for m in modes:
+        for m in families:
             sel = [r for r in rows if r["scene"] == scene_name and r["family"] == m]
             order, r2 = fit_order([r["frequency"] for r in sel],
                                   [r["rms_error"] if r["rms_error"] is not None else math.nan for r in sel])
@@ -157,10 +165,10 @@ def main_bench(argv) -> int:
                            "points": sum(1 for r in sel if r["rms_error"] is not None),
                            "order_all_frames": order_all, "r2_all": r2_all})
         if "fps" not in skip:
-            for m in modes:
+            for m, params in families.items():
                 recs = []
                 for fps in FPS_SET:
-                    v = base.with_(label=f"{scene_name}/{m}/fps{fps}", fps=fps, parameters={"solver.rate_mode": m})
+                    v = base.with_(label=f"{scene_name}/{m}/fps{fps}", fps=fps, parameters=dict(params))
                     run = run_variant(v, record_positions=False)
                     recs.append((run.times, run.tips))
                 spreads.append({"scene": scene_name, "mode": m,
@@ -183,6 +191,22 @@ def main_bench(argv) -> int:
         print(text)
         print(f"\nwritten: {out / 'bench.md'}, {out / 'bench.csv'}, {out / 'pareto.png'}")
     return 0
+
+
+def parse_family(text: str) -> tuple[str, dict]:
+    """``NAME:KEY=VALUE[,KEY=VALUE...]`` -> (NAME, {KEY: VALUE}); values are YAML."""
+    import yaml
+
+    if ":" not in text:
+        raise SystemExit(f"magica-py bench: --family {text!r}: expected NAME:KEY=VALUE[,KEY=VALUE...]")
+    name, rest = text.split(":", 1)
+    params = {}
+    for item in filter(None, rest.split(",")):
+        if "=" not in item:
+            raise SystemExit(f"magica-py bench: --family {text!r}: {item!r} is not KEY=VALUE")
+        key, value = item.split("=", 1)
+        params[key.strip()] = yaml.safe_load(value)
+    return name.strip(), params
 
 
 def numpy_comparison(repeats: int, say) -> dict:
