@@ -231,3 +231,13 @@ def test_stability_cli_reports_a_case_and_exits_zero_within_bounds(tmp_path):
     table = (tmp_path / "stability.md").read_text()
     assert "| scale_0_01 | yes |" in table and "| ok |" in table
     assert main_stability(["--case", "no_such_case", "--quiet"]) == 2
+
+
+def test_kinetic_envelope_of_two_particles_at_known_speeds():
+    t = np.array([0.0, 0.5, 1.0])
+    pos = np.zeros((3, 3, 3))
+    pos[:, 1, 0] = [0.0, 1.0, 2.0]        # 2 m/s
+    pos[:, 2, 2] = [0.0, 0.0, 1.5]        # 0 then 3 m/s
+    pos[:, 0, 1] = [0.0, 5.0, 9.0]        # not moving (fixed): ignored
+    e = M.kinetic_envelope(pos, t, np.array([False, True, True]))
+    assert e == pytest.approx([0.0, 2.0, 2.0 + 4.5])

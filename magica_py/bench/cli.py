@@ -128,6 +128,7 @@ def main_bench(argv) -> int:
                             progress=progress.run_callback())
         g = ref.geometry
         moving = g.moving
+        ref_energy = M.kinetic_envelope(ref.positions, ref.times, moving)
         res_rms, res_max = M.frame_errors(check.positions, ref.positions, g.length_scale, moving)
         residuals.append({"scene": scene_name, "residual_rms": float(np.sqrt(np.mean(res_rms ** 2))) * 100,
                           "residual_max": float(res_max.max()) * 100, "chain_length": g.chain_length,
@@ -136,10 +137,12 @@ def main_bench(argv) -> int:
         for v in sweep:
             run = run_variant(v, progress=progress.run_callback())
             err_rms, err_max = M.frame_errors(run.positions, ref.positions, g.length_scale, moving)
+            energy = M.kinetic_envelope(run.positions, run.times, moving)
             run.positions = None                  # keep memory flat over the sweep
-            runs.append((v, run, err_rms, err_max))
+            envelope = float(np.sqrt(np.mean((energy - ref_energy) ** 2))) / max(float(ref_energy.max()), 1e-12)
+            runs.append((v, run, err_rms, err_max, envelope))
         timings = time_interleaved(sweep, repeats=args.repeats, progress=lambda v: progress.add(frames))
-        for (v, run, err_rms, err_max), (sec, rate, fastest) in zip(runs, timings):
+        for (v, run, err_rms, err_max, envelope), (sec, rate, fastest) in zip(runs, timings):
             window = resolved_error(err_rms, err_max, res_rms)
             settle = M.settling_time(run.display_speed, run.times, REST_SPEED)
             rows.append({
@@ -153,6 +156,7 @@ def main_bench(argv) -> int:
                 "max_root_stretch": 100 * float(run.root_stretch.max()),
                 "max_penetration_mm": 1000 * float(run.penetration.max()),
                 "max_speed": float(run.state_speed.max()),
+                "energy_envelope": 100 * envelope,
                 "settle_s": settle,
             })
         progress.close()
@@ -355,6 +359,9 @@ def main_stability(argv) -> int:
                                             "finiteness, speed, stretch, penetration and return to rest.")
     p.add_argument("--case", action="append", default=[], help="run only this case (repeatable)")
     p.add_argument("--short", action="store_true", help="the CI-length version of each case")
+    p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                   help="a cloth parameter applied to every case (validated; VALUE is YAML), e.g. "
+                        "solver.rate_mode=frequency_consistent; repeatable")
     p.add_argument("--out", default=None, help="report folder (default: reports/)")
     p.add_argument("--quiet", "-q", action="store_true")
     args = p.parse_args(argv)
@@ -363,10 +370,11 @@ def main_stability(argv) -> int:
     except KeyError as exc:
         print(f"magica-py stability: {exc.args[0]}", file=sys.stderr)
         return 2
+    _, params = parse_family("params:" + ",".join(args.param))
     rows, failed = [], 0
     bar = Progress(len(cases), args.quiet)
     for c in cases:
-        result, _ = run_case(c, c.short_duration if args.short else None)
+        result, _ = run_case(c, c.short_duration if args.short else None, params)
         rows.append(stability_row(result))
         failed += bool(result.failures())
         bar.add(1)

@@ -204,6 +204,13 @@ def energy_envelope(positions: np.ndarray, times: np.ndarray, moving: np.ndarray
     return (0.5 * v * v + gravity * height).sum(axis=1)
 
 
+def kinetic_envelope(positions: np.ndarray, times: np.ndarray, moving: np.ndarray) -> np.ndarray:
+    """Specific kinetic energy (J/kg, summed over the moving particles) per frame, from the
+    frame speeds: a statistic that stays comparable when trajectories diverge."""
+    v = frame_speeds(positions, times)[:, moving]
+    return 0.5 * (v * v).sum(axis=1)
+
+
 def settling_time(values: np.ndarray, times: np.ndarray, threshold: float, after: float = 0.0) -> float:
     """Time (s, relative to ``after``) from which ``values`` stays at or below ``threshold``
     until the end of the run; ``inf`` when it never settles, 0 when it never exceeds."""

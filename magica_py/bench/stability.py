@@ -51,9 +51,9 @@ class HardCase:
     def path(self) -> str:
         return str(HARD_DIR / self.scene)
 
-    def variant(self, duration: float | None = None) -> Variant:
+    def variant(self, duration: float | None = None, parameters: dict | None = None) -> Variant:
         return Variant(self.name, self.path, duration=duration, raw_parameters=dict(self.raw_parameters),
-                       family="hard")
+                       parameters=dict(parameters or {}), family="hard")
 
 
 CASES: tuple[HardCase, ...] = (
@@ -140,9 +140,12 @@ def time_scale_hook(actions):
     return hook
 
 
-def run_case(c: HardCase, duration: float | None = None) -> tuple[CaseResult, RunResult]:
-    """Run one hard case (its full scene, or ``duration`` seconds) and evaluate it."""
-    variant = c.variant(duration)
+def run_case(c: HardCase, duration: float | None = None, parameters: dict | None = None
+             ) -> tuple[CaseResult, RunResult]:
+    """Run one hard case (its full scene, or ``duration`` seconds) and evaluate it;
+    ``parameters`` (dotted key -> value) are applied to every cloth, e.g. a quality-mode
+    candidate."""
+    variant = c.variant(duration, parameters)
     hook = time_scale_hook(c.time_scale_actions) if c.time_scale_actions else None
     run = run_variant(variant, record_positions=False, before_frame=hook, prepared=prepare(variant))
     return evaluate(c, run), run
