@@ -241,3 +241,9 @@ def test_kinetic_envelope_of_two_particles_at_known_speeds():
     pos[:, 0, 1] = [0.0, 5.0, 9.0]        # not moving (fixed): ignored
     e = M.kinetic_envelope(pos, t, np.array([False, True, True]))
     assert e == pytest.approx([0.0, 2.0, 2.0 + 4.5])
+    # the team's mean velocity removed: frame 1 mean (1, 0, 0) -> 0.5 * (1 + 1); frame 2
+    # mean (1, 0, 1.5) -> 0.5 * (1 + 2.25) * 2
+    e = M.kinetic_envelope(pos, t, np.array([False, True, True]), team=np.zeros(3, dtype=int))
+    assert e == pytest.approx([0.0, 1.0, 3.25])
+    assert M.kinetic_envelope(pos, t, np.array([False, True, True]), window=2) == pytest.approx([0.0, 2.0, 6.5])
+    assert M.kinetic_envelope(pos[::-1], t, np.array([False, True, True]), window=3)[-1] == pytest.approx(6.5)

@@ -204,11 +204,29 @@ def energy_envelope(positions: np.ndarray, times: np.ndarray, moving: np.ndarray
     return (0.5 * v * v + gravity * height).sum(axis=1)
 
 
-def kinetic_envelope(positions: np.ndarray, times: np.ndarray, moving: np.ndarray) -> np.ndarray:
+def kinetic_envelope(positions: np.ndarray, times: np.ndarray, moving: np.ndarray,
+                     team: np.ndarray | None = None, window: int = 1) -> np.ndarray:
     """Specific kinetic energy (J/kg, summed over the moving particles) per frame, from the
-    frame speeds: a statistic that stays comparable when trajectories diverge."""
-    v = frame_speeds(positions, times)[:, moving]
-    return 0.5 * (v * v).sum(axis=1)
+    frame speeds: a statistic that stays comparable when trajectories diverge.
+
+    With ``team`` (N,) the mean velocity of each team's moving particles is removed first
+    (the energy of the cloth's own swing, not of the character carrying it); ``window`` > 1
+    takes the running maximum over that many frames (the envelope)."""
+    vel = np.zeros(positions.shape)
+    if positions.shape[0] > 1:
+        dt = np.diff(times)
+        ok = dt > 1e-12
+        vel[1:][ok] = np.diff(positions, axis=0)[ok] / dt[ok, None, None]
+    vel = vel[:, moving]
+    if team is not None:
+        t = np.asarray(team)[moving]
+        for k in np.unique(t):
+            members = t == k
+            vel[:, members] -= vel[:, members].mean(axis=1, keepdims=True)
+    energy = 0.5 * (vel * vel).sum(axis=(1, 2))
+    if window > 1 and energy.size:
+        energy = np.array([energy[max(0, i - window + 1):i + 1].max() for i in range(energy.shape[0])])
+    return energy
 
 
 def settling_time(values: np.ndarray, times: np.ndarray, threshold: float, after: float = 0.0) -> float:

@@ -23,7 +23,7 @@ BENCH_COLUMNS = (
     ("max_root_stretch", "max root stretch (%)", "{:.2f}"),
     ("max_penetration_mm", "max penetration (mm)", "{:.2f}"),
     ("max_speed", "max speed (m/s)", "{:.2f}"),
-    ("energy_envelope", "kinetic energy envelope error (% of ref peak)", "{:.2g}"),
+    ("energy_envelope", "energy envelope error (%)", "{:.2g}"),
     ("settle_s", "settling (s)", "{:.2f}"),
 )
 
