@@ -47,6 +47,47 @@ def skin_team(m, ps, local_to_world, team):
         store4(ps.rotation, p, rot_from_normal_tangent(nor, tan))
 
 
+SMOOTHING_REFERENCE_RATE = 90.0   # 1/s: the frame rate at which the C.4 ratio is taken as is
+
+
+@kernel
+def smoothing_time_constant(s):
+    """Time constant (s) of movement smoothing ``s``: C.4's per-frame ratio
+    ``a = (1-s)^3 0.99 + 0.01`` read as the ratio of one 1/90 s frame, ``1 - a = exp(-h/tau)``.
+    0 when there is no smoothing (a = 1)."""
+    a = saturate((1.0 - s) ** 3 * 0.99 + 0.01)
+    if a >= 1.0:
+        return 0.0
+    return -1.0 / (SMOOTHING_REFERENCE_RATE * math.log(1.0 - a))
+
+
+@kernel
+def time_based_smoothing(ts, team, delta, frame_delta_time, s, speed_limit):
+    """Quality-mode C.4 smoothing: the smoothed component velocity is an exponential filter
+    with the time constant of ``smoothing_time_constant(s)``, integrated exactly over the frame
+    for the frame's mean velocity (piecewise constant input), every frame with time.
+
+    Returns the displacement the cloth feels this frame (the rest is shifted rigidly) and
+    updates ``ts.smoothing_velocity``; independent of how the time is cut into frames for a
+    constant input, first order in the frame time otherwise."""
+    h = frame_delta_time
+    if h <= 0.0:
+        return (0.0, 0.0, 0.0)
+    v = v_scale(delta, 1.0 / h)
+    if speed_limit >= 0.0:
+        v = clamp_length(v, speed_limit)
+    tau = smoothing_time_constant(s)
+    sv0 = load3(ts.smoothing_velocity, team)
+    if tau <= 0.0:
+        store3(ts.smoothing_velocity, team, v)
+        return v_scale(v, h)
+    decay = math.exp(-h / tau)
+    lag = v_sub(sv0, v)
+    store3(ts.smoothing_velocity, team, v_add(v, v_scale(lag, decay)))
+    # integral over the frame of v + (sv0 - v) exp(-t/tau)
+    return v_add(v_scale(v, h), v_scale(lag, tau * (1.0 - decay)))
+
+
 @kernel
 def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation, lossy_scale,
                             frame_delta_time, now_time_scale, skip_count, running, dt):
@@ -127,15 +168,20 @@ def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation
     s = prm.movement_smoothing[team]
     limit = prm.movement_speed_limit[team]
     if s >= 1e-6 and not reset and not keep:
-        if running:
-            v = (0.0, 0.0, 0.0)
-            if frame_delta_time > 0.0:
-                v = v_scale(v_sub(cpos, old_pos), 1.0 / frame_delta_time)
-            if limit >= 0.0:
-                v = clamp_length(v, limit * ratio)
-            a = saturate((1.0 - s) ** 3 * 0.99 + 0.01)
-            store3(ts.smoothing_velocity, team, v_lerp(load3(ts.smoothing_velocity, team), v, a))
-        smooth_pos = v_sub(cpos, v_scale(load3(ts.smoothing_velocity, team), frame_delta_time))
+        if prm.time_based_smoothing[team] != 0:
+            felt = time_based_smoothing(ts, team, v_sub(cpos, old_pos), frame_delta_time, s, limit * ratio
+                                        if limit >= 0.0 else -1.0)
+            smooth_pos = v_sub(cpos, felt)
+        else:
+            if running:
+                v = (0.0, 0.0, 0.0)
+                if frame_delta_time > 0.0:
+                    v = v_scale(v_sub(cpos, old_pos), 1.0 / frame_delta_time)
+                if limit >= 0.0:
+                    v = clamp_length(v, limit * ratio)
+                a = saturate((1.0 - s) ** 3 * 0.99 + 0.01)
+                store3(ts.smoothing_velocity, team, v_lerp(load3(ts.smoothing_velocity, team), v, a))
+            smooth_pos = v_sub(cpos, v_scale(load3(ts.smoothing_velocity, team), frame_delta_time))
         smooth_delta = v_sub(smooth_pos, old_pos)
         old_pos = smooth_pos
         shift = True

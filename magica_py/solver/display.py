@@ -4,6 +4,9 @@ The display extrapolates the last step by its real velocity to the frame time (f
 interpolation), clamps it to 1.3x the root distance of the animated pose, and blends it with
 the animated pose by ``blend_weight``. Positions are updated in place in particle order: a
 Move root reads its already blended display (a quirk kept on purpose, §E.1).
+
+With ``solver.time_based_smoothing`` on (quality mode) the display is the last step's state
+extrapolated by the time elapsed since that step (docs/quality-mode.md).
 """
 from __future__ import annotations
 
@@ -17,17 +20,25 @@ MAX_DISTANCE_RATIO = 1.3   # MaxDistanceRatioFutuerPrediction
 
 
 @kernel
-def display_team(m, ps, ts, team, dt, time, old_time, now_update_time, running):
+def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, running):
     blend = ts.blend_weight[team]
     interval = (now_update_time + dt) - old_time
     t = (time - old_time) / interval if interval > 0.0 else 0.0
+    time_based = prm.time_based_smoothing[team] != 0
+    # quality mode: the state extrapolated by the time since the last step (in [0, dt) with
+    # exact timing), a function of time only; E.1's lerp from the last display is a
+    # per-frame filter whose strength depends on the frame rate
+    ahead = min(max(time - now_update_time, 0.0), dt)
     start = m.team_particle_start[team]
     for p in range(start, start + m.team_particle_count[team]):
         pos0 = load3(ps.position, p)
         rot0 = load4(ps.rotation, p)
         if (m.attribute[p] & MOVE) != 0:
-            f = v_add(load3(ps.old_pos, p), v_scale(load3(ps.real_velocity, p), dt))
-            f = v_lerp(load3(ps.disp_pos, p), f, t)
+            if time_based:
+                f = v_add(load3(ps.old_pos, p), v_scale(load3(ps.real_velocity, p), ahead))
+            else:
+                f = v_add(load3(ps.old_pos, p), v_scale(load3(ps.real_velocity, p), dt))
+                f = v_lerp(load3(ps.disp_pos, p), f, t)
             r = m.root_index[p]
             if r >= 0:
                 rp = load3(ps.position, r)

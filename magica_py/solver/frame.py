@@ -36,6 +36,7 @@ from magica_py.solver.constraints.tether import tether_team
 from magica_py.solver.display import display_team
 from magica_py.solver.guards import check_team, reset_team_to_base
 from magica_py.solver.parameters import step_rate
+from magica_py.solver.quality import quality_distance_attenuation, quality_end_of_step
 from magica_py.solver.rotations import line_rotations_team, triangle_rotations_team
 from magica_py.solver.step import end_step_team, predict_team, step_basic_pose_team, team_step_update
 from magica_py.solver.writeback import transform_data_team, write_transforms_team
@@ -95,7 +96,7 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi):
     predict_team(m, ps, prm, ts, t, frac, dt, ratio, fi.power_z)
     step_basic_pose_team(m, ps, prm, ts, t)
     tether_team(m, ps, prm, t, step_rate(TETHER_ATTENUATION, ratio, 1.0, mode))
-    distance_attenuation = step_rate(DISTANCE_ATTENUATION, ratio, 1.0, mode)
+    distance_attenuation = quality_distance_attenuation(prm, t, step_rate(DISTANCE_ATTENUATION, ratio, 1.0, mode))
     distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
     angle_team(m, ps, prm, ts, t, ratio, fi.power_w, step_rate(LIMIT_ATTENUATION, ratio, 1.0, mode),
                step_rate(prm.restoration_attenuation[t], ratio, 1.0, mode))
@@ -109,6 +110,8 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi):
             edge_collision_team(m, ps, prm, ts, cs, t)
     distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
     motion_team(m, ps, prm, t, step_rate(MOTION_ATTENUATION, ratio, 1.0, mode))
+    if prm.inextensibility[t] != 0 or prm.collision_last[t] != 0:  # quality mode (issue 8)
+        quality_end_of_step(m, ps, prm, ts, cs, t, ratio, fi.power_y, distance_attenuation)
     end_step_team(m, ps, prm, ts, t, dt, ratio)
     collider_end_step_team(cs, ts, t)
 
@@ -132,7 +135,7 @@ def end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t):
     if code != 0:
         reset_team_to_base(m, ps, ts, t)
         ts.guard_code[t] = code
-    display_team(m, ps, ts, t, fi.dt, tt.time[t], tt.old_time[t], tt.now_update_time[t],
+    display_team(m, ps, prm, ts, t, fi.dt, tt.time[t], tt.old_time[t], tt.now_update_time[t],
                  tt.running[t])
     line_rotations_team(m, ps, prm, ts, t)
     triangle_rotations_team(m, ps, t)

@@ -62,6 +62,15 @@ TEAM_PARAMETER_FIELDS = [
     ("culling_fade_ratio", "team", (), F64, ""),
     ("culling_reference", "team", (), I32, "hierarchy node or -1"),
     ("rate_mode", "team", (), I32, "0 magica, 1 frequency_consistent"),
+    # quality mode (issue 8, docs/quality-mode.md); all zero in faithful mode
+    ("quality", "team", (), U8, "1: solver.mode quality (implies rate_mode 1)"),
+    ("time_based_smoothing", "team", (), U8, "1: smoothing and display converted by the frame time"),
+    ("inextensibility", "team", (), I32, "0 none, 1 tether, 2 ftl, 3 ftl_tether, 4 iterations"),
+    ("tether_limit", "team", (), F64, "allowed root-distance stretch of the tight tether (ratio)"),
+    ("distance_iterations", "team", (), I32, "extra distance passes of the iterations option"),
+    ("ftl_damping", "team", (), F64, "DFTL velocity correction factor s_damp"),
+    ("distance_full_velocity", "team", (), U8, "1: distance corrections become velocity in full"),
+    ("collision_last", "team", (), U8, "1: final collision projection at the end of the step"),
     # depth tables (§0.3)
     ("damping_curve", "team", CURVE, F64, "x0.2 applied"),
     ("radius_curve", "team", CURVE, F64, "m"),
@@ -77,6 +86,11 @@ NORMAL_AXES = ("right", "up", "forward", "inverse_right", "inverse_up", "inverse
 TELEPORT_MODES = ("none", "reset", "keep")
 COLLISION_MODES = ("none", "point", "edge")
 RATE_MODES = ("magica", "frequency_consistent")
+SOLVER_MODES = ("faithful", "quality")
+INEXTENSIBILITY = ("none", "tether", "ftl", "ftl_tether", "iterations")
+# what "auto" means in quality mode (chosen by measurement, docs/quality-mode.md)
+QUALITY_AUTO = {"solver.time_based_smoothing": "on", "solver.inextensibility": "ftl_tether",
+                "solver.distance_velocity": "full", "solver.collision_last": "on"}
 
 # reference defaults (§F.1), used for keys a parameter mapping does not carry
 _DEFAULTS = {
@@ -100,6 +114,9 @@ _DEFAULTS = {
     "collider_collision.mode": "point", "collider_collision.friction": 0.05,
     "culling.distance_culling_length": -1.0, "culling.distance_culling_fade_ratio": 0.2,
     "culling.distance_culling_reference": None, "solver.rate_mode": "magica",
+    "solver.mode": "faithful", "solver.time_based_smoothing": "auto", "solver.inextensibility": "auto",
+    "solver.tether_limit": 0.0, "solver.distance_iterations": 4, "solver.ftl_damping": 0.9,
+    "solver.distance_velocity": "auto", "solver.collision_last": "auto",
 }
 # curves whose default is a linear curve (value, start -> end), §F.1
 _LINEAR_DEFAULTS = {
@@ -197,6 +214,7 @@ def write_row(table, team: int, parameters, collision_mode: str | None = None,
     ref = g("culling.distance_culling_reference")
     table.culling_reference[t] = -1 if ref is None else (ref if isinstance(ref, int) else resolve(ref))
     table.rate_mode[t] = _enum(g("solver.rate_mode"), RATE_MODES, "solver.rate_mode")
+    _write_quality(table, t, g)
     table.damping_curve[t] = curve_table(g("damping")) * 0.2
     table.radius_curve[t] = curve_table(g("radius"))
     table.distance_stiffness_curve[t] = curve_table(g("distance.stiffness"))
@@ -204,6 +222,35 @@ def write_row(table, team: int, parameters, collision_mode: str | None = None,
     table.limit_angle_curve[t] = curve_table(g("angle_limit.limit_angle"))
     table.max_distance_curve[t] = curve_table(g("motion.max_distance"))
     table.backstop_distance_curve[t] = curve_table(g("motion.backstop_distance"))
+
+
+def _switch(g, key, quality: bool) -> str:
+    """An ``auto | on | off``-style switch: ``auto`` is off in faithful mode and the
+    measured default (``QUALITY_AUTO``) in quality mode."""
+    value = str(g(key)).lower()
+    if value == "auto":
+        return QUALITY_AUTO[key] if quality else "off"
+    return value
+
+
+def _write_quality(table, t: int, g) -> None:
+    """Quality-mode columns (issue 8). Faithful mode leaves them all at their "off" value,
+    so its kernels take exactly the MagicaCloth2 paths."""
+    quality = _enum(g("solver.mode"), SOLVER_MODES, "solver.mode") == 1
+    table.quality[t] = 1 if quality else 0
+    if quality:
+        table.rate_mode[t] = 1  # quality mode converts every per-step rate by the step size
+    table.time_based_smoothing[t] = 1 if _switch(g, "solver.time_based_smoothing", quality) == "on" else 0
+    inext = _switch(g, "solver.inextensibility", quality)
+    table.inextensibility[t] = 0 if inext == "off" else _enum(inext, INEXTENSIBILITY, "solver.inextensibility")
+    table.tether_limit[t] = float(g("solver.tether_limit"))
+    iterations = float(g("solver.distance_iterations"))
+    if iterations != int(iterations):
+        raise ValueError(f"parameter solver.distance_iterations: expected an integer, got {iterations!r}")
+    table.distance_iterations[t] = int(iterations)
+    table.ftl_damping[t] = float(g("solver.ftl_damping"))
+    table.distance_full_velocity[t] = 1 if _switch(g, "solver.distance_velocity", quality) == "full" else 0
+    table.collision_last[t] = 1 if _switch(g, "solver.collision_last", quality) == "on" else 0
 
 
 def allocate_parameters(team_count: int):

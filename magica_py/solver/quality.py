@@ -1,0 +1,136 @@
+"""Quality mode passes at the end of a step (issue 8, ``docs/quality-mode.md``).
+
+MagicaCloth2's constraints are soft (ref Appendix 4): edges stretch by 5-60 % under load and
+fast particles end a step inside colliders. Quality mode adds, after the second distance pass
+and the motion constraint (D.9), before the end of the step (D.10):
+
+1. an inextensibility pass chosen by ``prm.inextensibility[team]``:
+
+   * ``tether`` — a tight long-range attachment (Kim et al. 2012): each moving particle's
+     distance to its root is clamped to its step-basic rest distance x (1 + tether_limit);
+   * ``ftl`` — follow-the-leader (Mueller et al. 2012): along every baseline, root to tip,
+     each edge longer than its step-basic rest length is shortened by moving the child
+     only; the DFTL velocity correction gives the parent ``-s_damp x`` the child's
+     correction as velocity (its reaction), so the pass does not damp the swing;
+   * ``ftl_tether`` — the tether, then FTL (edges exact, root distance bounded);
+   * ``iterations`` — ``distance_iterations`` more D.4 passes (the brute-force candidate);
+
+2. ``collision_last``: a final point projection of every colliding particle against each
+   collider in turn, so that no particle ends the step inside one.
+
+Every pass is unilateral (only stretch is removed) and uses the step-basic pose (D.2) as the
+rest reference, like the tether of D.3. Faithful mode never calls this module.
+"""
+from __future__ import annotations
+
+from magica_py.jit import kernel
+from magica_py.kernels.math3d import load3, store3, v_add, v_length, v_scale, v_sub
+from magica_py.solver.constraints.collision import INVALID_OR_NO_COLLISION, solve_point_collider
+from magica_py.solver.constraints.distance import distance_team
+from magica_py.solver.parameters import curve_at
+
+MOVE = 0x02
+INEXT_NONE = 0
+INEXT_TETHER = 1
+INEXT_FTL = 2
+INEXT_FTL_TETHER = 3
+INEXT_ITERATIONS = 4
+
+
+@kernel
+def clamp_to_sphere(x, center, radius):
+    """``x`` moved onto the sphere (center, radius) when it lies outside it; and the move."""
+    v = v_sub(x, center)
+    length = v_length(v)
+    if length <= radius or length < 1e-12:
+        return x, (0.0, 0.0, 0.0)
+    target = v_add(center, v_scale(v, radius / length))
+    return target, v_sub(target, x)
+
+
+@kernel
+def tight_tether_team(m, ps, prm, team):
+    """Root distance of every moving particle <= step-basic rest x (1 + tether_limit).
+    The correction becomes velocity in full (plain PBD)."""
+    limit = 1.0 + prm.tether_limit[team]
+    start = m.team_particle_start[team]
+    for p in range(start, start + m.team_particle_count[team]):
+        if (m.attribute[p] & MOVE) == 0:
+            continue
+        r = m.root_index[p]
+        if r < 0:
+            continue
+        rest = v_length(v_sub(load3(ps.step_basic_pos, p), load3(ps.step_basic_pos, r)))
+        x, _move = clamp_to_sphere(load3(ps.next_pos, p), load3(ps.next_pos, r), rest * limit)
+        store3(ps.next_pos, p, x)
+
+
+@kernel
+def ftl_team(m, ps, prm, team):
+    """Follow-the-leader along each baseline (parents before children): every edge is at
+    most its step-basic rest length. DFTL: the parent's velocity gets ``-s_damp`` x the
+    child's correction (velocity_pos += s_damp x correction)."""
+    damping = prm.ftl_damping[team]
+    b0 = m.team_baseline_start[team]
+    for b in range(b0, b0 + m.team_baseline_count[team]):
+        e0 = m.baseline_start[b]
+        for e in range(e0 + 1, e0 + m.baseline_count[b]):
+            v = m.baseline_data[e]
+            if (m.attribute[v] & MOVE) == 0:
+                continue
+            p = m.parent[v]
+            if p < 0:
+                continue
+            rest = v_length(v_sub(load3(ps.step_basic_pos, v), load3(ps.step_basic_pos, p)))
+            x, move = clamp_to_sphere(load3(ps.next_pos, v), load3(ps.next_pos, p), rest)
+            store3(ps.next_pos, v, x)
+            if damping > 0.0 and (m.attribute[p] & MOVE) != 0:
+                store3(ps.velocity_pos, p, v_add(load3(ps.velocity_pos, p), v_scale(move, damping)))
+
+
+@kernel
+def collision_last_team(m, ps, prm, ts, cs, team):
+    """Project every colliding moving particle out of each collider in turn (point test of
+    D.8 with the particle radius; friction and normals are left to D.8)."""
+    scale = ts.scale_ratio[team]
+    c0 = ts.collider_start[team]
+    c1 = c0 + ts.collider_count[team]
+    start = m.team_particle_start[team]
+    for p in range(start, start + m.team_particle_count[team]):
+        attr = m.attribute[p]
+        if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
+            continue
+        r = max(curve_at(prm.radius_curve, team, m.depth[p]), 0.0001) * scale
+        x = load3(ps.next_pos, p)
+        for k in range(c0, c1):
+            if cs.scale_suspend[k] != 0:
+                continue
+            bmin = (x[0] - 2.0 * r, x[1] - 2.0 * r, x[2] - 2.0 * r)
+            bmax = (x[0] + 2.0 * r, x[1] + 2.0 * r, x[2] + 2.0 * r)
+            d, _n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
+            if d < 0.0:
+                x = x2
+        store3(ps.next_pos, p, x)
+
+
+@kernel
+def quality_distance_attenuation(prm, team, faithful_attenuation):
+    """D.4's velocity attenuation: 0 (full PBD velocity) when distance_full_velocity is on."""
+    if prm.distance_full_velocity[team] != 0:
+        return 0.0
+    return faithful_attenuation
+
+
+@kernel
+def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, distance_attenuation):
+    """The quality passes of one team after D.9 (see the module docstring)."""
+    mode = prm.inextensibility[team]
+    if mode == INEXT_TETHER or mode == INEXT_FTL_TETHER:
+        tight_tether_team(m, ps, prm, team)
+    if mode == INEXT_FTL or mode == INEXT_FTL_TETHER:
+        ftl_team(m, ps, prm, team)
+    elif mode == INEXT_ITERATIONS:
+        for _ in range(prm.distance_iterations[team]):
+            distance_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation)
+    if prm.collision_last[team] != 0 and ts.collider_count[team] > 0 and prm.collision_mode[team] != 0:
+        collision_last_team(m, ps, prm, ts, cs, team)
