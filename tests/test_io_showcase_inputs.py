@@ -66,6 +66,16 @@ def test_godette_spring_cloths_follow_the_retargeted_capture():
     ("wuson.glb", 1.0, "Wuson_Run", ["Tail0*"], "Pelvis", [f"Tail0{i}" for i in range(1, 7)]),
 ])
 def test_animal_tail_swings_on_its_run_clip_with_its_keys_dropped(file, scale, clip_name, drop, hips, tail):
+    """The tail follows the body's motion: its tip moves relative to the hips (exactly 0
+    without the cloth, since the dropped clip no longer moves it).
+
+    How much depends on how much the body moves, so the bound is relative to the hips' own
+    travel: the Fox's Run swings its hips 12 cm, but Wuson_Run only bobs its root 1.6 cm
+    vertically (no body rotation: the clip animates the legs, ears and tail), and the 0.8 m
+    tail answers with a 3.4 cm swing at the tip. The former absolute 1 cm bound sat within a
+    factor 3 of that weak signal, so any solver change that damps the tail a little (the
+    working tree is shared with solver work in progress) could fail it; half the hips'
+    travel is the physical statement and holds for both animals (Fox 2.2x, Wuson 4.3x)."""
     from magica_py.solver.system import ClothSystem
     rig = load_gltf(DATA / "gltf" / file, unit_scale=scale)
     clip = rig.clip(clip_name).without(drop)
@@ -77,14 +87,17 @@ def test_animal_tail_swings_on_its_run_clip_with_its_keys_dropped(file, scale, c
     system = ClothSystem(h, [spec])
     idx = [h.index(n) for n in tail]
     rest = [np.linalg.norm(h.world_position[idx[k + 1]] - h.world_position[idx[k]]) for k in range(len(idx) - 1)]
-    tip_local = []
+    tip_local, hips_world = [], []
 
     def check(f):
         for k in range(len(idx) - 1):
             length = np.linalg.norm(h.world_position[idx[k + 1]] - h.world_position[idx[k]])
             assert abs(length / rest[k] - 1) < 0.05
         tip_local.append(h.inverse_transform_point(h.index(hips), h.world_position[idx[-1]]))
+        hips_world.append(h.world_position[h.index(hips)].copy())
 
     _run(h, ClipDriver(clip, h), system, check)
-    swing = np.ptp(np.array(tip_local), axis=0)
-    assert swing.max() > 0.01          # the simulated tail swings relative to the hips (exactly 0 without the cloth)
+    hips_travel = np.ptp(np.array(hips_world), axis=0).max()
+    assert hips_travel > 0.01          # the clip (tail channels dropped) still moves the body
+    swing = np.ptp(np.array(tip_local), axis=0).max()
+    assert swing > 0.5 * hips_travel, (swing, hips_travel)
