@@ -47,6 +47,7 @@ PARTICLE_FIELDS = [
     ("angle_rotation", "particle", Q4, F64, "xyzw; working rotation of the limit pass"),
     ("angle_limit", "particle", (), F64, "rad; limit angle at the particle's depth (per step)"),
     ("angle_limit_cos", "particle", (), F64, "cos of angle_limit: the no-violation test without acos"),
+    ("angle_restoration_k", "particle", (), F64, "restoration stiffness of this step (curve, rate, gravity factor)"),
     # fixed-point accumulators of bending and edge collision (ref §0.2; 1 unit = 1e-6 m)
     ("accum_vector", "particle", V3, F64, "1e-6 m integer units summed as float64 (exact below 2^53)"),
     ("accum_count", "particle", (), I32, "number of contributions"),

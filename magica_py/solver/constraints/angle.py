@@ -36,7 +36,10 @@ def solve_pivot_pair(pp, cp, v, r, pivot_ratio, wp, wc):
 
 @kernel
 def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation, restoration_attenuation):
-    """D.5/D.6 over every baseline of one team."""
+    """D.5/D.6 over every baseline of one team.
+
+    The restoration stiffness of each particle (curve, rate conversion, gravity factor) is
+    computed once per step in the buffering pass rather than in each of the 3 iterations."""
     use_limit = prm.use_angle_limit[team] != 0
     use_restoration = prm.use_restoration[team] != 0
     if not use_limit and not use_restoration:
@@ -72,6 +75,9 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
                 max_angle = math.radians(curve_at(prm.limit_angle_curve, team, m.depth[c]))
                 ps.angle_limit[c] = max_angle
                 ps.angle_limit_cos[c] = math.cos(max_angle)
+            if use_restoration:
+                kr = curve_at_clamp01(prm.restoration_stiffness_curve, team, m.depth[c])
+                ps.angle_restoration_k[c] = saturate(step_rate(kr, frequency_ratio, power_w, mode)) * gravity_factor
         for k in range(ITERATIONS):
             rest_pivot = lerp(0.1, 0.5, k / 2.0)
             for e in range(e0 + 1, e1):
@@ -99,9 +105,7 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
                     vl = v_length(v)
                     if vl < 1e-8:
                         continue
-                    kr = curve_at_clamp01(prm.restoration_stiffness_curve, team, m.depth[c])
-                    kr = saturate(step_rate(kr, frequency_ratio, power_w, mode)) * gravity_factor
-                    q = from_to_rotation_unit(v_scale(v, 1.0 / vl), v_scale(tv, 1.0 / tl), kr)
+                    q = from_to_rotation_unit(v_scale(v, 1.0 / vl), v_scale(tv, 1.0 / tl), ps.angle_restoration_k[c])
                     r = q_rotate(q, v)
                     dp, dc = solve_pivot_pair(pp, cp, v, r, rest_pivot, wp, wc)
                     if c_move:
