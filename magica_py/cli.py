@@ -44,6 +44,10 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                    "regenerate one recording per showcase config into replays/"),
     "resim": ("magica_py.sinks.resim", "main_resim",
               "re-simulate cloths on the animated pose recorded in an .rrd"),
+    "bench": ("magica_py.bench.cli", "main_bench",
+              "speed against error: frequency sweep vs a converged reference, Pareto plot (reports/)"),
+    "stability": ("magica_py.bench.cli", "main_stability",
+                  "hard-case stability suite (configs/hard): finiteness, speed, stretch, penetration, rest"),
 }
 
 # Per-frame metrics: simulation steps this frame (first one present wins) and particle-steps.
