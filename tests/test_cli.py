@@ -211,3 +211,25 @@ def test_validate_checks_every_file_and_fails_if_any_is_bad(scene_file, broken_f
     captured = capsys.readouterr()
     assert captured.out.count("OK ") == 2
     assert f"{broken_file}: 2 errors" in captured.err and "Traceback" not in captured.err
+
+
+def test_set_overrides_are_kept_on_the_scene_and_recorded_for_resim(scene_file, tmp_path, capsys):
+    """Scene.overrides holds the --set strings; the recording stores them and resim re-reads the
+    embedded scene with them (so a re-simulation is the run that was recorded)."""
+    from magica_py.config import load_scene
+    from magica_py.sinks.resim import load_replay, load_scene_for
+
+    sets = ["cloths.tail.parameters.damping=0.3", "scene.frames=3"]
+    assert load_scene(scene_file, sets).overrides == tuple(sets)
+    assert load_scene(scene_file).overrides == ()
+    out = tmp_path / "with_sets.rrd"
+    argv = ["run", str(scene_file), "--rrd", str(out), "--quiet"]
+    for s in sets:
+        argv += ["--set", s]
+    assert cli.main(argv) == 0
+    replay = load_replay(out)
+    assert tuple(replay.scene_overrides) == tuple(sets)
+    again = load_scene_for(replay)
+    assert again.overrides == tuple(sets)
+    assert again.cloth("tail").parameters["damping"].value == pytest.approx(0.3)
+    assert again.settings.frames == 3 and replay.frames.size == 3

@@ -1,6 +1,8 @@
 """Scene entries that import asset files: rigs from glTF/VRM, clips, VRM spring bones as cloths."""
 import os
 
+import numpy as np
+
 import pytest
 
 from magica_py.config import ConfigError, load_scene
@@ -76,3 +78,109 @@ def test_unknown_clip_name_is_reported_at_the_clip(tmp_path, shared_data):
         load_scene(path)
     assert info.value.paths() == ["animation[0].clip"]
     assert "Dance" in info.value.issues[0].message
+
+
+def _world_at(scene, t, name):
+    h = scene.hierarchy
+    scene.animation.evaluate(h, t)
+    h.propagate()
+    return h.world_position[h.index(name)].copy()
+
+
+def test_a_clip_on_its_own_rig_gets_the_rigs_unit_scale(tmp_path, shared_data):
+    """Fox.glb is in centimetres: a rig loaded with unit_scale 0.01 plays its clip at the same
+    scale (the clip's b_Hip_01 translation keys are ~40 cm, not ~40 m)."""
+    fox = rel(tmp_path, shared_data / "gltf" / "Fox.glb")
+    scene = load_scene(write_scene(tmp_path, f"""
+rigs:
+  - {{name: fox, file: {fox}, unit_scale: 0.01}}
+animation:
+  - {{clip: "{fox}#Run", rig: fox}}
+"""))
+    rest_hips = scene.hierarchy.world_position[scene.hierarchy.index("b_Hip_01")].copy()
+    assert 0.40 < rest_hips[1] < 0.45
+    for t in (0.0, 0.3, 0.7):
+        hips = _world_at(scene, t, "b_Hip_01")
+        assert 0.25 < hips[1] < 0.6, (t, hips)
+        assert np.linalg.norm(hips - rest_hips) < 0.3
+
+
+def test_a_placed_rig_keeps_its_place_when_the_clip_animates_its_root(tmp_path, shared_data):
+    """Keys on a root bone are composed with the rig's placement, like its rest pose."""
+    bvh = rel(tmp_path, shared_data / "bvh" / "cmu_01_01.bvh")
+    body = f"""
+rigs:
+  - {{name: mocap, file: {bvh}, position: [5, 0, 0], euler: [0, 90, 0]}}
+animation:
+  - {{clip: {bvh}, rig: mocap, trim: [0, 1], rate: 30}}
+"""
+    placed = load_scene(write_scene(tmp_path, body))
+    plain = load_scene(write_scene(tmp_path, body.replace("position: [5, 0, 0], euler: [0, 90, 0]", "position: [0, 0, 0]")))
+    for t in (0.0, 0.5):
+        a, b = _world_at(placed, t, "Hips"), _world_at(plain, t, "Hips")
+        expected = np.array([5.0 + b[2], b[1], -b[0]])   # +90 degrees about +Y: (x, y, z) -> (z, y, -x)
+        np.testing.assert_allclose(a, expected, atol=1e-9)
+
+
+def test_trim_and_rate_shrink_a_long_capture(tmp_path, shared_data):
+    """trim keeps seconds [start, end] of the source re-timed from 0; rate sets keys per second."""
+    bvh = rel(tmp_path, shared_data / "bvh" / "cmu_01_01.bvh")
+    scene = load_scene(write_scene(tmp_path, f"""
+rigs:
+  - {{name: mocap, file: {bvh}}}
+animation:
+  - {{clip: {bvh}, rig: mocap, trim: [2.0, 4.0], rate: 30}}
+"""))
+    anim = scene.animation
+    hips = scene.hierarchy.index("Hips")
+    d = [k for k in range(len(anim.kind)) if anim.target[k] == hips and anim.key_count[k, 1]][0]
+    rotation_keys = anim.key_count[d, 1]
+    assert rotation_keys == 61                       # 2 s at 30 keys/s, both ends
+    times = anim.key_time[anim.key_first[d, 1]:anim.key_first[d, 1] + rotation_keys]
+    np.testing.assert_allclose(times[[0, -1]], [0.0, 2.0])
+    # the trimmed clip at 0.5 s is the source at 2.5 s
+    from magica_py.io import load_bvh
+    source = load_bvh(shared_data / "bvh" / "cmu_01_01.bvh")
+    expected = source.clip.track("Hips", "translation").sample(2.5)
+    np.testing.assert_allclose(_world_at(scene, 0.5, "Hips"), expected, atol=0.02)
+
+
+@pytest.mark.parametrize("entry, path, fragment", [
+    ("trim: [3, 1]", "animation[0].trim[1]", "expected end > start"),
+    ("trim: 2", "animation[0].trim", "expected [start, end]"),
+    ("rate: 0", "animation[0].rate", "expected a number in [1, 1000] keys/s"),
+])
+def test_bad_trim_and_rate_are_reported_at_their_key(tmp_path, shared_data, entry, path, fragment):
+    bvh = rel(tmp_path, shared_data / "bvh" / "cmu_01_01.bvh")
+    with pytest.raises(ConfigError) as info:
+        load_scene(write_scene(tmp_path, f"rigs:\n  - {{name: m, file: {bvh}}}\nanimation:\n  - {{clip: {bvh}, rig: m, {entry}}}\n"))
+    issues = [i for i in info.value.issues if i.path == path]
+    assert issues and fragment in issues[0].message, info.value.report()
+
+
+def test_retargeting_onto_a_vrm_uses_its_humanoid_map(tmp_path, shared_data, monkeypatch):
+    """retarget_to= the rig's bones and target_map= the rig's own VRM humanoid map."""
+    from magica_py.io import sections
+
+    seen = {}
+    real = sections.load_clip
+
+    def spy(ref, **kwargs):
+        seen.update(kwargs)
+        return real(ref, **kwargs)
+
+    monkeypatch.setattr(sections, "load_clip", spy)
+    vrm = rel(tmp_path, shared_data / "vrm" / "Godette_vrm_v4.vrm")
+    bvh = rel(tmp_path, shared_data / "bvh" / "cmu_01_01.bvh")
+    with pytest.warns(UserWarning):
+        scene = load_scene(write_scene(tmp_path, f"""
+rigs:
+  - {{name: avatar, file: {vrm}}}
+animation:
+  - {{clip: {bvh}, rig: avatar, retarget: {{source_rest: 0}}, trim: [0, 1], rate: 30}}
+"""))
+    assert seen["target_map"]["hips"] == "pelvis_Armature" and seen["target_map"]["leftUpperLeg"] == "thigh.l_Armature"
+    assert {b.name for b in seen["retarget_to"]} >= {"pelvis_Armature", "thigh.l_Armature"}
+    assert "target_bones" not in seen or seen["target_bones"] is None
+    driven = {scene.hierarchy.names[t] for t in scene.animation.target}
+    assert {"pelvis_Armature", "thigh.l_Armature", "head_Armature"} <= driven

@@ -4,13 +4,22 @@ Three entry forms (paths are relative to the scene file's folder):
 
 * ``rigs: - {name: fox, file: Fox.glb, prefix: "", unit_scale: 1.0}``: the file's node
   hierarchy becomes the rig's explicit bones (``io.sections.rig_section``; glTF, GLB, VRM,
-  BVH); ``bones`` and ``parts`` may add more bones (e.g. a chain under an imported bone);
+  BVH); ``bones`` and ``parts`` may add more bones (e.g. a chain under an imported bone).
+  The rig remembers its file, prefix, unit scale and (VRM) humanoid map for the entries
+  below;
 * ``animation: - {clip: "Fox.glb#Run", rig: fox, loop: true, drop: ["b_Tail*"],
-  retarget: {...}, start, end, phase_offset}``: the clip as keyframe drivers
-  (``io.sections.load_clip`` + ``Clip.to_animation_entries``); ``rig`` names the rig whose
-  bones the clip drives (its prefix is applied; with ``retarget`` the clip is retargeted
-  onto that rig's skeleton by humanoid names); ``drop`` removes the channels of bones the
-  cloth simulates;
+  retarget: {...}, trim: [start, end], rate: 30, start, end, phase_offset, fade}``: the clip
+  as keyframe drivers (``io.sections.load_clip`` + ``Clip.to_animation_entries``). ``rig``
+  names the rig whose bones the clip drives. Without ``retarget`` the clip plays on that
+  rig's own bones: its prefix and **unit scale** are applied (a centimetre Fox loaded with
+  ``unit_scale: 0.01`` needs its clip scaled alike). With ``retarget`` the clip is
+  retargeted onto the rig's skeleton by humanoid names, with the rig's own humanoid map
+  (VRM) or the automatic one. ``trim`` keeps seconds [start, end] of the source (after
+  retargeting, so ``source_rest: 0`` still names the capture's first frame) and ``rate``
+  resamples to that many keys per second: a 120 Hz capture of 23 s is 2752 keys per channel,
+  slow to load as YAML keyframes. ``drop`` removes the channels of bones the cloth
+  simulates. Tracks of the rig's root bones are composed with the rig's placement
+  (``position`` / ``rotation``), so a placed rig keeps its place when its root is animated;
 * ``cloths: - {from_vrm: avatar, group_by: group, chains: [...], prefix: vrm_,
   oversized_colliders: keep}``: the VRM spring bones of rig ``avatar`` (loaded from a .vrm
   file) as cloths and their colliders (``io.sections.vrm_sections``).
@@ -23,11 +32,12 @@ from __future__ import annotations
 
 import pathlib
 
-from magica_py.config.checker import POSITIVE, Checker
+from magica_py.config.checker import NON_NEGATIVE, POSITIVE, Checker, Range
 
 RIG_FILE_KEYS = ("file", "prefix", "unit_scale")
-CLIP_KEYS = ("clip", "rig", "loop", "drop", "retarget", "start", "end", "phase_offset", "fade")
+CLIP_KEYS = ("clip", "rig", "loop", "drop", "retarget", "trim", "rate", "start", "end", "phase_offset", "fade")
 VRM_KEYS = ("from_vrm", "group_by", "chains", "prefix", "oversized_colliders")
+CLIP_RATE = Range(1.0, 1000.0)  # keys per second after resampling
 
 
 def base_dir(c: Checker) -> pathlib.Path:
@@ -42,8 +52,9 @@ def _asset_error(c: Checker, path: tuple, exc: Exception) -> None:
     c.error(path, f"cannot import: {exc}")
 
 
-def import_rig_bones(c: Checker, m: dict, path: tuple) -> list[dict] | None:
-    """Normalized explicit bones of ``rigs[i].file`` (None after reporting a problem)."""
+def import_rig(c: Checker, m: dict, path: tuple) -> dict | None:
+    """``rigs[i].file`` → ``{"bones": [...], "humanoid": {...}, "unit_scale": s, "prefix": p}``
+    (None after reporting a problem). Bones are normalized explicit-bone entries."""
     file = c.text(m, "file", path, what="a .gltf, .glb, .vrm or .bvh file path")
     prefix = "" if m.get("prefix") in ("", None) else c.text(m, "prefix", path, "", what="a name prefix")
     unit_scale = c.number(m, "unit_scale", path, 1.0, POSITIVE)
@@ -58,8 +69,35 @@ def import_rig_bones(c: Checker, m: dict, path: tuple) -> list[dict] | None:
         _asset_error(c, path + ("file",), exc)
         return None
     where = path + ("file",)
-    return [{"name": b["name"], "parent": b["parent"], "path": where, "position": tuple(b["position"]),
-             "rotation": tuple(b["rotation"]), "scale": tuple(b["scale"])} for b in section["bones"]]
+    bones = [{"name": b["name"], "parent": b["parent"], "path": where, "position": tuple(b["position"]),
+              "rotation": tuple(b["rotation"]), "scale": tuple(b["scale"])} for b in section["bones"]]
+    return {"bones": bones, "humanoid": dict(section.get("humanoid") or {}), "unit_scale": unit_scale,
+            "prefix": prefix or ""}
+
+
+def import_rig_bones(c: Checker, m: dict, path: tuple) -> list[dict] | None:
+    """The bones of ``import_rig`` (kept for callers that need only them)."""
+    rig = import_rig(c, m, path)
+    return None if rig is None else rig["bones"]
+
+
+def _trim(c: Checker, m: dict, path: tuple):
+    """``trim: [start, end]`` in seconds of the source clip (end may be null: to the end)."""
+    if m.get("trim") is None:
+        return None
+    value = m["trim"]
+    where = path + ("trim",)
+    if not (isinstance(value, list) and len(value) == 2):
+        c.error(where, f"expected [start, end] in seconds of the source clip, got {value!r}")
+        return None
+    start = c.number({0: value[0]}, 0, where, None, NON_NEGATIVE, units="s")
+    end = c.number({1: value[1]}, 1, where, None, POSITIVE, units="s") if value[1] is not None else None
+    if start is None:
+        return None
+    if end is not None and end <= start:
+        c.error(where + (1,), f"expected end > start ({start:g} s), got {end:g}")
+        return None
+    return (start, end)
 
 
 def import_clip_entries(c: Checker, m: dict, path: tuple, rigs: list[dict]) -> list[dict]:
@@ -70,6 +108,8 @@ def import_clip_entries(c: Checker, m: dict, path: tuple, rigs: list[dict]) -> l
     ref = c.text(m, "clip", path, what="a clip reference: file.glb#Name or file.bvh")
     loop = c.boolean(m, "loop", path, True)
     drop = c.names(m, "drop", path)
+    trim = _trim(c, m, path)
+    rate = c.number(m, "rate", path, None, CLIP_RATE, units="keys/s")
     retarget = m.get("retarget")
     if retarget is not None and not isinstance(retarget, dict):
         c.error(path + ("retarget",), f"expected a mapping of retarget options, got {retarget!r}")
@@ -90,20 +130,62 @@ def import_clip_entries(c: Checker, m: dict, path: tuple, rigs: list[dict]) -> l
         return []
     common = {k: m[k] for k in ("start", "end", "phase_offset", "fade") if m.get(k) is not None}
     try:
-        from magica_py.io.sections import load_clip
-        from magica_py.scene.hierarchy import BoneSpec
-
-        target_bones = None
-        if rig is not None and retarget is not None:
-            target_bones = [BoneSpec(b["name"], b["parent"], b["position"], b["rotation"], b["scale"])
-                            for b in rig["bones"]]
-        clip = load_clip(ref, base_dir=base_dir(c), target_bones=target_bones, retarget_options=retarget,
-                         drop=tuple(drop), prefix=(rig or {}).get("prefix") or "")
-        entries = clip.to_animation_entries(loop=loop)
+        clip = _load_clip(c, ref, rig, retarget, trim, rate, drop)
+        entries = clip.to_animation_entries(loop=loop, resample_rate=rate or 30.0)
     except (ImportError, ValueError, OSError, KeyError) as exc:
         _asset_error(c, path + ("clip",), exc)
         return []
+    if rig is not None:
+        entries = _placed(entries, rig)
     return [dict(e, **common) for e in entries]
+
+
+def _load_clip(c: Checker, ref: str, rig: dict | None, retarget: dict | None, trim, rate, drop):
+    from magica_py.io.sections import load_clip
+    from magica_py.scene.hierarchy import BoneSpec
+
+    rig = rig or {}
+    if retarget is not None:
+        options = dict(retarget)
+        target_map = options.pop("target_map", None) or rig.get("humanoid") or "auto"
+        target = [BoneSpec(b["name"], b["parent"], b["position"], b["rotation"], b["scale"]) for b in rig["bones"]]
+        return load_clip(ref, base_dir=base_dir(c), retarget_to=target, target_map=target_map,
+                         retarget_options=options, drop=tuple(drop), trim=trim, rate=rate)
+    unit_scale = rig.get("unit_scale")
+    if unit_scale == 1.0 and str(ref).split("#", 1)[0].lower().endswith(".bvh"):
+        unit_scale = None  # a BVH rig loaded with unit_scale 1 has automatic units: so has its clip
+    return load_clip(ref, base_dir=base_dir(c), drop=tuple(drop), prefix=rig.get("prefix") or "",
+                     unit_scale=unit_scale, trim=trim, rate=rate)
+
+
+def _placed(entries: list[dict], rig: dict) -> list[dict]:
+    """Compose the rig's placement onto keyframes of its root bones (local = placement * key),
+    as ``scene.rigs.place_roots`` does for their rest pose."""
+    position, rotation = rig.get("position"), rig.get("rotation")
+    if position is None or rotation is None:
+        return entries
+    identity = tuple(position) == (0.0, 0.0, 0.0) and tuple(rotation) == (0.0, 0.0, 0.0, 1.0)
+    if identity:
+        return entries
+    import numpy as np
+
+    from magica_py.io.quat import qmul, qrotate
+
+    roots = {b["name"] for b in rig["bones"] if b["parent"] is None}
+    out = []
+    for e in entries:
+        if e["target"] in roots:
+            keys = []
+            for k in e["keyframes"]["keys"]:
+                k = dict(k)
+                if "position" in k:
+                    k["position"] = [float(x) for x in np.asarray(position) + qrotate(np.asarray(rotation), np.asarray(k["position"]))]
+                if "rotation" in k:
+                    k["rotation"] = [float(x) for x in qmul(np.asarray(rotation), np.asarray(k["rotation"]))]
+                keys.append(k)
+            e = dict(e, keyframes=dict(e["keyframes"], keys=keys))
+        out.append(e)
+    return out
 
 
 def import_vrm_sections(c: Checker, m: dict, path: tuple, rigs: list[dict]) -> tuple[list[dict], list[dict]]:
@@ -135,4 +217,3 @@ def import_vrm_sections(c: Checker, m: dict, path: tuple, rigs: list[dict]) -> t
         return [], []
     cloths = [{k: v for k, v in entry.items() if k != "notes"} for entry in sections["cloths"]]
     return list(sections["colliders"]), cloths
-

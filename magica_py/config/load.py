@@ -70,7 +70,7 @@ def load_scene(path, overrides=()):
     """Read, validate and build the scene file at ``path`` (``--set`` strings in ``overrides``)."""
     doc = load_document(path, overrides)
     resolved = validate_document(doc)
-    return build_scene(resolved, pathlib.Path(path), doc.effective_text())
+    return build_scene(resolved, pathlib.Path(path), doc.effective_text(), overrides)
 
 
 def load_scene_text(text: str, overrides=(), source: str = "<text>"):
@@ -78,12 +78,13 @@ def load_scene_text(text: str, overrides=(), source: str = "<text>"):
     doc = parse_text(text, source)
     if overrides:
         apply_overrides(doc, overrides)
-    return build_scene(validate_document(doc), None, doc.effective_text())
+    return build_scene(validate_document(doc), None, doc.effective_text(), overrides)
 
 
 # ----------------------------------------------------------------------------- build
-def build_scene(resolved: ResolvedScene, source: pathlib.Path | None, text: str | None = None):
-    """Construct the runtime objects of a resolved scene."""
+def build_scene(resolved: ResolvedScene, source: pathlib.Path | None, text: str | None = None, overrides=()):
+    """Construct the runtime objects of a resolved scene (``overrides``: the ``--set`` strings
+    it was loaded with, kept on the scene for recordings and ``resim``)."""
     from magica_py.scene.colliders import ColliderSet
     from magica_py.scene.hierarchy import HierarchyError, TransformHierarchy
     from magica_py.scene.scene import ClothSpec, OutputSpec, RigInfo, Scene, SceneSettings
@@ -109,7 +110,8 @@ def build_scene(resolved: ResolvedScene, source: pathlib.Path | None, text: str 
                     r["nodes_per_instance"], r["instances"]) for r in resolved.rigs]
     return Scene(name=settings.name, source=source, settings=settings, hierarchy=hierarchy,
                  colliders=colliders, animation=animation, cloths=cloths, output=output, rigs=rigs,
-                 collider_names=list(colliders.names), source_text=text)
+                 collider_names=list(colliders.names), source_text=text,
+                 overrides=tuple(str(o) for o in overrides))
 
 
 def _issue(path: str, message: str) -> Issue:

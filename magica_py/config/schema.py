@@ -109,39 +109,47 @@ INSTANCE_FIELDS = {
 }
 
 # -- animation ---------------------------------------------------------------------------
+# The keys and meanings follow magica_py.scene.animation (``_driver_params``, ``INTERPOLATIONS``):
+# tests/test_config_schema.py checks that both sides accept the same keys and choices.
+KEYFRAME_INTERPOLATIONS = ("linear", "step", "smooth", "cubic")
 DRIVER_FIELDS: dict[str, dict[str, Field]] = {
     "keyframes": {
-        "interpolation": F("choice", "linear", choices=("linear", "step", "smooth"),
-                           doc="linear (slerp for rotations), step, or smooth (eased segments)"),
+        "interpolation": F("choice", "linear", choices=KEYFRAME_INTERPOLATIONS,
+                           doc="linear (slerp for rotations), step, smooth (each segment eased in and out) "
+                               "or cubic (Catmull-Rom through the keys; rotations slerp linearly)"),
         "loop": F("bool", False, doc="repeat after the last key (else hold the last key)"),
         "keys": F("keys", doc="list of {time, position?, rotation|euler?, scale?} (local pose)"),
     },
     "orbit": {
         "center": F("vec3", (0.0, 0.0, 0.0), doc="circle centre in the parent's space (m)"),
         "radius": F("number", REQUIRED, POSITIVE, doc="circle radius (m)"),
-        "period": F("number", REQUIRED, Range(0.0, low_open=True), doc="time for one revolution (s)"),
-        "axis": F("dir3", (0.0, 1.0, 0.0), doc="axis of the circle (counter-clockwise about it, Unity left-handed)"),
+        "period": F("number", REQUIRED, doc="time for one revolution (s), non-zero; negative runs the circle backwards"),
+        "axis": F("dir3", (0.0, 1.0, 0.0), doc="axis of the circle in the parent's space: a positive rotation about it "
+                                                "(clockwise seen from the axis tip, Unity is left-handed), as spin"),
         "phase": F("number", 0.0, doc="start angle (degrees)"),
         "face_path": F("bool", False, doc="also rotate the target so it faces along the path"),
     },
     "oscillate": {
         "property": F("choice", "position", choices=("position", "rotation"), doc="what oscillates"),
-        "axis": F("dir3", (0.0, 1.0, 0.0), doc="direction (position) or rotation axis (rotation)"),
+        "axis": F("dir3", (0.0, 1.0, 0.0), doc="direction in the parent's space (position) or rotation axis in the "
+                                                "node's own local axes (rotation)"),
         "amplitude": F("number", REQUIRED, doc="m for position, degrees for rotation"),
         "frequency": F("number", REQUIRED, POSITIVE, doc="Hz"),
         "phase": F("number", 0.0, doc="degrees"),
     },
     "spin": {
-        "axis": F("dir3", (0.0, 1.0, 0.0), doc="rotation axis in the parent's space"),
+        "axis": F("dir3", (0.0, 1.0, 0.0), doc="rotation axis in the node's own local axes"),
         "speed": F("number", REQUIRED, doc="angular speed (degrees/s)"),
     },
     "walk": {
         "speed": F("number", 0.0, NON_NEGATIVE, doc="forward speed (m/s); 0 = walk on the spot"),
-        "stride_frequency": F("number", 1.8, POSITIVE, doc="steps per second (Hz)"),
-        "bob": F("number", 0.03, NON_NEGATIVE, doc="vertical bob amplitude (m), twice per stride"),
-        "sway": F("number", 4.0, NON_NEGATIVE, doc="lateral sway amplitude (degrees)"),
-        "lateral": F("number", 0.0, NON_NEGATIVE, doc="side-to-side shift amplitude (m), once per stride"),
-        "twist": F("number", 0.0, NON_NEGATIVE, doc="yaw amplitude about the local +Y (degrees)"),
+        "stride_frequency": F("number", 1.8, POSITIVE,
+                              doc="strides per second (Hz); a stride is one gait cycle of two steps"),
+        "bob": F("number", 0.03, NON_NEGATIVE, doc="bob amplitude along up (m), once per step: twice per stride"),
+        "sway": F("number", 4.0, NON_NEGATIVE, doc="roll amplitude about the node's local +Z (degrees), once per stride"),
+        "lateral": F("number", 0.0, NON_NEGATIVE, doc="side-to-side shift amplitude along up x direction (m), "
+                                                      "once per stride"),
+        "twist": F("number", 0.0, NON_NEGATIVE, doc="yaw amplitude about the node's local +Y (degrees), once per stride"),
         "direction": F("dir3", (0.0, 0.0, 1.0), doc="forward direction in the parent's space"),
         "up": F("dir3", (0.0, 1.0, 0.0), doc="bob direction in the parent's space (not parallel to direction)"),
     },
@@ -345,8 +353,12 @@ def check_rig(c: Checker, value, path: tuple) -> dict | None:
     rig = {"name": c.text(m, "name", path, what="a rig name"), **check_pose(c, m, path, scale=False)}
     rig["bones"] = []
     rig["file"] = rig["prefix"] = None
+    rig["humanoid"], rig["unit_scale"] = {}, 1.0
     if "file" in m:
-        rig["bones"] = imports.import_rig_bones(c, m, path) or []
+        imported = imports.import_rig(c, m, path)
+        if imported is not None:
+            rig["bones"], rig["humanoid"], rig["unit_scale"] = (imported["bones"], imported["humanoid"],
+                                                                imported["unit_scale"])
         rig["file"], rig["prefix"] = m.get("file"), m.get("prefix") or ""
     for i, b in enumerate(c.sequence(m, "bones", path)):
         bp = path + ("bones", i)
@@ -404,6 +416,9 @@ def check_animation_entry(c: Checker, value, path: tuple) -> dict | None:
                 params["keys"] = check_keys(c, m[kind], kp)
         else:
             params = read_fields(c, m[kind], kp, DRIVER_FIELDS[kind])
+        if kind == "orbit" and params and params["period"] == 0:
+            c.error(kp + ("period",), "expected a non-zero period (s); a negative one runs the circle backwards")
+            return None
         if kind == "walk" and params and params["direction"] and params["up"]:
             d, u = params["direction"], params["up"]
             if abs(sum(a * b for a, b in zip(d, u))) > 1 - 1e-9:

@@ -154,7 +154,8 @@ class Clip:
         """Linear tracks sampled at ``rate`` Hz (fewer keys for YAML entries; exact at the ends)."""
         duration = self.duration
         times = np.linspace(0.0, duration, max(2, int(round(duration * rate)) + 1))
-        tracks = [Track(tr.node, tr.path, times, sample_track_many(tr, times), "linear") for tr in self.tracks]
+        tracks = [tr if len(tr.times) == 1 else Track(tr.node, tr.path, times, sample_track_many(tr, times), "linear")
+                  for tr in self.tracks]   # a constant channel stays one key
         return replace(self, tracks=tracks, frame_time=1.0 / rate, notes=self.notes + [f"resampled at {rate:g} Hz"])
 
     def renamed(self, mapping: dict[str, str]) -> "Clip":

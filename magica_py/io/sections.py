@@ -115,7 +115,8 @@ def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, t
       same_names, rate); the result targets ``retarget_to``'s names.
     * ``drop``: globs of bones whose channels are removed (bones the cloth simulates),
       matched against the final names.
-    * ``trim``: ``[start, end]`` seconds of the source clip to keep (re-timed from 0);
+    * ``trim``: ``[start, end]`` seconds of the source clip to keep (re-timed from 0; applied
+      after retargeting, so ``source_rest`` frames count from the source's first frame);
       ``rate``: resample every track linearly at that rate (Hz), e.g. 30 to shrink a 120 Hz
       capture before turning it into YAML keyframe entries.
     * ``target_bones`` is the former name of ``retarget_to`` (kept for callers).
@@ -138,16 +139,18 @@ def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, t
         else:
             clip = rig.clip(clip_name)
         source_bones = rig.bones
-    if trim is not None:
-        if not (isinstance(trim, (list, tuple)) and len(trim) == 2):
-            raise ValueError(f"{ref}: trim must be [start, end] in seconds, got {trim!r}")
-        clip = clip.trimmed(float(trim[0]), None if trim[1] is None else float(trim[1]))
-    if rate is not None:
-        clip = clip.resampled(float(rate))
+    if trim is not None and not (isinstance(trim, (list, tuple)) and len(trim) == 2):
+        raise ValueError(f"{ref}: trim must be [start, end] in seconds, got {trim!r}")
+    # retarget the whole clip first: ``source_rest: <frame>`` names a frame of the source
+    # (CMU captures start with a T-pose at frame 0, outside most trims)
     if retarget_to is not None:
         clip = retarget(clip, source_bones, retarget_to, target_map=target_map, **options)
     elif prefix:
         clip = clip.renamed({n: prefix + n for n in clip.nodes()})
+    if trim is not None:
+        clip = clip.trimmed(float(trim[0]), None if trim[1] is None else float(trim[1]))
+    if rate is not None:
+        clip = clip.resampled(float(rate))
     if drop:
         clip = clip.without(drop)
     return clip

@@ -132,6 +132,8 @@ class Scene:
     rigs: list[RigInfo] = field(default_factory=list)
     collider_names: list[str] = field(default_factory=list)
     source_text: str | None = None          # YAML of the scene as run (overrides applied): for replays
+    overrides: tuple[str, ...] = ()         # the `--set PATH=VALUE` strings it was loaded with, in order:
+                                            # recorded so `magica-py resim` can re-apply them
 
     def cloth(self, name: str) -> ClothSpec:
         for spec in self.cloths:
