@@ -64,9 +64,11 @@ def hierarchy_arrays(h) -> HierarchyArrays:
 @kernel
 def prepare_teams(m, ts, prm, tt, h):
     """Scale suspension (A.4) and distance culling (H.1) before the team time runs."""
-    for t in range(ts.enabled.shape[0]):
+    for i in range(m.live_teams.shape[0]):
+        t = m.live_teams[i]
         if ts.enabled[t] == 0:
             tt.active[t] = False
+            ts.active[t] = 0
             continue
         tt.active[t] = True
         comp = m.team_component_transform[t]
@@ -160,9 +162,10 @@ def _time_frame_update(tt, fi):
 
 
 @kernel
-def _max_update_count(ts, tt):
+def _max_update_count(m, ts, tt):
     max_count = 0
-    for t in range(ts.enabled.shape[0]):
+    for i in range(m.live_teams.shape[0]):
+        t = m.live_teams[i]
         if ts.active[t] != 0 and tt.update_count[t] > max_count:
             max_count = tt.update_count[t]
     return max_count
@@ -171,19 +174,22 @@ def _max_update_count(ts, tt):
 @kernel
 def simulate_frame(m, ps, prm, ts, cs, tt, h, fi):
     """The whole cloth frame for every team (see the module docstring)."""
-    team_count = ts.enabled.shape[0]
+    team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
-    for t in range(team_count):
+    for i in range(team_count):
+        t = m.live_teams[i]
         if ts.active[t] != 0:
             begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t)
-    for step in range(_max_update_count(ts, tt)):
+    for step in range(_max_update_count(m, ts, tt)):
         team_time_begin_step(step, tt.active, tt.update_count, tt.time, tt.now_update_time,
                              tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
-        for t in range(team_count):
+        for i in range(team_count):
+            t = m.live_teams[i]
             if ts.active[t] != 0 and tt.step_running[t]:
                 run_step(m, ps, prm, ts, cs, tt, t, fi)
-    for t in range(team_count):
+    for i in range(team_count):
+        t = m.live_teams[i]
         if ts.active[t] != 0:
             end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t)
     team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
@@ -197,19 +203,22 @@ def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, fi):
 
     Teams are independent and each runs in its own order, so the results are bit-identical
     to the serial kernel (element-wise, no reductions)."""
-    team_count = ts.enabled.shape[0]
+    team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
-    for t in prange(team_count):
+    for i in prange(team_count):
+        t = m.live_teams[i]
         if ts.active[t] != 0:
             begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t)
-    for step in range(_max_update_count(ts, tt)):
+    for step in range(_max_update_count(m, ts, tt)):
         team_time_begin_step(step, tt.active, tt.update_count, tt.time, tt.now_update_time,
                              tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
-        for t in prange(team_count):
+        for i in prange(team_count):
+            t = m.live_teams[i]
             if ts.active[t] != 0 and tt.step_running[t]:
                 run_step(m, ps, prm, ts, cs, tt, t, fi)
-    for t in prange(team_count):
+    for i in prange(team_count):
+        t = m.live_teams[i]
         if ts.active[t] != 0:
             end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t)
     team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,

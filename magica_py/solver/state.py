@@ -12,7 +12,7 @@ A step never allocates: every buffer a kernel needs is a field here.
 """
 from __future__ import annotations
 
-from magica_py.solver.fields import F64, I32, U8, allocate, make_soa
+from magica_py.solver.fields import F64, I32, U8, allocate, grow, make_soa, reset_rows
 
 V3 = (3,)
 Q4 = (4,)
@@ -158,13 +158,44 @@ COLLIDER_FIELDS = [
 ColliderState = make_soa("ColliderState", COLLIDER_FIELDS)
 
 
+# initial values besides zero / identity (a team starts with Reset and TimeReset)
+TEAM_FILL = {"reset": 1, "time_reset": 1, "scale_ratio": 1.0, "gravity_ratio": 1.0,
+             "gravity_dot": 1.0, "distance_weight": 1.0, "component_scale_ratio": 1.0,
+             "component_scale": 1.0, "old_component_scale": 1.0,
+             "frame_world_scale": 1.0, "old_frame_world_scale": 1.0}
+COLLIDER_FILL = {"first_frame": 1, "frame_scale": 1.0}
+
+
 def allocate_state(particle_count: int, team_count: int, slot_count: int):
     """Fresh state tables sized for the given counts (every team starts with Reset)."""
     particles = allocate(ParticleState, {"particle": particle_count})
-    teams = allocate(TeamState, {"team": team_count},
-                     fill={"reset": 1, "time_reset": 1, "scale_ratio": 1.0, "gravity_ratio": 1.0,
-                           "gravity_dot": 1.0, "distance_weight": 1.0, "component_scale_ratio": 1.0,
-                           "component_scale": 1.0, "old_component_scale": 1.0,
-                           "frame_world_scale": 1.0, "old_frame_world_scale": 1.0})
-    colliders = allocate(ColliderState, {"slot": slot_count}, fill={"first_frame": 1, "frame_scale": 1.0})
+    teams = allocate(TeamState, {"team": team_count}, fill=TEAM_FILL)
+    colliders = allocate(ColliderState, {"slot": slot_count}, fill=COLLIDER_FILL)
     return particles, teams, colliders
+
+
+def grow_state(particles, teams, colliders, particle_count: int, team_count: int, slot_count: int):
+    """The state tables enlarged to the given counts: existing rows copied bit for bit, new
+    rows fresh (used when a cloth is added at runtime and a pool has no free chunk)."""
+    if particles.position.shape[0] < particle_count:
+        particles = grow(ParticleState, particles, {"particle": particle_count})
+    if teams.reset.shape[0] < team_count:
+        teams = grow(TeamState, teams, {"team": team_count}, fill=TEAM_FILL)
+    if colliders.shape.shape[0] < slot_count:
+        colliders = grow(ColliderState, colliders, {"slot": slot_count}, fill=COLLIDER_FILL)
+    return particles, teams, colliders
+
+
+def free_particle_rows(particles, start: int, count: int) -> None:
+    reset_rows(ParticleState, particles, "particle", start, start + count)
+
+
+def free_team_row(teams, team: int) -> None:
+    """A removed team's row: fresh values, disabled."""
+    reset_rows(TeamState, teams, "team", team, team + 1, fill=TEAM_FILL)
+    teams.enabled[team] = 0
+    teams.active[team] = 0
+
+
+def free_collider_rows(colliders, start: int, count: int) -> None:
+    reset_rows(ColliderState, colliders, "slot", start, start + count, fill=COLLIDER_FILL)

@@ -32,9 +32,12 @@ from magica_py.solver.frame import (
     FrameInputs, as_kernel_table, hierarchy_arrays, simulate_frame, simulate_frame_parallel, time_arrays,
 )
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
-from magica_py.solver.layout import build_solver_model
+from magica_py.solver.fields import grow
+from magica_py.solver.layout import ChunkAllocator, SolverLayout
 from magica_py.solver.parameters import allocate_parameters, write_row
-from magica_py.solver.state import allocate_state
+from magica_py.solver.state import (
+    allocate_state, free_collider_rows, free_particle_rows, free_team_row, grow_state,
+)
 
 FORCE_MODES = {"velocity_add": 1, "velocity_add_without_depth": 2, "velocity_change": 3,
                "velocity_change_without_depth": 4}
@@ -66,21 +69,23 @@ class ClothSystem:
         self.models = list(models)
         self._check_positive_scale(hierarchy)
         self.team_names = [str(getattr(s, "name", f"cloth{i}")) for i, s in enumerate(self.specs)]
-        self.model = build_solver_model(self.models)
+        self._scene_update_mode = scene_update_mode
+        # chunked global model: one chunk per team and pool (layout.SolverLayout); collider
+        # slots are chunked the same way
+        self.layout = SolverLayout()
+        for model in self.models:
+            self.layout.add(model)
+        self.model = self.layout.model()
         team_count = len(self.models)
-        slots = []
-        for t, spec in enumerate(self.specs):
-            indices = [int(i) for i in (getattr(spec, "colliders", ()) or ())]
-            slots.append((t, indices if colliders is not None else []))
-        slot_count = sum(len(s) for _, s in slots)
+        self._slots = ChunkAllocator()
+        slots = [(t, self._collider_indices(spec)) for t, spec in enumerate(self.specs)]
+        starts = [self._slots.allocate(len(indices)) for _t, indices in slots]
         self.particles, self.teams, self.collider_state = allocate_state(
-            int(self.model.transform_index.shape[0]), team_count, slot_count)
-        start = 0
-        for t, indices in slots:
+            self.layout.capacity("particle"), team_count, self._slots.capacity)
+        for (t, indices), start in zip(slots, starts):
             self.teams.collider_start[t] = start
             self.teams.collider_count[t] = len(indices)
-            start += len(indices)
-        if slot_count:
+        if self._slots.capacity:
             fill_slots(self.collider_state, slots, colliders)
         self.parameters = allocate_parameters(team_count)
         self.team_parameters = [getattr(s, "parameters", None) or {} for s in self.specs]
@@ -89,14 +94,11 @@ class ClothSystem:
             self._write_parameters(t)
         self.time_state = TeamTimeState.allocate(team_count)
         for t in range(team_count):
-            mode = self._parameter(t, "update_mode", "normal")
-            if str(mode) in ("normal", "animator_linkage") and scene_update_mode:
-                mode = scene_update_mode
-            self.time_state.activate(t, update_mode=update_mode_code(mode))
-            self.teams.enabled[t] = 1
+            self._activate(t)
         self._time = time_arrays(self.time_state)
         self._hierarchy = hierarchy_arrays(hierarchy)
         self.frame_count = 0
+        self._player = None
         self._entry_point = None
         self._tables = None
         self._kernel = simulate_frame_parallel if parallel else simulate_frame
@@ -109,11 +111,112 @@ class ClothSystem:
 
         player.schedule.add(Phase.LATE_UPDATE, System(self.name, self.run))
         player.register_restored_bones(self.restored_bones(), owner=self)
+        self._player = player
         return self
 
     def restored_bones(self) -> np.ndarray:
+        """Bones of the cloths in use (freed chunks have attribute 0: left out)."""
         m = self.model
         return np.unique(m.transform_index[(m.attribute & 0x03) != 0]).astype(np.int32)
+
+    # ------------------------------------------------------------------ teams at runtime
+    def add_cloth(self, spec, model=None) -> int:
+        """Add a cloth at runtime (issue 3 item 7); returns its team id (ids are not reused).
+
+        The model is built (unless given) after putting the cloth's bones back to their rest
+        local pose. Its chunks come from
+        the freed space first, the pools grow otherwise: other teams' rows never move and their
+        state is not touched. The new team starts with Reset, like a team built with the scene,
+        and its bones join the restored set."""
+        from magica_py.build import build_cloth
+
+        if model is None:
+            # build from the rest local pose of the cloth's bones (what RESTORE puts back each
+            # frame), not from whatever pose they were left in
+            h = self.hierarchy
+            nodes = sorted({n for r in getattr(spec, "root_bones", ()) for n in h.descendants(int(r))})
+            h.restore_rest_pose(np.asarray(nodes, dtype=np.int32))
+            h.propagate()
+            model = build_cloth(h, spec)
+        self._check_positive_scale(self.hierarchy, [(spec, model)])
+        team = self.layout.add(model)
+        indices = self._collider_indices(spec)
+        slot_start = self._slots.allocate(len(indices))
+        self.particles, self.teams, self.collider_state = grow_state(
+            self.particles, self.teams, self.collider_state, self.layout.capacity("particle"),
+            self.layout.team_count, self._slots.capacity)
+        p0, pn = self.layout.chunks[team]["particle"]
+        free_particle_rows(self.particles, p0, pn)   # a reused chunk starts fresh too
+        free_team_row(self.teams, team)
+        self.teams.collider_start[team] = slot_start
+        self.teams.collider_count[team] = len(indices)
+        if indices:
+            free_collider_rows(self.collider_state, slot_start, len(indices))
+            fill_slots(_rows(self.collider_state, slot_start, len(indices)), [(team, indices)], self.colliders)
+        self.specs.append(spec)
+        self.models.append(model)
+        self.team_names.append(str(getattr(spec, "name", f"cloth{team}")))
+        self.team_parameters.append(getattr(spec, "parameters", None) or {})
+        self.collision_modes.append(getattr(spec, "collision_mode", None))
+        if self.parameters.gravity.shape[0] < self.layout.team_count:
+            self.parameters = grow(type(self.parameters), self.parameters, {"team": self.layout.team_count})
+        self._write_parameters(team)
+        if self.time_state.capacity < self.layout.team_count:
+            self.time_state.resize(self.layout.team_count)
+        self._activate(team)
+        self._tables_changed()
+        return team
+
+    def remove_cloth(self, team: int) -> None:
+        """Remove a cloth at runtime: its chunks are freed (rows reset), the frame kernel no
+        longer visits it, its bones are neither restored nor written any more (they keep the
+        last written pose). Other teams are not touched."""
+        self._check_live(team)
+        p0, pn = self.layout.chunks[team]["particle"]
+        self.layout.remove(team)
+        free_particle_rows(self.particles, p0, pn)
+        s0, sn = int(self.teams.collider_start[team]), int(self.teams.collider_count[team])
+        if sn:
+            free_collider_rows(self.collider_state, s0, sn)
+            self.collider_state.team[s0:s0 + sn] = -1
+        self._slots.release(s0, sn)
+        free_team_row(self.teams, team)
+        self.teams.collider_count[team] = 0
+        self.time_state.deactivate(team)
+        self.models[team] = None
+        self._tables_changed()
+
+    @property
+    def live_teams(self) -> list[int]:
+        """Ids of the teams in use (ascending)."""
+        return self.layout.live_teams
+
+    def _check_live(self, team) -> None:
+        if not isinstance(team, (int, np.integer)) or not 0 <= int(team) < len(self.models) \
+                or self.models[int(team)] is None:
+            raise KeyError(f"no cloth team {team} (teams in use: {self.live_teams})")
+
+    def _tables_changed(self) -> None:
+        """After add/remove: new model, new kernel tables (same types: the compiled entry point
+        stays valid), restored bones re-registered with the player."""
+        self.model = self.layout.model()
+        self._time = time_arrays(self.time_state)
+        self._tables = None
+        if self._player is not None:
+            self._player.unregister_restored_bones(self)
+            self._player.register_restored_bones(self.restored_bones(), owner=self)
+
+    def _activate(self, t: int) -> None:
+        mode = self._parameter(t, "update_mode", "normal")
+        if str(mode) in ("normal", "animator_linkage") and self._scene_update_mode:
+            mode = self._scene_update_mode
+        self.time_state.activate(t, update_mode=update_mode_code(mode))
+        self.teams.enabled[t] = 1
+
+    def _collider_indices(self, spec) -> list[int]:
+        if self.colliders is None:
+            return []
+        return [int(i) for i in (getattr(spec, "colliders", ()) or ())]
 
     # ------------------------------------------------------------------ frame
     def run(self, ctx) -> None:
@@ -161,13 +264,12 @@ class ClothSystem:
     def teams_of(self, cloth) -> list[int]:
         """Team ids of a cloth name (all instances), ``name#i``, or a team id."""
         if isinstance(cloth, (int, np.integer)):
-            if not 0 <= int(cloth) < len(self.team_names):
-                raise KeyError(f"no cloth team {cloth}")
+            self._check_live(cloth)
             return [int(cloth)]
         name = str(cloth)
-        found = [t for t, n in enumerate(self.team_names)
-                 if n == name or n.split("#")[0] == name or
-                 (getattr(self.specs[t], "instance", None) is not None and f"{n}#{self.specs[t].instance}" == name)]
+        found = [t for t, n in enumerate(self.team_names) if self.models[t] is not None and (
+                 n == name or n.split("#")[0] == name or
+                 (getattr(self.specs[t], "instance", None) is not None and f"{n}#{self.specs[t].instance}" == name))]
         if not found:
             raise KeyError(f"no cloth named {name!r} (cloths: {sorted(set(self.team_names))})")
         return found
@@ -255,9 +357,9 @@ class ClothSystem:
             value = default
         return default if value is None else value
 
-    def _check_positive_scale(self, hierarchy) -> None:
+    def _check_positive_scale(self, hierarchy, pairs=None) -> None:
         """Negative scale is rejected (ref §H.7 allows a Python port to assume positive scale)."""
-        for spec, model in zip(self.specs, self.models):
+        for spec, model in (pairs if pairs is not None else zip(self.specs, self.models)):
             nodes = list(np.asarray(model.transform_index)) + [int(model.component_transform)]
             for node in nodes:
                 if (hierarchy.lossy_scale[node] < 0.0).any():
@@ -271,3 +373,9 @@ class ClothSystem:
         def resolve(name):
             return int(self.hierarchy.index(name))
         write_row(self.parameters, team, self.team_parameters[team], self.collision_modes[team], resolve)
+
+
+def _rows(table, start: int, count: int):
+    """The same namedtuple table restricted to rows ``start:start+count`` (views: writes land
+    in ``table``)."""
+    return type(table)(*(a[start:start + count] for a in table))
