@@ -31,6 +31,7 @@ import os
 import sys
 import time
 import traceback
+import warnings
 
 EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -145,7 +146,9 @@ def main(argv=None) -> int:
         return int(exc.code or 0)
     handler = {"run": cmd_run, "validate": cmd_validate, "info": cmd_info}[args.command]
     try:
-        return handler(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            return handler(args)
     except KeyboardInterrupt:
         print("magica-py: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
@@ -172,6 +175,16 @@ def _run_registered(name: str, argv: list[str]) -> int:
               file=sys.stderr)
         return EXIT_FAILURE
     return int(fn(argv) or 0)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings about the user's input (an importer's authoring-quirk note, ...) as one line,
+    without the Python source line; other warnings keep Python's format."""
+    stream = file if file is not None else sys.stderr
+    if issubclass(category, UserWarning) and not issubclass(category, DeprecationWarning):
+        stream.write(f"magica-py: warning: {message}\n")
+    else:
+        stream.write(warnings.formatwarning(message, category, filename, lineno, line))
 
 
 def _is_input_error(exc: BaseException) -> bool:

@@ -13,6 +13,8 @@ from magica_py.config import load_scene
 
 CONFIGS = sorted((pathlib.Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
 IDS = [p.stem for p in CONFIGS]
+# importer notes about authored data (the Godette VRM's r = 1 m sphere) are expected here
+pytestmark = pytest.mark.filterwarnings("ignore:.*authoring quirk:UserWarning")
 
 
 def test_the_three_showcases_exist():
@@ -115,18 +117,31 @@ def _penetration(p, shapes, k, particle_radius):
     return particle_radius - np.dot(p - shapes.position[k], shapes.normal[k])
 
 
+# Imported avatars keep their authored collision setup. Godette's VRM rests her two outer
+# front-hair tips 7 mm outside the head sphere, closer than their 0.02 m hit radius (12.9 mm
+# inside the "sphere + hit radius" shell): UniVRM pushes them out on its first frame and so
+# does the solver (tests/test_io_showcases.py bounds what follows). There the bones
+# themselves must be outside the colliders (overlap up to the particle radius).
+AUTHORED_OVERLAP = {"vrm_godette_mocap"}
+
+
 @pytest.mark.parametrize("config", CONFIGS, ids=IDS)
 def test_no_moving_bone_starts_inside_its_colliders(config):
-    scene = load_scene(config)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        scene = load_scene(config)
     h = scene.hierarchy
     shapes = scene.colliders.world_shapes(h)
     for spec in scene.cloths[:4]:  # instances are copies: the first few are enough
         radius = spec.parameters["radius"].value
+        allowed = radius if config.stem in AUTHORED_OVERLAP else 0.0
         moving = {i for r in spec.root_bones for i in h.descendants(r)} - set(spec.root_bones)
         for i in moving:
             for k in spec.colliders:
                 depth = _penetration(h.world_position[i], shapes, k, radius)
-                assert depth <= 0.0, (spec.name, h.names[i], scene.colliders.names[k], depth)
+                assert depth <= allowed, (spec.name, h.names[i], scene.colliders.names[k], depth)
 
 
 def test_hitches_and_events_fires_every_event_within_the_run():

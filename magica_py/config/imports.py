@@ -30,6 +30,7 @@ issue at that entry's ``file`` / ``clip`` / ``from_vrm`` key.
 """
 from __future__ import annotations
 
+import os
 import pathlib
 
 from magica_py.config.checker import NON_NEGATIVE, POSITIVE, Checker, Range
@@ -48,6 +49,11 @@ def base_dir(c: Checker) -> pathlib.Path:
     return pathlib.Path.cwd()
 
 
+def asset_path(c: Checker, file: str) -> pathlib.Path:
+    """An asset path relative to the scene file's folder, normalised for messages."""
+    return pathlib.Path(os.path.normpath(base_dir(c) / file))
+
+
 def _asset_error(c: Checker, path: tuple, exc: Exception) -> None:
     c.error(path, f"cannot import: {exc}")
 
@@ -60,7 +66,7 @@ def import_rig(c: Checker, m: dict, path: tuple) -> dict | None:
     unit_scale = c.number(m, "unit_scale", path, 1.0, POSITIVE)
     if file is None:
         return None
-    full = base_dir(c) / file
+    full = asset_path(c, file)
     try:
         from magica_py.io.sections import rig_section
 
@@ -210,7 +216,7 @@ def import_vrm_sections(c: Checker, m: dict, path: tuple, rigs: list[dict]) -> t
     try:
         from magica_py.io.sections import vrm_sections
 
-        sections = vrm_sections(base_dir(c) / rig["file"], group_by=group_by, prefix=rig.get("prefix") or "",
+        sections = vrm_sections(asset_path(c, rig["file"]), group_by=group_by, prefix=rig.get("prefix") or "",
                                 cloth_prefix=prefix, oversized_colliders=oversized, chains=chains)
     except (ImportError, ValueError, OSError, KeyError) as exc:
         _asset_error(c, path + ("from_vrm",), exc)

@@ -14,6 +14,7 @@ metres), ``colliders`` and ``cloths`` entries, and animation either as a ``Clip`
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 from magica_py.io.bvh import load_bvh
@@ -65,7 +66,9 @@ def rig_section(path, *, name: str | None = None, prefix: str = "", unit_scale: 
     ``joints`` lists skin joints (glTF); ``humanoid`` maps VRM humanoid names to bones (VRM).
     VRM synthetic nodes (virtual tails, collider frames) are included in ``bones``.
     """
-    result = load_rig(path, prefix=prefix, unit_scale=unit_scale)
+    with warnings.catch_warnings():  # collider quirks concern the cloths: vrm_sections reports them
+        warnings.simplefilter("ignore", UserWarning)
+        result = load_rig(path, prefix=prefix, unit_scale=unit_scale)
     section = {"name": name or Path(path).stem, "bones": bone_entries(result.bones)}
     rig = getattr(result, "rig", result)
     section["joints"] = sorted(getattr(rig, "joints", set()))
