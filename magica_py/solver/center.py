@@ -89,6 +89,22 @@ def time_based_smoothing(ts, team, delta, frame_delta_time, s, speed_limit):
 
 
 @kernel
+def mean_velocity_weight(w0, stabilization_time, span):
+    """Quality mode: the stabilisation weight averaged over the frame's simulated time span
+    (it ramps by dt/stab per step, C.3), so that the forced shift of C.4 removes the same
+    share of the motion however the time is cut into frames (faithful: the weight at the
+    start of the frame, a 1/30 s frame is shifted rigidly as a whole after a reset)."""
+    if span <= 0.0:
+        return w0
+    if stabilization_time <= 1e-6:
+        return 1.0
+    t1 = (1.0 - w0) * stabilization_time  # time to reach 1
+    if span <= t1:
+        return w0 + span / (2.0 * stabilization_time)
+    return ((w0 + 1.0) * 0.5 * t1 + (span - t1)) / span
+
+
+@kernel
 def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation, lossy_scale,
                             frame_delta_time, now_time_scale, skip_count, running, dt):
     """C.2 and C.4 for one team: center, anchor, teleport, smoothing, world inertia, shift."""
@@ -236,7 +252,10 @@ def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation
         if skip_count > 0 and frame_delta_time * now_time_scale > 0.0:
             o = lerp(o, 1.0, saturate(skip_count * dt / (frame_delta_time * now_time_scale)))
         if ts.velocity_weight[team] < 1.0:
-            o = lerp(o, 1.0, 1.0 - ts.velocity_weight[team])
+            w = ts.velocity_weight[team]
+            if prm.time_based_smoothing[team] != 0:
+                w = mean_velocity_weight(w, prm.stabilization_time[team], frame_delta_time * now_time_scale)
+            o = lerp(o, 1.0, 1.0 - w)
         if now_time_scale < 1.0:
             o = lerp(o, 1.0, 1.0 - now_time_scale)
         if o > 0.0:

@@ -11,6 +11,7 @@ extrapolated by the time elapsed since that step (docs/quality-mode.md).
 from __future__ import annotations
 
 from magica_py.jit import kernel
+from magica_py.solver.quality import display_ftl_team
 from magica_py.kernels.math3d import (
     clamp_length, load3, load4, store3, store4, v_add, v_length, v_lerp, v_scale, v_sub,
 )
@@ -52,3 +53,6 @@ def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, runn
             store4(ps.old_rotation, p, rot0)
         store3(ps.base_pos_buffer, p, pos0)
         store4(ps.base_rot_buffer, p, rot0)
+    mode = prm.inextensibility[team]
+    if time_based and (mode == 2 or mode == 3 or mode == 5):  # the FTL options
+        display_ftl_team(m, ps, team)

@@ -11,7 +11,11 @@ from __future__ import annotations
 from collections import namedtuple
 
 from numba import prange, types
+from numba.core import cgutils, imputils
+from numba.core.datamodel import default_manager, models
 from numba.core.extending import overload
+from numba.core.imputils import lower_getattr_generic, lower_setattr_generic
+from numba.core.typing.templates import AttributeTemplate, infer_getattr
 from numba.experimental import structref
 
 from magica_py.jit import kernel
@@ -36,7 +40,9 @@ from magica_py.solver.constraints.tether import tether_team
 from magica_py.solver.display import display_team
 from magica_py.solver.guards import check_team, reset_team_to_base
 from magica_py.solver.parameters import step_rate
-from magica_py.solver.quality import quality_distance_attenuation, quality_end_of_step
+from magica_py.solver.quality import (
+    quality_distance_attenuation, quality_end_of_step, quality_hard_attenuation, quality_restoration_attenuation,
+)
 from magica_py.solver.rotations import line_rotations_team, triangle_rotations_team
 from magica_py.solver.step import end_step_team, predict_team, step_basic_pose_team, team_step_update
 from magica_py.solver.writeback import transform_data_team, write_transforms_team
@@ -97,11 +103,13 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi):
     collider_step_team(cs, ts, t, frac)
     predict_team(m, ps, prm, ts, t, frac, dt, ratio, fi.power_z)
     step_basic_pose_team(m, ps, prm, ts, t)
-    tether_team(m, ps, prm, t, step_rate(TETHER_ATTENUATION, ratio, 1.0, mode))
+    tether_team(m, ps, prm, t, quality_hard_attenuation(prm, t, ratio, TETHER_ATTENUATION,
+                                                         step_rate(TETHER_ATTENUATION, ratio, 1.0, mode)))
     distance_attenuation = quality_distance_attenuation(prm, t, step_rate(DISTANCE_ATTENUATION, ratio, 1.0, mode))
     distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
-    angle_team(m, ps, prm, ts, t, ratio, fi.power_w, step_rate(LIMIT_ATTENUATION, ratio, 1.0, mode),
-               step_rate(prm.restoration_attenuation[t], ratio, 1.0, mode))
+    angle_team(m, ps, prm, ts, t, ratio, fi.power_w,
+               quality_hard_attenuation(prm, t, ratio, LIMIT_ATTENUATION, step_rate(LIMIT_ATTENUATION, ratio, 1.0, mode)),
+               quality_restoration_attenuation(prm, t, ratio, step_rate(prm.restoration_attenuation[t], ratio, 1.0, mode)))
     if m.team_bend_count[t] > 0 or m.team_volume_count[t] > 0:
         bending_team(m, ps, prm, ts, t, ratio, fi.power_y)
         apply_accumulated(m, ps, t, True)
@@ -111,7 +119,8 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi):
         elif prm.collision_mode[t] == 2:
             edge_collision_team(m, ps, prm, ts, cs, t)
     distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
-    motion_team(m, ps, prm, t, step_rate(MOTION_ATTENUATION, ratio, 1.0, mode))
+    motion_team(m, ps, prm, t, quality_hard_attenuation(prm, t, ratio, MOTION_ATTENUATION,
+                                                         step_rate(MOTION_ATTENUATION, ratio, 1.0, mode)))
     if prm.inextensibility[t] != 0 or prm.collision_last[t] != 0:  # quality mode (issue 8)
         quality_end_of_step(m, ps, prm, ts, cs, t, ratio, fi.power_y, distance_attenuation)
     end_step_team(m, ps, prm, ts, t, dt, ratio)
@@ -231,10 +240,55 @@ def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, fi):
 # by value: ~60 array structs per table, ~12 us per call for five tables (measured), paid by
 # every stage call. The kernels therefore receive each table as a numba StructRef with the
 # same field names (one pointer; attribute access is unchanged), sharing the numpy arrays.
-@structref.register
+#
+# Reading a field (``ps.next_pos``) must not touch the array's reference count: numba's
+# StructRef getattr increfs the array and the reader decrefs it, two atomic (lock-prefixed)
+# operations per field access that serialise the CPU; they were ~1/3 of the frame (perf:
+# NRT_incref/NRT_decref on top) and stopped independent work from overlapping. The table
+# keeps every array alive for the whole call (the StructRef holds a reference, and so does
+# the ClothSystem), so a field read hands out a *borrowed* view with a null meminfo, as numba
+# does for global constant arrays: NRT_incref/decref(NULL) return at once. Kernels only
+# index these arrays (never return or store them), so no reference can escape.
 class TableStructType(types.StructRef):
     def preprocess_fields(self, fields):
         return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+default_manager.register(TableStructType, models.StructRefModel)
+
+
+@infer_getattr
+class _TableAttribute(AttributeTemplate):
+    key = TableStructType
+
+    def generic_resolve(self, typ, attr):
+        if attr in typ.field_dict:
+            return typ.field_dict[attr]
+
+
+@lower_getattr_generic(TableStructType)
+def _table_getattr(context, builder, typ, val, attr):
+    dataval = structref._Utils(context, builder, typ).get_data_struct(val)
+    value = getattr(dataval, attr)
+    fieldtype = typ.field_dict[attr]
+    if isinstance(fieldtype, types.Array):
+        array = context.make_array(fieldtype)(context, builder, value=value)
+        array.meminfo = cgutils.get_null_value(array.meminfo.type)
+        value = array._getvalue()
+    return imputils.impl_ret_borrowed(context, builder, fieldtype, value)
+
+
+@lower_setattr_generic(TableStructType)
+def _table_setattr(context, builder, sig, args, attr):
+    """numba's StructRef setattr: the stored array is owned (incref new, decref old)."""
+    inst_type, val_type = sig.args
+    instance, val = args
+    dataval = structref._Utils(context, builder, inst_type).get_data_struct(instance)
+    casted = context.cast(builder, val, val_type, inst_type.field_dict[attr])
+    old_value = getattr(dataval, attr)
+    context.nrt.incref(builder, val_type, casted)
+    context.nrt.decref(builder, val_type, old_value)
+    setattr(dataval, attr, casted)
 
 
 class TableStruct(structref.StructRefProxy):

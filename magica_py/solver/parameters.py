@@ -65,7 +65,7 @@ TEAM_PARAMETER_FIELDS = [
     # quality mode (issue 8, docs/quality-mode.md); all zero in faithful mode
     ("quality", "team", (), U8, "1: solver.mode quality (implies rate_mode 1)"),
     ("time_based_smoothing", "team", (), U8, "1: smoothing and display converted by the frame time"),
-    ("inextensibility", "team", (), I32, "0 none, 1 tether, 2 ftl, 3 ftl_tether, 4 iterations"),
+    ("inextensibility", "team", (), I32, "0 none, 1 tether, 2 ftl, 3 ftl_tether, 4 iterations, 5 ftl_edges"),
     ("tether_limit", "team", (), F64, "allowed root-distance stretch of the tight tether (ratio)"),
     ("distance_iterations", "team", (), I32, "extra distance passes of the iterations option"),
     ("ftl_damping", "team", (), F64, "DFTL velocity correction factor s_damp"),
@@ -87,9 +87,9 @@ TELEPORT_MODES = ("none", "reset", "keep")
 COLLISION_MODES = ("none", "point", "edge")
 RATE_MODES = ("magica", "frequency_consistent")
 SOLVER_MODES = ("faithful", "quality")
-INEXTENSIBILITY = ("none", "tether", "ftl", "ftl_tether", "iterations")
+INEXTENSIBILITY = ("none", "tether", "ftl", "ftl_tether", "iterations", "ftl_edges")
 # what "auto" means in quality mode (chosen by measurement, docs/quality-mode.md)
-QUALITY_AUTO = {"solver.time_based_smoothing": "on", "solver.inextensibility": "ftl_tether",
+QUALITY_AUTO = {"solver.time_based_smoothing": "on", "solver.inextensibility": "ftl_edges",
                 "solver.distance_velocity": "full", "solver.collision_last": "on"}
 
 # reference defaults (§F.1), used for keys a parameter mapping does not carry
@@ -115,7 +115,7 @@ _DEFAULTS = {
     "culling.distance_culling_length": -1.0, "culling.distance_culling_fade_ratio": 0.2,
     "culling.distance_culling_reference": None, "solver.rate_mode": "magica",
     "solver.mode": "faithful", "solver.time_based_smoothing": "auto", "solver.inextensibility": "auto",
-    "solver.tether_limit": 0.0, "solver.distance_iterations": 4, "solver.ftl_damping": 0.9,
+    "solver.tether_limit": 0.0, "solver.distance_iterations": 2, "solver.ftl_damping": 0.9,
     "solver.distance_velocity": "auto", "solver.collision_last": "auto",
 }
 # curves whose default is a linear curve (value, start -> end), §F.1

@@ -14,6 +14,9 @@ and the motion constraint (D.9), before the end of the step (D.10):
      correction as velocity (its reaction), so the pass does not damp the swing;
    * ``ftl_tether`` — the tether, then FTL (edges exact, root distance bounded);
    * ``iterations`` — ``distance_iterations`` more D.4 passes (the brute-force candidate);
+   * ``ftl_edges`` — ``distance_iterations`` Gauss-Seidel passes of a unilateral PBD
+     projection over every proxy edge (horizontal skirt edges too, depth-weighted masses as
+     D.4, fixed ends immovable), then the tether and FTL;
 
 2. ``collision_last``: a final point projection of every colliding particle against each
    collider in turn, so that no particle ends the step inside one.
@@ -23,8 +26,10 @@ rest reference, like the tether of D.3. Faithful mode never calls this module.
 """
 from __future__ import annotations
 
+import math
+
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import load3, store3, v_add, v_length, v_scale, v_sub
+from magica_py.kernels.math3d import inverse_mass_friction_depth, load3, store3, v_add, v_length, v_scale, v_sub
 from magica_py.solver.constraints.collision import INVALID_OR_NO_COLLISION, solve_point_collider
 from magica_py.solver.constraints.distance import distance_team
 from magica_py.solver.parameters import curve_at
@@ -35,6 +40,7 @@ INEXT_TETHER = 1
 INEXT_FTL = 2
 INEXT_FTL_TETHER = 3
 INEXT_ITERATIONS = 4
+INEXT_FTL_EDGES = 5
 
 
 @kernel
@@ -89,6 +95,50 @@ def ftl_team(m, ps, prm, team):
 
 
 @kernel
+def edge_pass_team(m, ps, team):
+    """One Gauss-Seidel pass of unilateral edge projection over the team's proxy edges:
+    an edge longer than its step-basic rest length is shortened, both ends moving in
+    proportion to their inverse masses (D.4's depth masses; fixed ends do not move).
+    Corrections become velocity in full."""
+    e0 = m.team_edge_start[team]
+    for e in range(e0, e0 + m.team_edge_count[team]):
+        a = m.edges[e, 0]
+        b = m.edges[e, 1]
+        wa = inverse_mass_friction_depth(ps.friction[a], m.depth[a]) if (m.attribute[a] & MOVE) != 0 else 0.0
+        wb = inverse_mass_friction_depth(ps.friction[b], m.depth[b]) if (m.attribute[b] & MOVE) != 0 else 0.0
+        if wa + wb <= 0.0:
+            continue
+        rest = v_length(v_sub(load3(ps.step_basic_pos, a), load3(ps.step_basic_pos, b)))
+        pa = load3(ps.next_pos, a)
+        pb = load3(ps.next_pos, b)
+        d = v_sub(pb, pa)
+        length = v_length(d)
+        if length <= rest or length < 1e-12:
+            continue
+        c = v_scale(d, (length - rest) / (length * (wa + wb)))
+        store3(ps.next_pos, a, v_add(pa, v_scale(c, wa)))
+        store3(ps.next_pos, b, v_sub(pb, v_scale(c, wb)))
+
+
+@kernel
+def display_ftl_team(m, ps, team):
+    """Quality display: the extrapolated display positions (``ps.position``) go through one
+    FTL pass so that extrapolating each particle along its own velocity does not stretch
+    the edges the step kept (rest lengths of the last step)."""
+    b0 = m.team_baseline_start[team]
+    for b in range(b0, b0 + m.team_baseline_count[team]):
+        e0 = m.baseline_start[b]
+        for e in range(e0 + 1, e0 + m.baseline_count[b]):
+            v = m.baseline_data[e]
+            p = m.parent[v]
+            if (m.attribute[v] & MOVE) == 0 or p < 0:
+                continue
+            rest = v_length(v_sub(load3(ps.step_basic_pos, v), load3(ps.step_basic_pos, p)))
+            x, _move = clamp_to_sphere(load3(ps.position, v), load3(ps.position, p), rest)
+            store3(ps.position, v, x)
+
+
+@kernel
 def collision_last_team(m, ps, prm, ts, cs, team):
     """Project every colliding moving particle out of each collider in turn (point test of
     D.8 with the particle radius; friction and normals are left to D.8)."""
@@ -122,12 +172,41 @@ def quality_distance_attenuation(prm, team, faithful_attenuation):
 
 
 @kernel
+def quality_hard_attenuation(prm, team, frequency_ratio, attenuation, converted):
+    """Velocity attenuation of a hard limit (tether D.3, angle limit D.5, motion D.9) at the
+    step size. When a limit removes a step's penetration, ``1 - attn`` of the normal velocity
+    survives into the next step: a per-step retention, so quality mode converts it as one,
+    ``attn^(90/f)`` (the frequency-consistent mode converts attn as a rate, which lets the
+    surviving share tend to 1 - and the limit to a hard bounce - as f grows)."""
+    if prm.quality[team] == 0:
+        return converted
+    return math.pow(attenuation, frequency_ratio)
+
+
+@kernel
+def quality_restoration_attenuation(prm, team, frequency_ratio, converted):
+    """D.6's velocity attenuation at the step size. Quality mode scales the share of the
+    restoration correction that becomes velocity, ``1 - attn``, linearly with the step
+    (``(1 - attn) 90/f``): the correction itself is about proportional to the step, so the
+    velocity it leaves per unit time stays the same at any frequency (the converted rate of
+    the frequency-consistent mode lets that share tend to 1 as f grows, and the restoration
+    then acts as a force growing with f: 29 % of the tail's length between 90 and 1440 Hz)."""
+    if prm.quality[team] == 0:
+        return converted
+    share = (1.0 - prm.restoration_attenuation[team]) * frequency_ratio
+    return 1.0 - (1.0 if share > 1.0 else (0.0 if share < 0.0 else share))
+
+
+@kernel
 def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, distance_attenuation):
     """The quality passes of one team after D.9 (see the module docstring)."""
     mode = prm.inextensibility[team]
-    if mode == INEXT_TETHER or mode == INEXT_FTL_TETHER:
+    if mode == INEXT_FTL_EDGES:
+        for _ in range(prm.distance_iterations[team]):
+            edge_pass_team(m, ps, team)
+    if mode == INEXT_TETHER or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES:
         tight_tether_team(m, ps, prm, team)
-    if mode == INEXT_FTL or mode == INEXT_FTL_TETHER:
+    if mode == INEXT_FTL or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES:
         ftl_team(m, ps, prm, team)
     elif mode == INEXT_ITERATIONS:
         for _ in range(prm.distance_iterations[team]):
