@@ -44,6 +44,7 @@ CANDIDATES = {
     "q_ftl_tether": {**QUALITY, "solver.inextensibility": "ftl_tether"},
     "q_ftl_edges2": {**QUALITY, "solver.inextensibility": "ftl_edges", "solver.distance_iterations": 2},
     "q_ftl_edges4": {**QUALITY, "solver.inextensibility": "ftl_edges", "solver.distance_iterations": 4},
+    "q_no_collision_last": {**QUALITY, "solver.collision_last": "off"},
     "quality": QUALITY,
 }
 FPS_SET = (30, 60, 144, 240)
@@ -62,6 +63,21 @@ def chain20_scene(folder: pathlib.Path) -> str:
     return str(path)
 
 
+def tail_sphere_scene(folder: pathlib.Path, mode: str = "point") -> str:
+    """``configs/tail_orbit.yaml`` at 1 rev/s with a sphere (r 0.12 m) on the tail's path."""
+    doc = yaml.safe_load((ROOT / "configs" / "tail_orbit.yaml").read_text())
+    doc["scene"]["name"] = f"tail_sphere_{mode}"
+    doc["animation"][0]["orbit"]["period"] = 1.0
+    doc["rigs"][0]["bones"].append({"name": "ball", "position": [-0.45, 0.95, 0.2]})
+    doc["colliders"] = [{"name": "ball_col", "transform": "ball", "sphere": {"radius": 0.12}}]
+    doc["cloths"][0]["colliders"] = ["ball_col"]
+    doc["cloths"][0]["collision_mode"] = mode
+    doc.pop("output", None)
+    path = folder / f"tail_sphere_{mode}.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return str(path)
+
+
 def scenes(folder: pathlib.Path) -> dict:
     """name -> (yaml path, raw parameter overrides, duration s)."""
     return {
@@ -69,6 +85,8 @@ def scenes(folder: pathlib.Path) -> dict:
         "character_walk": (resolve_scene_path("character_walk"), {}, 4.0),
         "violent_50rad": (str(ROOT / "configs" / "hard" / "violent_50rad.yaml"), {}, 3.0),
         "chain20_g100": (chain20_scene(folder), {"gravity": 100.0}, 3.0),
+        "tail_sphere": (tail_sphere_scene(folder, "point"), {}, 4.0),
+        "tail_sphere_edge": (tail_sphere_scene(folder, "edge"), {}, 4.0),
     }
 
 

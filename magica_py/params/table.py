@@ -116,7 +116,7 @@ PARAMETER_DEFS: tuple[ParameterDef, ...] = (
     _p("solver.inextensibility", "enum", "auto", ref="docs/quality-mode.md",
        doc="End-of-step pass against stretch: none; tether (root distance clamped to rest x (1 + tether_limit)); ftl (follow-the-leader: each edge clamped to its rest length, root to tip, with the DFTL velocity correction); ftl_tether (both); iterations (distance_iterations extra distance passes); ftl_edges (distance_iterations unilateral projections of every proxy edge, horizontal ones too, then tether and FTL).",
        choices=("auto", "none", "tether", "ftl", "ftl_tether", "iterations", "ftl_edges")),
-    _p("solver.tether_limit", "float", 0.0, 0, 0.1, "ratio", "docs/quality-mode.md", "Root-distance stretch the tight tether allows (0.01 = 1 %)."),
+    _p("solver.tether_limit", "float", 0.008, 0, 0.1, "ratio", "docs/quality-mode.md", "Root-distance stretch the tight tether allows (0.01 = 1 %)."),
     _p("solver.distance_iterations", "float", 2, 1, 16, "passes", "docs/quality-mode.md", "Passes of inextensibility iterations / ftl_edges (an integer)."),
     _p("solver.ftl_damping", "float", 0.9, 0, 1, "", "docs/quality-mode.md", "DFTL velocity correction: fraction of a child's FTL correction removed from its parent's velocity (0: plain FTL, full damping of the stretch)."),
     _p("solver.distance_velocity", "enum", "auto", ref="docs/quality-mode.md",

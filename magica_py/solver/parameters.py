@@ -115,7 +115,7 @@ _DEFAULTS = {
     "culling.distance_culling_length": -1.0, "culling.distance_culling_fade_ratio": 0.2,
     "culling.distance_culling_reference": None, "solver.rate_mode": "magica",
     "solver.mode": "faithful", "solver.time_based_smoothing": "auto", "solver.inextensibility": "auto",
-    "solver.tether_limit": 0.0, "solver.distance_iterations": 2, "solver.ftl_damping": 0.9,
+    "solver.tether_limit": 0.008, "solver.distance_iterations": 2, "solver.ftl_damping": 0.9,
     "solver.distance_velocity": "auto", "solver.collision_last": "auto",
 }
 # curves whose default is a linear curve (value, start -> end), §F.1

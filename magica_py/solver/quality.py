@@ -142,6 +142,19 @@ def display_ftl_team(m, ps, team):
 def collision_last_team(m, ps, prm, ts, cs, team):
     """Project every colliding moving particle out of each collider in turn (point test of
     D.8 with the particle radius; friction and normals are left to D.8)."""
+    project_out_of_colliders(m, prm, ts, cs, team, ps.next_pos)
+
+
+@kernel
+def display_collision_team(m, ps, prm, ts, cs, team):
+    """Quality display: the extrapolated display positions projected out of the colliders
+    (at their pose of the last step), so that extrapolating does not show a particle inside."""
+    project_out_of_colliders(m, prm, ts, cs, team, ps.position)
+
+
+@kernel
+def project_out_of_colliders(m, prm, ts, cs, team, positions):
+    """Point projection of ``positions`` (N, 3) of the team's colliding moving particles."""
     scale = ts.scale_ratio[team]
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
@@ -151,7 +164,7 @@ def collision_last_team(m, ps, prm, ts, cs, team):
         if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
             continue
         r = max(curve_at(prm.radius_curve, team, m.depth[p]), 0.0001) * scale
-        x = load3(ps.next_pos, p)
+        x = load3(positions, p)
         for k in range(c0, c1):
             if cs.scale_suspend[k] != 0:
                 continue
@@ -160,7 +173,7 @@ def collision_last_team(m, ps, prm, ts, cs, team):
             d, _n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
             if d < 0.0:
                 x = x2
-        store3(ps.next_pos, p, x)
+        store3(positions, p, x)
 
 
 @kernel
