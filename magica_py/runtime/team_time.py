@@ -90,6 +90,10 @@ DEFAULT_FREQUENCY = 90
 FREQUENCY_RANGE = (30, 150)
 DEFAULT_MAX_STEPS = 3
 MAX_STEPS_RANGE = (1, 5)
+# quality mode and converged references (issue 8, docs/quality-mode.md): frequencies and step
+# counts beyond MagicaCloth2's caps, opted into with ``extended_range``
+EXTENDED_FREQUENCY_RANGE = (30, 2880)
+EXTENDED_MAX_STEPS_RANGE = (1, 64)
 
 
 def update_mode_code(name) -> int:
@@ -125,16 +129,19 @@ class SimulationTimeSettings:
     max_steps_per_frame: int = DEFAULT_MAX_STEPS
     global_time_scale: float = 1.0
     timing: str = "exact"
+    extended_range: bool = False   # quality mode / references: allow up to 2880 Hz and 64 steps
 
     def __post_init__(self):
+        f_range = EXTENDED_FREQUENCY_RANGE if self.extended_range else FREQUENCY_RANGE
+        s_range = EXTENDED_MAX_STEPS_RANGE if self.extended_range else MAX_STEPS_RANGE
         f = float(self.frequency)
         if not math.isfinite(f) or f != int(f):
             raise ValueError(f"simulation_frequency: expected an integer in Hz, got {self.frequency!r}")
-        self.frequency = int(min(max(int(f), FREQUENCY_RANGE[0]), FREQUENCY_RANGE[1]))
+        self.frequency = int(min(max(int(f), f_range[0]), f_range[1]))
         m = float(self.max_steps_per_frame)
         if not math.isfinite(m) or m != int(m):
             raise ValueError(f"max_steps_per_frame: expected an integer, got {self.max_steps_per_frame!r}")
-        self.max_steps_per_frame = int(min(max(int(m), MAX_STEPS_RANGE[0]), MAX_STEPS_RANGE[1]))
+        self.max_steps_per_frame = int(min(max(int(m), s_range[0]), s_range[1]))
         g = float(self.global_time_scale)
         if math.isnan(g):
             raise ValueError("global_time_scale: expected a number in [0, 1], got nan")
@@ -173,7 +180,8 @@ class SimulationTimeSettings:
         return cls(frequency=get("simulation_frequency", DEFAULT_FREQUENCY),
                    max_steps_per_frame=get("max_steps_per_frame", DEFAULT_MAX_STEPS),
                    global_time_scale=get("global_time_scale", 1.0),
-                   timing=get("timing", "exact"))
+                   timing=get("timing", "exact"),
+                   extended_range=bool(get("extended_range", False)))
 
 
 # ----------------------------------------------------------------------------- kernels
