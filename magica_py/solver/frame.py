@@ -11,11 +11,7 @@ from __future__ import annotations
 from collections import namedtuple
 
 from numba import prange, types
-from numba.core import cgutils, imputils
-from numba.core.datamodel import default_manager, models
 from numba.core.extending import overload
-from numba.core.imputils import lower_getattr_generic, lower_setattr_generic
-from numba.core.typing.templates import AttributeTemplate, infer_getattr
 from numba.experimental import structref
 
 from magica_py.jit import kernel
@@ -243,55 +239,10 @@ def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, fi):
 # by value: ~60 array structs per table, ~12 us per call for five tables (measured), paid by
 # every stage call. The kernels therefore receive each table as a numba StructRef with the
 # same field names (one pointer; attribute access is unchanged), sharing the numpy arrays.
-#
-# Reading a field (``ps.next_pos``) must not touch the array's reference count: numba's
-# StructRef getattr increfs the array and the reader decrefs it, two atomic (lock-prefixed)
-# operations per field access that serialise the CPU; they were ~1/3 of the frame (perf:
-# NRT_incref/NRT_decref on top) and stopped independent work from overlapping. The table
-# keeps every array alive for the whole call (the StructRef holds a reference, and so does
-# the ClothSystem), so a field read hands out a *borrowed* view with a null meminfo, as numba
-# does for global constant arrays: NRT_incref/decref(NULL) return at once. Kernels only
-# index these arrays (never return or store them), so no reference can escape.
+@structref.register
 class TableStructType(types.StructRef):
     def preprocess_fields(self, fields):
         return tuple((name, types.unliteral(typ)) for name, typ in fields)
-
-
-default_manager.register(TableStructType, models.StructRefModel)
-
-
-@infer_getattr
-class _TableAttribute(AttributeTemplate):
-    key = TableStructType
-
-    def generic_resolve(self, typ, attr):
-        if attr in typ.field_dict:
-            return typ.field_dict[attr]
-
-
-@lower_getattr_generic(TableStructType)
-def _table_getattr(context, builder, typ, val, attr):
-    dataval = structref._Utils(context, builder, typ).get_data_struct(val)
-    value = getattr(dataval, attr)
-    fieldtype = typ.field_dict[attr]
-    if isinstance(fieldtype, types.Array):
-        array = context.make_array(fieldtype)(context, builder, value=value)
-        array.meminfo = cgutils.get_null_value(array.meminfo.type)
-        value = array._getvalue()
-    return imputils.impl_ret_borrowed(context, builder, fieldtype, value)
-
-
-@lower_setattr_generic(TableStructType)
-def _table_setattr(context, builder, sig, args, attr):
-    """numba's StructRef setattr: the stored array is owned (incref new, decref old)."""
-    inst_type, val_type = sig.args
-    instance, val = args
-    dataval = structref._Utils(context, builder, inst_type).get_data_struct(instance)
-    casted = context.cast(builder, val, val_type, inst_type.field_dict[attr])
-    old_value = getattr(dataval, attr)
-    context.nrt.incref(builder, val_type, casted)
-    context.nrt.decref(builder, val_type, old_value)
-    setattr(dataval, attr, casted)
 
 
 class TableStruct(structref.StructRefProxy):
