@@ -497,6 +497,7 @@ def describe_scene(scene, list_bones: bool = False) -> list[str]:
         out.append(f"  rig {rig.name!r}: {rig.nodes_per_instance} bones{inst} (root {roots})")
     if list_bones:
         out.extend(_bone_tree(h))
+    out.extend(_describe_animation(scene))
     cols = scene.colliders
     out.append(f"colliders: {len(cols)}")
     shape_names = ("sphere", "capsule", "plane")
@@ -534,6 +535,31 @@ def describe_scene(scene, list_bones: bool = False) -> list[str]:
         if spec.bone_attributes:
             attrs = ", ".join(f"{h.names[i]}={a}" for i, a in list(spec.bone_attributes.items())[:8])
             out.append(f"    bone attributes: {attrs}")
+    return out
+
+
+def _describe_animation(scene) -> list[str]:
+    """Drivers by kind (with the bones they move, keys for keyframes) and events by kind: an
+    imported clip shows as keyframe drivers, one per animated bone and channel."""
+    anim = scene.animation
+    if anim is None:
+        return ["animation: none"]
+    kinds = getattr(anim, "kind", ())
+    names = {0: "keyframes", 1: "orbit", 2: "oscillate", 3: "spin", 4: "walk"}
+    counts: dict[str, int] = {}
+    for k in kinds:
+        label = names.get(int(k), str(int(k)))
+        counts[label] = counts.get(label, 0) + 1
+    events: dict[str, int] = {}
+    for e in getattr(anim, "events", ()):
+        events[e.kind] = events.get(e.kind, 0) + 1
+    driven = len(set(int(t) for t in getattr(anim, "target", ())))
+    parts = [f"{n} {kind}" for kind, n in counts.items()]
+    out = [f"animation: {len(kinds)} drivers on {driven} bones" + (f" ({', '.join(parts)})" if parts else "")
+           + (f"; events: {', '.join(f'{n} {k}' for k, n in events.items())}" if events else "")]
+    key_time = getattr(anim, "key_time", None)
+    if counts.get("keyframes") and key_time is not None and len(key_time):
+        out.append(f"  keyframes: {len(key_time)} keys over [{float(key_time.min()):g}, {float(key_time.max()):g}] s")
     return out
 
 

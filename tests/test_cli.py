@@ -233,3 +233,27 @@ def test_set_overrides_are_kept_on_the_scene_and_recorded_for_resim(scene_file, 
     assert again.overrides == tuple(sets)
     assert again.cloth("tail").parameters["damping"].value == pytest.approx(0.3)
     assert again.settings.frames == 3 and replay.frames.size == 3
+
+
+def test_info_summarises_the_animation(scene_file, capsys):
+    assert cli.main(["info", str(scene_file)]) == 0
+    assert "animation: 1 drivers on 1 bones (1 spin)" in capsys.readouterr().out
+
+
+def test_info_of_an_imported_clip_counts_its_keyframe_drivers(tmp_path, capsys):
+    """A glTF clip becomes one keyframe driver per animated bone and channel: info says so."""
+    import os
+
+    import pathlib
+
+    data = pathlib.Path(__file__).resolve().parents[1].parent / "shared" / "data" / "gltf" / "Fox.glb"
+    if not data.is_file():
+        pytest.skip(f"shared test data {data} is absent")
+    fox = os.path.relpath(data, tmp_path)
+    path = tmp_path / "fox.yaml"
+    path.write_text(f"scene: {{frames: 2}}\nrigs:\n  - {{name: fox, file: {fox}, unit_scale: 0.01}}\n"
+                    f"animation:\n  - {{clip: '{fox}#Walk', rig: fox, drop: ['b_Tail*']}}\n")
+    assert cli.main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    # Fox Walk animates 20 nodes; the 3 tail bones are dropped; b_Hip_01 has two channels
+    assert "animation: 18 drivers on 17 bones (18 keyframes)" in out, out
