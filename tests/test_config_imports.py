@@ -187,3 +187,33 @@ animation:
     assert "target_bones" not in seen or seen["target_bones"] is None
     driven = {scene.hierarchy.names[t] for t in scene.animation.target}
     assert {"pelvis_Armature", "thigh.l_Armature", "head_Armature"} <= driven
+
+
+def test_from_vrm_parameters_override_the_mapped_values_in_every_cloth(tmp_path, shared_data):
+    vrm = rel(tmp_path, shared_data / "vrm" / "Godette_vrm_v4.vrm")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        scene = load_scene(write_scene(tmp_path, f"""
+rigs:
+  - {{name: avatar, file: {vrm}}}
+cloths:
+  - {{from_vrm: avatar, parameters: {{gravity: 2.5, inertia: {{world_inertia: 0.5}}}}}}
+"""))
+        plain = load_scene(write_scene(tmp_path, f"rigs:\n  - {{name: avatar, file: {vrm}}}\ncloths:\n  - {{from_vrm: avatar}}\n"))
+    for name in ("vrm_group0", "vrm_group1", "vrm_group2"):
+        params, mapped = scene.cloth(name).parameters, plain.cloth(name).parameters
+        assert params["gravity"] == 2.5 and mapped["gravity"] == 0.0
+        assert params["inertia.world_inertia"] == 0.5 and mapped["inertia.world_inertia"] == 1.0
+        assert params["angle_restoration.stiffness"] == mapped["angle_restoration.stiffness"]   # the rest is kept
+
+
+def test_from_vrm_bad_parameter_is_reported_at_the_entry(tmp_path, shared_data):
+    vrm = rel(tmp_path, shared_data / "vrm" / "Godette_vrm_v4.vrm")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        with pytest.raises(ConfigError) as info:
+            load_scene(write_scene(tmp_path, f"rigs:\n  - {{name: avatar, file: {vrm}}}\n"
+                                             f"cloths:\n  - {{from_vrm: avatar, parameters: {{gravty: 2}}}}\n"))
+    paths = info.value.paths()
+    assert paths == ["cloths[0].parameters.gravty"], info.value.report()   # once, not once per cloth
+    assert "did you mean 'gravity'" in info.value.issues[0].message

@@ -82,8 +82,10 @@ class Checker:
         self.issues.append(Issue(format_path(path), message, self.doc.line(path)))
 
     def raise_if_any(self) -> None:
-        if self.issues:  # in file order; --set and generated problems last
-            issues = sorted(self.issues, key=lambda i: (i.line is None, i.line or 0))
+        if self.issues:  # in file order; --set and generated problems last; each problem once
+            # (an entry that generates several, e.g. from_vrm cloths, reports a shared mistake once)
+            unique = list({(i.path, i.message, i.line): i for i in self.issues}.values())
+            issues = sorted(unique, key=lambda i: (i.line is None, i.line or 0))
             raise ConfigError(self.doc.source, issues)
 
     # -- structure

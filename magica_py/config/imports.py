@@ -21,8 +21,10 @@ Three entry forms (paths are relative to the scene file's folder):
   simulates. Tracks of the rig's root bones are composed with the rig's placement
   (``position`` / ``rotation``), so a placed rig keeps its place when its root is animated;
 * ``cloths: - {from_vrm: avatar, group_by: group, chains: [...], prefix: vrm_,
-  oversized_colliders: keep}``: the VRM spring bones of rig ``avatar`` (loaded from a .vrm
-  file) as cloths and their colliders (``io.sections.vrm_sections``).
+  oversized_colliders: keep, parameters: {...}}``: the VRM spring bones of rig ``avatar``
+  (loaded from a .vrm file) as cloths and their colliders (``io.sections.vrm_sections``);
+  ``parameters`` override the mapped VRM values in every generated cloth (a problem is
+  reported at ``cloths[i].parameters...``).
 
 Generated entries go through the same checks as written ones; problems are reported at the
 path of the entry that generated them. An importer error (``io.errors.AssetError``) is an
@@ -37,7 +39,7 @@ from magica_py.config.checker import NON_NEGATIVE, POSITIVE, Checker, Range
 
 RIG_FILE_KEYS = ("file", "prefix", "unit_scale")
 CLIP_KEYS = ("clip", "rig", "loop", "drop", "retarget", "trim", "rate", "start", "end", "phase_offset", "fade")
-VRM_KEYS = ("from_vrm", "group_by", "chains", "prefix", "oversized_colliders")
+VRM_KEYS = ("from_vrm", "group_by", "chains", "prefix", "oversized_colliders", "parameters")
 CLIP_RATE = Range(1.0, 1000.0)  # keys per second after resampling
 
 
@@ -222,4 +224,27 @@ def import_vrm_sections(c: Checker, m: dict, path: tuple, rigs: list[dict]) -> t
         _asset_error(c, path + ("from_vrm",), exc)
         return [], []
     cloths = [{k: v for k, v in entry.items() if k != "notes"} for entry in sections["cloths"]]
+    extra = m.get("parameters")
+    if extra is not None and not isinstance(extra, dict):
+        c.error(path + ("parameters",), f"expected a mapping of parameter names to values, got {extra!r}")
+    elif extra:
+        # user overrides on top of the mapped VRM values (nested or dotted keys, as in any cloth)
+        for entry in cloths:
+            entry["parameters"] = {**_dotted(entry["parameters"]), **_dotted(extra)}
     return list(sections["colliders"]), cloths
+
+
+def _dotted(parameters: dict, prefix: str = "") -> dict:
+    """Nested parameter groups as dotted keys (``{inertia: {anchor: x}}`` → ``inertia.anchor``),
+    so a user's key replaces the mapped one of the same name. Curve mappings
+    (``{value, curve}``) and leaves stay whole."""
+    from magica_py.params import PARAMETERS
+
+    out = {}
+    for name, value in parameters.items():
+        key = prefix + str(name)
+        if key not in PARAMETERS and isinstance(value, dict) and any(k.startswith(key + ".") for k in PARAMETERS):
+            out.update(_dotted(value, key + "."))
+        else:
+            out[key] = value
+    return out
