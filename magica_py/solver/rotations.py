@@ -13,7 +13,7 @@ import math
 
 from magica_py.kernels.math3d import (
     from_to_rotation, from_to_rotation_unit, load3, load4, q_inverse, q_look_rotation, q_mul,
-    q_rotate, q_slerp, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp,
+    q_rotate, q_slerp, store3, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp,
     v_normalize, v_scale, v_sub,
 )
 
@@ -97,10 +97,20 @@ def line_rotations_team(m, ps, prm, ts, team):
 
 @kernel
 def triangle_rotations_team(m, ps, team):
-    """E.3: rotation of triangle vertices from their triangles' display normals and uv tangents."""
+    """E.3: rotation of triangle vertices from their triangles' display normals and uv tangents.
+
+    Each triangle's frame is computed once (into ``ps.triangle_normal/tangent``) and then
+    summed per vertex: a vertex of a strip mesh touches up to 6 triangles, so computing the
+    frame per (vertex, triangle) pair did the same work ~3 times. Positions do not change in
+    E.3, so the frames and sums are bit-identical either way."""
     t0 = m.team_triangle_start[team]
-    if m.team_triangle_count[team] == 0:
+    tn_count = m.team_triangle_count[team]
+    if tn_count == 0:
         return
+    for tri in range(t0, t0 + tn_count):
+        tn, tt = triangle_frame(m, ps, tri)
+        store3(ps.triangle_normal, tri, tn)
+        store3(ps.triangle_tangent, tri, tt)
     start = m.team_particle_start[team]
     for p in range(start, start + m.team_particle_count[team]):
         n = m.vertex_triangle_count[p]
@@ -112,9 +122,8 @@ def triangle_rotations_team(m, ps, team):
         for k in range(k0, k0 + n):
             tri = m.vertex_triangle_data[k]
             flip = m.vertex_triangle_flip[k]
-            tn, tt = triangle_frame(m, ps, tri)
-            ns = v_add(ns, v_scale(tn, -1.0 if (flip & 1) != 0 else 1.0))
-            ts_ = v_add(ts_, v_scale(tt, -1.0 if (flip & 2) != 0 else 1.0))
+            ns = v_add(ns, v_scale(load3(ps.triangle_normal, tri), -1.0 if (flip & 1) != 0 else 1.0))
+            ts_ = v_add(ts_, v_scale(load3(ps.triangle_tangent, tri), -1.0 if (flip & 2) != 0 else 1.0))
         if v_length(ns) > 1e-6 and v_length(ts_) > 1e-6:
             nn = v_normalize(ns)
             tn = v_normalize(ts_)
@@ -122,7 +131,6 @@ def triangle_rotations_team(m, ps, team):
             if abs(d) < 1.0 - 1e-9:
                 binormal = v_normalize(v_cross(nn, tn))
                 store4(ps.rotation, p, q_look_rotation(binormal, nn))
-    return t0
 
 
 @kernel

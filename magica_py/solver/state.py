@@ -3,7 +3,8 @@
 Three tables, all float64 / int32 / uint8, world space, metres and seconds:
 
 * ``ParticleState`` (one row per particle of every team; a team owns the contiguous rows
-  ``team_particle_start[t] : + team_particle_count[t]`` of the solver model);
+  ``team_particle_start[t] : + team_particle_count[t]`` of the solver model; plus a
+  per-triangle scratch for E.3 sized like the model's triangle pool);
 * ``TeamState`` (one row per team: center, inertia, flags, weights);
 * ``ColliderState`` (one row per collider *slot*: colliders are per team, ref §G.3, so a
   collider shared by two cloths is simulated as two slots).
@@ -51,11 +52,15 @@ PARTICLE_FIELDS = [
     # fixed-point accumulators of bending and edge collision (ref §0.2; 1 unit = 1e-6 m)
     ("accum_vector", "particle", V3, F64, "1e-6 m integer units summed as float64 (exact below 2^53)"),
     ("accum_count", "particle", (), I32, "number of contributions"),
+    ("bend_inverse_mass", "particle", (), F64, "inverse mass of this bending pass (D.7, per step)"),
     ("accum_friction", "particle", (), F64, "edge collision recorded friction (fixed-point max)"),
     ("accum_normal", "particle", V3, F64, "edge collision normal sum"),
     # transform data (E.4)
     ("transform_position", "particle", V3, F64, "m; world position written to the bone (E.4)"),
     ("transform_rotation", "particle", Q4, F64, "xyzw; world rotation written to the bone (E.4)"),
+    # per-triangle scratch of E.3 (one row per triangle of the model's triangle pool)
+    ("triangle_normal", "triangle", V3, F64, "unit or 0; display normal of each triangle (E.3, per frame)"),
+    ("triangle_tangent", "triangle", V3, F64, "unit; display uv tangent of each triangle (E.3, per frame)"),
 ]
 ParticleState = make_soa("ParticleState", PARTICLE_FIELDS)
 
@@ -166,19 +171,22 @@ TEAM_FILL = {"reset": 1, "time_reset": 1, "scale_ratio": 1.0, "gravity_ratio": 1
 COLLIDER_FILL = {"first_frame": 1, "frame_scale": 1.0}
 
 
-def allocate_state(particle_count: int, team_count: int, slot_count: int):
+def allocate_state(particle_count: int, team_count: int, slot_count: int, triangle_count: int = 0):
     """Fresh state tables sized for the given counts (every team starts with Reset)."""
-    particles = allocate(ParticleState, {"particle": particle_count})
+    particles = allocate(ParticleState, {"particle": particle_count, "triangle": triangle_count})
     teams = allocate(TeamState, {"team": team_count}, fill=TEAM_FILL)
     colliders = allocate(ColliderState, {"slot": slot_count}, fill=COLLIDER_FILL)
     return particles, teams, colliders
 
 
-def grow_state(particles, teams, colliders, particle_count: int, team_count: int, slot_count: int):
+def grow_state(particles, teams, colliders, particle_count: int, team_count: int, slot_count: int,
+               triangle_count: int = 0):
     """The state tables enlarged to the given counts: existing rows copied bit for bit, new
     rows fresh (used when a cloth is added at runtime and a pool has no free chunk)."""
-    if particles.position.shape[0] < particle_count:
-        particles = grow(ParticleState, particles, {"particle": particle_count})
+    if particles.position.shape[0] < particle_count or particles.triangle_normal.shape[0] < triangle_count:
+        particles = grow(ParticleState, particles, {
+            "particle": max(particle_count, particles.position.shape[0]),
+            "triangle": max(triangle_count, particles.triangle_normal.shape[0])})
     if teams.reset.shape[0] < team_count:
         teams = grow(TeamState, teams, {"team": team_count}, fill=TEAM_FILL)
     if colliders.shape.shape[0] < slot_count:

@@ -97,11 +97,19 @@ def solve_volume(p0, p1, p2, p3, w0, w1, w2, w3, rest_volume, stiffness):
 
 @kernel
 def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
-    """Accumulate the dihedral and volume corrections of one team (applied by ``apply_accumulated``)."""
+    """Accumulate the dihedral and volume corrections of one team (applied by ``apply_accumulated``).
+
+    The inverse mass of each particle is computed once per call into ``ps.bend_inverse_mass``
+    (friction and depth do not change during the routine): a mesh vertex belongs to several
+    bend pairs, so per-pair evaluation repeated the same division ~8 times per vertex."""
     stiffness = prm.bending_stiffness[team]
     if stiffness < 1e-6:
         return
     k = saturate(step_rate(stiffness, frequency_ratio, power_y, prm.rate_mode[team]))
+    start = m.team_particle_start[team]
+    for p in range(start, start + m.team_particle_count[team]):
+        ps.bend_inverse_mass[p] = inverse_mass(m, ps, p)
+    w = ps.bend_inverse_mass
     b0 = m.team_bend_start[team]
     for b in range(b0, b0 + m.team_bend_count[team]):
         v0 = m.bend_vertices[b, 0]
@@ -110,8 +118,7 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
         v3 = m.bend_vertices[b, 3]
         ok, c0, c1, c2, c3 = solve_dihedral(
             load3(ps.next_pos, v0), load3(ps.next_pos, v1), load3(ps.next_pos, v2), load3(ps.next_pos, v3),
-            inverse_mass(m, ps, v0), inverse_mass(m, ps, v1), inverse_mass(m, ps, v2), inverse_mass(m, ps, v3),
-            m.bend_rest_angle[b], m.bend_sign[b], k)
+            w[v0], w[v1], w[v2], w[v3], m.bend_rest_angle[b], m.bend_sign[b], k)
         if ok:
             accumulate(ps, v0, c0)
             accumulate(ps, v1, c1)
@@ -126,8 +133,7 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
         v3 = m.volume_vertices[b, 3]
         ok, c0, c1, c2, c3 = solve_volume(
             load3(ps.next_pos, v0), load3(ps.next_pos, v1), load3(ps.next_pos, v2), load3(ps.next_pos, v3),
-            inverse_mass(m, ps, v0), inverse_mass(m, ps, v1), inverse_mass(m, ps, v2), inverse_mass(m, ps, v3),
-            m.volume_rest[b] * scale, k)
+            w[v0], w[v1], w[v2], w[v3], m.volume_rest[b] * scale, k)
         if ok:
             accumulate(ps, v0, c0)
             accumulate(ps, v1, c1)
