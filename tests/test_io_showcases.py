@@ -7,9 +7,9 @@ Bounds (measured per frame by tests/showcase_run.py, after the write-back, on th
 * no non-finite value anywhere in the hierarchy, at any frame;
 * edge stretch (parent edges, extension) below the solver issue's 1 % where MagicaCloth2's
   faithful algorithm reaches it (Godette: 0.42 % measured), else at the measured figure with
-  margin and the reason (Fox: 0.98 % measured at the tail's hardest whip, bound 1.5 %: the
-  issue's 1 % sits 0.02 % above the measurement, so any harmless change of arithmetic in the
-  shared solver would flip it);
+  margin and the reason (Fox: 1.08 % measured while the body speeds up, bound 1.5 %: the
+  faithful step does not reach the issue's 1 % on this whipping tail, cf. the walking
+  character's measured figures in tests/test_solver_walk.py);
 * root-distance extension within the tether's 3 % (the solver issue's bound);
 * penetration: no moving particle deeper than 10 % of the collider's radius inside "collider
   surface + particle radius" (the solver issue's point-mode bound; Godette 7.2 % measured,
@@ -70,7 +70,8 @@ def test_fox_tail_swings_on_the_run_clip_inside_the_solver_bounds(fox):
     run = fox
     h = run.scene.hierarchy
     driven = {h.names[t] for t in run.scene.animation.target}
-    assert "b_Hip_01" in driven and not any(n.startswith("b_Tail") for n in driven)   # tail keys dropped
+    assert {"b_Hip_01", "b_Tail01_012"} <= driven                   # the clip turns the tail's fixed root
+    assert not driven & {"b_Tail02_013", "b_Tail03_014"}            # the simulated bones' keys are dropped
     assert run.frames == 360 and run.finite.all(), summary(run)
     assert run.edge_stretch.max() < 0.015, summary(run)
     assert run.root_stretch.max() < 0.03, summary(run)
@@ -171,3 +172,40 @@ def test_vrm0_childless_root_gets_its_virtual_tail_particle(tmp_path):
     assert [h.names[i] for i in model.transform_index] == ["Spring E", "Spring E_vrm_tail"]
     step = h.world_position[h.index("Spring E_vrm_tail")] - h.world_position[h.index("Spring E")]
     assert np.allclose(step, [0.0, -0.07 * 0.25, 0.0], atol=1e-12)
+
+
+def _tail_tip_in_hips(path, overrides=(), simulate=True):
+    """Tail tip position in the hips' frame, frames 90-359 (after the start), (270, 3)."""
+    from magica_py.config import load_scene
+    from magica_py.runtime.player import Player
+    from magica_py.solver.system import ClothSystem
+
+    scene = load_scene(path, overrides)
+    player = Player.for_scene(scene)
+    if simulate:
+        ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player)
+    h = scene.hierarchy
+    hips, tip = h.index("b_Hip_01"), h.index("b_Tail03_014")
+    rows = []
+    for f in range(360):
+        player.step()
+        if f >= 90:
+            rows.append(h.inverse_transform_point(hips, h.world_position[tip]))
+    return np.array(rows)
+
+
+def test_fox_simulated_tail_moves_like_the_animators_keyed_tail():
+    """Oracle: the same config with the tail keys kept and no cloth is the animator's tail.
+    The simulated tail is not the same motion (it lags and swings with the body), but its
+    statistics over the run should match the animation it replaces: the mean tip position
+    within 5 cm (measured 3.5 cm) and the swing (standard deviation per axis) within 30 %
+    (measured 11.6 / 5.4 cm against 10.9 / 6.9 cm). The first draft of the showcase (every
+    tail key dropped, tail preset with gravity 3) hung the tip 22 cm lower and swung it
+    17.7 cm vertically."""
+    config = ROOT / "configs" / "fox_run.yaml"
+    simulated = _tail_tip_in_hips(config)
+    keyed = _tail_tip_in_hips(config, ["animation[0].drop=[]", "cloths=[]"], simulate=False)
+    assert np.linalg.norm(simulated.mean(axis=0) - keyed.mean(axis=0)) < 0.05
+    swing, keyed_swing = simulated.std(axis=0)[:2], keyed.std(axis=0)[:2]
+    assert keyed_swing.min() > 0.05                              # the animator wags the tail
+    np.testing.assert_allclose(swing, keyed_swing, rtol=0.3)
