@@ -217,3 +217,14 @@ def test_from_vrm_bad_parameter_is_reported_at_the_entry(tmp_path, shared_data):
     paths = info.value.paths()
     assert paths == ["cloths[0].parameters.gravty"], info.value.report()   # once, not once per cloth
     assert "did you mean 'gravity'" in info.value.issues[0].message
+
+
+def test_an_explicit_oversized_colliders_choice_silences_the_reminder(tmp_path, shared_data):
+    vrm = rel(tmp_path, shared_data / "vrm" / "Godette_vrm_v4.vrm")
+    body = f"rigs:\n  - {{name: avatar, file: {vrm}}}\ncloths:\n  - {{from_vrm: avatar{{}}}}\n"
+    with pytest.warns(UserWarning, match="radius 1 m exceeds"):
+        load_scene(write_scene(tmp_path, body.replace("{}", "")))          # default keep: reminded
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scene = load_scene(write_scene(tmp_path, body.replace("{}", ", oversized_colliders: keep")))
+    assert max(scene.colliders.radius) == 1.0                                 # kept, silently

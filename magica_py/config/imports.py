@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import os
 import pathlib
+import warnings
 
 from magica_py.config.checker import NON_NEGATIVE, POSITIVE, Checker, Range
 
@@ -218,8 +219,11 @@ def import_vrm_sections(c: Checker, m: dict, path: tuple, rigs: list[dict]) -> t
     try:
         from magica_py.io.sections import vrm_sections
 
-        sections = vrm_sections(asset_path(c, rig["file"]), group_by=group_by, prefix=rig.get("prefix") or "",
-                                cloth_prefix=prefix, oversized_colliders=oversized, chains=chains)
+        with warnings.catch_warnings():
+            if "oversized_colliders" in m:  # the scene chose what to do with them: no reminder
+                warnings.filterwarnings("ignore", message=".*exceeds MagicaCloth2's 0.5 m", category=UserWarning)
+            sections = vrm_sections(asset_path(c, rig["file"]), group_by=group_by, prefix=rig.get("prefix") or "",
+                                    cloth_prefix=prefix, oversized_colliders=oversized, chains=chains)
     except (ImportError, ValueError, OSError, KeyError) as exc:
         _asset_error(c, path + ("from_vrm",), exc)
         return [], []
