@@ -228,3 +228,16 @@ def test_an_explicit_oversized_colliders_choice_silences_the_reminder(tmp_path, 
         warnings.simplefilter("error")
         scene = load_scene(write_scene(tmp_path, body.replace("{}", ", oversized_colliders: keep")))
     assert max(scene.colliders.radius) == 1.0                                 # kept, silently
+
+
+def test_retarget_target_map_auto_finds_the_same_bones_on_godette(tmp_path, shared_data):
+    """`retarget: {target_map: auto}` replaces the rig's VRM humanoid map with the generic
+    name matcher; on Godette it finds the same bones, so the clip is identical."""
+    vrm = rel(tmp_path, shared_data / "vrm" / "Godette_vrm_v4.vrm")
+    bvh = rel(tmp_path, shared_data / "bvh" / "cmu_01_01.bvh")
+    body = (f"rigs:\n  - {{name: avatar, file: {vrm}}}\nanimation:\n"
+            f"  - {{clip: {bvh}, rig: avatar, retarget: {{source_rest: 0}}, trim: [0, 1], rate: 30}}\n")
+    own = load_scene(write_scene(tmp_path, body))
+    auto = load_scene(write_scene(tmp_path, body.replace("{source_rest: 0}", "{source_rest: 0, target_map: auto}")))
+    assert len(own.animation.kind) == len(auto.animation.kind) == 22
+    np.testing.assert_array_equal(own.animation.key_value, auto.animation.key_value)
