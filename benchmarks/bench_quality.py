@@ -64,7 +64,9 @@ def chain20_scene(folder: pathlib.Path) -> str:
 
 
 def tail_sphere_scene(folder: pathlib.Path, mode: str = "point") -> str:
-    """``configs/tail_orbit.yaml`` at 1 rev/s with a sphere (r 0.12 m) on the tail's path."""
+    """``configs/tail_orbit.yaml`` at 1 rev/s with a sphere (r 0.12 m) on the tail's path. The
+    fixed root passes 5 cm from the sphere's centre, inside it: the first particles are pushed
+    out while their root is inside, so collision and inextensibility conflict (hard case)."""
     doc = yaml.safe_load((ROOT / "configs" / "tail_orbit.yaml").read_text())
     doc["scene"]["name"] = f"tail_sphere_{mode}"
     doc["animation"][0]["orbit"]["period"] = 1.0
