@@ -1,13 +1,14 @@
 """Solver benchmark: per-frame wall time by phase and particle-steps per second.
 
-    python benchmarks/bench_solver.py [--frames N] [--scenes tail_orbit crowd ...] [--parallel]
+    python benchmarks/bench_solver.py [--frames N] [--scenes tail_orbit crowd ...] [--parallel] [--stages]
 
 For each scene (``configs/<name>.yaml``): load, build the ``ClothSystem``, attach it to a
 ``Player`` (no recording sink), warm up (JIT from the cache, first frames), then time
 ``--frames`` frames. Reported per frame: the whole loop (restore to write-back, i.e. the
 player's frame minus nothing: there is no sink), each phase, the cloth kernel and the
 hierarchy propagation; and particle-steps per second of the cloth kernel (particles x steps
-run / kernel time) and of the whole frame.
+run / kernel time) and of the whole frame. ``--stages`` adds the stage profile of
+``bench_stages.py`` (each stage kernel alone over every team, per call and per particle).
 """
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ import time
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 
-def bench(name: str, frames: int, warmup: int = 30, parallel: bool = False) -> dict:
+def bench(name: str, frames: int, warmup: int = 30, parallel: bool = False, stages: bool = False) -> dict:
     from magica_py.config import load_scene
     from magica_py.runtime.player import Player
     from magica_py.solver.system import ClothSystem
@@ -40,8 +41,13 @@ def bench(name: str, frames: int, warmup: int = 30, parallel: bool = False) -> d
         for k, v in ctx.metrics.items():
             totals[k] = totals.get(k, 0.0) + float(v)
     wall = time.perf_counter() - wall
-    particles = int(system.model.transform_index.shape[0])
-    return {"scene": name, "teams": len(system.models), "particles": particles, "build_s": build,
+    particles = int(system.model.team_particle_count.sum())
+    profile = None
+    if stages:
+        from bench_stages import stage_profile
+
+        profile = stage_profile(system)
+    return {"profile": profile, "scene": name, "teams": len(system.models), "particles": particles, "build_s": build,
             "warmup_s": warm, "frames": frames, "frame_us": wall / frames * 1e6,
             "phases_us": {k: v / frames * 1e6 for k, v in totals.items() if k.startswith(("time.", "cloth.k", "cloth.p"))},
             "steps_per_frame": totals.get("cloth.steps", 0.0) / frames,
@@ -54,15 +60,20 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--scenes", nargs="+", default=["tail_orbit", "character_walk", "crowd"])
     ap.add_argument("--parallel", action="store_true", help="teams spread over numba threads")
+    ap.add_argument("--stages", action="store_true", help="also time each stage kernel alone")
     args = ap.parse_args(argv)
     for name in args.scenes:
-        r = bench(name, args.frames, parallel=args.parallel)
+        r = bench(name, args.frames, parallel=args.parallel, stages=args.stages)
         print(f"== {r['scene']}{' (parallel)' if args.parallel else ''}: {r['teams']} teams, {r['particles']} particles, "
               f"build {r['build_s']:.2f} s, warm-up {r['warmup_s']:.2f} s")
         print(f"   whole frame {r['frame_us']:9.1f} us   particle-steps/frame {r['steps_per_frame']:.0f}")
         for k, v in sorted(r["phases_us"].items()):
             print(f"   {k:22s} {v:9.1f} us")
         print(f"   particle-steps/s: kernel {r['kernel_pss']:.3g}, whole frame {r['frame_pss']:.3g}")
+        if r["profile"]:
+            print(f"   stage profile (each stage alone over all teams, min of 7 x 10 calls):")
+            for kind, stage, sec in r["profile"]:
+                print(f"     {kind:5s} {stage:28s} {sec * 1e6:9.1f} us  {sec * 1e9 / r['particles']:7.1f} ns/particle")
     return 0
 
 

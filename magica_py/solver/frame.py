@@ -15,6 +15,7 @@ from numba.core.extending import overload
 from numba.experimental import structref
 
 from magica_py.jit import kernel
+from magica_py.solver.batch_tables import borrow
 from magica_py.runtime.team_time import (
     TeamTimeState, team_time_begin_step, team_time_end_frame, team_time_frame_update,
 )
@@ -182,6 +183,8 @@ def _max_update_count(m, ts, tt):
 @kernel
 def simulate_frame(m, ps, prm, ts, cs, tt, h, fi):
     """The whole cloth frame for every team (see the module docstring)."""
+    m, ps, prm, ts, cs, tt, h = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
+                                 borrow(tt), borrow(h))  # no refcounting inside (batch_tables.py)
     team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
@@ -211,6 +214,8 @@ def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, fi):
 
     Teams are independent and each runs in its own order, so the results are bit-identical
     to the serial kernel (element-wise, no reductions)."""
+    m, ps, prm, ts, cs, tt, h = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
+                                 borrow(tt), borrow(h))  # no refcounting inside (batch_tables.py)
     team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
