@@ -31,7 +31,11 @@ def test_showcase_validates(config, capsys):
 def test_showcase_info(config, capsys):
     assert cli.main(["info", str(config)]) == 0
     out = capsys.readouterr().out
-    assert "bones:" in out and "colliders:" in out and "cloths:" in out
+    assert "bones:" in out and "colliders:" in out and "cloths:" in out and "animation:" in out
+    scene = load_scene(config)
+    for spec in scene.cloths[:2]:   # what was built: particles and constraints of each cloth
+        base = spec.name.split("#")[0]
+        assert f"cloth '{base}" in out and "particles (" in out and "built   distance" in out, out
 
 
 @pytest.mark.parametrize("config", CONFIGS, ids=IDS)
