@@ -44,7 +44,7 @@ CANDIDATES = {
     "q_ftl_tether": {**QUALITY, "solver.inextensibility": "ftl_tether"},
     "q_ftl_edges2": {**QUALITY, "solver.inextensibility": "ftl_edges", "solver.distance_iterations": 2},
     "q_ftl_edges4": {**QUALITY, "solver.inextensibility": "ftl_edges", "solver.distance_iterations": 4},
-    "q_no_collision_last": {**QUALITY, "solver.collision_last": "off"},
+    "q_no_collision_last": {**QUALITY, "solver.collision_last": "disabled"},
     "quality": QUALITY,
 }
 FPS_SET = (30, 60, 144, 240)

@@ -50,7 +50,7 @@ def penetrations(bq, name, params, duration=2.0):
 def test_collision_last_leaves_no_particle_inside_the_sphere_at_the_end_of_a_step(bq, name):
     step, _display = penetrations(bq, name, bq.QUALITY)
     assert step <= 1e-9
-    off_step, _ = penetrations(bq, name, {**bq.QUALITY, "solver.collision_last": "off"})
+    off_step, _ = penetrations(bq, name, {**bq.QUALITY, "solver.collision_last": "disabled"})
     faithful_step, _ = penetrations(bq, name, bq.FAITHFUL)
     assert off_step > 1e-3 and faithful_step > 1e-3     # measured 14-42 mm and 10-19 mm
 

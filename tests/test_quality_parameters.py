@@ -39,12 +39,12 @@ def test_quality_mode_turns_on_the_measured_defaults():
 
 
 def test_each_switch_overrides_the_quality_default():
-    t = row(**{"solver.mode": "quality", "solver.inextensibility": "tether", "solver.collision_last": "off",
-               "solver.time_based_smoothing": "off", "solver.distance_velocity": "attenuated"})
+    t = row(**{"solver.mode": "quality", "solver.inextensibility": "tether", "solver.collision_last": "disabled",
+               "solver.time_based_smoothing": "disabled", "solver.distance_velocity": "attenuated"})
     assert INEXTENSIBILITY[t.inextensibility[0]] == "tether"
     assert t.collision_last[0] == 0 and t.time_based_smoothing[0] == 0 and t.distance_full_velocity[0] == 0
     # a switch can also be used alone in faithful mode
-    t = row(**{"solver.collision_last": "on"})
+    t = row(**{"solver.collision_last": "enabled"})
     assert t.quality[0] == 0 and t.collision_last[0] == 1
 
 
@@ -110,3 +110,17 @@ def test_time_based_smoothing_does_not_depend_on_how_time_is_cut_into_frames():
     ts = Team(np.zeros((1, 3)))
     time_based_smoothing(ts, 0, tuple(v * 10.0), 10.0, s, 1.0)
     assert np.linalg.norm(ts.smoothing_velocity[0]) == pytest.approx(1.0, rel=1e-9)
+
+
+def test_switches_written_in_yaml_are_not_read_as_booleans():
+    """``on``/``off`` are YAML booleans: the switches use enabled/disabled, and a boolean is
+    rejected with the accepted words in the message."""
+    import yaml
+
+    doc = yaml.safe_load("solver.collision_last: disabled\nsolver.time_based_smoothing: enabled\n")
+    params = resolve_parameters("tail", {**doc, "solver.mode": "quality"}, where="cloths.tail.parameters")
+    table = allocate_parameters(1)
+    write_row(table, 0, params)
+    assert table.collision_last[0] == 0 and table.time_based_smoothing[0] == 1
+    with pytest.raises(ParameterError, match="auto, enabled, disabled"):
+        resolve_parameters("tail", yaml.safe_load("solver.collision_last: off"), where="cloths.tail.parameters")

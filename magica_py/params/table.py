@@ -106,13 +106,13 @@ PARAMETER_DEFS: tuple[ParameterDef, ...] = (
     _p("solver.rate_mode", "enum", "magica", ref="docs/parameters.md",
        doc="magica: per-step rates tuned for 90 Hz and patched by SimulationPower (MagicaCloth2); frequency_consistent: every per-step rate k becomes 1-(1-k)^(90/f), so the same parameters give the same motion at any frequency (identical at 90 Hz).",
        choices=("magica", "frequency_consistent")),
-    # -- quality mode (issue 8, docs/quality-mode.md); "auto" = off in faithful mode, the measured default in quality mode
+    # -- quality mode (issue 8, docs/quality-mode.md); "auto" = disabled in faithful mode, the measured default in quality mode (enabled/disabled, not on/off: YAML reads on/off as booleans)
     _p("solver.mode", "enum", "faithful", ref="docs/quality-mode.md",
        doc="faithful: MagicaCloth2's BoneCloth as specified (what its users tune against); quality: frequency-consistent rates, time-based smoothing and display, inextensibility and collision last (each switch below set to auto takes its quality default).",
        choices=("faithful", "quality")),
     _p("solver.time_based_smoothing", "enum", "auto", ref="docs/quality-mode.md",
-       doc="on: movement smoothing is a time constant (exact exponential filter of the component velocity, tuned at 90 fps) and the display extrapolates by the time since the last step, so the motion does not depend on the frame rate.",
-       choices=("auto", "on", "off")),
+       doc="enabled: movement smoothing is a time constant (exact exponential filter of the component velocity, tuned at 90 fps) and the display extrapolates by the time since the last step, so the motion does not depend on the frame rate.",
+       choices=("auto", "enabled", "disabled")),
     _p("solver.inextensibility", "enum", "auto", ref="docs/quality-mode.md",
        doc="End-of-step pass against stretch: none; tether (root distance clamped to rest x (1 + tether_limit)); ftl (follow-the-leader: each edge clamped to its rest length, root to tip, with the DFTL velocity correction); ftl_tether (both); iterations (distance_iterations extra distance passes); ftl_edges (distance_iterations unilateral projections of every proxy edge, horizontal ones too, then tether and FTL).",
        choices=("auto", "none", "tether", "ftl", "ftl_tether", "iterations", "ftl_edges")),
@@ -123,8 +123,8 @@ PARAMETER_DEFS: tuple[ParameterDef, ...] = (
        doc="attenuated: 70 % of each distance correction becomes velocity (MagicaCloth2); full: all of it (plain PBD, no artificial damping).",
        choices=("auto", "attenuated", "full")),
     _p("solver.collision_last", "enum", "auto", ref="docs/quality-mode.md",
-       doc="on: a final collider projection after the second distance pass and the inextensibility pass, so no particle ends a step inside a collider.",
-       choices=("auto", "on", "off")),
+       doc="enabled: a final collider projection after the second distance pass and the inextensibility pass, so no particle ends a step inside a collider.",
+       choices=("auto", "enabled", "disabled")),
 )
 
 # Defaults a limit takes when enabled without a value (ref §F.1 "check (false, v)").

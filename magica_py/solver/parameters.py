@@ -89,8 +89,8 @@ RATE_MODES = ("magica", "frequency_consistent")
 SOLVER_MODES = ("faithful", "quality")
 INEXTENSIBILITY = ("none", "tether", "ftl", "ftl_tether", "iterations", "ftl_edges")
 # what "auto" means in quality mode (chosen by measurement, docs/quality-mode.md)
-QUALITY_AUTO = {"solver.time_based_smoothing": "on", "solver.inextensibility": "ftl_edges",
-                "solver.distance_velocity": "full", "solver.collision_last": "on"}
+QUALITY_AUTO = {"solver.time_based_smoothing": "enabled", "solver.inextensibility": "ftl_edges",
+                "solver.distance_velocity": "full", "solver.collision_last": "enabled"}
 
 # reference defaults (§F.1), used for keys a parameter mapping does not carry
 _DEFAULTS = {
@@ -225,11 +225,11 @@ def write_row(table, team: int, parameters, collision_mode: str | None = None,
 
 
 def _switch(g, key, quality: bool) -> str:
-    """An ``auto | on | off``-style switch: ``auto`` is off in faithful mode and the
-    measured default (``QUALITY_AUTO``) in quality mode."""
+    """An ``auto | enabled | disabled``-style switch: ``auto`` is off ("disabled") in faithful
+    mode and the measured default (``QUALITY_AUTO``) in quality mode."""
     value = str(g(key)).lower()
     if value == "auto":
-        return QUALITY_AUTO[key] if quality else "off"
+        return QUALITY_AUTO[key] if quality else "disabled"
     return value
 
 
@@ -240,9 +240,9 @@ def _write_quality(table, t: int, g) -> None:
     table.quality[t] = 1 if quality else 0
     if quality:
         table.rate_mode[t] = 1  # quality mode converts every per-step rate by the step size
-    table.time_based_smoothing[t] = 1 if _switch(g, "solver.time_based_smoothing", quality) == "on" else 0
+    table.time_based_smoothing[t] = 1 if _switch(g, "solver.time_based_smoothing", quality) == "enabled" else 0
     inext = _switch(g, "solver.inextensibility", quality)
-    table.inextensibility[t] = 0 if inext == "off" else _enum(inext, INEXTENSIBILITY, "solver.inextensibility")
+    table.inextensibility[t] = 0 if inext == "disabled" else _enum(inext, INEXTENSIBILITY, "solver.inextensibility")
     table.tether_limit[t] = float(g("solver.tether_limit"))
     iterations = float(g("solver.distance_iterations"))
     if iterations != int(iterations):
@@ -250,7 +250,7 @@ def _write_quality(table, t: int, g) -> None:
     table.distance_iterations[t] = int(iterations)
     table.ftl_damping[t] = float(g("solver.ftl_damping"))
     table.distance_full_velocity[t] = 1 if _switch(g, "solver.distance_velocity", quality) == "full" else 0
-    table.collision_last[t] = 1 if _switch(g, "solver.collision_last", quality) == "on" else 0
+    table.collision_last[t] = 1 if _switch(g, "solver.collision_last", quality) == "enabled" else 0
 
 
 def allocate_parameters(team_count: int):
