@@ -12,7 +12,11 @@ Runtime control (all take effect at the next frame, none resets the simulation u
 * ``reset_cloth(cloth, keep_pose=False)`` — MagicaCloth2's ResetCloth (Reset + TimeReset, or
   KeepTeleport when keep_pose);
 * ``set_enabled(cloth, enabled)`` (disable mode Reset: re-enabling resets), ``set_time_scale``,
-  ``add_force(cloth, direction, speed, mode)``.
+  ``add_force(cloth, direction, speed, mode)``;
+* ``add_cloth(spec) -> team id`` / ``remove_cloth(team)`` — teams at runtime (issue 3 item 7):
+  chunks of the global SoA are allocated from freed space first and freed on removal
+  (``layout.SolverLayout``); other teams' rows never move or change; the frame kernel visits
+  ``model.live_teams`` only; a removed cloth's bones are no longer restored nor written.
 
 Guards: a team reset by ``solver/guards.py`` raises ``("cloth_reset", {"cloth", "team",
 "reason"})`` in ``ctx.events``. Metrics: ``cloth.steps`` (particle-steps this frame),
