@@ -145,3 +145,26 @@ def test_added_cloth_with_colliders_gets_its_own_slots():
     b = system.particles.position[system.team_particles(new)]
     # two identical skirts on the same bones with the same colliders move identically
     assert np.array_equal(a, b)
+
+
+def test_a_system_started_empty_takes_a_cloth_at_runtime_and_gives_it_back():
+    scene = load_scene(ROOT / "configs" / "character_walk.yaml")
+    player = Player.for_scene(scene)
+    system = ClothSystem(scene.hierarchy, [], scene.colliders, scene.settings).attach(player)
+    player.run(3)
+    assert system.live_teams == [] and player.restored_bones.size == 0
+    team = system.add_cloth(scene.cloths[_skirt_index(scene)])
+    assert team == 0 and system.model.team_particle_count.tolist() == [48]
+    assert player.restored_bones.size > 0
+    player.run(20)
+    sl = system.team_particles(team)
+    pos = system.particles.position[sl]
+    assert np.isfinite(pos).all()
+    assert np.abs(pos - system.particles.base_pos_buffer[sl]).max() > 1e-3   # it swings
+    system.remove_cloth(team)
+    player.run(2)
+    assert system.live_teams == [] and player.restored_bones.size == 0
+
+
+def _skirt_index(scene):
+    return [c.name for c in scene.cloths].index("skirt")
