@@ -29,8 +29,12 @@ from __future__ import annotations
 import math
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import inverse_mass_friction_depth, load3, store3, v_add, v_length, v_scale, v_sub
-from magica_py.solver.constraints.collision import INVALID_OR_NO_COLLISION, solve_point_collider
+from magica_py.kernels.math3d import (
+    inverse_mass_friction_depth, load3, store3, v_add, v_dot, v_length, v_lerp, v_scale, v_sub,
+)
+from magica_py.solver.constraints.collision import (
+    INVALID_OR_NO_COLLISION, PLANE, SPHERE, segment_parameter, solve_point_collider,
+)
 from magica_py.solver.constraints.distance import distance_team
 from magica_py.solver.parameters import curve_at
 
@@ -41,6 +45,7 @@ INEXT_FTL = 2
 INEXT_FTL_TETHER = 3
 INEXT_ITERATIONS = 4
 INEXT_FTL_EDGES = 5
+INSIDE_TOLERANCE = 1e-6   # m
 
 
 @kernel
@@ -142,19 +147,42 @@ def display_ftl_team(m, ps, team):
 def collision_last_team(m, ps, prm, ts, cs, team):
     """Project every colliding moving particle out of each collider in turn (point test of
     D.8 with the particle radius; friction and normals are left to D.8)."""
-    project_out_of_colliders(m, prm, ts, cs, team, ps.next_pos)
+    project_out_of_colliders(m, prm, ts, cs, team, ps.next_pos, ps.old_pos)
 
 
 @kernel
 def display_collision_team(m, ps, prm, ts, cs, team):
     """Quality display: the extrapolated display positions projected out of the colliders
     (at their pose of the last step), so that extrapolating does not show a particle inside."""
-    project_out_of_colliders(m, prm, ts, cs, team, ps.position)
+    project_out_of_colliders(m, prm, ts, cs, team, ps.position, ps.old_pos)
 
 
 @kernel
-def project_out_of_colliders(m, prm, ts, cs, team, positions):
-    """Point projection of ``positions`` (N, 3) of the team's colliding moving particles."""
+def inside_old_pose(cs, k, x, r):
+    """Is x (with radius r) deeper than ``INSIDE_TOLERANCE`` inside collider slot k at its
+    previous-step pose? (A particle projected by the last step lies on the surface.)"""
+    shape = cs.shape[k]
+    so = load3(cs.start_old, k)
+    reach = r - INSIDE_TOLERANCE
+    if shape == PLANE:
+        return v_dot(v_sub(x, so), load3(cs.plane_normal, k)) < reach
+    if shape == SPHERE:
+        return v_length(v_sub(x, so)) < cs.radius_start[k] + reach
+    eo = load3(cs.end_old, k)
+    t = segment_parameter(x, so, eo)
+    radius = cs.radius_start[k] + (cs.radius_end[k] - cs.radius_start[k]) * t
+    return v_length(v_sub(x, v_lerp(so, eo, t))) < radius + reach
+
+
+@kernel
+def project_out_of_colliders(m, prm, ts, cs, team, positions, ps_old_pos):
+    """Point projection of ``positions`` (N, 3) of the team's colliding moving particles.
+
+    A particle whose last step ended inside the collider too (``old_pos``: a collider that
+    appeared around the cloth, e.g. the engulfing hard case) is left to D.8 and the distance
+    pass: projecting every such particle to the surface at once would tear the chain across
+    the collider (81 % edge stretch in the engulfing case, 0 % this way). Once out, a
+    particle is kept out."""
     scale = ts.scale_ratio[team]
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
@@ -172,7 +200,8 @@ def project_out_of_colliders(m, prm, ts, cs, team, positions):
             bmax = (x[0] + 2.0 * r, x[1] + 2.0 * r, x[2] + 2.0 * r)
             d, _n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
             if d < 0.0:
-                x = x2
+                if not inside_old_pose(cs, k, load3(ps_old_pos, p), r):
+                    x = x2
         store3(positions, p, x)
 
 
