@@ -109,7 +109,7 @@ def test_bending_with_per_pass_inverse_masses_equals_per_pair_masses(walk):
     assert cnt.sum() > 0 and np.abs(acc).max() > 0
 
 
-def test_restoration_stiffness_buffer_equals_the_per_iteration_value(walk):
+def test_restoration_stiffness_and_rest_direction_buffers_equal_the_per_iteration_values(walk):
     s = walk
     m, ps, prm, ts = s.model, s.particles, s.parameters, s.teams
     tables = s.kernel_tables()
@@ -130,6 +130,10 @@ def test_restoration_stiffness_buffer_equals_the_per_iteration_value(walk):
                 kr = curve_at_clamp01(prm.restoration_stiffness_curve, team, float(m.depth[c]))
                 expected = min(max(step_rate(kr, 1.0, 1.0, int(prm.rate_mode[team])), 0.0), 1.0) * gravity_factor
                 assert ps.angle_restoration_k[c] == expected
+                # the rest direction, hoisted out of the iterations: |bv| and bv / |bv|
+                bv = tuple(ps.step_basic_pos[c] - ps.step_basic_pos[int(m.parent[c])])
+                assert ps.angle_rest_length[c] == v_length(bv)
+                assert tuple(ps.angle_rest_direction[c]) == v_scale(bv, 1.0 / v_length(bv))
                 checked += 1
         assert checked > 10
 

@@ -45,6 +45,8 @@ PARTICLE_FIELDS = [
     ("angle_local_pos", "particle", V3, F64, "unit; rest edge direction in the parent's frame"),
     ("angle_local_rot", "particle", Q4, F64, "xyzw; rest rotation relative to the parent"),
     ("angle_rest_vector", "particle", V3, F64, "m; rest edge vector in world space (restoration)"),
+    ("angle_rest_length", "particle", (), F64, "m; |angle_rest_vector| (restoration, per step)"),
+    ("angle_rest_direction", "particle", V3, F64, "unit; angle_rest_vector / its length (restoration, per step)"),
     ("angle_rotation", "particle", Q4, F64, "xyzw; working rotation of the limit pass"),
     ("angle_limit", "particle", (), F64, "rad; limit angle at the particle's depth (per step)"),
     ("angle_limit_cos", "particle", (), F64, "cos of angle_limit: the no-violation test without acos"),

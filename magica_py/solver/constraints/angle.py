@@ -38,8 +38,9 @@ def solve_pivot_pair(pp, cp, v, r, pivot_ratio, wp, wc):
 def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation, restoration_attenuation):
     """D.5/D.6 over every baseline of one team.
 
-    The restoration stiffness of each particle (curve, rate conversion, gravity factor) is
-    computed once per step in the buffering pass rather than in each of the 3 iterations."""
+    The restoration stiffness of each particle (curve, rate conversion, gravity factor) and its
+    rest direction (length, unit vector) are computed once per step in the buffering pass
+    rather than in each of the 3 iterations (same operations on the same values: same bits)."""
     use_limit = prm.use_angle_limit[team] != 0
     use_restoration = prm.use_restoration[team] != 0
     if not use_limit and not use_restoration:
@@ -71,6 +72,11 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
                 store3(ps.angle_local_pos, c, q_rotate(iq, v_scale(bv, 1.0 / blen)))
                 store4(ps.angle_local_rot, c, q_mul(iq, load4(ps.step_basic_rot, c)))
             store3(ps.angle_rest_vector, c, bv)
+            if use_restoration:  # the rest direction does not change over the iterations
+                tl = v_length(bv)
+                ps.angle_rest_length[c] = tl
+                if tl >= 1e-8:
+                    store3(ps.angle_rest_direction, c, v_scale(bv, 1.0 / tl))
             if use_limit:
                 max_angle = math.radians(curve_at(prm.limit_angle_curve, team, m.depth[c]))
                 ps.angle_limit[c] = max_angle
@@ -95,8 +101,7 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
                     cp, pp = _limit_pass(m, ps, prm, team, c, p, cp, pp, wc, wp, p_move,
                                          limit_stiffness, limit_attenuation)
                 if use_restoration:
-                    tv = load3(ps.angle_rest_vector, c)
-                    tl = v_length(tv)
+                    tl = ps.angle_rest_length[c]
                     if tl < 1e-8:
                         store3(ps.velocity_pos, c, v_add(load3(ps.velocity_pos, c), v_sub(pp, cp)))
                         store3(ps.next_pos, c, pp)
@@ -105,7 +110,8 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
                     vl = v_length(v)
                     if vl < 1e-8:
                         continue
-                    q = from_to_rotation_unit(v_scale(v, 1.0 / vl), v_scale(tv, 1.0 / tl), ps.angle_restoration_k[c])
+                    q = from_to_rotation_unit(v_scale(v, 1.0 / vl), load3(ps.angle_rest_direction, c),
+                                              ps.angle_restoration_k[c])
                     r = q_rotate(q, v)
                     dp, dc = solve_pivot_pair(pp, cp, v, r, rest_pivot, wp, wc)
                     if c_move:
