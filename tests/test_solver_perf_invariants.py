@@ -151,3 +151,22 @@ def test_faithful_results_match_the_golden_hashes(name):
         pytest.skip(f"configs/{name}.yaml changed since the golden hashes were written "
                     "(re-record with benchmarks/golden_hashes.py --write)")
     assert got["particles"] == stored["particles"] and got["bones"] == stored["bones"]
+
+
+@pytest.mark.parametrize("config", ["character_walk", "crowd", "tail_orbit", "hitches_and_events"])
+def test_baselines_list_every_parent_before_its_child(config):
+    """The angle pass buffers per-particle values (inverse mass) in baseline order and reads
+    the parent's: valid because a baseline lists each particle's parent before it (B.6)."""
+    from magica_py.build import build_cloth
+
+    scene = load_scene(ROOT / "configs" / f"{config}.yaml")
+    checked = 0
+    for spec in scene.cloths[:4]:
+        m = build_cloth(scene.hierarchy, spec)
+        for b in range(len(m.baseline_count)):
+            e0 = int(m.baseline_start[b])
+            data = [int(x) for x in m.baseline_data[e0:e0 + int(m.baseline_count[b])]]
+            for k in range(1, len(data)):
+                assert int(m.parent[data[k]]) in data[:k]
+                checked += 1
+    assert checked > 0

@@ -45,6 +45,7 @@ PARTICLE_FIELDS = [
     ("angle_local_pos", "particle", V3, F64, "unit; rest edge direction in the parent's frame"),
     ("angle_local_rot", "particle", Q4, F64, "xyzw; rest rotation relative to the parent"),
     ("angle_rest_vector", "particle", V3, F64, "m; rest edge vector in world space (restoration)"),
+    ("angle_inverse_mass", "particle", (), F64, "1/(1 + 3 friction) of this angle pass (per step)"),
     ("angle_rest_length", "particle", (), F64, "m; |angle_rest_vector| (restoration, per step)"),
     ("angle_rest_direction", "particle", V3, F64, "unit; angle_rest_vector / its length (restoration, per step)"),
     ("angle_rotation", "particle", Q4, F64, "xyzw; working rotation of the limit pass"),

@@ -38,8 +38,9 @@ def solve_pivot_pair(pp, cp, v, r, pivot_ratio, wp, wc):
 def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation, restoration_attenuation):
     """D.5/D.6 over every baseline of one team.
 
-    The restoration stiffness of each particle (curve, rate conversion, gravity factor) and its
-    rest direction (length, unit vector) are computed once per step in the buffering pass
+    The inverse mass (friction does not change in this routine), the restoration stiffness
+    (curve, rate conversion, gravity factor) and the rest direction (length, unit vector) of
+    each particle are computed once per step in the buffering pass
     rather than in each of the 3 iterations (same operations on the same values: same bits)."""
     use_limit = prm.use_angle_limit[team] != 0
     use_restoration = prm.use_restoration[team] != 0
@@ -56,6 +57,8 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
         for e in range(e0, e1):
             c = m.baseline_data[e]
             store4(ps.angle_rotation, c, load4(ps.step_basic_rot, c))
+            # parents come first in a baseline (B.6), so wp below is always this step's value
+            ps.angle_inverse_mass[c] = inverse_mass_friction(ps.friction[c])
             if e == e0:
                 continue
             p = m.parent[c]
@@ -95,8 +98,8 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
                 p_move = (m.attribute[p] & MOVE) != 0
                 cp = load3(ps.next_pos, c)
                 pp = load3(ps.next_pos, p)
-                wc = inverse_mass_friction(ps.friction[c])
-                wp = inverse_mass_friction(ps.friction[p])
+                wc = ps.angle_inverse_mass[c]
+                wp = ps.angle_inverse_mass[p]
                 if use_limit:
                     cp, pp = _limit_pass(m, ps, prm, team, c, p, cp, pp, wc, wp, p_move,
                                          limit_stiffness, limit_attenuation)
