@@ -55,4 +55,4 @@ def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, runn
         store4(ps.base_rot_buffer, p, rot0)
     mode = prm.inextensibility[team]
     if time_based and (mode == 2 or mode == 3 or mode == 5):  # the FTL options
-        display_ftl_team(m, ps, team)
+        display_ftl_team(m, ps, ts, team)

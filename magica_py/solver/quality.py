@@ -30,7 +30,7 @@ import math
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    inverse_mass_friction_depth, load3, store3, v_add, v_dot, v_length, v_lerp, v_scale, v_sub,
+    inverse_mass_friction_depth, load3, store3, v_add, v_dot, v_length, v_lerp, v_mul, v_scale, v_sub,
 )
 from magica_py.solver.constraints.collision import (
     INVALID_OR_NO_COLLISION, PLANE, SPHERE, segment_parameter, solve_point_collider,
@@ -126,10 +126,13 @@ def edge_pass_team(m, ps, team):
 
 
 @kernel
-def display_ftl_team(m, ps, team):
+def display_ftl_team(m, ps, ts, team):
     """Quality display: the extrapolated display positions (``ps.position``) go through one
     FTL pass so that extrapolating each particle along its own velocity does not stretch
-    the edges the step kept (rest lengths of the last step)."""
+    the edges the step kept. Rest length: the larger of the last step's (step-basic pose)
+    and the build rest length at the current scale (the step-basic pose is not set before
+    the first step, e.g. a first frame at 240 fps runs no 90 Hz step)."""
+    s = v_scale(load3(m.team_init_scale, team), ts.scale_ratio[team])
     b0 = m.team_baseline_start[team]
     for b in range(b0, b0 + m.team_baseline_count[team]):
         e0 = m.baseline_start[b]
@@ -138,7 +141,8 @@ def display_ftl_team(m, ps, team):
             p = m.parent[v]
             if (m.attribute[v] & MOVE) == 0 or p < 0:
                 continue
-            rest = v_length(v_sub(load3(ps.step_basic_pos, v), load3(ps.step_basic_pos, p)))
+            rest = max(v_length(v_sub(load3(ps.step_basic_pos, v), load3(ps.step_basic_pos, p))),
+                       v_length(v_mul(load3(m.baseline_local_position, v), s)))
             x, _move = clamp_to_sphere(load3(ps.position, v), load3(ps.position, p), rest)
             store3(ps.position, v, x)
 
