@@ -67,6 +67,11 @@ def time_based_smoothing(ts, team, delta, frame_delta_time, s, speed_limit):
     with the time constant of ``smoothing_time_constant(s)``, integrated exactly over the frame
     for the frame's mean velocity (piecewise constant input), every frame with time.
 
+    After a reset the filter state is NaN (set by the reset branch below) and starts in steady
+    state, ``sv0 = v``: the cloth is not made to feel a velocity ramp that would start at the
+    reset frame's time, i.e. at a different time at each frame rate (tail: 1.25 -> 0.83 % of
+    frame-rate spread over the whole run).
+
     Returns the displacement the cloth feels this frame (the rest is shifted rigidly) and
     updates ``ts.smoothing_velocity``; independent of how the time is cut into frames for a
     constant input, first order in the frame time otherwise."""
@@ -78,6 +83,8 @@ def time_based_smoothing(ts, team, delta, frame_delta_time, s, speed_limit):
         v = clamp_length(v, speed_limit)
     tau = smoothing_time_constant(s)
     sv0 = load3(ts.smoothing_velocity, team)
+    if math.isnan(sv0[0]):  # first frame after a reset: the filter starts in steady state
+        sv0 = v
     if tau <= 0.0:
         store3(ts.smoothing_velocity, team, v)
         return v_scale(v, h)
@@ -189,6 +196,8 @@ def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation
                                         if limit >= 0.0 else -1.0)
             smooth_pos = v_sub(cpos, felt)
         else:
+            if math.isnan(ts.smoothing_velocity[team, 0]):  # quality switched off after a reset
+                store3(ts.smoothing_velocity, team, (0.0, 0.0, 0.0))
             if running:
                 v = (0.0, 0.0, 0.0)
                 if frame_delta_time > 0.0:
@@ -208,7 +217,7 @@ def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation
             ts.now_world_pos[team, c] = center_pos[c]
             ts.old_world_pos[team, c] = center_pos[c]
             ts.old_frame_world_scale[team, c] = cscl[c]
-            ts.smoothing_velocity[team, c] = 0.0
+            ts.smoothing_velocity[team, c] = math.nan if prm.time_based_smoothing[team] != 0 else 0.0
             ts.frame_shift_vector[team, c] = 0.0
         store4(ts.old_frame_world_rot, team, center_rot)
         store4(ts.now_world_rot, team, center_rot)
