@@ -80,3 +80,38 @@ def test_ftl_pass_oracle():
     move2 = expected - np.array([0.5, -2.5, 0])
     assert ps.velocity_pos[1] == pytest.approx(0.9 * move2)
     assert ps.velocity_pos[0] == pytest.approx([0, 0, 0])   # fixed parent: no velocity
+
+
+def test_edge_pass_and_tight_tether_oracles():
+    """Hand cases: the unilateral edge projection moves both ends by their inverse-mass share
+    (fixed ends stay), leaves short edges alone; the tight tether clamps the root distance."""
+    from collections import namedtuple
+
+    from magica_py.kernels.math3d import inverse_mass_friction_depth
+    from magica_py.solver.quality import edge_pass_team, tight_tether_team
+
+    M = namedtuple("M", "team_edge_start team_edge_count edges attribute depth team_particle_start "
+                        "team_particle_count root_index")
+    P = namedtuple("P", "step_basic_pos next_pos friction")
+    R = namedtuple("R", "tether_limit")
+    m = M(np.array([0], np.int32), np.array([2], np.int32), np.array([[0, 1], [1, 2]], np.int32),
+          np.array([1, 2, 2], np.uint8), np.array([0.0, 0.5, 1.0]), np.array([0], np.int32),
+          np.array([3], np.int32), np.array([-1, 0, 0], np.int32))
+    rest = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
+    ps = P(rest.copy(), np.array([[0.0, 0, 0], [1.2, 0, 0], [2.0, 0, 0]]), np.zeros(3))
+    edge_pass_team(m, ps, 0)
+    # edge 0-1: fixed 0, so particle 1 takes the whole 0.2 m: back to x = 1.0
+    assert ps.next_pos[1] == pytest.approx([1.0, 0, 0])
+    # edge 1-2 was 0.8 m long before (compressed): untouched by the first edge's move, now 1.0
+    assert ps.next_pos[2] == pytest.approx([2.0, 0, 0])
+    ps = P(rest.copy(), np.array([[0.0, 0, 0], [1.0, 0, 0], [2.4, 0, 0]]), np.zeros(3))
+    edge_pass_team(m, ps, 0)
+    w1 = inverse_mass_friction_depth(0.0, 0.5)
+    w2 = inverse_mass_friction_depth(0.0, 1.0)
+    assert ps.next_pos[1, 0] == pytest.approx(1.0 + 0.4 * w1 / (w1 + w2))
+    assert ps.next_pos[2, 0] == pytest.approx(2.4 - 0.4 * w2 / (w1 + w2))
+    # tight tether: particle 2 at 3 m from its root (rest 2 m, limit 1 %): pulled to 2.02 m
+    ps = P(rest.copy(), np.array([[0.0, 0, 0], [1.0, 0, 0], [0.0, 3.0, 0]]), np.zeros(3))
+    tight_tether_team(m, ps, R(np.array([0.01])), 0)
+    assert ps.next_pos[2] == pytest.approx([0.0, 2.02, 0])
+    assert ps.next_pos[1] == pytest.approx([1.0, 0, 0])      # within its limit: untouched
