@@ -63,3 +63,26 @@ def test_display_stays_outside_a_static_sphere_without_smoothing(bq):
     _s, faithful_display = penetrations(bq, "tail_sphere", params)
     assert display <= 1e-9
     assert faithful_display > 5e-3                      # measured 15.7 mm
+
+
+def test_inside_old_pose_oracle():
+    """The "was already inside" test of collision last: sphere, tapered capsule and plane at
+    their previous-step pose, with the particle radius and the 1 um tolerance."""
+    from collections import namedtuple
+
+    from magica_py.solver.quality import inside_old_pose
+
+    C = namedtuple("C", "shape start_old end_old radius_start radius_end plane_normal")
+    cs = C(np.array([0, 1, 2], np.int8),
+           np.array([[0.0, 0, 0], [0, 0, 0], [0, 0, 0]]),
+           np.array([[0.0, 0, 0], [1, 0, 0], [0, 0, 0]]),
+           np.array([0.5, 0.2, 0.0]), np.array([0.5, 0.1, 0.0]),
+           np.array([[0.0, 1, 0], [0, 1, 0], [0, 1, 0]]))
+    r = 0.02
+    assert inside_old_pose(cs, 0, (0.5, 0.0, 0.0), r)             # inside sphere + radius
+    assert not inside_old_pose(cs, 0, (0.52, 0.0, 0.0), r)        # on the surface: not inside
+    assert inside_old_pose(cs, 1, (1.0, 0.11, 0.0), r)            # capsule end radius 0.1 + 0.02
+    assert not inside_old_pose(cs, 1, (1.0, 0.13, 0.0), r)
+    assert inside_old_pose(cs, 1, (0.0, 0.2, 0.0), r)             # start radius 0.2
+    assert inside_old_pose(cs, 2, (5.0, 0.01, 3.0), r)            # plane y = 0, within r
+    assert not inside_old_pose(cs, 2, (5.0, 0.03, 3.0), r)
