@@ -124,3 +124,15 @@ def test_switches_written_in_yaml_are_not_read_as_booleans():
     assert table.collision_last[0] == 0 and table.time_based_smoothing[0] == 1
     with pytest.raises(ParameterError, match="auto, enabled, disabled"):
         resolve_parameters("tail", yaml.safe_load("solver.collision_last: off"), where="cloths.tail.parameters")
+
+
+def test_extended_range_allows_reference_frequencies_and_keeps_the_magica_clamp_by_default():
+    from magica_py.runtime.team_time import SimulationTimeSettings
+
+    assert SimulationTimeSettings(frequency=360).frequency == 150            # MagicaCloth2's clamp
+    assert SimulationTimeSettings(max_steps_per_frame=12).max_steps_per_frame == 5
+    s = SimulationTimeSettings(frequency=360, max_steps_per_frame=12, extended_range=True)
+    assert (s.frequency, s.max_steps_per_frame) == (360, 12)
+    assert SimulationTimeSettings(frequency=5000, extended_range=True).frequency == 2880
+    s = SimulationTimeSettings.from_scene_settings({"simulation_frequency": 720, "extended_range": True})
+    assert s.frequency == 720 and s.simulation_delta_time == pytest.approx(1 / 720)
