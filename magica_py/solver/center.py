@@ -295,28 +295,35 @@ def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation
 
 
 @kernel
+def snap_particles_to_base_pose(ps, start, end):
+    """C.5 Reset of particles [start, end): every position history at this frame's animated
+    pose, velocities, friction and collision normals zero (also used by the guards)."""
+    for p in range(start, end):
+        pos = load3(ps.position, p)
+        rot = load4(ps.rotation, p)
+        for c in range(3):
+            ps.next_pos[p, c] = pos[c]
+            ps.old_pos[p, c] = pos[c]
+            ps.base_pos[p, c] = pos[c]
+            ps.old_position[p, c] = pos[c]
+            ps.velocity_pos[p, c] = pos[c]
+            ps.disp_pos[p, c] = pos[c]
+            ps.velocity[p, c] = 0.0
+            ps.real_velocity[p, c] = 0.0
+            ps.collision_normal[p, c] = 0.0
+        store4(ps.base_rot, p, rot)
+        store4(ps.old_rotation, p, rot)
+        ps.friction[p] = 0.0
+        ps.static_friction[p] = 0.0
+
+
+@kernel
 def reset_or_shift_team(m, ps, ts, team):
     """C.5: snap the particles to the base pose (Reset) or shift their history rigidly."""
     start = m.team_particle_start[team]
     end = start + m.team_particle_count[team]
     if ts.reset[team] != 0:
-        for p in range(start, end):
-            pos = load3(ps.position, p)
-            rot = load4(ps.rotation, p)
-            for c in range(3):
-                ps.next_pos[p, c] = pos[c]
-                ps.old_pos[p, c] = pos[c]
-                ps.base_pos[p, c] = pos[c]
-                ps.old_position[p, c] = pos[c]
-                ps.velocity_pos[p, c] = pos[c]
-                ps.disp_pos[p, c] = pos[c]
-                ps.velocity[p, c] = 0.0
-                ps.real_velocity[p, c] = 0.0
-                ps.collision_normal[p, c] = 0.0
-            store4(ps.base_rot, p, rot)
-            store4(ps.old_rotation, p, rot)
-            ps.friction[p] = 0.0
-            ps.static_friction[p] = 0.0
+        snap_particles_to_base_pose(ps, start, end)
     elif ts.inertia_shift[team] != 0:
         pivot = load3(ts.old_component_pos, team)
         vec = load3(ts.frame_shift_vector, team)

@@ -7,6 +7,7 @@ import math
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, store3, store4
+from magica_py.solver.center import snap_particles_to_base_pose
 
 GUARD_OK = 0
 GUARD_NON_FINITE = 1
@@ -38,24 +39,10 @@ def check_team(m, ps, ts, team):
 def reset_team_to_base(m, ps, ts, team):
     """Snap a team's particles to this frame's animated pose with zero velocity (C.5 Reset)."""
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        pos = load3(ps.position, p)
-        rot = load4(ps.rotation, p)
-        for c in range(3):
-            ps.next_pos[p, c] = pos[c]
-            ps.old_pos[p, c] = pos[c]
-            ps.base_pos[p, c] = pos[c]
-            ps.old_position[p, c] = pos[c]
-            ps.velocity_pos[p, c] = pos[c]
-            ps.disp_pos[p, c] = pos[c]
-            ps.velocity[p, c] = 0.0
-            ps.real_velocity[p, c] = 0.0
-            ps.collision_normal[p, c] = 0.0
-        store4(ps.base_rot, p, rot)
-        store4(ps.old_rotation, p, rot)
-        store3(ps.step_basic_pos, p, pos)
-        store4(ps.step_basic_rot, p, rot)
-        ps.friction[p] = 0.0
-        ps.static_friction[p] = 0.0
+    end = start + m.team_particle_count[team]
+    snap_particles_to_base_pose(ps, start, end)
+    for p in range(start, end):
+        store3(ps.step_basic_pos, p, load3(ps.position, p))
+        store4(ps.step_basic_rot, p, load4(ps.rotation, p))
     ts.velocity_weight[team] = 0.0
     ts.blend_weight[team] = 0.0
