@@ -113,8 +113,12 @@ def mean_velocity_weight(w0, stabilization_time, span):
 
 @kernel
 def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation, lossy_scale,
-                            frame_delta_time, now_time_scale, skip_count, running, dt):
-    """C.2 and C.4 for one team: center, anchor, teleport, smoothing, world inertia, shift."""
+                            frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step=0.0):
+    """C.2 and C.4 for one team: center, anchor, teleport, smoothing, world inertia, shift.
+
+    ``since_last_step``: team time (s) from the last step to the start of this frame; quality
+    mode uses it to read the stabilisation ramp, which C.3 advances per step, in continuous
+    time (the ramp at the frame's start, not at the last step before it)."""
     comp = m.team_component_transform[team]
     cpos = load3(world_position, comp)
     crot = load4(world_rotation, comp)
@@ -263,7 +267,10 @@ def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation
         if ts.velocity_weight[team] < 1.0:
             w = ts.velocity_weight[team]
             if prm.time_based_smoothing[team] != 0:
-                w = mean_velocity_weight(w, prm.stabilization_time[team], frame_delta_time * now_time_scale)
+                stab = prm.stabilization_time[team]
+                if stab > 1e-6:  # the ramp in continuous time: it rose since the last step too
+                    w = saturate(w + max(since_last_step, 0.0) / stab)
+                w = mean_velocity_weight(w, stab, frame_delta_time * now_time_scale)
             o = lerp(o, 1.0, 1.0 - w)
         if now_time_scale < 1.0:
             o = lerp(o, 1.0, 1.0 - now_time_scale)

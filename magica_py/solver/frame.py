@@ -10,17 +10,22 @@ from __future__ import annotations
 
 from collections import namedtuple
 
+import math
+
+import numpy as np
 from numba import prange, types
 from numba.core.extending import overload
 from numba.experimental import structref
 
 from magica_py.jit import kernel
+from magica_py.kernels.math3d import load3, load4, q_angle, v_length, v_sub
 from magica_py.solver.batch_tables import borrow
 from magica_py.runtime.team_time import (
     TeamTimeState, team_time_begin_step, team_time_end_frame, team_time_frame_update,
 )
 from magica_py.solver.center import (
     center_and_inertia_team, distance_culling_team, end_frame_team, reset_or_shift_team, skin_team,
+    snap_particles_to_base_pose,
 )
 from magica_py.solver.colliders import (
     collider_end_frame_team, collider_end_step_team, collider_frame_team, collider_step_team,
@@ -48,7 +53,12 @@ from magica_py.solver.writeback import transform_data_team, write_transforms_tea
 TimeArrays = namedtuple("TimeArrays", TeamTimeState.FIELDS)
 HierarchyArrays = namedtuple("HierarchyArrays", [
     "parent", "local_position", "local_rotation", "world_position", "world_rotation",
-    "lossy_scale", "local_to_world"])
+    "lossy_scale", "local_to_world",
+    # the world pose at build (copies taken by ``hierarchy_arrays`` when the system is built),
+    # read once by quality mode's build-time reset (``build_reset_team``)
+    "build_world_position", "build_world_rotation", "build_lossy_scale", "build_local_to_world",
+    "build_pose_pending",   # (1,) uint8: 1 until the first frame has run
+    "ramp_from_build"])     # (n,) uint8 per team id (< n): 1 while its last reset was the build
 # frame inputs: Unity time of the frame and the global simulation settings
 FrameInputs = namedtuple("FrameInputs", [
     "delta_time", "unscaled_delta_time", "fixed_delta_time", "fixed_update_count",
@@ -61,8 +71,13 @@ def time_arrays(state: TeamTimeState) -> TimeArrays:
 
 
 def hierarchy_arrays(h) -> HierarchyArrays:
+    """The hierarchy's arrays for the frame kernel, with a snapshot of its current world pose
+    as the build pose (the system calls this once, right after building its cloths)."""
     return HierarchyArrays(h.parent, h.local_position, h.local_rotation, h.world_position,
-                           h.world_rotation, h.lossy_scale, h.local_to_world)
+                           h.world_rotation, h.lossy_scale, h.local_to_world,
+                           h.world_position.copy(), h.world_rotation.copy(), h.lossy_scale.copy(),
+                           h.local_to_world.copy(), np.ones(1, dtype=np.uint8),
+                           np.zeros(max(h.parent.shape[0], 1), dtype=np.uint8))
 
 
 @kernel
@@ -126,13 +141,60 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi):
 
 
 @kernel
+def build_reset_team(m, ps, prm, ts, h, t):
+    """Quality mode: the Reset of a team built with the system happens at the build (t = 0),
+    not at its first frame (docs/quality-mode.md, *start-up*). The particles snap to the
+    build-time pose with zero velocity, and the center, frame and component histories take
+    the build-time component pose; the first frame then integrates from there like any other
+    frame. MagicaCloth2 resets on the first frame (C.5, H.2), i.e. at t = 1/fps: each frame
+    rate would start from a different state, which a lightly damped chain carries for ~1 s."""
+    skin_team(m, ps, h.build_local_to_world, t)
+    center_and_inertia_team(m, ps, prm, ts, t, h.build_world_position, h.build_world_rotation,
+                            h.build_lossy_scale, 0.0, 1.0, 0, False, 0.0, 0.0)
+    snap_particles_to_base_pose(ps, m.team_particle_start[t], m.team_particle_start[t] + m.team_particle_count[t])
+    for c in range(3):
+        ts.old_component_pos[t, c] = ts.component_pos[t, c]
+        ts.old_component_scale[t, c] = ts.component_scale[t, c]
+    for c in range(4):
+        ts.old_component_rot[t, c] = ts.component_rot[t, c]
+    ts.reset[t] = 0  # the first frame is an ordinary frame (time_reset keeps the ramp at 0)
+
+
+@kernel
+def first_frame_continues_build_pose(m, prm, h, t):
+    """True when the component's first-frame pose is within the teleport thresholds of its
+    build pose (whatever the teleport mode): the animation then starts from the build pose
+    and the build can be the reset instant. A scene whose rest pose is not the animation's
+    pose at t = 0 (a jump at the first frame) keeps MagicaCloth2's first-frame reset."""
+    comp = m.team_component_transform[t]
+    init_len = v_length(load3(m.team_init_scale, t))
+    ratio = v_length(load3(h.lossy_scale, comp)) / init_len if init_len > 0.0 else 1.0
+    jump = v_length(v_sub(load3(h.world_position, comp), load3(h.build_world_position, comp)))
+    turn = math.degrees(q_angle(load4(h.build_world_rotation, comp), load4(h.world_rotation, comp)))
+    return jump < prm.teleport_distance[t] * ratio and turn < prm.teleport_rotation[t]
+
+
+@kernel
 def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t):
     """Per-frame stages of team t before the steps (C.1, C.2/C.4, C.5, G.2)."""
     ts.running[t] = 1 if tt.running[t] else 0
+    tracked = t < h.ramp_from_build.shape[0]
+    if ts.reset[t] != 0 and tracked:
+        h.ramp_from_build[t] = 0
+    if (prm.quality[t] != 0 and h.build_pose_pending[0] != 0 and ts.reset[t] != 0 and ts.time_reset[t] != 0
+            and first_frame_continues_build_pose(m, prm, h, t)):
+        build_reset_team(m, ps, prm, ts, h, t)
+        if tracked:
+            h.ramp_from_build[t] = 1
+    # the stabilisation ramp in continuous time when it started at the build (t = 0, on the
+    # step grid); after a first-frame reset the per-step ramp is kept (docs/quality-mode.md)
+    since_last_step = 0.0
+    if tracked and h.ramp_from_build[t] != 0:
+        since_last_step = tt.old_time[t] - tt.now_update_time[t]
     skin_team(m, ps, h.local_to_world, t)
     center_and_inertia_team(m, ps, prm, ts, t, h.world_position, h.world_rotation, h.lossy_scale,
                             tt.frame_delta_time[t], tt.now_time_scale[t], tt.skip_count[t],
-                            tt.running[t], fi.dt)
+                            tt.running[t], fi.dt, since_last_step)
     reset_or_shift_team(m, ps, ts, t)
     collider_frame_team(cs, ts, t, h.world_position, h.world_rotation, h.lossy_scale)
 
@@ -144,6 +206,8 @@ def end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t):
     if code != 0:
         reset_team_to_base(m, ps, ts, t)
         ts.guard_code[t] = code
+        if t < h.ramp_from_build.shape[0]:
+            h.ramp_from_build[t] = 0
     display_team(m, ps, prm, ts, t, fi.dt, tt.time[t], tt.old_time[t], tt.now_update_time[t],
                  tt.running[t])
     if prm.collision_last[t] != 0 and prm.time_based_smoothing[t] != 0 and ts.collider_count[t] > 0:
@@ -206,6 +270,7 @@ def simulate_frame(m, ps, prm, ts, cs, tt, h, fi):
     team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
                         tt.now_update_time, tt.old_update_time, tt.frame_update_time,
                         tt.frame_old_time, fi.timing)
+    h.build_pose_pending[0] = 0  # teams added or reset later reset at their first frame
 
 
 @kernel(parallel=True)
@@ -237,6 +302,7 @@ def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, fi):
     team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
                         tt.now_update_time, tt.old_update_time, tt.frame_update_time,
                         tt.frame_old_time, fi.timing)
+    h.build_pose_pending[0] = 0  # teams added or reset later reset at their first frame
 
 
 # ----------------------------------------------------------------------------- kernel tables
