@@ -33,46 +33,52 @@ def spreads(bq, name, params, duration):
             100 * bq.spread_at_common_times(recs, length, start=1.5))
 
 
-def matched_tail_orbit(folder):
-    """``configs/tail_orbit.yaml`` with the root's rest rotation facing the orbit's path at
-    t = 0 (the scene as committed rests facing +Z and its animation turns it by 180 degrees
-    at the first frame, a jump that keeps MagicaCloth2's first-frame reset)."""
+def jumping_tail_orbit(folder):
+    """``configs/tail_orbit.yaml`` with the root resting facing +Z: its orbit (``face_path``)
+    turns it by 180 degrees at the first frame, a jump beyond the teleport rotation threshold
+    that keeps MagicaCloth2's first-frame reset."""
     import yaml
 
     doc = yaml.safe_load((ROOT / "configs" / "tail_orbit.yaml").read_text())
-    doc["scene"]["name"] = "tail_orbit_matched"
-    doc["rigs"][0]["bones"][0]["euler"] = [0, 180, 0]
+    doc["scene"]["name"] = "tail_orbit_jump"
+    doc["rigs"][0]["bones"][0]["euler"] = [0, 0, 0]
     doc.pop("output", None)
-    path = folder / "tail_orbit_matched.yaml"
+    path = folder / "tail_orbit_jump.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     return str(path)
 
 
-def test_tail_tip_spread_across_frame_rates_is_under_half_a_percent_after_the_start(bq):
+def test_tail_tip_spread_across_frame_rates_is_under_half_a_percent(bq):
+    """The committed tail rests in its t = 0 pose: quality mode resets at the build (t = 0), so
+    every frame rate starts from the same state and the spread is small from the first frame on."""
     whole, late = spreads(bq, "tail_orbit", bq.QUALITY, 2.5)
     faithful_whole, faithful_late = spreads(bq, "tail_orbit", bq.FAITHFUL, 2.5)
-    assert late <= 0.5            # measured 0.31 % (1 s on)
-    assert whole <= 1.0           # first-frame reset (rest pose != animated pose at t = 0): 0.83 %
+    assert whole <= 0.5           # measured 0.27 % (4 s run, python benchmarks/bench_quality.py --part spread)
+    assert late <= 0.5            # measured 0.26 % (1 s on)
     assert faithful_late >= 10.0  # MagicaCloth2's per-frame smoothing: 17.8 %
     assert whole < faithful_whole / 10
 
 
-def test_tail_starting_from_its_build_pose_has_no_start_up_transient_across_frame_rates(bq, tmp_path):
-    """Quality mode resets at the build (t = 0) when the first frame continues the build pose:
-    every frame rate starts from the same state, and the spread is small from the first frame on."""
-    path = matched_tail_orbit(tmp_path)
-    recs, length = bq.frame_rate_records((path, {}, 1.5), bq.QUALITY)
+def test_tail_whose_first_frame_jumps_keeps_the_first_frame_reset_and_settles_within_half_a_percent(bq, tmp_path):
+    """A root that turns 180 degrees at the first frame cannot be treated as motion from the
+    build pose: each frame rate resets at its own first frame (1/30 s against 1/240 s), and the
+    lightly damped tail carries that difference for about a second."""
+    path = jumping_tail_orbit(tmp_path)
+    recs, length = bq.frame_rate_records((path, {}, 2.5), bq.QUALITY)
     whole = 100 * bq.spread_at_common_times(recs, length)
-    assert whole <= 0.5           # measured 0.27 % (first-frame reset on this scene: 0.83 %)
+    late = 100 * bq.spread_at_common_times(recs, length, start=1.5)
+    assert whole <= 1.0           # measured 0.83 % (start-up transient)
+    assert late <= 0.5            # measured 0.31 % (1 s on)
 
 
 def test_build_reset_is_used_only_when_the_first_frame_continues_the_build_pose(bq, tmp_path):
-    """The committed tail_orbit turns its root by 180 degrees at the first frame (beyond the
-    teleport rotation threshold, 90 degrees): that team keeps the first-frame reset."""
+    """The committed tail_orbit continues its build pose; the jumping variant turns its root by
+    180 degrees at the first frame (beyond the 90 degree teleport rotation threshold) and keeps
+    the first-frame reset. Faithful mode always keeps it."""
     from magica_py.bench.variants import prepare
 
     flags = {}
-    for name, path in (("jump", bq.SCENES["tail_orbit"][0]), ("matched", matched_tail_orbit(tmp_path))):
+    for name, path in (("jump", jumping_tail_orbit(tmp_path)), ("matched", bq.SCENES["tail_orbit"][0])):
         for params in (bq.QUALITY, bq.FAITHFUL):
             p = prepare(bq.variant((path, {}, 0.1), "first", params, fps=60))
             p.player.step()
