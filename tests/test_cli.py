@@ -240,15 +240,11 @@ def test_info_summarises_the_animation(scene_file, capsys):
     assert "animation: 1 drivers on 1 bones (1 spin)" in capsys.readouterr().out
 
 
-def test_info_of_an_imported_clip_counts_its_keyframe_drivers(tmp_path, capsys):
+def test_info_of_an_imported_clip_counts_its_keyframe_drivers(tmp_path, capsys, shared_data):
     """A glTF clip becomes one keyframe driver per animated bone and channel: info says so."""
     import os
 
-    import pathlib
-
-    data = pathlib.Path(__file__).resolve().parents[1].parent / "shared" / "data" / "gltf" / "Fox.glb"
-    if not data.is_file():
-        pytest.skip(f"shared test data {data} is absent")
+    data = shared_data / "gltf" / "Fox.glb"
     fox = os.path.relpath(data, tmp_path)
     path = tmp_path / "fox.yaml"
     path.write_text(f"scene: {{frames: 2}}\nrigs:\n  - {{name: fox, file: {fox}, unit_scale: 0.01}}\n"
