@@ -293,3 +293,21 @@ def test_q_from_matrix_matches_unity_mathematics_signs_exactly():
         u_neg = r[0, 0] < 0
         seen_branches.add((u_neg, (r[1, 1] - r[2, 2] if u_neg else r[1, 1] + r[2, 2]) < 0))
     assert len(seen_branches) == 4
+
+
+def test_closest_segment_segment_matches_hand_computed_cases():
+    from magica_py.kernels.math3d import closest_segment_segment
+
+    # crossing segments: closest points at both midpoints
+    s, t, c1, c2 = closest_segment_segment((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.5, 1.0, -1.0), (0.5, 1.0, 1.0))
+    assert (s, t) == (0.5, 0.5)
+    np.testing.assert_allclose(c1, (0.5, 0.0, 0.0)) and np.testing.assert_allclose(c2, (0.5, 1.0, 0.0))
+    # the second segment lies beyond the first one's end: s clamps to 1
+    s, t, c1, _ = closest_segment_segment((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (3.0, 1.0, -1.0), (3.0, 1.0, 1.0))
+    assert (s, t) == (1.0, 0.5) and c1 == (1.0, 0.0, 0.0)
+    # a point (degenerate first segment) against a segment: its projection, clamped
+    s, t, _, c2 = closest_segment_segment((0.25, 2.0, 0.0), (0.25, 2.0, 0.0), (0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
+    assert (s, t) == (0.0, 0.25) and c2 == (0.25, 0.0, 0.0)
+    # both degenerate: parameters 0, never NaN
+    s, t, _, _ = closest_segment_segment((1.0, 1.0, 1.0), (1.0, 1.0, 1.0), (2.0, 2.0, 2.0), (2.0, 2.0, 2.0))
+    assert (s, t) == (0.0, 0.0)

@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import load3, v_cross, v_dot, v_length, v_sub
+from magica_py.kernels.math3d import closest_segment_segment, load3, v_cross, v_dot, v_length, v_sub
 
 BENDING_MAX_ANGLE = 120.0     # TriangleBendingMaxAngle, degrees
 VOLUME_MIN_ANGLE = 90.0       # VolumeMinAngle
@@ -111,36 +111,6 @@ def fold_angle(pos, a, b, z, w):
 
 
 @kernel
-def segment_segment_params(p1, q1, p2, q2):
-    """Ericson's ClosestPtSegmentSegment parameters (s, t), degeneracy threshold 1e-8."""
-    d1 = v_sub(q1, p1)
-    d2 = v_sub(q2, p2)
-    r = v_sub(p1, p2)
-    a = v_dot(d1, d1)
-    e = v_dot(d2, d2)
-    f = v_dot(d2, r)
-    eps = 1e-8
-    if a <= eps and e <= eps:
-        return 0.0, 0.0
-    if a <= eps:
-        return 0.0, min(max(f / e, 0.0), 1.0)
-    c = v_dot(d1, r)
-    if e <= eps:
-        return min(max(-c / a, 0.0), 1.0), 0.0
-    b = v_dot(d1, d2)
-    denom = a * e - b * b
-    s = min(max((b * f - c * e) / denom, 0.0), 1.0) if denom != 0.0 else 0.0
-    t = (b * s + f) / e
-    if t < 0.0:
-        t = 0.0
-        s = min(max(-c / a, 0.0), 1.0)
-    elif t > 1.0:
-        t = 1.0
-        s = min(max((b - c) / a, 0.0), 1.0)
-    return s, t
-
-
-@kernel
 def remove_duplicate_quads(pos, triangles, edge_pairs, et_start, et_count, et_data, max_angle, removed, quads):
     """Mark in ``removed`` one triangulation of every quad triangulated along both diagonals
     (``quads``: a ``key_table`` sized for every triangle pair)."""
@@ -159,7 +129,7 @@ def remove_duplicate_quads(pos, triangles, edge_pairs, et_start, et_count, et_da
                 w = opposite_vertex(triangles, t2, a, b)
                 if fold_angle(pos, a, b, z, w) > max_angle:
                     continue
-                s, t = segment_segment_params(load3(pos, a), load3(pos, b), load3(pos, z), load3(pos, w))
+                s, t, _ca, _cb = closest_segment_segment(load3(pos, a), load3(pos, b), load3(pos, z), load3(pos, w))
                 if s <= 0.0 or s >= 1.0 or t <= 0.0 or t >= 1.0:
                     continue
                 q0 = min(a, b)

@@ -434,6 +434,42 @@ def shift_position(p, pivot, delta, rotation):
     return v_add(v_add(pivot, q_rotate(rotation, v_sub(p, pivot))), delta)
 
 
+@kernel
+def closest_segment_segment(p1, q1, p2, q2):
+    """Ericson's ClosestPtSegmentSegment (§0.2, degeneracy threshold 1e-8): the parameters
+    (s, t) of the closest points on segments p1q1 and p2q2, and the points themselves."""
+    eps = 1e-8
+    d1 = v_sub(q1, p1)
+    d2 = v_sub(q2, p2)
+    r = v_sub(p1, p2)
+    a = v_dot(d1, d1)
+    e = v_dot(d2, d2)
+    f = v_dot(d2, r)
+    if a <= eps and e <= eps:
+        s = 0.0
+        t = 0.0
+    elif a <= eps:
+        s = 0.0
+        t = saturate(f / e)
+    else:
+        c = v_dot(d1, r)
+        if e <= eps:
+            t = 0.0
+            s = saturate(-c / a)
+        else:
+            b = v_dot(d1, d2)
+            denom = a * e - b * b
+            s = saturate((b * f - c * e) / denom) if denom != 0.0 else 0.0
+            t = (b * s + f) / e
+            if t < 0.0:
+                t = 0.0
+                s = saturate(-c / a)
+            elif t > 1.0:
+                t = 1.0
+                s = saturate((b - c) / a)
+    return s, t, v_add(p1, v_scale(d1, s)), v_add(p2, v_scale(d2, t))
+
+
 # ----------------------------------------------------------------------------- masses (§0.2)
 FRICTION_MASS = 3.0
 DEPTH_MASS = 5.0

@@ -13,7 +13,7 @@ import math
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    load3, load4, q_rotate, saturate, store3, v_add, v_dot, v_length, v_length_sq, v_lerp,
+    closest_segment_segment, load3, load4, q_rotate, saturate, store3, v_add, v_dot, v_length, v_length_sq, v_lerp,
     v_normalize, v_scale, v_sub,
 )
 from magica_py.solver.constraints.bending import FIXED_POINT
@@ -46,41 +46,6 @@ def segment_parameter(c, a, b):
     if l2 == 0.0:
         return 0.0
     return saturate(v_dot(v_sub(c, a), ab) / l2)
-
-
-@kernel
-def closest_segment_segment(p1, q1, p2, q2):
-    """Ericson's ClosestPtSegmentSegment (threshold 1e-8): (s, t, c1, c2)."""
-    eps = 1e-8
-    d1 = v_sub(q1, p1)
-    d2 = v_sub(q2, p2)
-    r = v_sub(p1, p2)
-    a = v_dot(d1, d1)
-    e = v_dot(d2, d2)
-    f = v_dot(d2, r)
-    if a <= eps and e <= eps:
-        s = 0.0
-        t = 0.0
-    elif a <= eps:
-        s = 0.0
-        t = saturate(f / e)
-    else:
-        c = v_dot(d1, r)
-        if e <= eps:
-            t = 0.0
-            s = saturate(-c / a)
-        else:
-            b = v_dot(d1, d2)
-            denom = a * e - b * b
-            s = saturate((b * f - c * e) / denom) if denom != 0.0 else 0.0
-            t = (b * s + f) / e
-            if t < 0.0:
-                t = 0.0
-                s = saturate(-c / a)
-            elif t > 1.0:
-                t = 1.0
-                s = saturate((b - c) / a)
-    return s, t, v_add(p1, v_scale(d1, s)), v_add(p2, v_scale(d2, t))
 
 
 @kernel
