@@ -76,3 +76,32 @@ def run(system, frames, dt=1.0 / 60.0, before=None):
             before(f)
         system.hierarchy.propagate()
         system.step_frame(dt)
+
+
+def pendulum_yaml(theta0: float, *, fps: int, duration: float, solver: str, length: float = 1.0,
+                  gravity: float = 9.81, name: str = "pendulum") -> str:
+    """Scene YAML of a one-link pendulum (bob at angle ``theta0`` radians from straight down)
+    with every restoring term off and no damping; ``solver`` is the ``solver.*`` parameter line
+    (``"rate_mode: frequency_consistent"``, ``"mode: quality"``)."""
+    x, y = length * np.sin(theta0), -length * np.cos(theta0)
+    return f"""
+version: 1
+scene: {{name: {name}, fps: {fps}, duration: {duration}, simulation_frequency: 90, max_steps_per_frame: 5}}
+rigs:
+  - name: p
+    bones:
+      - {{name: anchor, position: [0, 2, 0]}}
+      - {{name: b0, parent: anchor, position: [0, 0, 0]}}
+      - {{name: b1, parent: b0, position: [{float(x)!r}, {float(y)!r}, 0]}}
+cloths:
+  - name: pendulum
+    root_bones: [b0]
+    connection: line
+    parameters:
+      gravity: {gravity}
+      damping: 0
+      angle_restoration.use: false
+      angle_limit.use: false
+      inertia.particle_speed_limit: off
+      solver.{solver}
+"""

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from magica_py.bench.variants import Variant, run_variant
+from solver_scenes import pendulum_yaml
 
 THETA0 = math.radians(3.0)      # small: the amplitude decays (ref Appendix 4), the correction stays tiny
 LENGTH = 1.0
@@ -31,28 +32,8 @@ def scene_file(tmp_path, name, text):
 
 
 def pendulum_scene(tmp_path, name="pendulum"):
-    x, y = LENGTH * math.sin(THETA0), -LENGTH * math.cos(THETA0)
-    return scene_file(tmp_path, name, f"""
-        version: 1
-        scene: {{name: {name}, fps: 120, duration: 6.0, simulation_frequency: 90, max_steps_per_frame: 5}}
-        rigs:
-          - name: p
-            bones:
-              - {{name: anchor, position: [0, 2, 0]}}
-              - {{name: b0, parent: anchor, position: [0, 0, 0]}}
-              - {{name: b1, parent: b0, position: [{x!r}, {y!r}, 0]}}
-        cloths:
-          - name: pendulum
-            root_bones: [b0]
-            connection: line
-            parameters:
-              gravity: {G}
-              damping: 0
-              angle_restoration.use: false
-              angle_limit.use: false
-              inertia.particle_speed_limit: off
-              solver.rate_mode: frequency_consistent
-        """)
+    return scene_file(tmp_path, name, pendulum_yaml(THETA0, fps=120, duration=6.0, length=LENGTH, gravity=G,
+                                                    solver="rate_mode: frequency_consistent", name=name))
 
 
 def measured_period(times, x):

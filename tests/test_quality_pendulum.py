@@ -4,12 +4,12 @@ first-order damping, 5.3 %/s at 90 Hz, 1.4 %/s at 360 Hz: the numpy twin below),
 MagicaCloth2's 30 % velocity attenuation of D.4 loses more (7.5 %/s at 90 Hz, ref Appendix 4).
 """
 import math
-import textwrap
 
 import numpy as np
 import pytest
 
 from magica_py.bench.variants import Variant, run_variant
+from solver_scenes import pendulum_yaml
 
 THETA0 = math.radians(10.0)
 LENGTH = 1.0
@@ -17,29 +17,8 @@ G = 9.81
 
 
 def pendulum(tmp_path, mode, frequency=90):
-    x, y = LENGTH * math.sin(THETA0), -LENGTH * math.cos(THETA0)
     path = tmp_path / f"pendulum_{mode}.yaml"
-    path.write_text(textwrap.dedent(f"""
-        version: 1
-        scene: {{name: pendulum, fps: 60, duration: 8.0, simulation_frequency: 90, max_steps_per_frame: 5}}
-        rigs:
-          - name: p
-            bones:
-              - {{name: anchor, position: [0, 2, 0]}}
-              - {{name: b0, parent: anchor, position: [0, 0, 0]}}
-              - {{name: b1, parent: b0, position: [{x!r}, {y!r}, 0]}}
-        cloths:
-          - name: pendulum
-            root_bones: [b0]
-            connection: line
-            parameters:
-              gravity: {G}
-              damping: 0
-              angle_restoration.use: false
-              angle_limit.use: false
-              inertia.particle_speed_limit: off
-              solver.mode: {mode}
-        """))
+    path.write_text(pendulum_yaml(THETA0, fps=60, duration=8.0, length=LENGTH, gravity=G, solver=f"mode: {mode}"))
     run = run_variant(Variant(f"pendulum/{mode}", str(path), frequency=frequency))
     return run.times, run.positions[:, 1, 0] - run.positions[:, 0, 0]
 
