@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 
 from magica_py.jit import kernel
+from magica_py.kernels import trig
 
 EPSILON = 1e-8  # SystemDefine.Epsilon
 
@@ -144,7 +145,7 @@ def angle_between_vectors(a, b):
         c = 1.0
     elif c < -1.0:
         c = -1.0
-    return math.acos(c)
+    return trig.acos(c)
 
 
 @kernel
@@ -252,10 +253,10 @@ def q_slerp(q1, q2, t):
         d = -d
         b = (-q2[0], -q2[1], -q2[2], -q2[3])
     if d < 0.9995:
-        angle = math.acos(d)
-        w1 = math.sin((1.0 - t) * angle)
-        w2 = math.sin(t * angle)
-        inv_s = 1.0 / math.sin(angle)
+        angle = trig.acos(d)
+        w1 = trig.sin((1.0 - t) * angle)
+        w2 = trig.sin(t * angle)
+        inv_s = 1.0 / trig.sin(angle)
         r = (
             (q1[0] * w1 + b[0] * w2) * inv_s,
             (q1[1] * w1 + b[1] * w2) * inv_s,
@@ -275,8 +276,8 @@ def q_slerp(q1, q2, t):
 @kernel
 def q_axis_angle(axis, angle):
     """Rotation of ``angle`` radians about the unit vector ``axis``."""
-    s = math.sin(0.5 * angle)
-    return (axis[0] * s, axis[1] * s, axis[2] * s, math.cos(0.5 * angle))
+    s, c = trig.sincos(0.5 * angle)
+    return (axis[0] * s, axis[1] * s, axis[2] * s, c)
 
 
 @kernel
@@ -365,7 +366,7 @@ def from_to_rotation_unit(a, b, t):
     if abs(1.0 - c) < 1e-6:
         return (0.0, 0.0, 0.0, 1.0)
     axis = v_normalize(v_cross(a, b))
-    return q_axis_angle(axis, math.acos(c) * t)
+    return q_axis_angle(axis, trig.acos(c) * t)
 
 
 @kernel
@@ -389,7 +390,7 @@ def q_angle(a, b):
             d = 1.0
         elif d < -1.0:
             d = -1.0
-        ang = 2.0 * math.acos(d)
+        ang = 2.0 * trig.acos(d)
         if ang > math.pi:
             ang = 2.0 * math.pi - ang
         return ang
@@ -399,8 +400,8 @@ def q_angle(a, b):
 @kernel
 def q_to_angle_axis(q):
     """``ToAngleAxis`` of §0.2: returns (angle radians, axis 3-tuple; zero axis when degenerate)."""
-    a = math.acos(q[3]) if abs(q[3]) < 0.9999 else 0.0
-    s = math.sin(a)
+    a = trig.acos(q[3]) if abs(q[3]) < 0.9999 else 0.0
+    s = trig.sin(a)
     if abs(s) < 1e-6:
         return 2.0 * a, (0.0, 0.0, 0.0)
     return 2.0 * a, (q[0] / s, q[1] / s, q[2] / s)
@@ -416,7 +417,7 @@ def clamp_angle(direction, base, max_angle):
         c = 1.0
     elif c < -1.0:
         c = -1.0
-    alpha = math.acos(c)
+    alpha = trig.acos(c)
     if alpha <= max_angle:
         return direction
     if abs(1.0 + c) < 1e-6:

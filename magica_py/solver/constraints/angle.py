@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 from magica_py.jit import kernel
+from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
     angle_between_vectors, clamp_angle, from_to_rotation_unit, inverse_mass_friction, lerp,
     load3, load4, q_inverse, q_mul, q_rotate, saturate, store3, store4, v_add, v_dot, v_length,
@@ -83,7 +84,7 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
             if use_limit:
                 max_angle = math.radians(curve_at(prm.limit_angle_curve, team, m.depth[c]))
                 ps.angle_limit[c] = max_angle
-                ps.angle_limit_cos[c] = math.cos(max_angle)
+                ps.angle_limit_cos[c] = trig.cos(max_angle)
             if use_restoration:
                 kr = curve_at_clamp01(prm.restoration_stiffness_curve, team, m.depth[c])
                 ps.angle_restoration_k[c] = saturate(step_rate(kr, frequency_ratio, power_w, mode)) * gravity_factor

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 from magica_py.jit import kernel
+from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
     inverse_mass_friction_depth, load3, saturate, v_cross, v_dot, v_length, v_length_sq,
     v_scale, v_sub,
@@ -67,7 +68,7 @@ def solve_dihedral(p0, p1, p2, p3, w0, w1, w2, w3, rest_angle, sign, stiffness):
     d3 = (a * n1[0] + b * n2[0], a * n1[1] + b * n2[1], a * n1[2] + b * n2[2])
     c = v_dot(n1u, n2u)
     c = -1.0 if c < -1.0 else (1.0 if c > 1.0 else c)
-    phi = math.acos(c)
+    phi = trig.acos(c)
     if v_dot(v_cross(n1u, n2u), e) < 0.0:
         phi = -phi
     denom = w0 * v_length_sq(d0) + w1 * v_length_sq(d1) + w2 * v_length_sq(d2) + w3 * v_length_sq(d3)
