@@ -9,12 +9,15 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     clamp_length, depth_mass, lerp, load3, load4, project_on_plane, q_angle, q_from_to, q_mul,
     q_normalize, q_rotate, q_slerp, q_to_angle_axis, saturate, store3, store4, v_add, v_cross,
     v_dot, v_length, v_length_sq, v_lerp, v_mul, v_normalize, v_scale, v_sub,
 )
+from magica_py.solver.batched.transfer import bload3, bload4, bstore3, bstore4
 from magica_py.solver.parameters import curve_at_clamp01, step_keep, step_rate
 
 MOVE = 0x02
@@ -88,10 +91,58 @@ def team_step_update(m, ts, prm, frame_interpolation, team, dt):
 
 
 @kernel
+def predict_base_pose(old_position, position, old_rotation, rotation, t):
+    """D.1's animated pose of a particle at frame interpolation t: (base_pos, base_rot)."""
+    base_pos = v_lerp(old_position, position, t)
+    # at the last step of a frame (t == 1) the rotation is taken as is; the slerp is
+    # computed either way and selected (no branch: a lane loop over it vectorises)
+    slerped = q_normalize(q_slerp(old_rotation, rotation, t))
+    base_rot = rotation if t == 1.0 else slerped
+    return base_pos, base_rot
+
+
+@kernel
+def predict_move(old_pos, velocity, depth, old_world_pos, inertia_vector, inertia_rotation, step_vector,
+                 step_rotation, depth_inertia, velocity_weight, damping_keep, gravity, force_mode, impact,
+                 scale, dt):
+    """D.1 for a Move particle: (velocity, velocity_pos, next_pos) after the inertia shift,
+    damping (``damping_keep`` = saturate(1 - step rate of the damping curve)) and forces."""
+    k = depth_inertia * (1.0 - depth * depth)
+    # branch-free (computed both ways, then selected) so that a lane loop over it vectorises;
+    # depth inertia off (k == 0): lerp/slerp at 0 are the first argument
+    iv_mixed = v_lerp(inertia_vector, step_vector, k)
+    iq_mixed = q_slerp(inertia_rotation, step_rotation, k)
+    off = k == 0.0
+    iv = inertia_vector if off else iv_mixed
+    iq = inertia_rotation if off else iq_mixed
+    w = v_add(v_add(old_world_pos, q_rotate(iq, v_sub(old_pos, old_world_pos))), iv)
+    velocity_pos = w  # old_pos + (w - old_pos)
+    velocity = q_rotate(iq, velocity)
+    velocity = v_scale(velocity, velocity_weight)
+    velocity = v_scale(velocity, damping_keep)
+    # external force modes: 1 add (/ depth mass), 2 add, 3 change (/ depth mass), 4 change
+    change = force_mode == 3 or force_mode == 4
+    velocity = (0.0, 0.0, 0.0) if change else velocity
+    with_depth = v_add(gravity, v_scale(impact, 1.0 / depth_mass(depth)))
+    without_depth = v_add(gravity, impact)
+    mode_force = with_depth if (force_mode == 1 or force_mode == 3) else without_depth
+    force = gravity if force_mode == 0 else mode_force
+    force = v_scale(force, scale)
+    velocity = v_add(velocity, v_scale(force, dt))
+    return velocity, velocity_pos, v_add(w, v_scale(velocity, dt))
+
+
+@kernel
+def damping_keep_at(prm, team, depth, frequency_ratio, power_z):
+    """D.1's velocity factor at a depth: saturate(1 - step rate of the damping curve)."""
+    damp = curve_at_clamp01(prm.damping_curve, team, depth)
+    return saturate(1.0 - step_rate(damp, frequency_ratio, power_z, prm.rate_mode[team]))
+
+
+@kernel
 def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio, power_z):
     """D.1: animated pose at this step, inertia shift, damping, forces, prediction."""
     t = frame_interpolation
-    mode = prm.rate_mode[team]
     old_world_pos = load3(ts.old_world_pos, team)
     inertia_vector = load3(ts.inertia_vector, team)
     inertia_rotation = load4(ts.inertia_rotation, team)
@@ -105,11 +156,8 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
     scale = ts.scale_ratio[team]
     start = m.team_particle_start[team]
     for p in range(start, start + m.team_particle_count[team]):
-        base_pos = v_lerp(load3(ps.old_position, p), load3(ps.position, p), t)
-        if t == 1.0:  # the last step of a frame: slerp(a, b, 1) == b
-            base_rot = load4(ps.rotation, p)
-        else:
-            base_rot = q_normalize(q_slerp(load4(ps.old_rotation, p), load4(ps.rotation, p), t))
+        base_pos, base_rot = predict_base_pose(load3(ps.old_position, p), load3(ps.position, p),
+                                               load4(ps.old_rotation, p), load4(ps.rotation, p), t)
         store3(ps.base_pos, p, base_pos)
         store4(ps.base_rot, p, base_rot)
         store3(ps.step_basic_pos, p, base_pos)
@@ -118,34 +166,70 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
             store3(ps.next_pos, p, base_pos)
             store3(ps.velocity_pos, p, base_pos)
             continue
-        old_pos = load3(ps.old_pos, p)
         depth = m.depth[p]
-        k = depth_inertia * (1.0 - depth * depth)
-        if k == 0.0:  # depth inertia off: lerp/slerp at 0 are the first argument
-            iv = inertia_vector
-            iq = inertia_rotation
-        else:
-            iv = v_lerp(inertia_vector, step_vector, k)
-            iq = q_slerp(inertia_rotation, step_rotation, k)
-        w = v_add(v_add(old_world_pos, q_rotate(iq, v_sub(old_pos, old_world_pos))), iv)
-        velocity_pos = w  # old_pos + (w - old_pos)
-        velocity = q_rotate(iq, load3(ps.velocity, p))
-        velocity = v_scale(velocity, velocity_weight)
-        damp = curve_at_clamp01(prm.damping_curve, team, depth)
-        velocity = v_scale(velocity, saturate(1.0 - step_rate(damp, frequency_ratio, power_z, mode)))
-        force = gravity
-        if force_mode != 0:
-            if force_mode == 3 or force_mode == 4:
-                velocity = (0.0, 0.0, 0.0)
-            if force_mode == 1 or force_mode == 3:
-                force = v_add(force, v_scale(impact, 1.0 / depth_mass(depth)))
-            else:
-                force = v_add(force, impact)
-        force = v_scale(force, scale)
-        velocity = v_add(velocity, v_scale(force, dt))
+        velocity, velocity_pos, next_pos = predict_move(
+            load3(ps.old_pos, p), load3(ps.velocity, p), depth, old_world_pos, inertia_vector,
+            inertia_rotation, step_vector, step_rotation, depth_inertia, velocity_weight,
+            damping_keep_at(prm, team, depth, frequency_ratio, power_z), gravity, force_mode, impact, scale, dt)
         store3(ps.velocity, p, velocity)
         store3(ps.velocity_pos, p, velocity_pos)
-        store3(ps.next_pos, p, v_add(w, v_scale(velocity, dt)))
+        store3(ps.next_pos, p, next_pos)
+
+
+@kernel
+def predict_block(m, bs, prm, blk, b, dt, frequency_ratio, power_z):
+    """D.1 for every lane of block b (``solver/batched``): ``predict_team``'s maths, lanes innermost."""
+    ex = blk.block_exemplar[b]
+    width = blk.block_width[b]
+    lanes = np.uint64(blk.block_lane_base[b])
+    p0 = m.team_particle_start[ex]
+    depth_inertia = prm.depth_inertia[ex]
+    gravity_direction = load3(prm.gravity_direction, ex)
+    gravity = prm.gravity[ex]
+    # arrays as locals: read through the table inside the loop, their pointers would be
+    # reloaded after every store and the lane loop would not vectorise
+    old_position, position, old_rotation, rotation = bs.old_position, bs.position, bs.old_rotation, bs.rotation
+    base_pos_a, base_rot_a, sbp, sbr = bs.base_pos, bs.base_rot, bs.step_basic_pos, bs.step_basic_rot
+    next_pos_a, velocity_pos_a, velocity_a, old_pos_a = bs.next_pos, bs.velocity_pos, bs.velocity, bs.old_pos
+    interpolation, lane_old_world_pos = bs.lane_frame_interpolation, bs.lane_old_world_pos
+    lane_iv, lane_iq, lane_sv, lane_sq = (bs.lane_inertia_vector, bs.lane_inertia_rotation,
+                                          bs.lane_step_vector, bs.lane_step_rotation)
+    lane_vw, lane_gr, lane_fm, lane_f, lane_scale = (bs.lane_velocity_weight, bs.lane_gravity_ratio,
+                                                     bs.lane_external_force_mode, bs.lane_external_force,
+                                                     bs.lane_scale_ratio)
+    for p in range(blk.block_particle_count[b]):
+        # unsigned row indices: numba wraps negative signed indices (a select per access that
+        # hides the affine address from LLVM's vectoriser)
+        k0 = np.uint64(blk.block_row_base[b] + p * width)
+        move = (m.attribute[p0 + p] & MOVE) != 0
+        depth = m.depth[p0 + p]
+        damping_keep = damping_keep_at(prm, ex, depth, frequency_ratio, power_z)
+        for i in range(width):
+            k = k0 + np.uint64(i)
+            base_pos, base_rot = predict_base_pose(bload3(old_position, k), bload3(position, k),
+                                                   bload4(old_rotation, k), bload4(rotation, k),
+                                                   interpolation[lanes + np.uint64(i)])
+            bstore3(base_pos_a, k, base_pos)
+            bstore4(base_rot_a, k, base_rot)
+            bstore3(sbp, k, base_pos)
+            bstore4(sbr, k, base_rot)
+        if not move:
+            for i in range(width):
+                k = k0 + np.uint64(i)
+                bstore3(next_pos_a, k, bload3(base_pos_a, k))
+                bstore3(velocity_pos_a, k, bload3(base_pos_a, k))
+            continue
+        for i in range(width):
+            k = k0 + np.uint64(i)
+            L = lanes + np.uint64(i)
+            velocity, velocity_pos, next_pos = predict_move(
+                bload3(old_pos_a, k), bload3(velocity_a, k), depth, bload3(lane_old_world_pos, L),
+                bload3(lane_iv, L), bload4(lane_iq, L), bload3(lane_sv, L), bload4(lane_sq, L), depth_inertia,
+                lane_vw[L], damping_keep, v_scale(gravity_direction, gravity * lane_gr[L]),
+                lane_fm[L], bload3(lane_f, L), lane_scale[L], dt)
+            bstore3(velocity_a, k, velocity)
+            bstore3(velocity_pos_a, k, velocity_pos)
+            bstore3(next_pos_a, k, next_pos)
 
 
 @kernel

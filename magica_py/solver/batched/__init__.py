@@ -1,0 +1,41 @@
+"""Batched steps: teams of identical topology and parameters simulated side by side.
+
+A crowd is many copies of a few cloths. Running one team after another makes each step a
+chain of dependent scalar operations (latency-bound: tech-notes LAYOUT measured 17-21x
+between that and the same maths with the chain index innermost). Here teams that share
+their topology, their per-particle model data and their parameters form a **block** of up to
+``BLOCK_WIDTH`` **lanes** (one lane per team). A block's step state is stored lane-innermost
+(``row = block_row_base + p * width + lane``, component-major ``(3, rows)`` arrays), so that
+for each particle, edge or baseline entry of the shared topology the loop over lanes runs the
+same operations on contiguous memory and LLVM vectorises it.
+
+Bit-identity: a block stage calls the *same* per-element functions as the per-team stage
+(``predict_particle``, ...) with the same inputs in the same order, and the solver's
+trigonometry is branch-free polynomial (``kernels/trig.py``) rather than libm; there is no
+fastmath. A block therefore produces exactly the bits the per-team path produces; the tests
+compare the two on whole runs (``tests/test_batched_steps.py``).
+
+Frame flow (``solver/frame.py``): the per-frame stages stay per team; after them the
+*running* blocks (every lane active, the same number of steps this frame) gather their
+lanes' particle state into the block arrays, run every step (per-team C.3/G.3, then the block
+stages), and scatter the state back before the end-of-frame stages. A block that cannot run
+this frame (a lane culled, suspended or on another step count) leaves its teams to the
+per-team path: nothing is lost, only speed.
+
+Modules: ``blocks`` (formation, tables, Python), ``state`` (block and lane arrays),
+``transfer`` (gather/scatter, per-step lane values).
+
+**Status (issue 4, in progress):** the layout, formation, transfer and the first block stage
+(D.1 ``step.predict_block``, bit-identical to ``predict_team``: tests/test_batched_stages.py)
+exist; the frame kernel does not call blocks yet, so every scene still runs per team. What a
+lane loop needs to vectorise (measured on ``predict_block``, 80 -> 35-43 ns per particle):
+
+* per-element maths inlined (``jit.INLINE_THRESHOLD``) and without libm (``kernels/trig``);
+* the block's arrays read into locals before the loops (through the table, their pointers
+  are reloaded after every store: "cannot identify array bounds");
+* unsigned row indices (numba's negative-index wraparound hides the affine address:
+  "unsafe indirect dependence");
+* a runtime overlap-check budget above LLVM's default of 8 arrays (``jit.py``);
+* branch-free per-element functions: both sides computed and selected (a slerp under a
+  branch is not if-converted).
+"""

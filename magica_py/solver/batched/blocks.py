@@ -1,0 +1,127 @@
+"""Block formation: which teams run side by side (Python, outside the frame path).
+
+Two teams can share a block when one kernel can run them in lockstep with the same
+per-element inputs except their state: the same topology (``ClothModel.topology_key``), the
+same per-particle model data the steps read (depth, rest lengths and angles, baseline rest
+pose, build scale and gravity reference), the same parameter row (hierarchy-node parameters
+such as the anchor are read per team, outside the steps) and the same collider shapes in the
+same slots, and a feature set the block stages implement (``unsupported_reason``). Blocks
+hold at most ``BLOCK_WIDTH`` lanes; a group of 100 teams becomes blocks of 32, 32, 32, 4...
+balanced to 25 x 4 (equal widths keep the two threads' work equal).
+
+Formation runs when the system is built, after ``add_cloth`` / ``remove_cloth`` and after
+``set_parameter`` (a changed team leaves its block: its parameter row differs).
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+
+import numpy as np
+
+from magica_py.solver.batched.state import (
+    BLOCK_WIDTH, BlockTable, COLLIDER_FIELDS, LANE_FIELDS, PARTICLE_BLOCK_FIELDS,
+    SHARED_PARTICLE_FIELDS, allocate_block_state,
+)
+from magica_py.solver.fields import I32, U8
+
+# model fields (per particle and link pools) the step stages read, compared bit for bit
+STEP_MODEL_FIELDS = ("depth", "baseline_local_position", "baseline_local_rotation", "distance_rest",
+                     "bend_rest_angle", "bend_sign", "volume_rest", "root_length")
+# parameters that name hierarchy nodes (per instance; read by the per-team frame stages only)
+PER_TEAM_PARAMETERS = ("anchor_transform", "culling_reference")
+MIN_LANES = 2
+
+
+def unsupported_reason(prm, team: int, collider_count: int) -> str | None:
+    """Why a team cannot run in a block (None: it can)."""
+    if prm.quality[team] != 0 or prm.inextensibility[team] != 0 or prm.collision_last[team] != 0:
+        return "quality mode"
+    if collider_count > 0 and prm.collision_mode[team] == 2:
+        return "edge collision"
+    return None
+
+
+def _team_signature(system, t: int) -> str | None:
+    model = system.models[t]
+    if model is None or not model.topology_key:
+        return None
+    prm = system.parameters
+    ts = system.teams
+    count = int(ts.collider_count[t])
+    if unsupported_reason(prm, t, count) is not None:
+        return None
+    h = hashlib.blake2b(digest_size=16)
+    h.update(model.topology_key.encode())
+    for name in STEP_MODEL_FIELDS:
+        a = getattr(model, name, None)
+        if a is not None:
+            h.update(name.encode())
+            h.update(np.ascontiguousarray(a).tobytes())
+    for name in ("init_scale", "init_local_gravity_direction"):
+        h.update(np.ascontiguousarray(getattr(model, name)).tobytes())
+    for name in prm._fields:
+        if name not in PER_TEAM_PARAMETERS:
+            h.update(name.encode())
+            h.update(np.ascontiguousarray(getattr(prm, name)[t]).tobytes())
+    cs = system.collider_state
+    start = int(ts.collider_start[t])
+    for j in range(start, start + count):
+        h.update(repr((int(cs.shape[j]), cs.size[j].tobytes(), int(cs.direction[j]),
+                       int(cs.reverse_direction[j]), int(cs.aligned_on_center[j]),
+                       cs.local_center[j].tobytes())).encode())
+    return h.hexdigest()
+
+
+def form_blocks(system, enabled: bool = True):
+    """(BlockTable, BlockState) for ``system``'s live teams."""
+    team_total = len(system.models)
+    groups: dict[str, list[int]] = {}
+    if enabled:
+        for t in system.live_teams:
+            key = _team_signature(system, int(t))
+            if key is not None:
+                groups.setdefault(key, []).append(int(t))
+    blocks: list[list[int]] = []
+    for teams in groups.values():
+        if len(teams) < MIN_LANES:
+            continue
+        n_blocks = math.ceil(len(teams) / BLOCK_WIDTH)
+        width = math.ceil(len(teams) / n_blocks)
+        blocks += [teams[i:i + width] for i in range(0, len(teams), width)]
+    blocks = [b for b in blocks if len(b) >= MIN_LANES]
+    m = system.model
+    nb = len(blocks)
+    width = np.array([len(b) for b in blocks], dtype=I32)
+    exemplar = np.array([b[0] for b in blocks], dtype=I32)
+    pcount = np.array([int(m.team_particle_count[b[0]]) for b in blocks], dtype=I32)
+    ccount = np.array([int(system.teams.collider_count[b[0]]) for b in blocks], dtype=I32)
+    row_base = np.zeros(nb, dtype=I32)
+    lane_base = np.zeros(nb, dtype=I32)
+    shared_base = np.zeros(nb, dtype=I32)
+    collider_base = np.zeros(nb, dtype=I32)
+    if nb:
+        row_base[1:] = np.cumsum(pcount * width)[:-1]
+        lane_base[1:] = np.cumsum(width)[:-1]
+        shared_base[1:] = np.cumsum(pcount)[:-1]
+        collider_base[1:] = np.cumsum(ccount * width)[:-1]
+    lane_team = np.array([t for b in blocks for t in b], dtype=I32)
+    team_block = np.full(max(team_total, 1), -1, dtype=I32)
+    for k, b in enumerate(blocks):
+        team_block[b] = k
+    table = BlockTable(width, exemplar, pcount, row_base, lane_base, shared_base, ccount, collider_base,
+                       np.zeros(nb, dtype=U8), lane_team, team_block)
+    state = allocate_block_state(int((pcount * width).sum()), int(pcount.sum()), int(width.sum()),
+                                 int((ccount * width).sum()))
+    return table, state
+
+
+def describe_blocks(table) -> list[str]:
+    """One line per block (``magica-py info``, benchmarks)."""
+    return [f"block {b}: {int(table.block_width[b])} lanes x {int(table.block_particle_count[b])} particles "
+            f"(teams {table.lane_team[table.block_lane_base[b]:table.block_lane_base[b] + table.block_width[b]].tolist()})"
+            for b in range(len(table.block_width))]
+
+
+__all__ = ["form_blocks", "describe_blocks", "unsupported_reason", "BLOCK_WIDTH",
+           "PARTICLE_BLOCK_FIELDS", "SHARED_PARTICLE_FIELDS", "LANE_FIELDS", "COLLIDER_FIELDS"]

@@ -1,0 +1,130 @@
+"""Block and lane arrays of the batched steps (see ``solver/batched/__init__``).
+
+``BlockTable`` (read-only between formations, except ``block_run`` written each frame):
+
+* per block ``b``: ``block_width`` lanes (teams), ``block_exemplar`` (a team of the block: its
+  model rows give the shared topology; local index = model row - its team_particle_start),
+  ``block_particle_count`` P, ``block_row_base`` (first row in the block state: particle p of
+  lane i is row ``block_row_base + p * width + i``), ``block_lane_base`` (first lane in the
+  lane arrays), ``block_shared_base`` (first row of the ``shared_*`` arrays: one row per
+  particle, values equal in every lane), ``block_collider_count`` C and ``block_collider_base`` (collider j of lane i
+  is lane-collider row ``block_collider_base + j * width + i``), ``block_run`` (1: the block
+  runs its steps this frame; written by the frame kernel);
+* per lane ``L``: ``lane_team``;
+* per team: ``team_block`` (-1: not in a block).
+
+``BlockState``: particle fields mirror ``ParticleState`` (same names, units and meaning) but
+component-major, ``(3, rows)`` / ``(4, rows)`` / ``(rows,)``, so that a loop over the lanes of
+one particle reads contiguous memory. Lane fields (``lane_*``) hold the team values of the
+current step (copied from ``TeamState`` / team time at each step by ``transfer.load_lanes``);
+collider fields (``col_*``) hold each lane's collider slots at this step (``ColliderState``).
+"""
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+
+from magica_py.solver.fields import F64, I32, U8, make_soa
+
+BLOCK_WIDTH = 32   # lanes per block at most (tech-notes LAYOUT: 32 chains per block was best)
+
+BLOCK_FIELDS = [
+    ("block_width", "block", (), I32, "lanes (teams) in the block"),
+    ("block_exemplar", "block", (), I32, "team whose model rows give the block's topology"),
+    ("block_particle_count", "block", (), I32, "particles per lane"),
+    ("block_row_base", "block", (), I32, "first block-state row; row = base + p * width + lane"),
+    ("block_lane_base", "block", (), I32, "first lane-array index of the block"),
+    ("block_shared_base", "block", (), I32, "first shared row (per particle, same in every lane): base + p"),
+    ("block_collider_count", "block", (), I32, "collider slots per lane"),
+    ("block_collider_base", "block", (), I32, "first lane-collider row; row = base + j * width + lane"),
+    ("block_run", "block", (), U8, "1: runs its steps in block form this frame (frame kernel)"),
+    ("lane_team", "lane", (), I32, "team of each lane"),
+    ("team_block", "team", (), I32, "block of each team id, -1 if none"),
+]
+BlockTable = make_soa("BlockTable", BLOCK_FIELDS)
+
+# (name, components (0: scalar), dtype, gathered at frame start, scattered at frame end)
+PARTICLE_BLOCK_FIELDS = [
+    ("position", 3, F64, True, False),
+    ("rotation", 4, F64, True, False),
+    ("old_position", 3, F64, True, False),
+    ("old_rotation", 4, F64, True, False),
+    ("next_pos", 3, F64, False, True),
+    ("old_pos", 3, F64, True, True),
+    ("velocity_pos", 3, F64, False, True),
+    ("velocity", 3, F64, True, True),
+    ("real_velocity", 3, F64, False, True),
+    ("base_pos", 3, F64, False, True),
+    ("base_rot", 4, F64, False, True),
+    ("friction", 0, F64, True, True),
+    ("static_friction", 0, F64, True, True),
+    ("collision_normal", 3, F64, True, True),
+    ("step_basic_pos", 3, F64, False, True),
+    ("step_basic_rot", 4, F64, False, True),
+    # stage scratch (each stage leaves it as it found it, as in ParticleState)
+    ("angle_length", 0, F64, False, False),
+    ("angle_local_pos", 3, F64, False, False),
+    ("angle_local_rot", 4, F64, False, False),
+    ("angle_rest_vector", 3, F64, False, False),
+    ("angle_inverse_mass", 0, F64, False, False),
+    ("angle_rest_length", 0, F64, False, False),
+    ("angle_rest_direction", 3, F64, False, False),
+    ("angle_rotation", 4, F64, False, False),
+    ("accum_vector", 3, F64, False, False),
+    ("accum_count", 0, I32, False, False),
+    ("bend_inverse_mass", 0, F64, False, False),
+    ("accum_friction", 0, F64, False, False),
+    ("accum_normal", 3, F64, False, False),
+]
+# per-particle values that are the same in every lane (parameters x depth): one row per particle
+SHARED_PARTICLE_FIELDS = [
+    ("shared_damping", 0, F64, "D.1 damping factor saturate(1 - step_rate(damping(depth)))"),
+    ("shared_angle_limit", 0, F64, "rad; D.5 limit angle at the particle's depth"),
+    ("shared_angle_limit_cos", 0, F64, "cos of shared_angle_limit"),
+    ("shared_restoration_k", 0, F64, "D.6 stiffness of this step before the per-lane gravity factor"),
+]
+# TeamState / team-time values of the current step, one per lane
+LANE_FIELDS = [
+    ("frame_interpolation", 0, F64), ("old_world_pos", 3, F64), ("now_world_pos", 3, F64),
+    ("inertia_vector", 3, F64), ("inertia_rotation", 4, F64), ("step_vector", 3, F64),
+    ("step_rotation", 4, F64), ("velocity_weight", 0, F64), ("gravity_ratio", 0, F64),
+    ("gravity_dot", 0, F64), ("scale_ratio", 0, F64), ("external_force_mode", 0, I32),
+    ("external_force", 3, F64), ("angular_velocity", 0, F64), ("rotation_axis", 3, F64),
+]
+# ColliderState values of each lane's collider slots at the current step
+COLLIDER_FIELDS = [
+    ("shape", 0, I32), ("scale_suspend", 0, U8), ("start_old", 3, F64), ("end_old", 3, F64),
+    ("start_new", 3, F64), ("end_new", 3, F64), ("radius_start", 0, F64), ("radius_end", 0, F64),
+    ("plane_normal", 3, F64), ("inverse_old_rot", 4, F64), ("now_rot", 4, F64),
+    ("aabb_min", 3, F64), ("aabb_max", 3, F64),
+]
+
+BlockState = namedtuple("BlockState",
+                        [f[0] for f in PARTICLE_BLOCK_FIELDS] + [f[0] for f in SHARED_PARTICLE_FIELDS]
+                        + ["lane_" + f[0] for f in LANE_FIELDS] + ["col_" + f[0] for f in COLLIDER_FIELDS],
+                        module=__name__)
+
+
+def _array(components: int, n: int, dtype, name: str) -> np.ndarray:
+    a = np.zeros((components, n) if components else (n,), dtype=dtype)
+    if components == 4 and ("rot" in name):
+        a[3] = 1.0
+    return a
+
+
+def allocate_block_state(rows: int, shared_rows: int, lanes: int, collider_rows: int) -> BlockState:
+    """Zeroed block arrays (identity quaternions); at least one row each so that types are stable."""
+    rows, shared_rows, lanes, collider_rows = (max(1, x) for x in (rows, shared_rows, lanes, collider_rows))
+    arrays = [_array(c, rows, dt, n) for n, c, dt, _g, _s in PARTICLE_BLOCK_FIELDS]
+    arrays += [_array(c, shared_rows, dt, n) for n, c, dt, _doc in SHARED_PARTICLE_FIELDS]
+    arrays += [_array(c, lanes, dt, n) for n, c, dt in LANE_FIELDS]
+    arrays += [_array(c, collider_rows, dt, n) for n, c, dt in COLLIDER_FIELDS]
+    return BlockState(*arrays)
+
+
+def empty_block_table(team_count: int) -> BlockTable:
+    """No blocks: every team runs per team."""
+    z = np.zeros(0, dtype=I32)
+    return BlockTable(z, z, z, z, z, z, z, z, np.zeros(0, dtype=U8), z,
+                      np.full(max(team_count, 1), -1, dtype=I32))

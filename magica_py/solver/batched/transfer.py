@@ -1,0 +1,161 @@
+"""Moving state between the team rows (``ParticleState``, ``TeamState``, ``ColliderState``)
+and a block's lane-innermost arrays (``BlockState``).
+
+* ``gather_block``: at the start of a frame's steps, the particle fields the steps read
+  (``state.PARTICLE_BLOCK_FIELDS`` marked *gathered*) from each lane's team rows;
+* ``scatter_block``: after the steps, the fields the steps wrote (marked *scattered*) back;
+* ``load_lanes``: at each step, after the per-team C.3 / G.3, the team and collider values
+  of this step into the ``lane_*`` / ``col_*`` arrays.
+
+Copies only: values are moved, never recomputed, so they cannot change bits.
+"""
+from __future__ import annotations
+
+from magica_py.jit import kernel
+
+
+@kernel
+def block_row(blk, b, p, lane):
+    """Row of particle p (team-local) of lane ``lane`` in the block state."""
+    return blk.block_row_base[b] + p * blk.block_width[b] + lane
+
+
+@kernel
+def _in(dst, src, k, r, n):
+    for c in range(n):
+        dst[c, k] = src[r, c]
+
+
+@kernel
+def _out(dst, src, r, k, n):
+    for c in range(n):
+        dst[r, c] = src[c, k]
+
+
+@kernel
+def gather_block(m, ps, blk, bs, b):
+    width = blk.block_width[b]
+    base = blk.block_row_base[b]
+    lanes = blk.block_lane_base[b]
+    count = blk.block_particle_count[b]
+    for i in range(width):
+        start = m.team_particle_start[blk.lane_team[lanes + i]]
+        for p in range(count):
+            r = start + p
+            k = base + p * width + i
+            _in(bs.position, ps.position, k, r, 3)
+            _in(bs.rotation, ps.rotation, k, r, 4)
+            _in(bs.old_position, ps.old_position, k, r, 3)
+            _in(bs.old_rotation, ps.old_rotation, k, r, 4)
+            _in(bs.old_pos, ps.old_pos, k, r, 3)
+            _in(bs.velocity, ps.velocity, k, r, 3)
+            _in(bs.collision_normal, ps.collision_normal, k, r, 3)
+            bs.friction[k] = ps.friction[r]
+            bs.static_friction[k] = ps.static_friction[r]
+
+
+@kernel
+def scatter_block(m, ps, blk, bs, b):
+    width = blk.block_width[b]
+    base = blk.block_row_base[b]
+    lanes = blk.block_lane_base[b]
+    count = blk.block_particle_count[b]
+    for i in range(width):
+        start = m.team_particle_start[blk.lane_team[lanes + i]]
+        for p in range(count):
+            r = start + p
+            k = base + p * width + i
+            _out(ps.next_pos, bs.next_pos, r, k, 3)
+            _out(ps.old_pos, bs.old_pos, r, k, 3)
+            _out(ps.velocity_pos, bs.velocity_pos, r, k, 3)
+            _out(ps.velocity, bs.velocity, r, k, 3)
+            _out(ps.real_velocity, bs.real_velocity, r, k, 3)
+            _out(ps.base_pos, bs.base_pos, r, k, 3)
+            _out(ps.base_rot, bs.base_rot, r, k, 4)
+            _out(ps.collision_normal, bs.collision_normal, r, k, 3)
+            _out(ps.step_basic_pos, bs.step_basic_pos, r, k, 3)
+            _out(ps.step_basic_rot, bs.step_basic_rot, r, k, 4)
+            ps.friction[r] = bs.friction[k]
+            ps.static_friction[r] = bs.static_friction[k]
+
+
+@kernel
+def _lane3(dst, src, lane, t):
+    for c in range(3):
+        dst[c, lane] = src[t, c]
+
+
+@kernel
+def _lane4(dst, src, lane, t):
+    for c in range(4):
+        dst[c, lane] = src[t, c]
+
+
+@kernel
+def load_lanes(blk, bs, ts, tt, cs, b):
+    """This step's team values (after C.3) and collider slots (after G.3) of every lane."""
+    width = blk.block_width[b]
+    lanes = blk.block_lane_base[b]
+    colliders = blk.block_collider_count[b]
+    cbase = blk.block_collider_base[b]
+    for i in range(width):
+        L = lanes + i
+        t = blk.lane_team[L]
+        bs.lane_frame_interpolation[L] = tt.frame_interpolation[t]
+        _lane3(bs.lane_old_world_pos, ts.old_world_pos, L, t)
+        _lane3(bs.lane_now_world_pos, ts.now_world_pos, L, t)
+        _lane3(bs.lane_inertia_vector, ts.inertia_vector, L, t)
+        _lane4(bs.lane_inertia_rotation, ts.inertia_rotation, L, t)
+        _lane3(bs.lane_step_vector, ts.step_vector, L, t)
+        _lane4(bs.lane_step_rotation, ts.step_rotation, L, t)
+        bs.lane_velocity_weight[L] = ts.velocity_weight[t]
+        bs.lane_gravity_ratio[L] = ts.gravity_ratio[t]
+        bs.lane_gravity_dot[L] = ts.gravity_dot[t]
+        bs.lane_scale_ratio[L] = ts.scale_ratio[t]
+        bs.lane_external_force_mode[L] = ts.external_force_mode[t]
+        _lane3(bs.lane_external_force, ts.external_force, L, t)
+        bs.lane_angular_velocity[L] = ts.angular_velocity[t]
+        _lane3(bs.lane_rotation_axis, ts.rotation_axis, L, t)
+        start = ts.collider_start[t]
+        for j in range(colliders):
+            s = start + j
+            k = cbase + j * width + i
+            bs.col_shape[k] = cs.shape[s]
+            bs.col_scale_suspend[k] = cs.scale_suspend[s]
+            _lane3(bs.col_start_old, cs.start_old, k, s)
+            _lane3(bs.col_end_old, cs.end_old, k, s)
+            _lane3(bs.col_start_new, cs.start_new, k, s)
+            _lane3(bs.col_end_new, cs.end_new, k, s)
+            bs.col_radius_start[k] = cs.radius_start[s]
+            bs.col_radius_end[k] = cs.radius_end[s]
+            _lane3(bs.col_plane_normal, cs.plane_normal, k, s)
+            _lane4(bs.col_inverse_old_rot, cs.inverse_old_rot, k, s)
+            _lane4(bs.col_now_rot, cs.now_rot, k, s)
+            _lane3(bs.col_aabb_min, cs.aabb_min, k, s)
+            _lane3(bs.col_aabb_max, cs.aabb_max, k, s)
+
+
+# ----------------------------------------------------------------------------- block access
+@kernel
+def bload3(a, k):
+    return (a[0, k], a[1, k], a[2, k])
+
+
+@kernel
+def bstore3(a, k, v):
+    a[0, k] = v[0]
+    a[1, k] = v[1]
+    a[2, k] = v[2]
+
+
+@kernel
+def bload4(a, k):
+    return (a[0, k], a[1, k], a[2, k], a[3, k])
+
+
+@kernel
+def bstore4(a, k, q):
+    a[0, k] = q[0]
+    a[1, k] = q[1]
+    a[2, k] = q[2]
+    a[3, k] = q[3]
