@@ -14,7 +14,10 @@ Usage (see tests/test_batched_stages.py)::
 A wrapper is an ``@njit`` function ``(m, ps, prm, ts, cs, tt, teams)`` for the per-team stage
 (``teams``: int32 array of team ids) and ``(m, ps, prm, ts, cs, tt, blk, bs, blocks)`` for the
 block stage; the harness gathers before and scatters after the block wrapper, with the
-per-step lane values loaded (``transfer.load_lanes``).
+per-step lane values loaded (``transfer.load_lanes``). The gather is the *full* one (every
+field of the block state, scratch included), so a stage can start from a mid-step state.
+Only the fields ``scatter_block`` writes back are compared by ``assert_same_rows``; compare
+others with ``block_rows``.
 """
 from __future__ import annotations
 
@@ -25,7 +28,7 @@ import numpy as np
 
 from magica_py.solver.batch_tables import borrow
 from magica_py.solver.batched.blocks import form_blocks
-from magica_py.solver.batched.transfer import gather_block, load_lanes, scatter_block
+from magica_py.solver.batched.transfer import gather_block_full, load_lanes, scatter_block
 from magica_py.solver.frame import as_kernel_table
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -66,7 +69,7 @@ def restore(system, snap: dict) -> None:
 def _gather_all(m, ps, ts, cs, tt, blk, bs):
     m, ps, ts, cs, tt, blk, bs = borrow(m), borrow(ps), borrow(ts), borrow(cs), borrow(tt), borrow(blk), borrow(bs)
     for b in range(blk.block_width.shape[0]):
-        gather_block(m, ps, blk, bs, b)
+        gather_block_full(m, ps, blk, bs, b)
         load_lanes(blk, bs, ts, tt, cs, b)
 
 
@@ -124,3 +127,45 @@ def assert_same_rows(system, blk, expected: dict, fields) -> None:
         want = expected[f"ps.{name}"][rows]
         same = (got == want) | (np.isnan(got) & np.isnan(want))
         assert same.all(), f"{name}: {int((~same).sum())} values differ, max {np.nanmax(np.abs(got - want))}"
+
+
+def compare_stage(system, team_wrapper, block_wrapper, fields) -> None:
+    """Run the per-team and the block stage from the same state; the scattered ``fields``
+    must be equal bit for bit. The system's state is left as it was."""
+    blk, bs = block_tables(system)
+    before = snapshot(system)
+    run_team_stage(system, team_wrapper, blk)
+    expected = snapshot(system)
+    restore(system, before)
+    run_block_stage(system, block_wrapper, blk, bs)
+    try:
+        assert_same_rows(system, blk, expected, fields)
+    finally:
+        restore(system, before)
+
+
+def stage_timing(system, team_wrapper, block_wrapper, repeats: int = 20) -> tuple[float, float]:
+    """(per-team, block) ns per particle of one stage call over every block team (min of
+    ``repeats``; the block figure excludes gather/scatter). The state is left as it was."""
+    import time
+
+    blk, bs = block_tables(system)
+    before = snapshot(system)
+    m, ps, prm, ts, cs, tt, _h = system.kernel_tables()
+    kb, kbs = as_kernel_table(blk), as_kernel_table(bs)
+    _gather_all(m, ps, ts, cs, tt, kb, kbs)
+    teams = blk.lane_team.copy()
+    blocks = np.arange(len(blk.block_width), dtype=np.int32)
+    n = int(system.model.team_particle_count[teams].sum())
+    out = []
+    for fn, args in ((team_wrapper, (m, ps, prm, ts, cs, tt, teams)),
+                     (block_wrapper, (m, ps, prm, ts, cs, tt, kb, kbs, blocks))):
+        fn(*args)
+        best = 1e9
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            fn(*args)
+            best = min(best, time.perf_counter() - t0)
+        out.append(best * 1e9 / n)
+    restore(system, before)
+    return out[0], out[1]

@@ -55,6 +55,42 @@ def gather_block(m, ps, blk, bs, b):
 
 
 @kernel
+def gather_block_full(m, ps, blk, bs, b):
+    """Every particle field of ``PARTICLE_BLOCK_FIELDS`` (the stage tests start a block stage
+    from a mid-step state: next_pos, velocity_pos, step basic pose, scratch)."""
+    gather_block(m, ps, blk, bs, b)
+    width = blk.block_width[b]
+    base = blk.block_row_base[b]
+    lanes = blk.block_lane_base[b]
+    count = blk.block_particle_count[b]
+    for i in range(width):
+        start = m.team_particle_start[blk.lane_team[lanes + i]]
+        for p in range(count):
+            r = start + p
+            k = base + p * width + i
+            _in(bs.next_pos, ps.next_pos, k, r, 3)
+            _in(bs.velocity_pos, ps.velocity_pos, k, r, 3)
+            _in(bs.real_velocity, ps.real_velocity, k, r, 3)
+            _in(bs.base_pos, ps.base_pos, k, r, 3)
+            _in(bs.base_rot, ps.base_rot, k, r, 4)
+            _in(bs.step_basic_pos, ps.step_basic_pos, k, r, 3)
+            _in(bs.step_basic_rot, ps.step_basic_rot, k, r, 4)
+            bs.angle_length[k] = ps.angle_length[r]
+            _in(bs.angle_local_pos, ps.angle_local_pos, k, r, 3)
+            _in(bs.angle_local_rot, ps.angle_local_rot, k, r, 4)
+            _in(bs.angle_rest_vector, ps.angle_rest_vector, k, r, 3)
+            bs.angle_inverse_mass[k] = ps.angle_inverse_mass[r]
+            bs.angle_rest_length[k] = ps.angle_rest_length[r]
+            _in(bs.angle_rest_direction, ps.angle_rest_direction, k, r, 3)
+            _in(bs.angle_rotation, ps.angle_rotation, k, r, 4)
+            _in(bs.accum_vector, ps.accum_vector, k, r, 3)
+            bs.accum_count[k] = ps.accum_count[r]
+            bs.bend_inverse_mass[k] = ps.bend_inverse_mass[r]
+            bs.accum_friction[k] = ps.accum_friction[r]
+            _in(bs.accum_normal, ps.accum_normal, k, r, 3)
+
+
+@kernel
 def scatter_block(m, ps, blk, bs, b):
     width = blk.block_width[b]
     base = blk.block_row_base[b]
