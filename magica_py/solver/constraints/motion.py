@@ -1,12 +1,17 @@
 """Motion constraint (ref §D.9): max distance from the animated pose and a backstop sphere
 behind it. The reference is always the animated ``base_pos``; distances are not scaled and the
-curves are evaluated at depth^2."""
+curves are evaluated at depth^2.
+
+``motion_team`` runs one team; ``motion_block`` runs every lane of a block
+(``solver/batched``) with the same per-element function ``solve_motion``, so both give the
+same bits."""
 from __future__ import annotations
 
+import numpy as np
+
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import (
-    clamp_length, load3, load4, q_rotate, store3, v_add, v_length, v_lerp, v_scale, v_sub,
-)
+from magica_py.kernels.math3d import load3, load4, q_rotate, store3, v_add, v_length, v_lerp, v_scale, v_sub
+from magica_py.solver.batched.transfer import bload3, bload4, bstore3
 from magica_py.solver.parameters import curve_at
 
 MOVE = 0x02
@@ -30,23 +35,35 @@ def normal_axis_vector(axis):
 
 
 @kernel
+def clamp_length_selected(v, max_length):
+    """``math3d.clamp_length`` (``clamp_len`` of §0.2) with the same bits, branch-free: the
+    shortened vector is computed either way and selected, so a lane loop over it vectorises."""
+    n = v_length(v)
+    shortened = v_scale(v, max_length / n)
+    return shortened if (n > 1e-9) & (n > max_length) else v
+
+
+@kernel
 def solve_motion(x, base_pos, direction, max_distance, use_max, use_backstop,
                  backstop_distance, backstop_radius, particle_radius, stiffness):
-    """Return the constrained position of x (before the stiffness blend is applied by the caller)."""
+    """The constrained position of x blended by ``stiffness``: clamped to ``max_distance`` of
+    the animated position (``use_max``), then pushed out of the backstop sphere behind it
+    (``use_backstop``). Branch-free (every side computed, then selected)."""
     o = x
-    if use_max:
-        x = v_add(base_pos, clamp_length(v_sub(x, base_pos), max_distance))
-    if use_backstop and backstop_radius > 0.0:
-        c = v_sub(base_pos, v_scale(direction, backstop_distance + backstop_radius))
-        v = v_sub(x, c)
-        length = v_length(v)
-        if length > 1e-8 and length < backstop_radius + particle_radius and length < backstop_radius:
-            x = v_add(c, v_scale(v, backstop_radius / length))
+    clamped = v_add(base_pos, clamp_length_selected(v_sub(x, base_pos), max_distance))
+    x = clamped if use_max else x
+    c = v_sub(base_pos, v_scale(direction, backstop_distance + backstop_radius))
+    v = v_sub(x, c)
+    length = v_length(v)
+    pushed = v_add(c, v_scale(v, backstop_radius / length))
+    inside = ((length > 1e-8) & (length < backstop_radius + particle_radius) & (length < backstop_radius))
+    x = pushed if (use_backstop & (backstop_radius > 0.0) & inside) else x
     return v_lerp(o, x, stiffness)
 
 
 @kernel
 def motion_team(m, ps, prm, team, attenuation):
+    """D.9 over one team's moving particles (skipped when the team uses neither limit)."""
     use_max = prm.use_max_distance[team] != 0
     use_backstop = prm.use_backstop[team] != 0
     if not use_max and not use_backstop:
@@ -67,3 +84,39 @@ def motion_team(m, ps, prm, team, attenuation):
                          r, prm.motion_stiffness[team])
         store3(ps.next_pos, p, x)
         store3(ps.velocity_pos, p, v_add(load3(ps.velocity_pos, p), v_scale(v_sub(x, o), attenuation)))
+
+
+@kernel
+def motion_block(m, bs, prm, blk, b, attenuation):
+    """D.9 for every lane of block b: ``motion_team``'s maths, lanes innermost (the curves
+    are read per particle, outside the lane loop)."""
+    ex = blk.block_exemplar[b]
+    use_max = prm.use_max_distance[ex] != 0
+    use_backstop = prm.use_backstop[ex] != 0
+    if not use_max and not use_backstop:
+        return
+    axis = normal_axis_vector(prm.normal_axis[ex])
+    width = blk.block_width[b]
+    row_base = blk.block_row_base[b]
+    p0 = m.team_particle_start[ex]
+    backstop_radius = prm.backstop_radius[ex]
+    stiffness = prm.motion_stiffness[ex]
+    next_pos_a, velocity_pos_a, base_pos_a, base_rot_a = bs.next_pos, bs.velocity_pos, bs.base_pos, bs.base_rot
+    for p in range(blk.block_particle_count[b]):
+        attr = m.attribute[p0 + p]
+        if (attr & MOVE) == 0 or (attr & INVALID_MOTION) != 0:
+            continue
+        depth = m.depth[p0 + p]
+        d2 = depth * depth
+        r = max(curve_at(prm.radius_curve, ex, depth), 1e-4)
+        max_distance = curve_at(prm.max_distance_curve, ex, d2)
+        backstop_distance = curve_at(prm.backstop_distance_curve, ex, d2)
+        k0 = np.uint64(row_base + p * width)
+        for i in range(width):
+            k = k0 + np.uint64(i)
+            direction = q_rotate(bload4(base_rot_a, k), axis)
+            o = bload3(next_pos_a, k)
+            x = solve_motion(o, bload3(base_pos_a, k), direction, max_distance, use_max, use_backstop,
+                             backstop_distance, backstop_radius, r, stiffness)
+            bstore3(next_pos_a, k, x)
+            bstore3(velocity_pos_a, k, v_add(bload3(velocity_pos_a, k), v_scale(v_sub(x, o), attenuation)))

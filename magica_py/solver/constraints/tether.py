@@ -1,9 +1,16 @@
 """Tether (ref §D.3): keep each moving particle between (1 - compression) and 1.03 times its
-rest distance to its root. Only the particle moves; the root is infinitely heavy."""
+rest distance to its root. Only the particle moves; the root is infinitely heavy.
+
+``tether_team`` runs one team; ``tether_block`` runs every lane of a block
+(``solver/batched``) with the same per-element function ``solve_tether``, so both give the
+same bits."""
 from __future__ import annotations
+
+import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, saturate, store3, v_add, v_length, v_scale, v_sub
+from magica_py.solver.batched.transfer import bload3, bstore3
 
 MOVE = 0x02
 STRETCH_LIMIT = 0.03          # TetherStretchLimit
@@ -11,26 +18,29 @@ STIFFNESS_WIDTH = 0.3         # TetherStiffnessWidth
 COMPRESSION_STIFFNESS = 1.0   # TetherCompressionStiffness
 STRETCH_STIFFNESS = 1.0       # TetherStretchStiffness
 VELOCITY_ATTENUATION = 0.7    # Tether{Compression,Stretch}VelocityAttenuation
+ZERO3 = (0.0, 0.0, 0.0)
 
 
 @kernel
 def solve_tether(position, root_position, rest_length, compression_limit):
-    """Correction of ``position`` towards the allowed band around ``rest_length`` (zero if inside)."""
+    """Correction of ``position`` towards the allowed band around ``rest_length``: zero inside
+    the band, when the particle sits on its root (< 1e-8) or when the rest length is zero.
+    Branch-free (both sides computed, then selected) so that a lane loop over it vectorises."""
     v = v_sub(root_position, position)
     length = v_length(v)
-    if length < 1e-8 or rest_length == 0.0:
-        return (0.0, 0.0, 0.0)
     ratio = length / rest_length
     stretch_limit = 1.0 + STRETCH_LIMIT
-    if ratio < compression_limit:
-        d = length - compression_limit * rest_length
-        k = saturate((compression_limit - ratio) / STIFFNESS_WIDTH) * COMPRESSION_STIFFNESS
-    elif ratio > stretch_limit:
-        d = length - stretch_limit * rest_length
-        k = saturate((ratio - stretch_limit) / STIFFNESS_WIDTH) * STRETCH_STIFFNESS
-    else:
-        return (0.0, 0.0, 0.0)
-    return v_scale(v, d * k / length)
+    compressed = ratio < compression_limit
+    stretched = ratio > stretch_limit
+    d_compression = length - compression_limit * rest_length
+    k_compression = saturate((compression_limit - ratio) / STIFFNESS_WIDTH) * COMPRESSION_STIFFNESS
+    d_stretch = length - stretch_limit * rest_length
+    k_stretch = saturate((ratio - stretch_limit) / STIFFNESS_WIDTH) * STRETCH_STIFFNESS
+    d = d_compression if compressed else d_stretch
+    k = k_compression if compressed else k_stretch
+    corr = v_scale(v, d * k / length)
+    active = (compressed | stretched) & (length >= 1e-8) & (rest_length != 0.0)
+    return corr if active else ZERO3
 
 
 @kernel
@@ -48,3 +58,31 @@ def tether_team(m, ps, prm, team, attenuation):
         delta = solve_tether(load3(ps.next_pos, p), load3(ps.next_pos, r), rest, compression_limit)
         store3(ps.next_pos, p, v_add(load3(ps.next_pos, p), delta))
         store3(ps.velocity_pos, p, v_add(load3(ps.velocity_pos, p), v_scale(delta, attenuation)))
+
+
+@kernel
+def tether_block(m, bs, prm, blk, b, attenuation):
+    """D.3 for every lane of block b: ``tether_team``'s maths, lanes innermost (the root of
+    each particle is topology, the same in every lane)."""
+    ex = blk.block_exemplar[b]
+    width = blk.block_width[b]
+    row_base = blk.block_row_base[b]
+    p0 = m.team_particle_start[ex]
+    compression_limit = 1.0 - prm.tether_compression[ex]
+    next_pos_a, velocity_pos_a, step_basic_pos_a = bs.next_pos, bs.velocity_pos, bs.step_basic_pos
+    for p in range(blk.block_particle_count[b]):
+        if (m.attribute[p0 + p] & MOVE) == 0:
+            continue
+        r = m.root_index[p0 + p]
+        if r < 0:
+            continue
+        k0 = np.uint64(row_base + p * width)
+        r0 = np.uint64(row_base + (r - p0) * width)
+        for i in range(width):
+            k = k0 + np.uint64(i)
+            kr = r0 + np.uint64(i)
+            rest = v_length(v_sub(bload3(step_basic_pos_a, k), bload3(step_basic_pos_a, kr)))
+            position = bload3(next_pos_a, k)
+            delta = solve_tether(position, bload3(next_pos_a, kr), rest, compression_limit)
+            bstore3(next_pos_a, k, v_add(position, delta))
+            bstore3(velocity_pos_a, k, v_add(bload3(velocity_pos_a, k), v_scale(delta, attenuation)))
