@@ -9,11 +9,16 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     clamp_length, lerp, load3, load4, q_angle, q_from_to, q_inverse, q_mul, q_normal_axis,
     q_rotate, q_slerp, q_tangent_axis, rot_from_normal_tangent, saturate, shift_position,
     store3, store4, unlerp, v_add, v_length, v_lerp, v_normalize, v_scale, v_sub,
+)
+from magica_py.solver.rotations import (
+    flat, load_input, load_input3, load_input4, normalize_or_zero, rot_from_normal_tangent_select, store_output3, store_output4,
 )
 
 MOVE = 0x02
@@ -23,28 +28,53 @@ TELEPORT_KEEP = 2
 
 
 @kernel
-def _transform_point(l2w, i, bind, p, v, w):
-    """(l2w[i] @ bind[p]) @ (v, w) without forming the product matrix."""
-    x = bind[p, 0, 0] * v[0] + bind[p, 0, 1] * v[1] + bind[p, 0, 2] * v[2] + bind[p, 0, 3] * w
-    y = bind[p, 1, 0] * v[0] + bind[p, 1, 1] * v[1] + bind[p, 1, 2] * v[2] + bind[p, 1, 3] * w
-    z = bind[p, 2, 0] * v[0] + bind[p, 2, 1] * v[1] + bind[p, 2, 2] * v[2] + bind[p, 2, 3] * w
-    h = bind[p, 3, 0] * v[0] + bind[p, 3, 1] * v[1] + bind[p, 3, 2] * v[2] + bind[p, 3, 3] * w
-    return (l2w[i, 0, 0] * x + l2w[i, 0, 1] * y + l2w[i, 0, 2] * z + l2w[i, 0, 3] * h,
-            l2w[i, 1, 0] * x + l2w[i, 1, 1] * y + l2w[i, 1, 2] * z + l2w[i, 1, 3] * h,
-            l2w[i, 2, 0] * x + l2w[i, 2, 1] * y + l2w[i, 2, 2] * z + l2w[i, 2, 3] * h)
+def transform_point_rows(l0, l1, l2, b0, b1, b2, b3, v, w):
+    """``(L @ B) @ (v, w)`` without forming the product: ``B`` (rows b0..b3) first, then the
+    first three rows l0..l2 of ``L`` (4-tuples)."""
+    x = b0[0] * v[0] + b0[1] * v[1] + b0[2] * v[2] + b0[3] * w
+    y = b1[0] * v[0] + b1[1] * v[1] + b1[2] * v[2] + b1[3] * w
+    z = b2[0] * v[0] + b2[1] * v[1] + b2[2] * v[2] + b2[3] * w
+    h = b3[0] * v[0] + b3[1] * v[1] + b3[2] * v[2] + b3[3] * w
+    return (l0[0] * x + l0[1] * y + l0[2] * z + l0[3] * h,
+            l1[0] * x + l1[1] * y + l1[2] * z + l1[3] * h,
+            l2[0] * x + l2[1] * y + l2[2] * z + l2[3] * h)
+
+
+@kernel
+def skin_vertex(l0, l1, l2, b0, b1, b2, b3, local_position, local_normal, local_tangent):
+    """C.1 for one vertex: world (position, rotation) from its bone's local-to-world rows
+    l0..l2 and its bind pose rows b0..b3. Branch-free (a loop over vertices vectorises)."""
+    pos = transform_point_rows(l0, l1, l2, b0, b1, b2, b3, local_position, 1.0)
+    nor = normalize_or_zero(transform_point_rows(l0, l1, l2, b0, b1, b2, b3, local_normal, 0.0))
+    tan = normalize_or_zero(transform_point_rows(l0, l1, l2, b0, b1, b2, b3, local_tangent, 0.0))
+    return pos, rot_from_normal_tangent_select(nor, tan)
 
 
 @kernel
 def skin_team(m, ps, local_to_world, team):
-    """C.1: one-bone skinning of every vertex with this frame's bone matrices."""
-    start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        i = m.transform_index[p]
-        pos = _transform_point(local_to_world, i, m.skin_bind_pose, p, load3(m.local_position, p), 1.0)
-        nor = v_normalize(_transform_point(local_to_world, i, m.skin_bind_pose, p, load3(m.local_normal, p), 0.0))
-        tan = v_normalize(_transform_point(local_to_world, i, m.skin_bind_pose, p, load3(m.local_tangent, p), 0.0))
-        store3(ps.position, p, pos)
-        store4(ps.rotation, p, rot_from_normal_tangent(nor, tan))
+    """C.1: one-bone skinning of every vertex with this frame's bone matrices.
+
+    Vectorised over the team's vertices (``rotations.load_input``: the loop only reads the
+    model and the bone matrices and only writes position and rotation)."""
+    l2w = flat(local_to_world)          # (nodes * 16,) bone matrices, gathered per vertex
+    bind = flat(m.skin_bind_pose)       # (N * 16,)
+    node_of = m.transform_index
+    local_position, local_normal, local_tangent = flat(m.local_position), flat(m.local_normal), flat(m.local_tangent)
+    position, rotation = flat(ps.position), flat(ps.rotation)
+    start = np.uint64(m.team_particle_start[team])
+    for j in range(m.team_particle_count[team]):
+        p = start + np.uint64(j)
+        node = np.uint64(16) * np.uint64(load_input(node_of, p, "skin"))
+        b = np.uint64(16) * p
+        v = np.uint64(3) * p
+        pos, rot = skin_vertex(load_input4(l2w, node, "skin"), load_input4(l2w, node + np.uint64(4), "skin"),
+                               load_input4(l2w, node + np.uint64(8), "skin"),
+                               load_input4(bind, b, "skin"), load_input4(bind, b + np.uint64(4), "skin"),
+                               load_input4(bind, b + np.uint64(8), "skin"), load_input4(bind, b + np.uint64(12), "skin"),
+                               load_input3(local_position, v, "skin"), load_input3(local_normal, v, "skin"),
+                               load_input3(local_tangent, v, "skin"))
+        store_output3(position, v, pos, "skin")
+        store_output4(rotation, np.uint64(4) * p, rot, "skin")
 
 
 SMOOTHING_REFERENCE_RATE = 90.0   # 1/s: the frame rate at which the C.4 ratio is taken as is

@@ -8,9 +8,14 @@ vertices with the frame of their adjacent triangles' normals and tangents.
 """
 from __future__ import annotations
 
-from magica_py.jit import kernel
 import math
 
+import numpy as np
+from llvmlite import ir
+from numba.core import types
+from numba.extending import intrinsic
+
+from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     from_to_rotation, from_to_rotation_unit, load3, load4, q_inverse, q_look_rotation, q_mul,
     q_rotate, q_slerp, store3, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp,
@@ -21,6 +26,180 @@ FIXED = 0x01
 MOVE = 0x02
 ZERO_DISTANCE = 0x20
 INCLUDE_LINE = 0x01
+
+
+# ----------------------------------------------------------------------------- vectorised loops
+# The per-frame stages loop over a team's particles with no dependency between them; LLVM
+# vectorises such a loop only if it can prove (or check at run time) that its stores do not
+# overwrite what it reads. An affine row access (``flat[3 p + c]``) can be checked; a gather
+# through an index array (``local_to_world[transform_index[p]]``) cannot ("cannot identify
+# array bounds"), and one such access makes every access of its alias set unanalysable. A loop
+# whose loads all go through ``load_input(a, i, scope)`` and whose stores all go through
+# ``store_output(a, i, v, scope)`` tells LLVM (scoped alias metadata) that, for that scope,
+# no store ever writes memory that a load reads. Use it only when that is true for *every*
+# execution of the scope in a compiled function: a loop that reads back what it writes
+# (in-place update) must not use these. Values and arithmetic are unchanged (bits identical).
+def _scope_list(module, name):
+    domain = module.add_metadata([ir.MetaDataString(module, "magica_py.frame_stage")])
+    scope = module.add_metadata([ir.MetaDataString(module, "magica_py.frame_stage." + name), domain])
+    return module.add_metadata([scope])
+
+
+def _flat_pointer(context, builder, array_type, array, index_type, index):
+    data = context.make_array(array_type)(context, builder, array).data
+    i = context.cast(builder, index, index_type, types.uint64)
+    return builder.gep(data, [i], inbounds=True)
+
+
+@intrinsic
+def load_input(typingctx, array, index, scope):
+    """``array[index]`` (1-D C array, unsigned index) read as an input of loop ``scope``."""
+    if not (isinstance(array, types.Array) and array.ndim == 1 and isinstance(index, types.Integer)
+            and isinstance(scope, types.StringLiteral)):
+        return None
+    name = scope.literal_value
+
+    def codegen(context, builder, sig, args):
+        value = builder.load(_flat_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1]))
+        value.set_metadata("alias.scope", _scope_list(builder.module, name))
+        return value
+
+    return array.dtype(array, index, scope), codegen
+
+
+def _row_intrinsic(n):
+    def typer(typingctx, array, index, scope):
+        if not (isinstance(array, types.Array) and array.ndim == 1 and isinstance(index, types.Integer)
+                and isinstance(scope, types.StringLiteral)):
+            return None
+        name = scope.literal_value
+        row_type = types.UniTuple(array.dtype, n)
+
+        def codegen(context, builder, sig, args):
+            data = context.make_array(sig.args[0])(context, builder, args[0]).data
+            base = context.cast(builder, args[1], sig.args[1], types.uint64)
+            values = []
+            for c in range(n):
+                i = builder.add(base, ir.Constant(base.type, c))
+                value = builder.load(builder.gep(data, [i], inbounds=True))
+                value.set_metadata("alias.scope", _scope_list(builder.module, name))
+                values.append(value)
+            return context.make_tuple(builder, row_type, values)
+
+        return row_type(array, index, scope), codegen
+
+    typer.__name__ = f"load_input{n}"
+    typer.__doc__ = f"``array[index : index + {n}]`` as a tuple, read as inputs of loop ``scope``."
+    return intrinsic(typer)
+
+
+load_input3 = _row_intrinsic(3)
+load_input4 = _row_intrinsic(4)
+
+
+@intrinsic
+def store_output(typingctx, array, index, value, scope):
+    """``array[index] = value`` (1-D C array, unsigned index) as an output of loop ``scope``."""
+    if not (isinstance(array, types.Array) and array.ndim == 1 and isinstance(index, types.Integer)
+            and isinstance(scope, types.StringLiteral)):
+        return None
+    name = scope.literal_value
+
+    def codegen(context, builder, sig, args):
+        v = context.cast(builder, args[2], sig.args[2], sig.args[0].dtype)
+        store = builder.store(v, _flat_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1]))
+        store.set_metadata("noalias", _scope_list(builder.module, name))
+        return context.get_dummy_value()
+
+    return types.none(array, index, value, scope), codegen
+
+
+def _row_store_intrinsic(n):
+    def typer(typingctx, array, index, row, scope):
+        if not (isinstance(array, types.Array) and array.ndim == 1 and isinstance(index, types.Integer)
+                and isinstance(row, types.BaseTuple) and len(row) == n and isinstance(scope, types.StringLiteral)):
+            return None
+        name = scope.literal_value
+
+        def codegen(context, builder, sig, args):
+            data = context.make_array(sig.args[0])(context, builder, args[0]).data
+            base = context.cast(builder, args[1], sig.args[1], types.uint64)
+            for c in range(n):
+                value = context.cast(builder, builder.extract_value(args[2], c), sig.args[2][c], sig.args[0].dtype)
+                i = builder.add(base, ir.Constant(base.type, c))
+                store = builder.store(value, builder.gep(data, [i], inbounds=True))
+                store.set_metadata("noalias", _scope_list(builder.module, name))
+            return context.get_dummy_value()
+
+        return types.none(array, index, row, scope), codegen
+
+    typer.__name__ = f"store_output{n}"
+    typer.__doc__ = f"``array[index : index + {n}] = row`` as outputs of loop ``scope``."
+    return intrinsic(typer)
+
+
+store_output3 = _row_store_intrinsic(3)
+store_output4 = _row_store_intrinsic(4)
+
+
+@kernel
+def flat(a):
+    """A C-contiguous array as 1-D (a view): row p of an (n, k) array is ``[k p, k p + k)``
+    with k a compile-time constant, so LLVM sees the rows of a loop as strided accesses."""
+    return a.reshape(a.size)
+
+
+# branch-free twins of math3d helpers (both sides computed, then selected: same bits)
+@kernel
+def normalize_or_zero(a):
+    """``v_normalize`` without a branch."""
+    n = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    inv = 1.0 / n
+    small = n < 1e-12
+    return (0.0 if small else a[0] * inv, 0.0 if small else a[1] * inv, 0.0 if small else a[2] * inv)
+
+
+@kernel
+def q_normalize_or_identity(q):
+    """``q_normalize`` without a branch."""
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    inv = 1.0 / n
+    small = n < 1e-12
+    return (0.0 if small else q[0] * inv, 0.0 if small else q[1] * inv,
+            0.0 if small else q[2] * inv, 1.0 if small else q[3] * inv)
+
+
+@kernel
+def q_from_matrix_select(m00, m01, m02, m10, m11, m12, m20, m21, m22):
+    """``q_from_matrix`` with its four cases computed and selected."""
+    t_plus = m11 + m22
+    t_minus = m11 - m22
+    qa = (m21 - m12, m02 - m20, m10 - m01, 1.0 + m00 + t_plus)
+    qb = (1.0 + m00 - t_plus, m01 + m10, m02 + m20, m21 - m12)
+    qc = (m01 + m10, 1.0 - m00 + t_minus, m12 + m21, m02 - m20)
+    qd = (m02 + m20, m12 + m21, 1.0 - m00 - t_minus, m10 - m01)
+    pos00 = math.copysign(1.0, m00) >= 0.0
+    first = math.copysign(1.0, t_plus) >= 0.0
+    second = math.copysign(1.0, t_minus) >= 0.0
+    q = (qa[0] if first else qb[0], qa[1] if first else qb[1], qa[2] if first else qb[2], qa[3] if first else qb[3])
+    r = (qc[0] if second else qd[0], qc[1] if second else qd[1], qc[2] if second else qd[2], qc[3] if second else qd[3])
+    q = (q[0] if pos00 else r[0], q[1] if pos00 else r[1], q[2] if pos00 else r[2], q[3] if pos00 else r[3])
+    return q_normalize_or_identity(q)
+
+
+@kernel
+def look_rotation_select(forward, up):
+    """``q_look_rotation`` (+Z = forward, +Y towards up, both unit) without branches."""
+    x_axis = normalize_or_zero(v_cross(up, forward))
+    y_axis = v_cross(forward, x_axis)
+    return q_from_matrix_select(x_axis[0], y_axis[0], forward[0], x_axis[1], y_axis[1], forward[1],
+                                x_axis[2], y_axis[2], forward[2])
+
+
+@kernel
+def rot_from_normal_tangent_select(normal, tangent):
+    """``rot_from_normal_tangent`` (ref §0.2 rot_from) without branches."""
+    return look_rotation_select(tangent, normal)
 
 
 @kernel
