@@ -18,7 +18,8 @@ from magica_py.kernels.math3d import (
     store3, store4, unlerp, v_add, v_length, v_lerp, v_normalize, v_scale, v_sub,
 )
 from magica_py.solver.rotations import (
-    flat, load_input, load_input3, load_input4, normalize_or_zero, rot_from_normal_tangent_select, store_output3, store_output4,
+    flat, load_input, load_input3, load_input4, normalize_or_zero, rot_from_normal_tangent_select, row3, row4,
+    set_row3, set_row4, store_output3, store_output4,
 )
 
 MOVE = 0x02
@@ -355,6 +356,15 @@ def snap_particles_to_base_pose(ps, start, end):
 
 
 @kernel
+def shift_particle(old_pos, old_position, disp_pos, old_rotation, velocity, real_velocity, pivot, vec, rot):
+    """C.5 inertia shift of one particle's history: positions moved rigidly about the pivot,
+    rotation and velocities turned (no branch: a loop over particles vectorises)."""
+    return (shift_position(old_pos, pivot, vec, rot), shift_position(old_position, pivot, vec, rot),
+            shift_position(disp_pos, pivot, vec, rot), q_mul(rot, old_rotation), q_rotate(rot, velocity),
+            q_rotate(rot, real_velocity))
+
+
+@kernel
 def reset_or_shift_team(m, ps, ts, team):
     """C.5: snap the particles to the base pose (Reset) or shift their history rigidly."""
     start = m.team_particle_start[team]
@@ -365,13 +375,24 @@ def reset_or_shift_team(m, ps, ts, team):
         pivot = load3(ts.old_component_pos, team)
         vec = load3(ts.frame_shift_vector, team)
         rot = load4(ts.frame_shift_rotation, team)
-        for p in range(start, end):
-            store3(ps.old_pos, p, shift_position(load3(ps.old_pos, p), pivot, vec, rot))
-            store3(ps.old_position, p, shift_position(load3(ps.old_position, p), pivot, vec, rot))
-            store3(ps.disp_pos, p, shift_position(load3(ps.disp_pos, p), pivot, vec, rot))
-            store4(ps.old_rotation, p, q_mul(rot, load4(ps.old_rotation, p)))
-            store3(ps.velocity, p, q_rotate(rot, load3(ps.velocity, p)))
-            store3(ps.real_velocity, p, q_rotate(rot, load3(ps.real_velocity, p)))
+        # flat rows and unsigned indices: the loop vectorises (in-place updates of distinct
+        # arrays, which LLVM checks for overlap at run time)
+        old_pos, old_position, disp_pos = flat(ps.old_pos), flat(ps.old_position), flat(ps.disp_pos)
+        old_rotation, velocity, real_velocity = flat(ps.old_rotation), flat(ps.velocity), flat(ps.real_velocity)
+        first = np.uint64(start)
+        for j in range(end - start):
+            p = first + np.uint64(j)
+            v = np.uint64(3) * p
+            q = np.uint64(4) * p
+            a, b, c, r, u, w = shift_particle(row3(old_pos, v), row3(old_position, v), row3(disp_pos, v),
+                                              row4(old_rotation, q), row3(velocity, v), row3(real_velocity, v),
+                                              pivot, vec, rot)
+            set_row3(old_pos, v, a)
+            set_row3(old_position, v, b)
+            set_row3(disp_pos, v, c)
+            set_row4(old_rotation, q, r)
+            set_row3(velocity, v, u)
+            set_row3(real_velocity, v, w)
 
 
 @kernel

@@ -149,6 +149,32 @@ def flat(a):
     return a.reshape(a.size)
 
 
+@kernel
+def row3(a, i):
+    """``a[i : i + 3]`` of a flat view as a tuple (unsigned i: no wraparound select)."""
+    return (a[i], a[i + np.uint64(1)], a[i + np.uint64(2)])
+
+
+@kernel
+def row4(a, i):
+    return (a[i], a[i + np.uint64(1)], a[i + np.uint64(2)], a[i + np.uint64(3)])
+
+
+@kernel
+def set_row3(a, i, v):
+    a[i] = v[0]
+    a[i + np.uint64(1)] = v[1]
+    a[i + np.uint64(2)] = v[2]
+
+
+@kernel
+def set_row4(a, i, q):
+    a[i] = q[0]
+    a[i + np.uint64(1)] = q[1]
+    a[i + np.uint64(2)] = q[2]
+    a[i + np.uint64(3)] = q[3]
+
+
 # branch-free twins of math3d helpers (both sides computed, then selected: same bits)
 @kernel
 def normalize_or_zero(a):
