@@ -16,7 +16,7 @@ A wrapper is an ``@njit`` function ``(m, ps, prm, ts, cs, tt, teams)`` for the p
 block stage; the harness gathers before and scatters after the block wrapper, with the
 per-step lane values loaded (``transfer.load_lanes``). The gather is the *full* one (every
 field of the block state, scratch included), so a stage can start from a mid-step state.
-Only the fields ``scatter_block`` writes back are compared by ``assert_same_rows``; compare
+Only the fields ``scatter_block_full`` writes back are compared by ``assert_same_rows``; compare
 others with ``block_rows``.
 """
 from __future__ import annotations
@@ -28,7 +28,7 @@ import numpy as np
 
 from magica_py.solver.batch_tables import borrow
 from magica_py.solver.batched.blocks import form_blocks
-from magica_py.solver.batched.transfer import gather_block_full, load_lanes, scatter_block
+from magica_py.solver.batched.transfer import gather_block_full, load_lanes, scatter_block_full
 from magica_py.solver.frame import as_kernel_table
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -77,7 +77,7 @@ def _gather_all(m, ps, ts, cs, tt, blk, bs):
 def _scatter_all(m, ps, blk, bs):
     m, ps, blk, bs = borrow(m), borrow(ps), borrow(blk), borrow(bs)
     for b in range(blk.block_width.shape[0]):
-        scatter_block(m, ps, blk, bs, b)
+        scatter_block_full(m, ps, blk, bs, b)
 
 
 def block_tables(system):

@@ -44,24 +44,25 @@ BLOCK_FIELDS = [
 ]
 BlockTable = make_soa("BlockTable", BLOCK_FIELDS)
 
-# (name, components (0: scalar), dtype, gathered at frame start, scattered at frame end)
+# (name, components (0: scalar), dtype, gathered at frame start, scattered at frame end);
+# next_pos, velocity_pos, base and step basic pose are step-internal (D.1 rewrites them)
 PARTICLE_BLOCK_FIELDS = [
     ("position", 3, F64, True, False),
     ("rotation", 4, F64, True, False),
     ("old_position", 3, F64, True, False),
     ("old_rotation", 4, F64, True, False),
-    ("next_pos", 3, F64, False, True),
+    ("next_pos", 3, F64, False, False),
     ("old_pos", 3, F64, True, True),
-    ("velocity_pos", 3, F64, False, True),
+    ("velocity_pos", 3, F64, False, False),
     ("velocity", 3, F64, True, True),
     ("real_velocity", 3, F64, False, True),
-    ("base_pos", 3, F64, False, True),
-    ("base_rot", 4, F64, False, True),
+    ("base_pos", 3, F64, False, False),
+    ("base_rot", 4, F64, False, False),
     ("friction", 0, F64, True, True),
     ("static_friction", 0, F64, True, True),
     ("collision_normal", 3, F64, True, True),
-    ("step_basic_pos", 3, F64, False, True),
-    ("step_basic_rot", 4, F64, False, True),
+    ("step_basic_pos", 3, F64, False, False),
+    ("step_basic_rot", 4, F64, False, False),
     # stage scratch (each stage leaves it as it found it, as in ParticleState)
     ("angle_length", 0, F64, False, False),
     ("angle_local_pos", 3, F64, False, False),

@@ -3,7 +3,8 @@ and a block's lane-innermost arrays (``BlockState``).
 
 * ``gather_block``: at the start of a frame's steps, the particle fields the steps read
   (``state.PARTICLE_BLOCK_FIELDS`` marked *gathered*) from each lane's team rows;
-* ``scatter_block``: after the steps, the fields the steps wrote (marked *scattered*) back;
+* ``scatter_block``: after the steps, the state the rest of the frame reads back (the
+  step-internal fields stay in the block; ``scatter_block_full`` copies those too, for tests);
 * ``load_lanes``: at each step, after the per-team C.3 / G.3, the team and collider values
   of this step into the ``lane_*`` / ``col_*`` arrays.
 
@@ -91,7 +92,8 @@ def gather_block_full(m, ps, blk, bs, b):
 
 
 @kernel
-def scatter_block(m, ps, blk, bs, b):
+def scatter_block_full(m, ps, blk, bs, b):
+    """Every field the steps write, step-internal ones included (the stage tests compare them)."""
     width = blk.block_width[b]
     base = blk.block_row_base[b]
     lanes = blk.block_lane_base[b]
@@ -111,6 +113,29 @@ def scatter_block(m, ps, blk, bs, b):
             _out(ps.collision_normal, bs.collision_normal, r, k, 3)
             _out(ps.step_basic_pos, bs.step_basic_pos, r, k, 3)
             _out(ps.step_basic_rot, bs.step_basic_rot, r, k, 4)
+            ps.friction[r] = bs.friction[k]
+            ps.static_friction[r] = bs.static_friction[k]
+
+
+@kernel
+def scatter_block(m, ps, blk, bs, b):
+    """The state the steps leave for the rest of the frame and the next one: old_pos, velocity,
+    real_velocity, friction, static friction, collision normal. next_pos, velocity_pos,
+    base_pos/rot and the step basic pose are step-internal (each step's D.1 writes them all
+    before they are read) and stay in the block."""
+    width = blk.block_width[b]
+    base = blk.block_row_base[b]
+    lanes = blk.block_lane_base[b]
+    count = blk.block_particle_count[b]
+    for i in range(width):
+        start = m.team_particle_start[blk.lane_team[lanes + i]]
+        for p in range(count):
+            r = start + p
+            k = base + p * width + i
+            _out(ps.old_pos, bs.old_pos, r, k, 3)
+            _out(ps.velocity, bs.velocity, r, k, 3)
+            _out(ps.real_velocity, bs.real_velocity, r, k, 3)
+            _out(ps.collision_normal, bs.collision_normal, r, k, 3)
             ps.friction[r] = bs.friction[k]
             ps.static_friction[r] = bs.static_friction[k]
 
