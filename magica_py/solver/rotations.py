@@ -300,6 +300,43 @@ def line_rotations_team(m, ps, prm, ts, team):
             store4(ps.rotation, x, q if bw == 1.0 else q_slerp(bq, q, bw))
 
 
+TRIANGLES_PER_VERTEX = 6   # E.3's vectorised pass sums up to this many triangles per vertex
+
+
+@kernel
+def triangle_frame_from(p0, p1, p2, uv0, uv1, uv2):
+    """Normal and uv tangent of a triangle at the display positions p0..p2 with corner uvs
+    uv0..uv2 (normal 0 when degenerate). Branch-free (the per-triangle loop vectorises)."""
+    e1 = v_sub(p1, p0)
+    e2 = v_sub(p2, p0)
+    n = v_cross(e1, e2)
+    unit = normalize_or_zero(n)
+    flat_triangle = not (v_length_sq(n) > 1e-16)
+    normal = (0.0 if flat_triangle else unit[0], 0.0 if flat_triangle else unit[1], 0.0 if flat_triangle else unit[2])
+    du1 = uv1[0] - uv0[0]
+    dv1 = uv1[1] - uv0[1]
+    du2 = uv2[0] - uv0[0]
+    dv2 = uv2[1] - uv0[1]
+    area = du1 * dv2 - du2 * dv1
+    inv_area = 1.0 / area
+    r = inv_area if area != 0.0 else 1.0
+    # standard uv tangent, negated for Unity's left-handed convention (B.4)
+    tangent = v_scale(v_sub(v_scale(e1, dv2), v_scale(e2, dv1)), -r)
+    return normal, normalize_or_zero(tangent)
+
+
+@kernel
+def vertex_frame_rotation(ns, ts_):
+    """E.3's rotation of a vertex from its summed triangle normals ``ns`` and tangents ``ts_``:
+    (valid, rotation); not valid when a sum is (near) zero or the two are parallel."""
+    nn = normalize_or_zero(ns)
+    tn = normalize_or_zero(ts_)
+    d = v_dot(nn, tn)
+    binormal = normalize_or_zero(v_cross(nn, tn))
+    valid = (v_length(ns) > 1e-6) & (v_length(ts_) > 1e-6) & (abs(d) < 1.0 - 1e-9)
+    return valid, look_rotation_select(binormal, nn)
+
+
 @kernel
 def triangle_rotations_team(m, ps, team):
     """E.3: rotation of triangle vertices from their triangles' display normals and uv tangents.
@@ -307,54 +344,91 @@ def triangle_rotations_team(m, ps, team):
     Each triangle's frame is computed once (into ``ps.triangle_normal/tangent``) and then
     summed per vertex: a vertex of a strip mesh touches up to 6 triangles, so computing the
     frame per (vertex, triangle) pair did the same work ~3 times. Positions do not change in
-    E.3, so the frames and sums are bit-identical either way."""
+    E.3, so the frames and sums are bit-identical either way.
+
+    Both loops vectorise (``load_input``: each only reads what it does not write). The
+    per-vertex sums run over ``TRIANGLES_PER_VERTEX`` slots, the unused ones selected away
+    (same additions in the same order); a vertex with more triangles is left to a scalar pass."""
     t0 = m.team_triangle_start[team]
     tn_count = m.team_triangle_count[team]
     if tn_count == 0:
         return
-    for tri in range(t0, t0 + tn_count):
-        tn, tt = triangle_frame(m, ps, tri)
-        store3(ps.triangle_normal, tri, tn)
-        store3(ps.triangle_tangent, tri, tt)
+    triangles, triangle_uv = flat(m.triangles), flat(m.triangle_uv)
+    position = flat(ps.position)
+    triangle_normal, triangle_tangent = flat(ps.triangle_normal), flat(ps.triangle_tangent)
+    first_triangle = np.uint64(t0)
+    for j in range(tn_count):
+        tri = first_triangle + np.uint64(j)
+        corners = load_input3(triangles, np.uint64(3) * tri, "triangle_frame")
+        uv = np.uint64(6) * tri
+        tn, tt = triangle_frame_from(
+            load_input3(position, np.uint64(3) * np.uint64(corners[0]), "triangle_frame"),
+            load_input3(position, np.uint64(3) * np.uint64(corners[1]), "triangle_frame"),
+            load_input3(position, np.uint64(3) * np.uint64(corners[2]), "triangle_frame"),
+            (load_input(triangle_uv, uv, "triangle_frame"), load_input(triangle_uv, uv + np.uint64(1), "triangle_frame")),
+            (load_input(triangle_uv, uv + np.uint64(2), "triangle_frame"),
+             load_input(triangle_uv, uv + np.uint64(3), "triangle_frame")),
+            (load_input(triangle_uv, uv + np.uint64(4), "triangle_frame"),
+             load_input(triangle_uv, uv + np.uint64(5), "triangle_frame")))
+        store_output3(triangle_normal, np.uint64(3) * tri, tn, "triangle_frame")
+        store_output3(triangle_tangent, np.uint64(3) * tri, tt, "triangle_frame")
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        n = m.vertex_triangle_count[p]
-        if n == 0:
-            continue
+    count = m.team_particle_count[team]
+    vt_start, vt_count, vt_data, vt_flip = (m.vertex_triangle_start, m.vertex_triangle_count,
+                                            m.vertex_triangle_data, m.vertex_triangle_flip)
+    rotation = flat(ps.rotation)
+    crowded = 0
+    first = np.uint64(start)
+    for j in range(count):
+        p = first + np.uint64(j)
+        n = load_input(vt_count, p, "triangle_rotation")
+        k0 = load_input(vt_start, p, "triangle_rotation")
         ns = (0.0, 0.0, 0.0)
         ts_ = (0.0, 0.0, 0.0)
-        k0 = m.vertex_triangle_start[p]
-        for k in range(k0, k0 + n):
-            tri = m.vertex_triangle_data[k]
-            flip = m.vertex_triangle_flip[k]
-            ns = v_add(ns, v_scale(load3(ps.triangle_normal, tri), -1.0 if (flip & 1) != 0 else 1.0))
-            ts_ = v_add(ts_, v_scale(load3(ps.triangle_tangent, tri), -1.0 if (flip & 2) != 0 else 1.0))
-        if v_length(ns) > 1e-6 and v_length(ts_) > 1e-6:
-            nn = v_normalize(ns)
-            tn = v_normalize(ts_)
-            d = v_dot(nn, tn)
-            if abs(d) < 1.0 - 1e-9:
-                binormal = v_normalize(v_cross(nn, tn))
-                store4(ps.rotation, p, q_look_rotation(binormal, nn))
+        for k in range(TRIANGLES_PER_VERTEX):
+            used = k < n
+            # an unused slot reads entry 0 (always valid) and is selected away
+            e = np.uint64(k0 + k) if used else np.uint64(0)
+            tri = np.uint64(3) * np.uint64(load_input(vt_data, e, "triangle_rotation"))
+            flip = load_input(vt_flip, e, "triangle_rotation")
+            ns_k = v_add(ns, v_scale(load_input3(triangle_normal, tri, "triangle_rotation"),
+                                     -1.0 if (flip & 1) != 0 else 1.0))
+            ts_k = v_add(ts_, v_scale(load_input3(triangle_tangent, tri, "triangle_rotation"),
+                                      -1.0 if (flip & 2) != 0 else 1.0))
+            ns = (ns_k[0] if used else ns[0], ns_k[1] if used else ns[1], ns_k[2] if used else ns[2])
+            ts_ = (ts_k[0] if used else ts_[0], ts_k[1] if used else ts_[1], ts_k[2] if used else ts_[2])
+        valid, q = vertex_frame_rotation(ns, ts_)
+        few = n <= TRIANGLES_PER_VERTEX
+        crowded += 0 if few else 1
+        if valid & few:
+            store_output4(rotation, np.uint64(4) * p, q, "triangle_rotation")
+    if crowded > 0:
+        for p in range(start, start + count):
+            if m.vertex_triangle_count[p] > TRIANGLES_PER_VERTEX:
+                crowded_vertex_rotation(m, ps, p)
+
+
+@kernel
+def crowded_vertex_rotation(m, ps, p):
+    """E.3 for a vertex with more than ``TRIANGLES_PER_VERTEX`` triangles (scalar)."""
+    ns = (0.0, 0.0, 0.0)
+    ts_ = (0.0, 0.0, 0.0)
+    k0 = m.vertex_triangle_start[p]
+    for k in range(k0, k0 + m.vertex_triangle_count[p]):
+        tri = m.vertex_triangle_data[k]
+        flip = m.vertex_triangle_flip[k]
+        ns = v_add(ns, v_scale(load3(ps.triangle_normal, tri), -1.0 if (flip & 1) != 0 else 1.0))
+        ts_ = v_add(ts_, v_scale(load3(ps.triangle_tangent, tri), -1.0 if (flip & 2) != 0 else 1.0))
+    valid, q = vertex_frame_rotation(ns, ts_)
+    if valid:
+        store4(ps.rotation, p, q)
 
 
 @kernel
 def triangle_frame(m, ps, tri):
     """Normal and uv tangent of triangle ``tri`` at the display positions (0 when degenerate)."""
-    i0 = m.triangles[tri, 0]
-    i1 = m.triangles[tri, 1]
-    i2 = m.triangles[tri, 2]
-    p0 = load3(ps.position, i0)
-    e1 = v_sub(load3(ps.position, i1), p0)
-    e2 = v_sub(load3(ps.position, i2), p0)
-    n = v_cross(e1, e2)
-    normal = v_normalize(n) if v_length_sq(n) > 1e-16 else (0.0, 0.0, 0.0)
-    du1 = m.triangle_uv[tri, 1, 0] - m.triangle_uv[tri, 0, 0]
-    dv1 = m.triangle_uv[tri, 1, 1] - m.triangle_uv[tri, 0, 1]
-    du2 = m.triangle_uv[tri, 2, 0] - m.triangle_uv[tri, 0, 0]
-    dv2 = m.triangle_uv[tri, 2, 1] - m.triangle_uv[tri, 0, 1]
-    area = du1 * dv2 - du2 * dv1
-    r = 1.0 / area if area != 0.0 else 1.0
-    # standard uv tangent, negated for Unity's left-handed convention (B.4)
-    tangent = v_scale(v_sub(v_scale(e1, dv2), v_scale(e2, dv1)), -r)
-    return normal, v_normalize(tangent)
+    return triangle_frame_from(load3(ps.position, m.triangles[tri, 0]), load3(ps.position, m.triangles[tri, 1]),
+                               load3(ps.position, m.triangles[tri, 2]),
+                               (m.triangle_uv[tri, 0, 0], m.triangle_uv[tri, 0, 1]),
+                               (m.triangle_uv[tri, 1, 0], m.triangle_uv[tri, 1, 1]),
+                               (m.triangle_uv[tri, 2, 0], m.triangle_uv[tri, 2, 1]))
