@@ -3,10 +3,19 @@
 Restoration pulls each edge towards its *absolute* world direction in the step basic pose
 (not parent-relative, Appendix 2.2). Masses use friction only (Appendix 2.3). Both parent and
 child move; the restoration pivot grows 0.1 -> 0.3 -> 0.5 over the iterations.
+
+Two forms of the same maths (``solver/batched``): ``angle_team`` (one team, rows of
+``ParticleState``) and ``angle_block`` (every lane of a block, lanes innermost). Both call the
+per-element functions ``angle_buffer_entry`` (buffering pass), ``angle_limit_entry`` (D.5 half of
+an iteration) and ``angle_restoration_entry`` (D.6 half): tuples in and out, no array access,
+branch-free (every path computed, the taken one selected), so that a lane loop over them
+vectorises and gives the per-team bits.
 """
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels import trig
@@ -15,6 +24,7 @@ from magica_py.kernels.math3d import (
     load3, load4, q_inverse, q_mul, q_rotate, saturate, store3, store4, v_add, v_dot, v_length,
     v_scale, v_sub,
 )
+from magica_py.solver.batched.transfer import bload3, bload4, bstore3, bstore4
 from magica_py.solver.parameters import curve_at, curve_at_clamp01, step_rate
 from magica_py.solver.rotations import full_swing
 
@@ -22,6 +32,8 @@ MOVE = 0x02
 ITERATIONS = 3               # AngleLimitIteration
 LIMIT_ATTENUATION = 0.9      # AngleLimitAttenuation
 LIMIT_PIVOT = 0.4
+ZERO3 = (0.0, 0.0, 0.0)
+IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
 
 @kernel
@@ -35,6 +47,127 @@ def solve_pivot_pair(pp, cp, v, r, pivot_ratio, wp, wc):
     return dp, dc
 
 
+# ----------------------------------------------------------------------------- per element
+@kernel
+def limit_angle_at(prm, team, depth):
+    """D.5 limit angle (rad) of a particle at ``depth``."""
+    return math.radians(curve_at(prm.limit_angle_curve, team, depth))
+
+
+@kernel
+def restoration_rate_at(prm, team, depth, frequency_ratio, power_w):
+    """D.6 restoration stiffness of this step at ``depth``, before the team's gravity factor."""
+    kr = curve_at_clamp01(prm.restoration_stiffness_curve, team, depth)
+    return saturate(step_rate(kr, frequency_ratio, power_w, prm.rate_mode[team]))
+
+
+@kernel
+def restoration_gravity_factor(falloff, gravity_dot):
+    """D.6 stiffness factor: 1 with gravity along the rest pose's, 1 - falloff against it."""
+    return lerp(1.0 - falloff, 1.0, gravity_dot)
+
+
+@kernel(inline="always")
+def angle_buffer_entry(cp, pp, c_basic_pos, p_basic_pos, c_basic_rot, p_basic_rot, old_rest_direction):
+    """Buffering pass of a non-root entry (child c of parent p).
+
+    Returns (angle_length, angle_local_pos, angle_local_rot, angle_rest_vector,
+    angle_rest_length, angle_rest_direction); a degenerate segment or rest edge (< 1e-8 m)
+    gives length 0, a zero local direction and the identity rotation, and a degenerate rest
+    edge keeps ``old_rest_direction`` (the restoration snaps that child and never reads it)."""
+    length = v_length(v_sub(cp, pp))
+    bv = v_sub(c_basic_pos, p_basic_pos)
+    blen = v_length(bv)
+    iq = q_inverse(p_basic_rot)
+    direction = v_scale(bv, 1.0 / blen)
+    local_pos = q_rotate(iq, direction)
+    local_rot = q_mul(iq, c_basic_rot)
+    degenerate = (length < 1e-8) | (blen < 1e-8)
+    length = 0.0 if degenerate else length
+    local_pos = ZERO3 if degenerate else local_pos
+    local_rot = IDENTITY if degenerate else local_rot
+    rest_direction = direction if blen >= 1e-8 else old_rest_direction
+    return length, local_pos, local_rot, bv, blen, rest_direction
+
+
+@kernel(inline="always")
+def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, length, max_angle,
+                      max_angle_cos, wc, wp, p_move, stiffness, attenuation):
+    """The angle-limit half of one iteration for child c (positions cp, pp read at its start).
+
+    ``vel_*`` velocity_pos, ``rot_*`` angle_rotation, ``local_*`` / ``length`` the buffered
+    angle_local_pos / angle_local_rot / angle_length of c. Returns (cp, pp, next_c, vel_c,
+    vel_p, rot_c): the positions the restoration sees, then c's next_pos, both velocity_pos
+    and c's angle_rotation after the pass (p's next_pos is the returned pp). Paths, in the
+    reference's order: segment shorter than 1e-8 m: nothing; degenerate rest direction: c
+    snaps onto p but the returned cp stays as it was (quirk); degenerate rest length:
+    nothing; otherwise the limit is solved about the pivot at 0.4 and c's rotation swung
+    (kept when the new segment is degenerate)."""
+    v = v_sub(cp, pp)
+    vl = v_length(v)
+    tv = q_rotate(rot_p, local_pos)
+    tl = v_length(tv)
+    rest_rot = q_mul(rot_p, local_rot)
+    vn = v_scale(v, 1.0 / vl)
+    tn = v_scale(tv, 1.0 / tl)
+    lc = (vl + length) * 0.5
+    v = v_scale(vn, lc)
+    # alpha > max angle <=> cos(alpha) < cos(max angle); both computed, the test selects
+    alpha = angle_between_vectors(v, tn)
+    clamped = clamp_angle(v, tn, lerp(alpha, max_angle, stiffness))
+    r = clamped if (v_dot(vn, tn) < max_angle_cos) & (alpha > max_angle) else v
+    dp, dc = solve_pivot_pair(pp, cp, v, r, LIMIT_PIVOT, wp, wc)
+    solved_c = v_add(cp, dc)
+    solved_vel_c = v_add(vel_c, v_scale(dc, attenuation))
+    solved_p = v_add(pp, dp) if p_move else pp
+    solved_vel_p = v_add(vel_p, v_scale(dp, attenuation)) if p_move else vel_p
+    u = v_sub(solved_c, solved_p)
+    ul = v_length(u)
+    swung = q_mul(full_swing(tn, v_scale(u, 1.0 / ul)), rest_rot)
+    solved_rot = rot_c if ul < 1e-8 else swung
+    # path selection (a NaN compares false everywhere, as the reference's early returns do)
+    skip = vl < 1e-8
+    snap = (not skip) & (tl < 1e-8)
+    solve = (not skip) & (not (tl < 1e-8)) & (not ((length < 1e-8) | (lc < 1e-8)))
+    snapped_vel_c = v_add(vel_c, v_sub(pp, cp))
+    next_c = solved_c if solve else (pp if snap else cp)
+    vel_c = solved_vel_c if solve else (snapped_vel_c if snap else vel_c)
+    vel_p = solved_vel_p if solve else vel_p
+    rot_c = solved_rot if solve else (rest_rot if snap else rot_c)
+    cp = solved_c if solve else cp
+    pp = solved_p if solve else pp
+    return cp, pp, next_c, vel_c, vel_p, rot_c
+
+
+@kernel(inline="always")
+def angle_restoration_entry(cp, pp, next_c, vel_c, next_p, vel_p, rest_length, rest_direction, stiffness,
+                            pivot, wc, wp, p_move, attenuation):
+    """The restoration half of one iteration for child c: the edge cp - pp (as the limit
+    pass returned it) turned towards ``rest_direction`` by ``stiffness`` about the point at
+    ``pivot``, the corrections added to the current next_pos / velocity_pos of c and p.
+    A degenerate rest edge snaps c onto pp; a degenerate edge does nothing.
+    Returns (next_c, vel_c, next_p, vel_p)."""
+    v = v_sub(cp, pp)
+    vl = v_length(v)
+    q = from_to_rotation_unit(v_scale(v, 1.0 / vl), rest_direction, stiffness)
+    r = q_rotate(q, v)
+    dp, dc = solve_pivot_pair(pp, cp, v, r, pivot, wp, wc)
+    snap = rest_length < 1e-8
+    solve = (not snap) & (not (vl < 1e-8))
+    move_p = solve & p_move
+    snapped_vel_c = v_add(vel_c, v_sub(pp, cp))
+    solved_next_c = v_add(next_c, dc)
+    solved_vel_c = v_add(vel_c, v_scale(dc, attenuation))
+    solved_next_p = v_add(next_p, dp)
+    solved_vel_p = v_add(vel_p, v_scale(dp, attenuation))
+    next_c_out = solved_next_c if solve else (pp if snap else next_c)
+    vel_c_out = solved_vel_c if solve else (snapped_vel_c if snap else vel_c)
+    next_p = solved_next_p if move_p else next_p
+    vel_p = solved_vel_p if move_p else vel_p
+    return next_c_out, vel_c_out, next_p, vel_p
+
+
+# ----------------------------------------------------------------------------- per team
 @kernel
 def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation, restoration_attenuation):
     """D.5/D.6 over every baseline of one team.
@@ -47,9 +180,8 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
     use_restoration = prm.use_restoration[team] != 0
     if not use_limit and not use_restoration:
         return
-    mode = prm.rate_mode[team]
     limit_stiffness = prm.limit_stiffness[team]
-    gravity_factor = lerp(1.0 - prm.restoration_gravity_falloff[team], 1.0, ts.gravity_dot[team])
+    gravity_factor = restoration_gravity_factor(prm.restoration_gravity_falloff[team], ts.gravity_dot[team])
     b0 = m.team_baseline_start[team]
     for b in range(b0, b0 + m.team_baseline_count[team]):
         e0 = m.baseline_start[b]
@@ -63,31 +195,23 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
             if e == e0:
                 continue
             p = m.parent[c]
-            length = v_length(v_sub(load3(ps.next_pos, c), load3(ps.next_pos, p)))
-            bv = v_sub(load3(ps.step_basic_pos, c), load3(ps.step_basic_pos, p))
-            blen = v_length(bv)
-            if length < 1e-8 or blen < 1e-8:
-                ps.angle_length[c] = 0.0
-                store3(ps.angle_local_pos, c, (0.0, 0.0, 0.0))
-                store4(ps.angle_local_rot, c, (0.0, 0.0, 0.0, 1.0))
-            else:
-                ps.angle_length[c] = length
-                iq = q_inverse(load4(ps.step_basic_rot, p))
-                store3(ps.angle_local_pos, c, q_rotate(iq, v_scale(bv, 1.0 / blen)))
-                store4(ps.angle_local_rot, c, q_mul(iq, load4(ps.step_basic_rot, c)))
-            store3(ps.angle_rest_vector, c, bv)
+            length, local_pos, local_rot, rest_vector, rest_length, rest_direction = angle_buffer_entry(
+                load3(ps.next_pos, c), load3(ps.next_pos, p), load3(ps.step_basic_pos, c),
+                load3(ps.step_basic_pos, p), load4(ps.step_basic_rot, c), load4(ps.step_basic_rot, p),
+                load3(ps.angle_rest_direction, c))
+            ps.angle_length[c] = length
+            store3(ps.angle_local_pos, c, local_pos)
+            store4(ps.angle_local_rot, c, local_rot)
+            store3(ps.angle_rest_vector, c, rest_vector)
             if use_restoration:  # the rest direction does not change over the iterations
-                tl = v_length(bv)
-                ps.angle_rest_length[c] = tl
-                if tl >= 1e-8:
-                    store3(ps.angle_rest_direction, c, v_scale(bv, 1.0 / tl))
+                ps.angle_rest_length[c] = rest_length
+                store3(ps.angle_rest_direction, c, rest_direction)
+                ps.angle_restoration_k[c] = restoration_rate_at(prm, team, m.depth[c], frequency_ratio,
+                                                                power_w) * gravity_factor
             if use_limit:
-                max_angle = math.radians(curve_at(prm.limit_angle_curve, team, m.depth[c]))
+                max_angle = limit_angle_at(prm, team, m.depth[c])
                 ps.angle_limit[c] = max_angle
                 ps.angle_limit_cos[c] = trig.cos(max_angle)
-            if use_restoration:
-                kr = curve_at_clamp01(prm.restoration_stiffness_curve, team, m.depth[c])
-                ps.angle_restoration_k[c] = saturate(step_rate(kr, frequency_ratio, power_w, mode)) * gravity_factor
         for k in range(ITERATIONS):
             rest_pivot = lerp(0.1, 0.5, k / 2.0)
             for e in range(e0 + 1, e1):
@@ -95,84 +219,202 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
                 if (m.attribute[c] & MOVE) == 0:
                     continue
                 p = m.parent[c]
-                c_move = True
                 p_move = (m.attribute[p] & MOVE) != 0
                 cp = load3(ps.next_pos, c)
                 pp = load3(ps.next_pos, p)
+                next_c = cp
+                vel_c = load3(ps.velocity_pos, c)
+                vel_p = load3(ps.velocity_pos, p)
                 wc = ps.angle_inverse_mass[c]
                 wp = ps.angle_inverse_mass[p]
                 if use_limit:
-                    cp, pp = _limit_pass(m, ps, prm, team, c, p, cp, pp, wc, wp, p_move,
-                                         limit_stiffness, limit_attenuation)
+                    cp, pp, next_c, vel_c, vel_p, rot_c = angle_limit_entry(
+                        cp, pp, vel_c, vel_p, load4(ps.angle_rotation, c), load4(ps.angle_rotation, p),
+                        load3(ps.angle_local_pos, c), load4(ps.angle_local_rot, c), ps.angle_length[c],
+                        ps.angle_limit[c], ps.angle_limit_cos[c], wc, wp, p_move, limit_stiffness,
+                        limit_attenuation)
+                    store4(ps.angle_rotation, c, rot_c)
+                next_p = pp
                 if use_restoration:
-                    tl = ps.angle_rest_length[c]
-                    if tl < 1e-8:
-                        store3(ps.velocity_pos, c, v_add(load3(ps.velocity_pos, c), v_sub(pp, cp)))
-                        store3(ps.next_pos, c, pp)
-                        continue
-                    v = v_sub(cp, pp)
-                    vl = v_length(v)
-                    if vl < 1e-8:
-                        continue
-                    q = from_to_rotation_unit(v_scale(v, 1.0 / vl), load3(ps.angle_rest_direction, c),
-                                              ps.angle_restoration_k[c])
-                    r = q_rotate(q, v)
-                    dp, dc = solve_pivot_pair(pp, cp, v, r, rest_pivot, wp, wc)
-                    if c_move:
-                        store3(ps.next_pos, c, v_add(load3(ps.next_pos, c), dc))
-                        store3(ps.velocity_pos, c, v_add(load3(ps.velocity_pos, c), v_scale(dc, restoration_attenuation)))
-                    if p_move:
-                        store3(ps.next_pos, p, v_add(load3(ps.next_pos, p), dp))
-                        store3(ps.velocity_pos, p, v_add(load3(ps.velocity_pos, p), v_scale(dp, restoration_attenuation)))
+                    next_c, vel_c, next_p, vel_p = angle_restoration_entry(
+                        cp, pp, next_c, vel_c, next_p, vel_p, ps.angle_rest_length[c],
+                        load3(ps.angle_rest_direction, c), ps.angle_restoration_k[c], rest_pivot, wc, wp,
+                        p_move, restoration_attenuation)
+                store3(ps.next_pos, c, next_c)
+                store3(ps.velocity_pos, c, vel_c)
+                store3(ps.next_pos, p, next_p)
+                store3(ps.velocity_pos, p, vel_p)
         # clear the buffers
         for e in range(e0, e1):
             c = m.baseline_data[e]
             ps.angle_length[c] = 0.0
-            store3(ps.angle_local_pos, c, (0.0, 0.0, 0.0))
-            store3(ps.angle_rest_vector, c, (0.0, 0.0, 0.0))
+            store3(ps.angle_local_pos, c, ZERO3)
+            store3(ps.angle_rest_vector, c, ZERO3)
 
 
+# ----------------------------------------------------------------------------- per block
 @kernel
-def _limit_pass(m, ps, prm, team, c, p, cp, pp, wc, wp, p_move, limit_stiffness, attenuation):
-    """The angle-limit half of one iteration for child c; returns the (cp, pp) restoration sees."""
-    v = v_sub(cp, pp)
-    vl = v_length(v)
-    if vl < 1e-8:
-        return cp, pp
-    tv = q_rotate(load4(ps.angle_rotation, p), load3(ps.angle_local_pos, c))
-    tl = v_length(tv)
-    if tl < 1e-8:  # degenerate rest: snap onto the parent; the local cp stays as it was (quirk)
-        store3(ps.velocity_pos, c, v_add(load3(ps.velocity_pos, c), v_sub(pp, cp)))
-        store3(ps.next_pos, c, pp)
-        store4(ps.angle_rotation, c, q_mul(load4(ps.angle_rotation, p), load4(ps.angle_local_rot, c)))
-        return cp, pp
-    vn = v_scale(v, 1.0 / vl)
-    tn = v_scale(tv, 1.0 / tl)
-    lb = ps.angle_length[c]
-    lc = (vl + lb) * 0.5
-    if lb < 1e-8 or lc < 1e-8:
-        return cp, pp
-    v = v_scale(vn, lc)
-    r = v
-    # alpha > max angle  <=>  cos(alpha) < cos(max angle): acos only for a violation
-    if v_dot(vn, tn) < ps.angle_limit_cos[c]:
-        alpha = angle_between_vectors(v, tn)
-        max_angle = ps.angle_limit[c]
-        if alpha > max_angle:
-            r = clamp_angle(v, tn, lerp(alpha, max_angle, limit_stiffness))
-    dp, dc = solve_pivot_pair(pp, cp, v, r, LIMIT_PIVOT, wp, wc)
-    cp = v_add(cp, dc)
-    store3(ps.next_pos, c, cp)
-    store3(ps.velocity_pos, c, v_add(load3(ps.velocity_pos, c), v_scale(dc, attenuation)))
-    if p_move:
-        pp = v_add(pp, dp)
-        store3(ps.next_pos, p, pp)
-        store3(ps.velocity_pos, p, v_add(load3(ps.velocity_pos, p), v_scale(dp, attenuation)))
-    u = v_sub(cp, pp)
-    ul = v_length(u)
-    if ul < 1e-8:
-        return cp, pp
-    rot = q_mul(full_swing(tn, v_scale(u, 1.0 / ul)),
-                q_mul(load4(ps.angle_rotation, p), load4(ps.angle_local_rot, c)))
-    store4(ps.angle_rotation, c, rot)
-    return cp, pp
+def angle_block(m, bs, prm, blk, b, frequency_ratio, power_w, limit_attenuation, restoration_attenuation):
+    """D.5/D.6 for every lane of block b (``solver/batched``): ``angle_team``'s maths and
+    order (baselines, buffering, 3 iterations over the entries, clearing), lanes innermost.
+
+    The limit angle, its cosine and the restoration stiffness before the gravity factor are
+    the same in every lane: computed once per particle into ``bs.shared_*``; the gravity
+    factor (gravity_dot) and the inverse masses (friction) are per lane."""
+    ex = blk.block_exemplar[b]
+    use_limit = prm.use_angle_limit[ex] != 0
+    use_restoration = prm.use_restoration[ex] != 0
+    if not use_limit and not use_restoration:
+        return
+    width = blk.block_width[b]
+    lanes = np.uint64(blk.block_lane_base[b])
+    row_base = blk.block_row_base[b]
+    shared = blk.block_shared_base[b]
+    p0 = m.team_particle_start[ex]
+    limit_stiffness = prm.limit_stiffness[ex]
+    falloff = prm.restoration_gravity_falloff[ex]
+    # arrays as locals (through the table their pointers are reloaded after every store)
+    next_pos, velocity_pos, friction = bs.next_pos, bs.velocity_pos, bs.friction
+    step_basic_pos, step_basic_rot = bs.step_basic_pos, bs.step_basic_rot
+    angle_rotation, angle_inverse_mass, angle_length = bs.angle_rotation, bs.angle_inverse_mass, bs.angle_length
+    angle_local_pos, angle_local_rot, angle_rest_vector = bs.angle_local_pos, bs.angle_local_rot, bs.angle_rest_vector
+    angle_rest_length, angle_rest_direction = bs.angle_rest_length, bs.angle_rest_direction
+    shared_limit, shared_limit_cos, shared_k = bs.shared_angle_limit, bs.shared_angle_limit_cos, bs.shared_restoration_k
+    gravity_dot = bs.lane_gravity_dot
+    b0 = m.team_baseline_start[ex]
+    for bl in range(b0, b0 + m.team_baseline_count[ex]):
+        e0 = m.baseline_start[bl]
+        e1 = e0 + m.baseline_count[bl]
+        # buffering pass
+        for e in range(e0, e1):
+            c = m.baseline_data[e] - p0
+            kc0 = np.uint64(row_base + c * width)
+            if e == e0:
+                for i in range(width):
+                    kc = kc0 + np.uint64(i)
+                    bstore4(angle_rotation, kc, bload4(step_basic_rot, kc))
+                    angle_inverse_mass[kc] = inverse_mass_friction(friction[kc])
+                continue
+            p = m.parent[c + p0] - p0
+            kp0 = np.uint64(row_base + p * width)
+            depth = m.depth[c + p0]
+            if use_restoration:
+                shared_k[shared + c] = restoration_rate_at(prm, ex, depth, frequency_ratio, power_w)
+            if use_limit:
+                max_angle = limit_angle_at(prm, ex, depth)
+                shared_limit[shared + c] = max_angle
+                shared_limit_cos[shared + c] = trig.cos(max_angle)
+            for i in range(width):
+                kc = kc0 + np.uint64(i)
+                kp = kp0 + np.uint64(i)
+                bstore4(angle_rotation, kc, bload4(step_basic_rot, kc))
+                angle_inverse_mass[kc] = inverse_mass_friction(friction[kc])
+                length, local_pos, local_rot, rest_vector, rest_length, rest_direction = angle_buffer_entry(
+                    bload3(next_pos, kc), bload3(next_pos, kp), bload3(step_basic_pos, kc),
+                    bload3(step_basic_pos, kp), bload4(step_basic_rot, kc), bload4(step_basic_rot, kp),
+                    bload3(angle_rest_direction, kc))
+                angle_length[kc] = length
+                bstore3(angle_local_pos, kc, local_pos)
+                bstore4(angle_local_rot, kc, local_rot)
+                bstore3(angle_rest_vector, kc, rest_vector)
+                angle_rest_length[kc] = rest_length
+                bstore3(angle_rest_direction, kc, rest_direction)
+        for it in range(ITERATIONS):
+            rest_pivot = lerp(0.1, 0.5, it / 2.0)
+            for e in range(e0 + 1, e1):
+                c = m.baseline_data[e] - p0
+                if (m.attribute[c + p0] & MOVE) == 0:
+                    continue
+                p = m.parent[c + p0] - p0
+                p_move = (m.attribute[p + p0] & MOVE) != 0
+                kc0 = np.uint64(row_base + c * width)
+                kp0 = np.uint64(row_base + p * width)
+                max_angle = shared_limit[shared + c]
+                max_angle_cos = shared_limit_cos[shared + c]
+                rate = shared_k[shared + c]
+                if use_limit and use_restoration:
+                    for i in range(width):
+                        _limit_and_restoration_lane(
+                            kc0 + np.uint64(i), kp0 + np.uint64(i), lanes + np.uint64(i), next_pos,
+                            velocity_pos, angle_rotation, angle_inverse_mass, angle_local_pos, angle_local_rot,
+                            angle_length, angle_rest_length, angle_rest_direction, gravity_dot, max_angle,
+                            max_angle_cos, rate, falloff, rest_pivot, p_move, limit_stiffness,
+                            limit_attenuation, restoration_attenuation)
+                elif use_limit:
+                    for i in range(width):
+                        _limit_lane(kc0 + np.uint64(i), kp0 + np.uint64(i), next_pos, velocity_pos,
+                                    angle_rotation, angle_inverse_mass, angle_local_pos, angle_local_rot,
+                                    angle_length, max_angle, max_angle_cos, p_move, limit_stiffness,
+                                    limit_attenuation)
+                else:
+                    for i in range(width):
+                        _restoration_lane(kc0 + np.uint64(i), kp0 + np.uint64(i), lanes + np.uint64(i),
+                                          next_pos, velocity_pos, angle_inverse_mass, angle_rest_length,
+                                          angle_rest_direction, gravity_dot, rate, falloff, rest_pivot, p_move,
+                                          restoration_attenuation)
+        # clear the buffers
+        for e in range(e0, e1):
+            kc0 = np.uint64(row_base + (m.baseline_data[e] - p0) * width)
+            for i in range(width):
+                kc = kc0 + np.uint64(i)
+                angle_length[kc] = 0.0
+                bstore3(angle_local_pos, kc, ZERO3)
+                bstore3(angle_rest_vector, kc, ZERO3)
+
+
+@kernel(inline="always")
+def _limit_and_restoration_lane(kc, kp, L, next_pos, velocity_pos, angle_rotation, angle_inverse_mass,
+                                angle_local_pos, angle_local_rot, angle_length, angle_rest_length,
+                                angle_rest_direction, gravity_dot, max_angle, max_angle_cos, rate, falloff,
+                                rest_pivot, p_move, limit_stiffness, limit_attenuation, restoration_attenuation):
+    """One lane of one iteration entry, both halves (``angle_team``'s loop body)."""
+    cp = bload3(next_pos, kc)
+    pp = bload3(next_pos, kp)
+    wc = angle_inverse_mass[kc]
+    wp = angle_inverse_mass[kp]
+    cp, pp, next_c, vel_c, vel_p, rot_c = angle_limit_entry(
+        cp, pp, bload3(velocity_pos, kc), bload3(velocity_pos, kp), bload4(angle_rotation, kc),
+        bload4(angle_rotation, kp), bload3(angle_local_pos, kc), bload4(angle_local_rot, kc), angle_length[kc],
+        max_angle, max_angle_cos, wc, wp, p_move, limit_stiffness, limit_attenuation)
+    bstore4(angle_rotation, kc, rot_c)
+    next_c, vel_c, next_p, vel_p = angle_restoration_entry(
+        cp, pp, next_c, vel_c, pp, vel_p, angle_rest_length[kc], bload3(angle_rest_direction, kc),
+        rate * restoration_gravity_factor(falloff, gravity_dot[L]), rest_pivot, wc, wp, p_move,
+        restoration_attenuation)
+    bstore3(next_pos, kc, next_c)
+    bstore3(velocity_pos, kc, vel_c)
+    bstore3(next_pos, kp, next_p)
+    bstore3(velocity_pos, kp, vel_p)
+
+
+@kernel(inline="always")
+def _limit_lane(kc, kp, next_pos, velocity_pos, angle_rotation, angle_inverse_mass, angle_local_pos,
+                angle_local_rot, angle_length, max_angle, max_angle_cos, p_move, limit_stiffness,
+                limit_attenuation):
+    """One lane of one iteration entry, angle limit only."""
+    _cp, pp, next_c, vel_c, vel_p, rot_c = angle_limit_entry(
+        bload3(next_pos, kc), bload3(next_pos, kp), bload3(velocity_pos, kc), bload3(velocity_pos, kp),
+        bload4(angle_rotation, kc), bload4(angle_rotation, kp), bload3(angle_local_pos, kc),
+        bload4(angle_local_rot, kc), angle_length[kc], max_angle, max_angle_cos, angle_inverse_mass[kc],
+        angle_inverse_mass[kp], p_move, limit_stiffness, limit_attenuation)
+    bstore4(angle_rotation, kc, rot_c)
+    bstore3(next_pos, kc, next_c)
+    bstore3(velocity_pos, kc, vel_c)
+    bstore3(next_pos, kp, pp)
+    bstore3(velocity_pos, kp, vel_p)
+
+
+@kernel(inline="always")
+def _restoration_lane(kc, kp, L, next_pos, velocity_pos, angle_inverse_mass, angle_rest_length,
+                      angle_rest_direction, gravity_dot, rate, falloff, rest_pivot, p_move, restoration_attenuation):
+    """One lane of one iteration entry, angle restoration only."""
+    cp = bload3(next_pos, kc)
+    pp = bload3(next_pos, kp)
+    next_c, vel_c, next_p, vel_p = angle_restoration_entry(
+        cp, pp, cp, bload3(velocity_pos, kc), pp, bload3(velocity_pos, kp), angle_rest_length[kc],
+        bload3(angle_rest_direction, kc), rate * restoration_gravity_factor(falloff, gravity_dot[L]),
+        rest_pivot, angle_inverse_mass[kc], angle_inverse_mass[kp], p_move, restoration_attenuation)
+    bstore3(next_pos, kc, next_c)
+    bstore3(velocity_pos, kc, vel_c)
+    bstore3(next_pos, kp, next_p)
+    bstore3(velocity_pos, kp, vel_p)
