@@ -3,7 +3,10 @@
 ``team_step_update`` runs after the runtime's ``team_time_begin_step`` (A.6: now_update_time,
 frame_interpolation) and interpolates the center, derives local inertia, gravity falloff and
 the stabilisation weights (C.3). ``predict_team`` is D.1, ``step_basic_pose_team`` D.2 and
-``end_step_team`` D.10.
+``end_step_team`` D.10. Each has a block form (``predict_block``, ``step_basic_pose_block``,
+``end_step_block``: every lane of a block, lanes innermost, ``solver/batched``) calling the same
+branch-free per-element functions (``predict_move``, ``basic_pose_child``, ``end_step_velocity``, ...)
+so that both give the same bits.
 """
 from __future__ import annotations
 
@@ -233,6 +236,19 @@ def predict_block(m, bs, prm, blk, b, dt, frequency_ratio, power_z):
 
 
 @kernel
+def basic_pose_child(parent_pos, parent_rot, local_position, local_rotation, scale):
+    """D.2: a baseline child's rest pose placed on its parent's (scale = build scale x scale ratio)."""
+    pos = v_add(q_rotate(parent_rot, v_mul(local_position, scale)), parent_pos)
+    return pos, q_mul(parent_rot, local_rotation)
+
+
+@kernel
+def basic_pose_blend(pos, rot, base_pos, base_rot, ratio):
+    """D.2: the rest shape blended towards the animated pose by animation_pose_ratio."""
+    return v_lerp(pos, base_pos, ratio), q_slerp(rot, base_rot, ratio)
+
+
+@kernel
 def step_basic_pose_team(m, ps, prm, ts, team):
     """D.2: rebuild the rest shape along each baseline and blend it to the animated pose."""
     a = prm.animation_pose_ratio[team]
@@ -246,15 +262,108 @@ def step_basic_pose_team(m, ps, prm, ts, team):
         for e in range(e0 + 1, e1):
             v = m.baseline_data[e]
             p = m.parent[v]
-            prot = load4(ps.step_basic_rot, p)
-            store3(ps.step_basic_pos, v, v_add(q_rotate(prot, v_mul(load3(m.baseline_local_position, v), s)),
-                                               load3(ps.step_basic_pos, p)))
-            store4(ps.step_basic_rot, v, q_mul(prot, load4(m.baseline_local_rotation, v)))
+            pos, rot = basic_pose_child(load3(ps.step_basic_pos, p), load4(ps.step_basic_rot, p),
+                                        load3(m.baseline_local_position, v), load4(m.baseline_local_rotation, v), s)
+            store3(ps.step_basic_pos, v, pos)
+            store4(ps.step_basic_rot, v, rot)
         if a > 1e-8:
             for e in range(e0, e1):
                 v = m.baseline_data[e]
-                store3(ps.step_basic_pos, v, v_lerp(load3(ps.step_basic_pos, v), load3(ps.base_pos, v), a))
-                store4(ps.step_basic_rot, v, q_slerp(load4(ps.step_basic_rot, v), load4(ps.base_rot, v), a))
+                pos, rot = basic_pose_blend(load3(ps.step_basic_pos, v), load4(ps.step_basic_rot, v),
+                                            load3(ps.base_pos, v), load4(ps.base_rot, v), a)
+                store3(ps.step_basic_pos, v, pos)
+                store4(ps.step_basic_rot, v, rot)
+
+
+@kernel
+def step_basic_pose_block(m, bs, prm, blk, b):
+    """D.2 for every lane of block b (``solver/batched``): ``step_basic_pose_team``'s maths,
+    baseline entries in the per-team order, lanes innermost."""
+    ex = blk.block_exemplar[b]
+    a = prm.animation_pose_ratio[ex]
+    if a > 0.99:
+        return
+    width = blk.block_width[b]
+    lanes = np.uint64(blk.block_lane_base[b])
+    row_base = blk.block_row_base[b]
+    p0 = m.team_particle_start[ex]
+    init_scale = load3(m.team_init_scale, ex)
+    sbp, sbr, base_pos, base_rot, scale = bs.step_basic_pos, bs.step_basic_rot, bs.base_pos, bs.base_rot, bs.lane_scale_ratio
+    b0 = m.team_baseline_start[ex]
+    for bl in range(b0, b0 + m.team_baseline_count[ex]):
+        e0 = m.baseline_start[bl]
+        e1 = e0 + m.baseline_count[bl]
+        for e in range(e0 + 1, e1):
+            v = m.baseline_data[e]
+            kv = np.uint64(row_base + (v - p0) * width)
+            kp = np.uint64(row_base + (m.parent[v] - p0) * width)
+            local_position = load3(m.baseline_local_position, v)
+            local_rotation = load4(m.baseline_local_rotation, v)
+            for i in range(width):
+                s = v_scale(init_scale, scale[lanes + np.uint64(i)])
+                pos, rot = basic_pose_child(bload3(sbp, kp + np.uint64(i)), bload4(sbr, kp + np.uint64(i)),
+                                            local_position, local_rotation, s)
+                bstore3(sbp, kv + np.uint64(i), pos)
+                bstore4(sbr, kv + np.uint64(i), rot)
+        if a > 1e-8:
+            for e in range(e0, e1):
+                kv = np.uint64(row_base + (m.baseline_data[e] - p0) * width)
+                for i in range(width):
+                    k = kv + np.uint64(i)
+                    pos, rot = basic_pose_blend(bload3(sbp, k), bload4(sbr, k), bload3(base_pos, k),
+                                                bload4(base_rot, k), a)
+                    bstore3(sbp, k, pos)
+                    bstore4(sbr, k, rot)
+
+
+@kernel
+def static_friction_step(next_pos, old_pos, velocity_pos, normal, static_friction, dt, static_threshold, gain):
+    """D.10 static friction of a particle in contact: its tangential move this step is cancelled
+    by the static friction factor, which grows while the particle holds (tangential speed below
+    the threshold) and drops as it slips. Returns (next_pos, velocity_pos, static_friction)."""
+    d = v_sub(next_pos, old_pos)
+    tv = v_sub(d, v_scale(normal, v_dot(d, normal)))
+    speed = v_length(tv) / dt
+    held = saturate(static_friction + gain)
+    slipping = saturate(static_friction - max((speed - static_threshold) / 0.2, STATIC_FRICTION_LOSS))
+    sf = held if speed < static_threshold else slipping
+    return v_sub(next_pos, v_scale(tv, sf)), v_sub(velocity_pos, v_scale(tv, sf)), sf
+
+
+@kernel
+def end_step_velocity(next_pos, velocity_pos, dt):
+    """D.10 velocity of a Move particle from its positions: (velocity, unit direction (0 when
+    not moving), moving). Branch-free."""
+    vel = v_scale(v_sub(next_pos, velocity_pos), 1.0 / dt)
+    speed_sq = v_length_sq(vel)
+    moving = speed_sq >= 1e-8
+    unit = v_scale(vel, 1.0 / math.sqrt(speed_sq))
+    return vel, (unit if moving else (0.0, 0.0, 0.0)), moving
+
+
+@kernel
+def dynamic_friction_brake(vel, direction, normal, friction, dynamic_friction):
+    """D.10 dynamic friction of a moving particle in contact: brakes motion along the surface,
+    not away from it."""
+    dd = 0.5 + 0.5 * v_dot(normal, direction)
+    dd = 1.0 - dd * dd
+    return v_sub(vel, v_scale(vel, dd * saturate(friction * dynamic_friction)))
+
+
+@kernel
+def centrifugal_velocity(vel, next_pos, direction, moving, depth, angular_velocity, centrifugal, axis, center):
+    """D.10 centrifugal term: outwards from the team's rotation axis through its center, scaled
+    by how much the particle moves along the rotation (none when not rotating, not moving or on
+    the axis). Branch-free."""
+    lv = project_on_plane(v_sub(next_pos, center), axis)
+    radius = v_length(lv)
+    n = v_scale(lv, 1.0 / radius)
+    mass = 1.0 + (1.0 - depth)
+    force = mass * angular_velocity * angular_velocity * radius
+    u = v_normalize(v_cross(axis, n))
+    force *= saturate(v_dot(direction, u))
+    flung = v_add(vel, v_scale(n, force * centrifugal * CENTRIFUGAL_SCALE))
+    return flung if (angular_velocity > 1e-8 and centrifugal > 1e-8 and moving and radius > 1e-8) else vel
 
 
 @kernel
@@ -267,6 +376,7 @@ def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
     speed_limit = prm.particle_speed_limit[team]
     angular_velocity = ts.angular_velocity[team]
     centrifugal = prm.centrifugal_acceleration[team]
+    spinning = angular_velocity > 1e-8 and centrifugal > 1e-8
     axis = load3(ts.rotation_axis, team)
     center = load3(ts.now_world_pos, team)
     velocity_weight = ts.velocity_weight[team]
@@ -280,44 +390,104 @@ def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
             cn = load3(ps.collision_normal, p)
             f = ps.friction[p]
             contact = v_length_sq(cn) > 1e-8 and f > 1e-8
-            sf = ps.static_friction[p]
             velocity_pos = load3(ps.velocity_pos, p)
+            # the branches skip work whose result the block stage computes and discards
             if contact and static_threshold > 0.0:
-                d = v_sub(next_pos, old_pos)
-                tv = v_sub(d, v_scale(cn, v_dot(d, cn)))
-                speed = v_length(tv) / dt
-                if speed < static_threshold:
-                    sf = saturate(sf + gain)
-                else:
-                    sf = saturate(sf - max((speed - static_threshold) / 0.2, STATIC_FRICTION_LOSS))
-                next_pos = v_sub(next_pos, v_scale(tv, sf))
-                velocity_pos = v_sub(velocity_pos, v_scale(tv, sf))
+                next_pos, velocity_pos, sf = static_friction_step(next_pos, old_pos, velocity_pos, cn,
+                                                                  ps.static_friction[p], dt, static_threshold, gain)
                 store3(ps.next_pos, p, next_pos)
             else:
-                sf = saturate(sf - STATIC_FRICTION_LOSS)
+                sf = saturate(ps.static_friction[p] - STATIC_FRICTION_LOSS)
             ps.static_friction[p] = sf
-            vel = v_scale(v_sub(next_pos, velocity_pos), 1.0 / dt)
-            speed_sq = v_length_sq(vel)
-            direction = (0.0, 0.0, 0.0)
-            if speed_sq >= 1e-8:
-                direction = v_scale(vel, 1.0 / math.sqrt(speed_sq))
-                if contact and dynamic > 0.0:
-                    dd = 0.5 + 0.5 * v_dot(cn, direction)
-                    dd = 1.0 - dd * dd
-                    vel = v_sub(vel, v_scale(vel, dd * saturate(f * dynamic)))
+            vel, direction, moving = end_step_velocity(next_pos, velocity_pos, dt)
+            if moving and contact and dynamic > 0.0:
+                vel = dynamic_friction_brake(vel, direction, cn, f, dynamic)
             ps.friction[p] = f * friction_keep
             if speed_limit >= 0.0:
                 vel = clamp_length(vel, speed_limit * scale)
-            if angular_velocity > 1e-8 and centrifugal > 1e-8 and speed_sq >= 1e-8:
-                lv = project_on_plane(v_sub(next_pos, center), axis)
-                radius = v_length(lv)
-                if radius > 1e-8:
-                    n = v_scale(lv, 1.0 / radius)
-                    mass = 1.0 + (1.0 - m.depth[p])
-                    force = mass * angular_velocity * angular_velocity * radius
-                    u = v_normalize(v_cross(axis, n))
-                    force *= saturate(v_dot(direction, u))
-                    vel = v_add(vel, v_scale(n, force * centrifugal * CENTRIFUGAL_SCALE))
+            if spinning:
+                vel = centrifugal_velocity(vel, next_pos, direction, moving, m.depth[p], angular_velocity,
+                                           centrifugal, axis, center)
             store3(ps.velocity, p, v_scale(vel, velocity_weight))
         store3(ps.real_velocity, p, v_scale(v_sub(next_pos, old_pos), 1.0 / dt))
         store3(ps.old_pos, p, next_pos)
+
+
+@kernel
+def _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_velocity_a, normal_a, friction_a,
+                   static_friction_a, k, depth, dt, dynamic, gain, friction_keep, speed_limit, centrifugal, spin,
+                   scale, angular_velocity, axis, center, velocity_weight):
+    """end_step_team's Move-particle body on block row k, branch-free (``spin``: the block's
+    centrifugal acceleration is on; a constant at each call site, so it folds away)."""
+    old_pos = bload3(old_pos_a, k)
+    next_pos = bload3(next_pos_a, k)
+    velocity_pos = bload3(velocity_pos_a, k)
+    cn = bload3(normal_a, k)
+    f = friction_a[k]
+    sf = static_friction_a[k]
+    static_threshold = dynamic * scale
+    contact = v_length_sq(cn) > 1e-8 and f > 1e-8
+    stuck_pos, stuck_velocity_pos, stuck_sf = static_friction_step(next_pos, old_pos, velocity_pos, cn, sf, dt,
+                                                                   static_threshold, gain)
+    sticking = contact and static_threshold > 0.0
+    next_pos = stuck_pos if sticking else next_pos
+    velocity_pos = stuck_velocity_pos if sticking else velocity_pos
+    released = saturate(sf - STATIC_FRICTION_LOSS)
+    static_friction_a[k] = stuck_sf if sticking else released
+    vel, direction, moving = end_step_velocity(next_pos, velocity_pos, dt)
+    braked = dynamic_friction_brake(vel, direction, cn, f, dynamic)
+    vel = braked if (moving and contact and dynamic > 0.0) else vel
+    friction_a[k] = f * friction_keep
+    limited = clamp_length(vel, speed_limit * scale)
+    vel = limited if speed_limit >= 0.0 else vel
+    if spin:
+        vel = centrifugal_velocity(vel, next_pos, direction, moving, depth, angular_velocity, centrifugal, axis, center)
+    bstore3(next_pos_a, k, next_pos)
+    bstore3(velocity_a, k, v_scale(vel, velocity_weight))
+    bstore3(real_velocity_a, k, v_scale(v_sub(next_pos, old_pos), 1.0 / dt))
+    bstore3(old_pos_a, k, next_pos)
+
+
+@kernel
+def end_step_block(m, bs, prm, blk, b, dt, frequency_ratio):
+    """D.10 for every lane of block b (``solver/batched``): ``end_step_team``'s maths, lanes innermost."""
+    ex = blk.block_exemplar[b]
+    width = blk.block_width[b]
+    lanes = np.uint64(blk.block_lane_base[b])
+    p0 = m.team_particle_start[ex]
+    mode = prm.rate_mode[ex]
+    dynamic = prm.friction[ex]
+    speed_limit = prm.particle_speed_limit[ex]
+    centrifugal = prm.centrifugal_acceleration[ex]
+    friction_keep = step_keep(FRICTION_DAMPING_RATE, frequency_ratio, mode)
+    gain = step_rate(STATIC_FRICTION_GAIN, frequency_ratio, 1.0, mode)
+    next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_velocity_a = (bs.next_pos, bs.old_pos, bs.velocity_pos,
+                                                                          bs.velocity, bs.real_velocity)
+    normal_a, friction_a, static_friction_a = bs.collision_normal, bs.friction, bs.static_friction
+    lane_scale, lane_av, lane_axis, lane_center, lane_vw = (bs.lane_scale_ratio, bs.lane_angular_velocity,
+                                                            bs.lane_rotation_axis, bs.lane_now_world_pos,
+                                                            bs.lane_velocity_weight)
+    for p in range(blk.block_particle_count[b]):
+        k0 = np.uint64(blk.block_row_base[b] + p * width)
+        if (m.attribute[p0 + p] & MOVE) == 0:
+            for i in range(width):
+                k = k0 + np.uint64(i)
+                next_pos = bload3(next_pos_a, k)
+                bstore3(real_velocity_a, k, v_scale(v_sub(next_pos, bload3(old_pos_a, k)), 1.0 / dt))
+                bstore3(old_pos_a, k, next_pos)
+            continue
+        depth = m.depth[p0 + p]
+        if centrifugal > 1e-8:
+            for i in range(width):
+                L = lanes + np.uint64(i)
+                _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_velocity_a, normal_a,
+                               friction_a, static_friction_a, k0 + np.uint64(i), depth, dt, dynamic, gain,
+                               friction_keep, speed_limit, centrifugal, True, lane_scale[L], lane_av[L],
+                               bload3(lane_axis, L), bload3(lane_center, L), lane_vw[L])
+        else:
+            for i in range(width):
+                L = lanes + np.uint64(i)
+                _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_velocity_a, normal_a,
+                               friction_a, static_friction_a, k0 + np.uint64(i), depth, dt, dynamic, gain,
+                               friction_keep, speed_limit, centrifugal, False, lane_scale[L], 0.0,
+                               (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), lane_vw[L])

@@ -6,16 +6,24 @@ Point mode pushes ``next_pos`` directly (Gauss-Seidel); edge mode accumulates in
 and averages (Jacobi). Neither touches ``velocity_pos``: the push becomes velocity in full.
 Edge-mode friction is quantised to {0, 1} as MagicaCloth2's fixed-point max does (§0.2,
 Appendix 2.5): we reproduce it deliberately.
+
+Point mode has a block form (``point_collision_block``, lanes innermost, ``solver/batched``)
+calling the same array-free per-element functions (``point_sphere``, ``point_capsule``,
+``point_plane``, ``point_contact_add``, ``point_contact_result``) as ``point_collision_team``,
+so that both give the same bits.
 """
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     closest_segment_segment, load3, load4, q_rotate, saturate, store3, v_add, v_dot, v_length, v_length_sq, v_lerp,
     v_normalize, v_scale, v_sub,
 )
+from magica_py.solver.batched.transfer import bload3, bload4, bstore3
 from magica_py.solver.constraints.bending import FIXED_POINT
 from magica_py.solver.parameters import curve_at
 
@@ -29,23 +37,24 @@ FAR = 1e30
 
 @kernel
 def plane_push(c, n, p):
-    """``IntersectPointPlaneDist``: push p onto the plane (c, n) when behind it; signed distance."""
+    """``IntersectPointPlaneDist``: push p onto the plane (c, n) when behind it; signed distance.
+    Both answers are computed and one selected (branch-free: a lane loop over it vectorises)."""
     v = v_sub(p, c)
     d = v_dot(v, n)
     g = v_scale(n, d)
-    if d < 0.0:
-        return -v_length(g), v_sub(p, g)
-    return v_length(g), p
+    length = v_length(g)
+    pushed = v_sub(p, g)
+    behind = d < 0.0
+    return (-length if behind else length), (pushed if behind else p)
 
 
 @kernel
 def segment_parameter(c, a, b):
-    """Parameter in [0, 1] of the point of segment ab closest to c (0 when a == b)."""
+    """Parameter in [0, 1] of the point of segment ab closest to c (0 when a == b; branch-free)."""
     ab = v_sub(b, a)
     l2 = v_length_sq(ab)
-    if l2 == 0.0:
-        return 0.0
-    return saturate(v_dot(v_sub(c, a), ab) / l2)
+    s = saturate(v_dot(v_sub(c, a), ab) / l2)
+    return 0.0 if l2 == 0.0 else s
 
 
 @kernel
@@ -54,31 +63,89 @@ def aabb_overlap(min_a, max_a, min_b, max_b):
             and max_a[1] >= min_b[1] and min_a[2] <= max_b[2] and max_a[2] >= min_b[2])
 
 
+# -- point mode, per element (array-free: the per-team and the block stage call the same maths)
+@kernel
+def point_bounds(x, r):
+    """AABB of a particle sphere grown by the contact range (cfr = r): (min, max)."""
+    ext = r + r
+    return (x[0] - ext, x[1] - ext, x[2] - ext), (x[0] + ext, x[1] + ext, x[2] + ext)
+
+
+@kernel
+def point_plane(x, r, origin, normal):
+    """Particle (x, radius r) against an infinite plane: (distance, normal, pushed x)."""
+    d, x2 = plane_push(v_add(origin, v_scale(normal, r)), normal, x)
+    return d, normal, x2
+
+
+@kernel
+def point_sphere(x, r, center_old, center_new, radius):
+    """Particle against a moving sphere (normal from the old center, surface at the new one)."""
+    n = v_normalize(v_sub(x, center_old))
+    c = v_add(center_new, v_scale(n, radius + r))
+    d, x2 = plane_push(c, n, x)
+    return d, n, x2
+
+
+@kernel
+def point_capsule(x, r, start_old, end_old, start_new, end_new, radius_start, radius_end,
+                  inverse_old_rot, now_rot):
+    """Particle against a moving capsule with two radii: the closest axis point of the old
+    pose, its offset carried into the new pose by the collider's rotation."""
+    t = segment_parameter(x, start_old, end_old)
+    radius = radius_start + (radius_end - radius_start) * t
+    u = q_rotate(inverse_old_rot, v_sub(x, v_lerp(start_old, end_old, t)))
+    n = v_normalize(q_rotate(now_rot, u))
+    c = v_add(v_lerp(start_new, end_new, t), v_scale(n, radius + r))
+    d, x2 = plane_push(c, n, x)
+    return d, n, x2
+
+
+@kernel
+def point_contact_add(sum_push, sum_n, n_acc, count, min_dist, x, r, d, n, x2):
+    """One collider's answer (d, n, x2) added to a particle's sums: push and normal of the
+    colliders it penetrates (d <= 0), normal and closest distance of those within the
+    contact range (d <= cfr = r). Returns the five sums (branch-free)."""
+    pushed = d <= 0.0
+    near = d <= r
+    push_added = v_add(sum_push, v_sub(x2, x))
+    n_added = v_add(sum_n, n)
+    near_added = v_add(n_acc, n)
+    closest = min(min_dist, d)
+    return ((push_added if pushed else sum_push), (n_added if pushed else sum_n),
+            (near_added if near else n_acc), (count + 1 if pushed else count),
+            (closest if near else min_dist))
+
+
+@kernel
+def point_contact_result(x, sum_push, sum_n, count, n_acc, min_dist, r, friction):
+    """A particle's collision outcome from its sums: (next_pos, friction, collision normal).
+    The push is the mean push scaled by the length of the mean normal (opposed colliders cancel);
+    friction grows with the closeness of the nearest collider within the contact range
+    (``min_dist <= r`` exactly when one was: min_dist starts at FAR). Branch-free."""
+    mag = v_length(v_scale(sum_n, 1.0 / count))
+    pushed = v_add(x, v_scale(sum_push, min(mag, 1.0) / count))
+    new_x = pushed if (count > 0 and mag >= 1e-8) else x
+    contact = min_dist <= r and v_length_sq(n_acc) > 1e-6
+    rubbed = max(friction, 1.0 - saturate(min_dist / r))
+    unit = v_normalize(n_acc)
+    return new_x, (rubbed if contact else friction), (unit if contact else n_acc)
+
+
 @kernel
 def solve_point_collider(cs, k, x, r, bmin, bmax):
     """One particle (x, radius r, bounds) against collider slot k: (distance, normal, pushed x)."""
     z = (0.0, 0.0, 0.0)
     shape = cs.shape[k]
     if shape == PLANE:
-        n = load3(cs.plane_normal, k)
-        d, x2 = plane_push(v_add(load3(cs.start_new, k), v_scale(n, r)), n, x)
-        return d, n, x2
+        return point_plane(x, r, load3(cs.start_new, k), load3(cs.plane_normal, k))
     if not aabb_overlap(bmin, bmax, load3(cs.aabb_min, k), load3(cs.aabb_max, k)):
         return FAR, z, x
     if shape == SPHERE:
-        n = v_normalize(v_sub(x, load3(cs.start_old, k)))
-        c = v_add(load3(cs.start_new, k), v_scale(n, cs.radius_start[k] + r))
-        d, x2 = plane_push(c, n, x)
-        return d, n, x2
-    so = load3(cs.start_old, k)
-    eo = load3(cs.end_old, k)
-    t = segment_parameter(x, so, eo)
-    radius = cs.radius_start[k] + (cs.radius_end[k] - cs.radius_start[k]) * t
-    u = q_rotate(load4(cs.inverse_old_rot, k), v_sub(x, v_lerp(so, eo, t)))
-    n = v_normalize(q_rotate(load4(cs.now_rot, k), u))
-    c = v_add(v_lerp(load3(cs.start_new, k), load3(cs.end_new, k), t), v_scale(n, radius + r))
-    d, x2 = plane_push(c, n, x)
-    return d, n, x2
+        return point_sphere(x, r, load3(cs.start_old, k), load3(cs.start_new, k), cs.radius_start[k])
+    return point_capsule(x, r, load3(cs.start_old, k), load3(cs.end_old, k), load3(cs.start_new, k),
+                         load3(cs.end_new, k), cs.radius_start[k], cs.radius_end[k],
+                         load4(cs.inverse_old_rot, k), load4(cs.now_rot, k))
 
 
 @kernel
@@ -88,42 +155,130 @@ def point_collision_team(m, ps, prm, ts, cs, team):
     scale = ts.scale_ratio[team]
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
+    z = (0.0, 0.0, 0.0)
     for p in range(start, start + m.team_particle_count[team]):
         attr = m.attribute[p]
         if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
             continue
         r = max(curve_at(prm.radius_curve, team, m.depth[p]), 0.0001) * scale
-        cfr = r
         x = load3(ps.next_pos, p)
-        ext = r + cfr
-        bmin = (x[0] - ext, x[1] - ext, x[2] - ext)
-        bmax = (x[0] + ext, x[1] + ext, x[2] + ext)
-        sum_push = (0.0, 0.0, 0.0)
-        sum_n = (0.0, 0.0, 0.0)
-        n_acc = (0.0, 0.0, 0.0)
-        cnt = 0
-        min_dist = FAR
-        touched = False
+        bmin, bmax = point_bounds(x, r)
+        sum_push, sum_n, n_acc, count, min_dist = z, z, z, 0, FAR
         for k in range(c0, c1):
             if cs.scale_suspend[k] != 0:
                 continue
             d, n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
-            if d <= 0.0:
-                sum_push = v_add(sum_push, v_sub(x2, x))
-                sum_n = v_add(sum_n, n)
-                cnt += 1
-            if d <= cfr:
-                touched = True
-                n_acc = v_add(n_acc, n)
-                min_dist = min(min_dist, d)
-        if cnt > 0:
-            mag = v_length(v_scale(sum_n, 1.0 / cnt))
-            if mag >= 1e-8:
-                store3(ps.next_pos, p, v_add(x, v_scale(sum_push, min(mag, 1.0) / cnt)))
-        if touched and v_length_sq(n_acc) > 1e-6:
-            ps.friction[p] = max(ps.friction[p], 1.0 - saturate(min_dist / cfr))
-            n_acc = v_normalize(n_acc)
+            if d <= r:  # otherwise (out of range, or missed) the sums stay as they are: skip the work
+                sum_push, sum_n, n_acc, count, min_dist = point_contact_add(sum_push, sum_n, n_acc, count, min_dist,
+                                                                            x, r, d, n, x2)
+        if count > 0 or min_dist <= r:  # otherwise the result is (x, friction, n_acc): skip the work
+            new_x, friction, n_acc = point_contact_result(x, sum_push, sum_n, count, n_acc, min_dist, r,
+                                                          ps.friction[p])
+            store3(ps.next_pos, p, new_x)
+            ps.friction[p] = friction
         store3(ps.collision_normal, p, n_acc)
+
+
+@kernel
+def _add_lane(sum_push_a, sum_n_a, n_acc_a, count_a, min_dist_a, k, x, r, d, n, x2, suspended):
+    """point_contact_add on the sums a block keeps in its scratch rows (row k); a suspended
+    collider (scale_suspend) leaves them as they are."""
+    old_push, old_n, old_near, old_count, old_min = (bload3(sum_push_a, k), bload3(sum_n_a, k), bload3(n_acc_a, k),
+                                                     count_a[k], min_dist_a[k])
+    sum_push, sum_n, n_acc, count, min_dist = point_contact_add(old_push, old_n, old_near, old_count, old_min,
+                                                                x, r, d, n, x2)
+    keep = suspended != 0
+    bstore3(sum_push_a, k, old_push if keep else sum_push)
+    bstore3(sum_n_a, k, old_n if keep else sum_n)
+    bstore3(n_acc_a, k, old_near if keep else n_acc)
+    count_a[k] = old_count if keep else count
+    min_dist_a[k] = old_min if keep else min_dist
+
+
+@kernel
+def point_collision_block(m, bs, prm, blk, b):
+    """D.8 point mode for every lane of block b (``solver/batched``): ``point_collision_team``'s
+    maths, lanes innermost. Per particle, collider slot after slot (the per-team order), a
+    particle's sums live in block scratch between slots: push in ``accum_vector``, penetrating
+    normals in ``accum_normal``, near normals in ``collision_normal`` (its final value is built
+    from them), count in ``accum_count``, closest distance in ``accum_friction``; the scratch is
+    cleared again at the end. A slot's shape is the same in every lane (block formation), so
+    the shape branch is outside the lane loop; AABB early-outs and suspension are selects."""
+    ex = blk.block_exemplar[b]
+    width = blk.block_width[b]
+    lanes = np.uint64(blk.block_lane_base[b])
+    p0 = m.team_particle_start[ex]
+    slots = blk.block_collider_count[b]
+    if slots == 0:
+        return
+    z = (0.0, 0.0, 0.0)
+    next_pos, friction, normal_a = bs.next_pos, bs.friction, bs.collision_normal
+    sum_push_a, sum_n_a, count_a, min_dist_a = bs.accum_vector, bs.accum_normal, bs.accum_count, bs.accum_friction
+    scale = bs.lane_scale_ratio
+    shape_a, suspend_a = bs.col_shape, bs.col_scale_suspend
+    start_old, end_old, start_new, end_new = bs.col_start_old, bs.col_end_old, bs.col_start_new, bs.col_end_new
+    radius_start, radius_end, plane_normal = bs.col_radius_start, bs.col_radius_end, bs.col_plane_normal
+    inverse_old_rot, now_rot, aabb_min, aabb_max = bs.col_inverse_old_rot, bs.col_now_rot, bs.col_aabb_min, bs.col_aabb_max
+    for p in range(blk.block_particle_count[b]):
+        attr = m.attribute[p0 + p]
+        if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
+            continue
+        radius = max(curve_at(prm.radius_curve, ex, m.depth[p0 + p]), 0.0001)
+        k0 = np.uint64(blk.block_row_base[b] + p * width)
+        for i in range(width):
+            k = k0 + np.uint64(i)
+            bstore3(sum_push_a, k, z)
+            bstore3(sum_n_a, k, z)
+            bstore3(normal_a, k, z)
+            count_a[k] = 0
+            min_dist_a[k] = FAR
+        for j in range(slots):
+            c0 = np.uint64(blk.block_collider_base[b] + j * width)
+            shape = shape_a[c0]
+            if shape == PLANE:
+                for i in range(width):
+                    k = k0 + np.uint64(i)
+                    c = c0 + np.uint64(i)
+                    x = bload3(next_pos, k)
+                    r = radius * scale[lanes + np.uint64(i)]
+                    d, n, x2 = point_plane(x, r, bload3(start_new, c), bload3(plane_normal, c))
+                    _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d, n, x2, suspend_a[c])
+            elif shape == SPHERE:
+                for i in range(width):
+                    k = k0 + np.uint64(i)
+                    c = c0 + np.uint64(i)
+                    x = bload3(next_pos, k)
+                    r = radius * scale[lanes + np.uint64(i)]
+                    bmin, bmax = point_bounds(x, r)
+                    hit = aabb_overlap(bmin, bmax, bload3(aabb_min, c), bload3(aabb_max, c))
+                    d, n, x2 = point_sphere(x, r, bload3(start_old, c), bload3(start_new, c), radius_start[c])
+                    _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d if hit else FAR,
+                              n if hit else z, x2 if hit else x, suspend_a[c])
+            else:
+                for i in range(width):
+                    k = k0 + np.uint64(i)
+                    c = c0 + np.uint64(i)
+                    x = bload3(next_pos, k)
+                    r = radius * scale[lanes + np.uint64(i)]
+                    bmin, bmax = point_bounds(x, r)
+                    hit = aabb_overlap(bmin, bmax, bload3(aabb_min, c), bload3(aabb_max, c))
+                    d, n, x2 = point_capsule(x, r, bload3(start_old, c), bload3(end_old, c), bload3(start_new, c),
+                                             bload3(end_new, c), radius_start[c], radius_end[c],
+                                             bload4(inverse_old_rot, c), bload4(now_rot, c))
+                    _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d if hit else FAR,
+                              n if hit else z, x2 if hit else x, suspend_a[c])
+        for i in range(width):
+            k = k0 + np.uint64(i)
+            r = radius * scale[lanes + np.uint64(i)]
+            new_x, f, normal = point_contact_result(bload3(next_pos, k), bload3(sum_push_a, k), bload3(sum_n_a, k),
+                                                    count_a[k], bload3(normal_a, k), min_dist_a[k], r, friction[k])
+            bstore3(next_pos, k, new_x)
+            friction[k] = f
+            bstore3(normal_a, k, normal)
+            bstore3(sum_push_a, k, z)
+            bstore3(sum_n_a, k, z)
+            count_a[k] = 0
+            min_dist_a[k] = 0.0
 
 
 @kernel
