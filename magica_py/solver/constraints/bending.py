@@ -4,56 +4,78 @@ Corrections are accumulated per particle in MagicaCloth2's fixed point (1e-6 m u
 contribution truncated toward zero, ref §0.2), averaged by count and added to the moving
 particles' ``next_pos`` (Jacobi, not Gauss-Seidel). ``velocity_pos`` is untouched, so the whole
 correction becomes velocity. The rest volume scales with scaleRatio, not its cube (Appendix 2.6).
+
+Two forms (``solver/batched``): ``bending_team`` / ``apply_accumulated`` run one team,
+``bending_block`` / ``apply_accumulated_block`` every lane of a block. Both call the same
+array-free per-element functions (``particle_inverse_mass``, ``solve_dihedral``,
+``solve_volume``, ``accumulated``, ``averaged``), which are branch-free (degenerate pairs
+are computed through and selected away), so the block's lane loops vectorise and give
+exactly the per-team bits.
 """
 from __future__ import annotations
 
 import math
 
+import numpy as np
+from llvmlite import ir
+from numba.core import cgutils, types
+from numba import literally
+from numba.extending import intrinsic
+
 from magica_py.jit import kernel
 from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
-    inverse_mass_friction_depth, load3, saturate, v_cross, v_dot, v_length, v_length_sq,
+    inverse_mass_friction_depth, load3, saturate, store3, v_cross, v_dot, v_length, v_length_sq,
     v_scale, v_sub,
 )
+from magica_py.solver.batched.transfer import bload3, bstore3
 from magica_py.solver.parameters import step_rate
 
 MOVE = 0x02
 FIXED_POINT = 1e6
 DONT_MOVE_INVERSE_MASS = 0.01
+ZERO3 = (0.0, 0.0, 0.0)
+
+
+# ----------------------------------------------------------------------------- per element
+@kernel
+def particle_inverse_mass(move, friction, depth):
+    """Inverse mass of a bend/volume vertex: friction and depth weighted when it moves."""
+    moving = inverse_mass_friction_depth(friction, depth)
+    return moving if move else DONT_MOVE_INVERSE_MASS
 
 
 @kernel
-def accumulate(ps, p, v):
-    """Add one contribution in fixed point (truncation toward zero, as InterlockUtility)."""
-    ps.accum_vector[p, 0] += float(math.trunc(v[0] * FIXED_POINT))
-    ps.accum_vector[p, 1] += float(math.trunc(v[1] * FIXED_POINT))
-    ps.accum_vector[p, 2] += float(math.trunc(v[2] * FIXED_POINT))
-    ps.accum_count[p] += 1
+def accumulated(acc, count, v, ok):
+    """(acc, count) after adding contribution v in fixed point (truncated toward zero, as
+    InterlockUtility) when ok; unchanged otherwise. Sums of integer-valued floats are exact."""
+    summed = (acc[0] + float(math.trunc(v[0] * FIXED_POINT)),
+              acc[1] + float(math.trunc(v[1] * FIXED_POINT)),
+              acc[2] + float(math.trunc(v[2] * FIXED_POINT)))
+    return (summed if ok else acc), (count + 1 if ok else count)
 
 
 @kernel
-def inverse_mass(m, ps, p):
-    if (m.attribute[p] & MOVE) == 0:
-        return DONT_MOVE_INVERSE_MASS
-    return inverse_mass_friction_depth(ps.friction[p], m.depth[p])
+def averaged(next_pos, acc, count):
+    """next_pos plus the mean of ``count`` fixed-point contributions (unchanged when none)."""
+    s = 1.0 / (max(count, 1) * FIXED_POINT)
+    moved = (next_pos[0] + acc[0] * s, next_pos[1] + acc[1] * s, next_pos[2] + acc[2] * s)
+    return moved if count > 0 else next_pos
 
 
 @kernel
 def solve_dihedral(p0, p1, p2, p3, w0, w1, w2, w3, rest_angle, sign, stiffness):
     """Direction-dihedral-angle correction of the pair (v0, v1 opposite; v2-v3 the shared edge).
 
-    Returns (ok, c0, c1, c2, c3)."""
-    z = (0.0, 0.0, 0.0)
+    Returns (ok, c0, c1, c2, c3); not ok (zero corrections) for a degenerate edge, a
+    degenerate triangle or a zero denominator. Branch-free: the degenerate cases are
+    computed through (inf/NaN, no exception under the numpy error model) and selected away."""
     e = v_sub(p3, p2)
     el = v_length(e)
-    if el < 1e-8:
-        return False, z, z, z, z
     n1 = v_cross(v_sub(p2, p0), v_sub(p3, p0))
     n2 = v_cross(v_sub(p3, p1), v_sub(p2, p1))
     l1 = v_length_sq(n1)
     l2 = v_length_sq(n2)
-    if l1 == 0.0 or l2 == 0.0:
-        return False, z, z, z, z
     n1u = v_scale(n1, 1.0 / math.sqrt(l1))
     n2u = v_scale(n2, 1.0 / math.sqrt(l2))
     n1 = v_scale(n1, 1.0 / l1)
@@ -69,31 +91,58 @@ def solve_dihedral(p0, p1, p2, p3, w0, w1, w2, w3, rest_angle, sign, stiffness):
     c = v_dot(n1u, n2u)
     c = -1.0 if c < -1.0 else (1.0 if c > 1.0 else c)
     phi = trig.acos(c)
-    if v_dot(v_cross(n1u, n2u), e) < 0.0:
-        phi = -phi
+    phi = -phi if v_dot(v_cross(n1u, n2u), e) < 0.0 else phi
     denom = w0 * v_length_sq(d0) + w1 * v_length_sq(d1) + w2 * v_length_sq(d2) + w3 * v_length_sq(d3)
-    if denom == 0.0:
-        return False, z, z, z, z
     lam = (sign * rest_angle - phi) / denom * stiffness
-    return (True, v_scale(d0, -w0 * lam), v_scale(d1, -w1 * lam), v_scale(d2, -w2 * lam),
-            v_scale(d3, -w3 * lam))
+    # the per-team tests in their original order, negated (a NaN length passes, as it did)
+    ok = (not el < 1e-8) & (not (l1 == 0.0)) & (not (l2 == 0.0)) & (not denom == 0.0)
+    c0 = v_scale(d0, -w0 * lam)
+    c1 = v_scale(d1, -w1 * lam)
+    c2 = v_scale(d2, -w2 * lam)
+    c3 = v_scale(d3, -w3 * lam)
+    return (ok, c0 if ok else ZERO3, c1 if ok else ZERO3, c2 if ok else ZERO3, c3 if ok else ZERO3)
 
 
 @kernel
 def solve_volume(p0, p1, p2, p3, w0, w1, w2, w3, rest_volume, stiffness):
-    """Tetra volume correction (volumes x1000). Returns (ok, c0, c1, c2, c3)."""
-    z = (0.0, 0.0, 0.0)
+    """Tetra volume correction (volumes x1000). Returns (ok, c0, c1, c2, c3); not ok (zero
+    corrections) when the denominator vanishes. Branch-free like ``solve_dihedral``."""
     volume = 1000.0 / 6.0 * v_dot(v_cross(v_sub(p1, p0), v_sub(p2, p0)), v_sub(p3, p0))
     g0 = v_cross(v_sub(p1, p2), v_sub(p3, p2))
     g1 = v_cross(v_sub(p2, p0), v_sub(p3, p0))
     g2 = v_cross(v_sub(p0, p1), v_sub(p3, p1))
     g3 = v_cross(v_sub(p1, p0), v_sub(p2, p0))
     denom = 1000.0 * (w0 * v_length_sq(g0) + w1 * v_length_sq(g1) + w2 * v_length_sq(g2) + w3 * v_length_sq(g3))
-    if abs(denom) < 1e-6:
-        return False, z, z, z, z
+    ok = not abs(denom) < 1e-6
     lam = stiffness * (rest_volume - volume) / denom
-    return (True, v_scale(g0, lam * w0), v_scale(g1, lam * w1), v_scale(g2, lam * w2),
-            v_scale(g3, lam * w3))
+    c0 = v_scale(g0, lam * w0)
+    c1 = v_scale(g1, lam * w1)
+    c2 = v_scale(g2, lam * w2)
+    c3 = v_scale(g3, lam * w3)
+    return (ok, c0 if ok else ZERO3, c1 if ok else ZERO3, c2 if ok else ZERO3, c3 if ok else ZERO3)
+
+
+@kernel
+def bending_rate(prm, team, frequency_ratio, power_y):
+    """Per-step stiffness of the team's bending (negative: bending off)."""
+    stiffness = prm.bending_stiffness[team]
+    if stiffness < 1e-6:
+        return -1.0
+    return saturate(step_rate(stiffness, frequency_ratio, power_y, prm.rate_mode[team]))
+
+
+# ----------------------------------------------------------------------------- per team
+@kernel
+def accumulate(ps, p, v):
+    """Add one contribution to particle p's accumulator (``accumulated``)."""
+    acc, n = accumulated(load3(ps.accum_vector, p), ps.accum_count[p], v, True)
+    store3(ps.accum_vector, p, acc)
+    ps.accum_count[p] = n
+
+
+@kernel
+def inverse_mass(m, ps, p):
+    return particle_inverse_mass((m.attribute[p] & MOVE) != 0, ps.friction[p], m.depth[p])
 
 
 @kernel
@@ -103,10 +152,9 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
     The inverse mass of each particle is computed once per call into ``ps.bend_inverse_mass``
     (friction and depth do not change during the routine): a mesh vertex belongs to several
     bend pairs, so per-pair evaluation repeated the same division ~8 times per vertex."""
-    stiffness = prm.bending_stiffness[team]
-    if stiffness < 1e-6:
+    k = bending_rate(prm, team, frequency_ratio, power_y)
+    if k < 0.0:
         return
-    k = saturate(step_rate(stiffness, frequency_ratio, power_y, prm.rate_mode[team]))
     start = m.team_particle_start[team]
     for p in range(start, start + m.team_particle_count[team]):
         ps.bend_inverse_mass[p] = inverse_mass(m, ps, p)
@@ -147,13 +195,303 @@ def apply_accumulated(m, ps, team, move_only):
     """Add the averaged accumulator to next_pos (moving particles only when ``move_only``) and clear it."""
     start = m.team_particle_start[team]
     for p in range(start, start + m.team_particle_count[team]):
-        n = ps.accum_count[p]
-        if n > 0 and (not move_only or (m.attribute[p] & MOVE) != 0):
-            s = 1.0 / (n * FIXED_POINT)
-            ps.next_pos[p, 0] += ps.accum_vector[p, 0] * s
-            ps.next_pos[p, 1] += ps.accum_vector[p, 1] * s
-            ps.next_pos[p, 2] += ps.accum_vector[p, 2] * s
-        ps.accum_vector[p, 0] = 0.0
-        ps.accum_vector[p, 1] = 0.0
-        ps.accum_vector[p, 2] = 0.0
+        if not move_only or (m.attribute[p] & MOVE) != 0:
+            store3(ps.next_pos, p, averaged(load3(ps.next_pos, p), load3(ps.accum_vector, p), ps.accum_count[p]))
+        store3(ps.accum_vector, p, ZERO3)
         ps.accum_count[p] = 0
+
+
+# ----------------------------------------------------------------------------- per block
+@kernel
+def _accumulate_row(accum_vector, accum_count, k, v, ok):
+    acc, n = accumulated(bload3(accum_vector, k), accum_count[k], v, ok)
+    bstore3(accum_vector, k, acc)
+    accum_count[k] = n
+
+
+@kernel
+def _inverse_mass_rows(m, bs, blk, b):
+    """bs.bend_inverse_mass of every row of block b."""
+    ex = blk.block_exemplar[b]
+    width = blk.block_width[b]
+    row_base = blk.block_row_base[b]
+    p0 = m.team_particle_start[ex]
+    friction, w = bs.friction, bs.bend_inverse_mass
+    for p in range(blk.block_particle_count[b]):
+        k0 = np.uint64(row_base + p * width)
+        move = (m.attribute[p0 + p] & MOVE) != 0
+        depth = m.depth[p0 + p]
+        for i in range(width):
+            r = k0 + np.uint64(i)
+            w[r] = particle_inverse_mass(move, friction[r], depth)
+
+
+# ----------------------------------------------------------------------------- pair scopes
+# A block's pair loop reads next_pos and the inverse masses of four vertices and updates their
+# accumulators (x, y, z, count): 16 read-modify-write streams at row offsets LLVM cannot
+# relate. Left to runtime overlap checks (hundreds of them) the vectorised loop only paid off
+# from 40 lanes, so blocks of 25 ran scalar. Scoped alias metadata states what is true of one
+# pair: the reads never touch an accumulator (other arrays), and the accumulator streams of
+# its four distinct vertices are disjoint in every lane (rows differ by multiples of the
+# width). ``_declare_pair_scopes`` opens new scope instances at each pair
+# (llvm.experimental.noalias.scope.decl), so nothing is claimed across pairs, which share
+# vertices. Only the memory model changes, not the arithmetic: the bits are the same.
+_DOMAIN = "magica_py.bending.pair"
+READ_SCOPE = 0          # next_pos, inverse masses, lane scale
+ACCUM_SCOPES = 16       # 1 + 4 * vertex + component (3: count)
+
+
+def _scope_node(module, i):
+    domain = module.add_metadata([ir.MetaDataString(module, _DOMAIN)])
+    return module.add_metadata([ir.MetaDataString(module, f"{_DOMAIN}.{i}"), domain])
+
+
+def _tag(module, instruction, scope):
+    instruction.set_metadata("alias.scope", module.add_metadata([_scope_node(module, scope)]))
+    others = [_scope_node(module, i) for i in range(ACCUM_SCOPES + 1) if i != scope]
+    instruction.set_metadata("noalias", module.add_metadata(others))
+
+
+def _element_pointer(context, builder, array_type, array, indices):
+    ary = context.make_array(array_type)(context, builder, array)
+    shape = cgutils.unpack_tuple(builder, ary.shape, array_type.ndim)
+    strides = cgutils.unpack_tuple(builder, ary.strides, array_type.ndim)
+    return cgutils.get_item_pointer2(context, builder, ary.data, shape, strides, array_type.layout, indices)
+
+
+def _index(context, builder, value_type, value):
+    return context.cast(builder, value, value_type, types.intp)
+
+
+def _scalar_load(offset):
+    def typer(typingctx, array, row, scope):
+        if not (isinstance(array, types.Array) and array.ndim == 1 and isinstance(scope, types.IntegerLiteral)):
+            return None
+        tag = scope.literal_value + offset
+
+        def codegen(context, builder, sig, args):
+            pointer = _element_pointer(context, builder, sig.args[0], args[0],
+                                       [_index(context, builder, sig.args[1], args[1])])
+            value = builder.load(pointer)
+            _tag(builder.module, value, tag)
+            return value
+
+        return array.dtype(array, row, scope), codegen
+
+    return intrinsic(typer)
+
+
+def _scalar_store(offset):
+    def typer(typingctx, array, row, value, scope):
+        if not (isinstance(array, types.Array) and array.ndim == 1 and isinstance(scope, types.IntegerLiteral)):
+            return None
+        tag = scope.literal_value + offset
+
+        def codegen(context, builder, sig, args):
+            pointer = _element_pointer(context, builder, sig.args[0], args[0],
+                                       [_index(context, builder, sig.args[1], args[1])])
+            store = builder.store(context.cast(builder, args[2], sig.args[2], sig.args[0].dtype), pointer)
+            _tag(builder.module, store, tag)
+            return context.get_dummy_value()
+
+        return types.none(array, row, value, scope), codegen
+
+    return intrinsic(typer)
+
+
+# ``array[row]`` (1-D) tagged with alias scope ``scope`` (a literal int)
+scoped_load = _scalar_load(0)
+# the count stream of a vertex whose x, y, z streams are scopes scope + 0..2
+scoped_count_load = _scalar_load(3)
+scoped_count_store = _scalar_store(3)
+
+
+@intrinsic
+def scoped_load3(typingctx, array, row, scope):
+    """``(array[0, row], array[1, row], array[2, row])`` with scopes ``scope + c`` (or all
+    ``scope`` when it is ``READ_SCOPE``)."""
+    if not (isinstance(array, types.Array) and array.ndim == 2 and isinstance(scope, types.IntegerLiteral)):
+        return None
+    tag = scope.literal_value
+    row_type = types.UniTuple(array.dtype, 3)
+
+    def codegen(context, builder, sig, args):
+        k = _index(context, builder, sig.args[1], args[1])
+        values = []
+        for c in range(3):
+            pointer = _element_pointer(context, builder, sig.args[0], args[0], [context.get_constant(types.intp, c), k])
+            value = builder.load(pointer)
+            _tag(builder.module, value, tag if tag == READ_SCOPE else tag + c)
+            values.append(value)
+        return context.make_tuple(builder, row_type, values)
+
+    return row_type(array, row, scope), codegen
+
+
+@intrinsic
+def scoped_store3(typingctx, array, row, value, scope):
+    """``array[:, row] = value`` with scopes ``scope + c``."""
+    if not (isinstance(array, types.Array) and array.ndim == 2 and isinstance(value, types.BaseTuple)
+            and len(value) == 3 and isinstance(scope, types.IntegerLiteral)):
+        return None
+    tag = scope.literal_value
+
+    def codegen(context, builder, sig, args):
+        k = _index(context, builder, sig.args[1], args[1])
+        for c in range(3):
+            pointer = _element_pointer(context, builder, sig.args[0], args[0], [context.get_constant(types.intp, c), k])
+            v = context.cast(builder, builder.extract_value(args[2], c), sig.args[2][c], sig.args[0].dtype)
+            _tag(builder.module, builder.store(v, pointer), tag + c)
+        return context.get_dummy_value()
+
+    return types.none(array, row, value, scope), codegen
+
+
+@intrinsic
+def _declare_pair_scopes(typingctx):
+    """New instances of the accumulator scopes (one pair): claims do not cross pairs."""
+    def codegen(context, builder, sig, args):
+        module = builder.module
+        fn = cgutils.get_or_insert_function(module, ir.FunctionType(ir.VoidType(), [ir.MetaDataType()]),
+                                            "llvm.experimental.noalias.scope.decl")
+        for i in range(1, ACCUM_SCOPES + 1):
+            builder.call(fn, [module.add_metadata([_scope_node(module, i)])])
+        return context.get_dummy_value()
+
+    return types.none(), codegen
+
+
+@kernel
+def _accumulate_scoped(accum_vector, accum_count, r, v, ok, scope):
+    """``_accumulate_row`` with the accumulator scopes of one vertex (x, y, z: scope + 0..2,
+    count: scope + 3)."""
+    literally(scope)
+    acc, n = accumulated(scoped_load3(accum_vector, r, scope), scoped_count_load(accum_count, r, scope), v, ok)
+    scoped_store3(accum_vector, r, acc, scope)
+    scoped_count_store(accum_count, r, n, scope)
+
+
+@kernel
+def _pair_rows(blk, b, p0, vertices, c):
+    """First block rows of the four vertices of pair c (unsigned: see step.predict_block)."""
+    width = blk.block_width[b]
+    row_base = blk.block_row_base[b]
+    return (np.uint64(row_base + (vertices[c, 0] - p0) * width), np.uint64(row_base + (vertices[c, 1] - p0) * width),
+            np.uint64(row_base + (vertices[c, 2] - p0) * width), np.uint64(row_base + (vertices[c, 3] - p0) * width))
+
+
+@kernel
+def _distinct(r0, r1, r2, r3):
+    """The scopes' premise: four distinct vertices (true of every built pair)."""
+    return r0 != r1 and r0 != r2 and r0 != r3 and r1 != r2 and r1 != r3 and r2 != r3
+
+
+@kernel
+def _dihedral_rows(m, bs, blk, b, k):
+    ex = blk.block_exemplar[b]
+    width = blk.block_width[b]
+    p0 = m.team_particle_start[ex]
+    # arrays as locals (through the table their pointers are reloaded after every store)
+    next_pos, w, accum_vector, accum_count = bs.next_pos, bs.bend_inverse_mass, bs.accum_vector, bs.accum_count
+    c0_ = m.team_bend_start[ex]
+    for c in range(c0_, c0_ + m.team_bend_count[ex]):
+        r0, r1, r2, r3 = _pair_rows(blk, b, p0, m.bend_vertices, c)
+        rest_angle = m.bend_rest_angle[c]
+        sign = m.bend_sign[c]
+        if _distinct(r0, r1, r2, r3):
+            _declare_pair_scopes()
+            for i in range(width):
+                u = np.uint64(i)
+                ok, c0, c1, c2, c3 = solve_dihedral(
+                    scoped_load3(next_pos, r0 + u, 0), scoped_load3(next_pos, r1 + u, 0),
+                    scoped_load3(next_pos, r2 + u, 0), scoped_load3(next_pos, r3 + u, 0),
+                    scoped_load(w, r0 + u, 0), scoped_load(w, r1 + u, 0), scoped_load(w, r2 + u, 0),
+                    scoped_load(w, r3 + u, 0), rest_angle, sign, k)
+                _accumulate_scoped(accum_vector, accum_count, r0 + u, c0, ok, 1)
+                _accumulate_scoped(accum_vector, accum_count, r1 + u, c1, ok, 5)
+                _accumulate_scoped(accum_vector, accum_count, r2 + u, c2, ok, 9)
+                _accumulate_scoped(accum_vector, accum_count, r3 + u, c3, ok, 13)
+            continue
+        for i in range(width):
+            u = np.uint64(i)
+            ok, c0, c1, c2, c3 = solve_dihedral(
+                bload3(next_pos, r0 + u), bload3(next_pos, r1 + u), bload3(next_pos, r2 + u),
+                bload3(next_pos, r3 + u), w[r0 + u], w[r1 + u], w[r2 + u], w[r3 + u], rest_angle, sign, k)
+            _accumulate_row(accum_vector, accum_count, r0 + u, c0, ok)
+            _accumulate_row(accum_vector, accum_count, r1 + u, c1, ok)
+            _accumulate_row(accum_vector, accum_count, r2 + u, c2, ok)
+            _accumulate_row(accum_vector, accum_count, r3 + u, c3, ok)
+
+
+@kernel
+def _volume_rows(m, bs, blk, b, k):
+    ex = blk.block_exemplar[b]
+    width = blk.block_width[b]
+    lanes = np.uint64(blk.block_lane_base[b])
+    p0 = m.team_particle_start[ex]
+    next_pos, w, accum_vector, accum_count = bs.next_pos, bs.bend_inverse_mass, bs.accum_vector, bs.accum_count
+    scale_ratio = bs.lane_scale_ratio
+    c0_ = m.team_volume_start[ex]
+    for c in range(c0_, c0_ + m.team_volume_count[ex]):
+        r0, r1, r2, r3 = _pair_rows(blk, b, p0, m.volume_vertices, c)
+        rest_volume = m.volume_rest[c]
+        if _distinct(r0, r1, r2, r3):
+            _declare_pair_scopes()
+            for i in range(width):
+                u = np.uint64(i)
+                ok, c0, c1, c2, c3 = solve_volume(
+                    scoped_load3(next_pos, r0 + u, 0), scoped_load3(next_pos, r1 + u, 0),
+                    scoped_load3(next_pos, r2 + u, 0), scoped_load3(next_pos, r3 + u, 0),
+                    scoped_load(w, r0 + u, 0), scoped_load(w, r1 + u, 0), scoped_load(w, r2 + u, 0),
+                    scoped_load(w, r3 + u, 0), rest_volume * scoped_load(scale_ratio, lanes + u, 0), k)
+                _accumulate_scoped(accum_vector, accum_count, r0 + u, c0, ok, 1)
+                _accumulate_scoped(accum_vector, accum_count, r1 + u, c1, ok, 5)
+                _accumulate_scoped(accum_vector, accum_count, r2 + u, c2, ok, 9)
+                _accumulate_scoped(accum_vector, accum_count, r3 + u, c3, ok, 13)
+            continue
+        for i in range(width):
+            u = np.uint64(i)
+            ok, c0, c1, c2, c3 = solve_volume(
+                bload3(next_pos, r0 + u), bload3(next_pos, r1 + u), bload3(next_pos, r2 + u),
+                bload3(next_pos, r3 + u), w[r0 + u], w[r1 + u], w[r2 + u], w[r3 + u],
+                rest_volume * scale_ratio[lanes + u], k)
+            _accumulate_row(accum_vector, accum_count, r0 + u, c0, ok)
+            _accumulate_row(accum_vector, accum_count, r1 + u, c1, ok)
+            _accumulate_row(accum_vector, accum_count, r2 + u, c2, ok)
+            _accumulate_row(accum_vector, accum_count, r3 + u, c3, ok)
+
+
+@kernel
+def bending_block(m, bs, prm, blk, b, frequency_ratio, power_y):
+    """``bending_team`` for every lane of block b (``solver/batched``): the same pair order
+    within each lane, lanes innermost; a pair degenerate in some lanes is selected away
+    (``ok``) there rather than skipped."""
+    ex = blk.block_exemplar[b]
+    if m.team_bend_count[ex] == 0 and m.team_volume_count[ex] == 0:
+        return
+    k = bending_rate(prm, ex, frequency_ratio, power_y)
+    if k < 0.0:
+        return
+    _inverse_mass_rows(m, bs, blk, b)
+    _dihedral_rows(m, bs, blk, b, k)
+    _volume_rows(m, bs, blk, b, k)
+
+
+@kernel
+def apply_accumulated_block(m, bs, blk, b, move_only):
+    """``apply_accumulated`` for every lane of block b."""
+    ex = blk.block_exemplar[b]
+    width = blk.block_width[b]
+    row_base = blk.block_row_base[b]
+    p0 = m.team_particle_start[ex]
+    next_pos, accum_vector, accum_count = bs.next_pos, bs.accum_vector, bs.accum_count
+    for p in range(blk.block_particle_count[b]):
+        k0 = np.uint64(row_base + p * width)
+        if not move_only or (m.attribute[p0 + p] & MOVE) != 0:
+            for i in range(width):
+                r = k0 + np.uint64(i)
+                bstore3(next_pos, r, averaged(bload3(next_pos, r), bload3(accum_vector, r), accum_count[r]))
+        for i in range(width):
+            r = k0 + np.uint64(i)
+            bstore3(accum_vector, r, ZERO3)
+            accum_count[r] = 0
