@@ -8,11 +8,13 @@ shear links half of it; a zero-rest link *overwrites* the accumulated correction
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    inverse_mass_friction_depth, lerp, load3, saturate, store3, v_add, v_length, v_scale, v_sub,
+    inverse_mass_friction_depth, lerp, load3, saturate, store3, v_add, v_length, v_length_sq, v_scale, v_sub,
 )
 from magica_py.solver.batched.transfer import bload3, bstore3
 from magica_py.solver.parameters import curve_at_clamp01, step_rate
@@ -39,8 +41,14 @@ def distance_link(p_pos, q_pos, rest, w_p, w_q, stiffness):
 @kernel
 def distance_rest_length(signed_rest, scale, p_base, q_base, animation_pose_ratio):
     """The link's rest length this step: the build rest length at the team's scale blended
-    towards the animated pose's distance."""
-    return lerp(abs(signed_rest) * scale, v_length(v_sub(p_base, q_base)), animation_pose_ratio)
+    towards the animated pose's distance, ``lerp(|rest| scale, |p_base - q_base|, ratio)``.
+
+    With a ratio of 0 the lerp is ``x + (d - x) * 0``: x when d is finite, NaN when it is not,
+    and the squared distance is finite exactly when the distance is, so it stands in for the
+    distance with the same bits and without the square root."""
+    d2 = v_length_sq(v_sub(p_base, q_base))
+    pose = math.sqrt(d2) if animation_pose_ratio != 0.0 else d2
+    return lerp(abs(signed_rest) * scale, pose, animation_pose_ratio)
 
 
 @kernel
@@ -101,65 +109,69 @@ def distance_team(m, ps, prm, ts, team, frequency_ratio, power_y, attenuation):
 
 
 @kernel
+def _link_lanes(k0, q0, width, scale_base, lanes, lane_scale, signed_rest, animation_pose_ratio, stiffness,
+                next_pos_a, base_pos_a, w, acc_a, count_a):
+    """One non-zero-rest link of particle rows k0 + i to rows q0 + i, every lane i: the
+    correction is added to the particle's running sum and count (``accum_*`` scratch)."""
+    for i in range(width):
+        k = k0 + np.uint64(i)
+        kq = q0 + np.uint64(i)
+        rest = distance_rest_length(signed_rest, scale_base * lane_scale[lanes + np.uint64(i)],
+                                    bload3(base_pos_a, k), bload3(base_pos_a, kq), animation_pose_ratio)
+        corr, ok = distance_link(bload3(next_pos_a, k), bload3(next_pos_a, kq), rest, w[k], w[kq], stiffness)
+        acc = bload3(acc_a, k)
+        bstore3(acc_a, k, v_add(acc, corr) if ok else acc)
+        count_a[k] += 1 if ok else 0
+
+
+@kernel
 def distance_block(m, bs, prm, blk, b, frequency_ratio, power_y, attenuation):
     """D.4 for every lane of block b: ``distance_team``'s maths, lanes innermost.
 
     Each lane visits particles and links in the per-team order (Gauss-Seidel). A particle's
     running sum and count live in the ``accum_vector`` / ``accum_count`` scratch rows of that
-    particle (zero between stages, left zero here) so that the lane loop is innermost for
-    every link; what depends on topology or parameters only (zero-rest link, fixed partner,
-    stiffness) is decided outside the lane loop."""
+    particle (zero between stages, left zero here), so that the lane loop is the innermost
+    loop for every link; what depends on topology or parameters only (zero-rest link,
+    stiffness) is decided outside the lane loop. The
+    inverse masses (friction does not change during the pass) are computed once per particle
+    and lane into ``bend_inverse_mass``, the bending pass's per-call scratch (it rewrites it
+    before reading it), instead of twice per link."""
     ex = blk.block_exemplar[b]
     width = blk.block_width[b]
     lanes = np.uint64(blk.block_lane_base[b])
     row_base = blk.block_row_base[b]
+    count = blk.block_particle_count[b]
     p0 = m.team_particle_start[ex]
     a = prm.animation_pose_ratio[ex]
     init_scale = m.team_init_scale[ex, 0]
     next_pos_a, velocity_pos_a, base_pos_a, friction = bs.next_pos, bs.velocity_pos, bs.base_pos, bs.friction
-    acc_a, count_a, lane_scale = bs.accum_vector, bs.accum_count, bs.lane_scale_ratio
-    for p in range(blk.block_particle_count[b]):
+    acc_a, count_a, lane_scale, w = bs.accum_vector, bs.accum_count, bs.lane_scale_ratio, bs.bend_inverse_mass
+    for p in range(count):
+        k0 = np.uint64(row_base + p * width)
+        if (m.attribute[p0 + p] & MOVE) == 0:
+            for i in range(width):
+                w[k0 + np.uint64(i)] = 1.0 / FIX_MASS
+        else:
+            depth = m.depth[p0 + p]
+            for i in range(width):
+                w[k0 + np.uint64(i)] = inverse_mass_friction_depth(friction[k0 + np.uint64(i)], depth)
+    for p in range(count):
         if (m.attribute[p0 + p] & MOVE) == 0:
             continue
-        depth = m.depth[p0 + p]
-        k_vertical, k_horizontal = distance_stiffness(prm, ex, depth, frequency_ratio, power_y)
+        k_vertical, k_horizontal = distance_stiffness(prm, ex, m.depth[p0 + p], frequency_ratio, power_y)
         k0 = np.uint64(row_base + p * width)
         for link in range(m.distance_start[p0 + p], m.distance_start[p0 + p] + m.distance_count[p0 + p]):
-            q = m.distance_target[link] - p0
             r = m.distance_rest[link]
-            q0 = np.uint64(row_base + q * width)
-            if r == 0.0:
+            q0 = np.uint64(row_base + (m.distance_target[link] - p0) * width)
+            stiffness = k_vertical if r > 0.0 else k_horizontal
+            if r == 0.0:  # zero-distance link: assignment, not accumulation (quirk)
                 for i in range(width):
                     k = k0 + np.uint64(i)
                     bstore3(acc_a, k, v_scale(v_sub(bload3(next_pos_a, q0 + np.uint64(i)), bload3(next_pos_a, k)), 0.5))
                     count_a[k] += 1
-                continue
-            stiffness = k_vertical if r > 0.0 else k_horizontal
-            if (m.attribute[p0 + q] & MOVE) == 0:
-                for i in range(width):
-                    k = k0 + np.uint64(i)
-                    kq = q0 + np.uint64(i)
-                    rest = distance_rest_length(r, init_scale * lane_scale[lanes + np.uint64(i)],
-                                                bload3(base_pos_a, k), bload3(base_pos_a, kq), a)
-                    corr, ok = distance_link(bload3(next_pos_a, k), bload3(next_pos_a, kq), rest,
-                                             inverse_mass_friction_depth(friction[k], depth), 1.0 / FIX_MASS,
-                                             stiffness)
-                    acc = bload3(acc_a, k)
-                    bstore3(acc_a, k, v_add(acc, corr) if ok else acc)
-                    count_a[k] += 1 if ok else 0
             else:
-                depth_q = m.depth[p0 + q]
-                for i in range(width):
-                    k = k0 + np.uint64(i)
-                    kq = q0 + np.uint64(i)
-                    rest = distance_rest_length(r, init_scale * lane_scale[lanes + np.uint64(i)],
-                                                bload3(base_pos_a, k), bload3(base_pos_a, kq), a)
-                    corr, ok = distance_link(bload3(next_pos_a, k), bload3(next_pos_a, kq), rest,
-                                             inverse_mass_friction_depth(friction[k], depth),
-                                             inverse_mass_friction_depth(friction[kq], depth_q), stiffness)
-                    acc = bload3(acc_a, k)
-                    bstore3(acc_a, k, v_add(acc, corr) if ok else acc)
-                    count_a[k] += 1 if ok else 0
+                _link_lanes(k0, q0, width, init_scale, lanes, lane_scale, r, a, stiffness,
+                            next_pos_a, base_pos_a, w, acc_a, count_a)
         for i in range(width):
             k = k0 + np.uint64(i)
             next_pos, velocity_pos = distance_apply(bload3(next_pos_a, k), bload3(velocity_pos_a, k),
