@@ -266,3 +266,47 @@ def test_scalar_pass_for_crowded_vertices_gives_the_vectorised_bits(crowd):
         assert (_bits(state.rotation[rows]) == _bits(vectorised[rows])).all()
     finally:
         restore(crowd, before)
+
+
+# ----------------------------------------------------------------------------- E.4 write-back
+def test_write_back_gives_the_scalar_formulation_bits(crowd):
+    from magica_py.solver.writeback import write_transforms_team
+
+    m, ps, _prm, _ts, _cs, _tt, _h = crowd.kernel_tables()
+    state, model, h = crowd.particles, crowd.model, crowd._hierarchy
+    before = snapshot(crowd)
+    lp0, lq0, scale0 = h.local_position.copy(), h.local_rotation.copy(), h.lossy_scale.copy()
+    try:
+        h.lossy_scale[model.transform_index[1]] = (1.0, 0.0, 2.0)  # a zero scale component: 0 written
+        want_p, want_q = lp0.copy(), lq0.copy()
+        for t in _teams(crowd):
+            assert transform_data_team(m, ps, t)
+            for p in _rows(crowd, t):
+                node, attr = int(model.transform_index[p]), int(model.attribute[p])
+                tq = tuple(state.transform_rotation[p])
+                if attr & 0x02:
+                    pp = int(model.parent[p])
+                    if pp < 0:
+                        continue
+                    iq = m3.q_inverse(tuple(state.transform_rotation[pp]))
+                    lp = m3.q_rotate(iq, m3.v_sub(tuple(state.transform_position[p]), tuple(state.transform_position[pp])))
+                    sc = h.lossy_scale[int(model.transform_index[pp])]
+                    want_p[node] = [lp[c] / sc[c] if sc[c] != 0.0 else 0.0 for c in range(3)]
+                    want_q[node] = m3.q_normalize(m3.q_mul(iq, tq))
+                elif attr & 0x01:
+                    parent = int(h.parent[node])
+                    rot = m3.q_mul(m3.q_inverse(tuple(h.world_rotation[parent])), tq) if parent >= 0 else tq
+                    want_q[node] = m3.q_normalize(rot)
+            write_transforms_team(m, ps, t, h.parent, h.world_rotation, h.lossy_scale, h.local_position,
+                                  h.local_rotation)
+        assert (_bits(h.local_position) == _bits(want_p)).all()
+        assert (_bits(h.local_rotation) == _bits(want_q)).all()
+        assert (h.local_position != lp0).any(axis=1).sum() > 10   # moving bones were written
+        child = [p for p in range(len(model.parent)) if model.parent[p] >= 0
+                 and model.transform_index[model.parent[p]] == model.transform_index[1]]
+        assert child and h.local_position[model.transform_index[child[0]], 1] == 0.0
+    finally:
+        h.local_position[:] = lp0
+        h.local_rotation[:] = lq0
+        h.lossy_scale[:] = scale0
+        restore(crowd, before)

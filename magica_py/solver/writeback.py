@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import load3, load4, q_inverse, q_mul, q_normalize, q_rotate, store4, v_sub
+from magica_py.kernels.math3d import q_inverse, q_mul, q_normalize, q_rotate, v_sub
 from magica_py.solver.rotations import flat, q_normalize_or_identity, row3, row4, set_row3, set_row4
 
 FIXED = 0x01
@@ -56,27 +56,37 @@ def write_transforms_team(m, ps, team, parent_node, world_rotation, lossy_scale,
                           local_position, local_rotation):
     """Write one team's bones into the hierarchy's local pose arrays.
 
-    Scalar on purpose: the writes are scatters (through transform_index) of 3- and 4-value
-    rows, which LLVM's vectoriser cannot check for overlap (measured: "cannot identify array
-    bounds" even with every access alias-tagged, ``rotations.load_input``)."""
-    start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        attr = m.attribute[p]
-        node = m.transform_index[p]
+    Scalar: the writes are scatters (through transform_index) of 3- and 4-value rows, which
+    LLVM's vectoriser cannot check for overlap (measured: "cannot identify array bounds" even
+    with every access alias-tagged, ``rotations.load_input``), so the branches stay."""
+    # arrays as locals and flat rows: through the tables their pointers would be reloaded
+    # after every store (the stores may alias the tables as far as LLVM knows)
+    attribute, node_of, parent_of = m.attribute, m.transform_index, m.parent
+    transform_position, transform_rotation = flat(ps.transform_position), flat(ps.transform_rotation)
+    world_rot, scale = flat(world_rotation), flat(lossy_scale)
+    out_position, out_rotation = flat(local_position), flat(local_rotation)
+    first = np.uint64(m.team_particle_start[team])
+    for j in range(m.team_particle_count[team]):
+        p = first + np.uint64(j)
+        attr = attribute[p]
+        node = np.uint64(node_of[p])
         if (attr & MOVE) != 0:
-            pp = m.parent[p]
+            pp = parent_of[p]
             if pp < 0:
                 continue
-            iq = q_inverse(load4(ps.transform_rotation, pp))
-            lp = q_rotate(iq, v_sub(load3(ps.transform_position, p), load3(ps.transform_position, pp)))
-            pnode = m.transform_index[pp]
+            ppu = np.uint64(pp)
+            iq = q_inverse(row4(transform_rotation, np.uint64(4) * ppu))
+            lp = q_rotate(iq, v_sub(row3(transform_position, np.uint64(3) * p),
+                                    row3(transform_position, np.uint64(3) * ppu)))
+            pnode = np.uint64(3) * np.uint64(node_of[ppu])
             for c in range(3):
-                s = lossy_scale[pnode, c]
-                local_position[node, c] = lp[c] / s if s != 0.0 else 0.0
-            store4(local_rotation, node, q_normalize(q_mul(iq, load4(ps.transform_rotation, p))))
+                s = scale[pnode + np.uint64(c)]
+                out_position[np.uint64(3) * node + np.uint64(c)] = lp[c] / s if s != 0.0 else 0.0
+            set_row4(out_rotation, np.uint64(4) * node,
+                     q_normalize(q_mul(iq, row4(transform_rotation, np.uint64(4) * p))))
         elif (attr & FIXED) != 0:
             parent = parent_node[node]
-            rot = load4(ps.transform_rotation, p)
+            rot = row4(transform_rotation, np.uint64(4) * p)
             if parent >= 0:
-                rot = q_mul(q_inverse(load4(world_rotation, parent)), rot)
-            store4(local_rotation, node, q_normalize(rot))
+                rot = q_mul(q_inverse(row4(world_rot, np.uint64(4) * np.uint64(parent))), rot)
+            set_row4(out_rotation, np.uint64(4) * node, q_normalize(rot))
