@@ -221,6 +221,39 @@ def test_lanes_with_degenerate_pairs_match_per_team_while_others_correct(crowd):
         restore(crowd, saved)
 
 
+def test_pairs_with_a_repeated_vertex_take_the_unscoped_loop_with_the_same_bits(crowd):
+    """The scoped (alias-metadata) lane loop assumes four distinct vertices; a pair that
+    repeats one (never built, but not excluded by the model's type) takes the plain loop,
+    which accumulates the repeated vertex twice exactly as the per-team stage does."""
+    from magica_py.solver.frame import as_kernel_table
+
+    model = crowd.model
+    bend_vertices = model.bend_vertices.copy()
+    blk, _bs = block_tables(crowd)
+    hit = []
+    for t in _bending_teams_of(crowd, blk):
+        c = int(model.team_bend_start[t]) + 7
+        bend_vertices[c, 1] = bend_vertices[c, 0]
+        hit.append(c)
+    tables = crowd.kernel_tables()
+    before = snapshot(crowd)
+    run_team_stage(crowd, _bending_teams, blk)
+    plain_counts = crowd.particles.accum_count.copy()
+    restore(crowd, before)
+    try:
+        crowd._tables = (as_kernel_table(model._replace(bend_vertices=bend_vertices)),) + tables[1:]
+        before_, expected, blk, bs = _run_both(crowd, _bending_teams, _bending_blocks)
+        rows = _team_rows(crowd, _bending_teams_of(crowd, blk))
+        _assert_scratch_equal(crowd, blk, bs, expected, rows)
+        v0 = bend_vertices[hit[0], 0]   # now in pair hit[0] twice, in place of its v1
+        assert expected["ps.accum_count"][v0] == plain_counts[v0] + 1
+        restore(crowd, before_)
+        compare_stage(crowd, _bend_apply_teams, _bend_apply_blocks, ["next_pos"])
+    finally:
+        crowd._tables = tables
+        restore(crowd, before)
+
+
 # ----------------------------------------------------------------------------- per element
 def _dihedral_twin(p, w, rest_angle, sign, k):
     """The original branching maths in numpy (libm arccos): None for a degenerate pair."""
