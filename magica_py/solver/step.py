@@ -416,9 +416,11 @@ def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
 @kernel
 def _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_velocity_a, normal_a, friction_a,
                    static_friction_a, k, depth, dt, dynamic, gain, friction_keep, speed_limit, centrifugal, spin,
-                   scale, angular_velocity, axis, center, velocity_weight):
-    """end_step_team's Move-particle body on block row k, branch-free (``spin``: the block's
-    centrifugal acceleration is on; a constant at each call site, so it folds away)."""
+                   touch, scale, angular_velocity, axis, center, velocity_weight):
+    """end_step_team's Move-particle body on block row k, branch-free. Flags, constant at each
+    call site so that they fold away: ``spin`` the block's centrifugal acceleration is on;
+    ``touch`` some lane of this particle is in contact (else the friction work is skipped: its
+    results would be discarded in every lane)."""
     old_pos = bload3(old_pos_a, k)
     next_pos = bload3(next_pos_a, k)
     velocity_pos = bload3(velocity_pos_a, k)
@@ -427,16 +429,19 @@ def _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_veloc
     sf = static_friction_a[k]
     static_threshold = dynamic * scale
     contact = v_length_sq(cn) > 1e-8 and f > 1e-8
-    stuck_pos, stuck_velocity_pos, stuck_sf = static_friction_step(next_pos, old_pos, velocity_pos, cn, sf, dt,
-                                                                   static_threshold, gain)
-    sticking = contact and static_threshold > 0.0
-    next_pos = stuck_pos if sticking else next_pos
-    velocity_pos = stuck_velocity_pos if sticking else velocity_pos
     released = saturate(sf - STATIC_FRICTION_LOSS)
-    static_friction_a[k] = stuck_sf if sticking else released
+    if touch:
+        stuck_pos, stuck_velocity_pos, stuck_sf = static_friction_step(next_pos, old_pos, velocity_pos, cn, sf, dt,
+                                                                       static_threshold, gain)
+        sticking = contact and static_threshold > 0.0
+        next_pos = stuck_pos if sticking else next_pos
+        velocity_pos = stuck_velocity_pos if sticking else velocity_pos
+        released = stuck_sf if sticking else released
+    static_friction_a[k] = released
     vel, direction, moving = end_step_velocity(next_pos, velocity_pos, dt)
-    braked = dynamic_friction_brake(vel, direction, cn, f, dynamic)
-    vel = braked if (moving and contact and dynamic > 0.0) else vel
+    if touch:
+        braked = dynamic_friction_brake(vel, direction, cn, f, dynamic)
+        vel = braked if (moving and contact and dynamic > 0.0) else vel
     friction_a[k] = f * friction_keep
     limited = clamp_length(vel, speed_limit * scale)
     vel = limited if speed_limit >= 0.0 else vel
@@ -477,17 +482,36 @@ def end_step_block(m, bs, prm, blk, b, dt, frequency_ratio):
                 bstore3(old_pos_a, k, next_pos)
             continue
         depth = m.depth[p0 + p]
-        if centrifugal > 1e-8:
+        touching = 0
+        for i in range(width):
+            k = k0 + np.uint64(i)
+            touching += 1 if (v_length_sq(bload3(normal_a, k)) > 1e-8 and friction_a[k] > 1e-8) else 0
+        # four variants of one lane loop (flags constant in each): centrifugal on, contact in some lane
+        if centrifugal > 1e-8 and touching > 0:
             for i in range(width):
                 L = lanes + np.uint64(i)
                 _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_velocity_a, normal_a,
                                friction_a, static_friction_a, k0 + np.uint64(i), depth, dt, dynamic, gain,
-                               friction_keep, speed_limit, centrifugal, True, lane_scale[L], lane_av[L],
+                               friction_keep, speed_limit, centrifugal, True, True, lane_scale[L], lane_av[L],
                                bload3(lane_axis, L), bload3(lane_center, L), lane_vw[L])
+        elif centrifugal > 1e-8:
+            for i in range(width):
+                L = lanes + np.uint64(i)
+                _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_velocity_a, normal_a,
+                               friction_a, static_friction_a, k0 + np.uint64(i), depth, dt, dynamic, gain,
+                               friction_keep, speed_limit, centrifugal, True, False, lane_scale[L], lane_av[L],
+                               bload3(lane_axis, L), bload3(lane_center, L), lane_vw[L])
+        elif touching > 0:
+            for i in range(width):
+                L = lanes + np.uint64(i)
+                _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_velocity_a, normal_a,
+                               friction_a, static_friction_a, k0 + np.uint64(i), depth, dt, dynamic, gain,
+                               friction_keep, speed_limit, centrifugal, False, True, lane_scale[L], 0.0,
+                               (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), lane_vw[L])
         else:
             for i in range(width):
                 L = lanes + np.uint64(i)
                 _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_velocity_a, normal_a,
                                friction_a, static_friction_a, k0 + np.uint64(i), depth, dt, dynamic, gain,
-                               friction_keep, speed_limit, centrifugal, False, lane_scale[L], 0.0,
+                               friction_keep, speed_limit, centrifugal, False, False, lane_scale[L], 0.0,
                                (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), lane_vw[L])

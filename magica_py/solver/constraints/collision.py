@@ -196,6 +196,20 @@ def _add_lane(sum_push_a, sum_n_a, n_acc_a, count_a, min_dist_a, k, x, r, d, n, 
 
 
 @kernel
+def _lanes_in_bounds(next_pos, scale, aabb_min, aabb_max, k0, c0, lanes, width, radius):
+    """How many lanes' particle bounds overlap their collider's AABB (a sphere or capsule slot
+    whose count is 0 changes nothing in any lane: the block skips it, as the per-team stage
+    skips each missed collider)."""
+    hits = 0
+    for i in range(width):
+        x = bload3(next_pos, k0 + np.uint64(i))
+        bmin, bmax = point_bounds(x, radius * scale[lanes + np.uint64(i)])
+        c = c0 + np.uint64(i)
+        hits += 1 if aabb_overlap(bmin, bmax, bload3(aabb_min, c), bload3(aabb_max, c)) else 0
+    return hits
+
+
+@kernel
 def point_collision_block(m, bs, prm, blk, b):
     """D.8 point mode for every lane of block b (``solver/batched``): ``point_collision_team``'s
     maths, lanes innermost. Per particle, collider slot after slot (the per-team order), a
@@ -225,6 +239,17 @@ def point_collision_block(m, bs, prm, blk, b):
             continue
         radius = max(curve_at(prm.radius_curve, ex, m.depth[p0 + p]), 0.0001)
         k0 = np.uint64(blk.block_row_base[b] + p * width)
+        near = False
+        for j in range(slots):
+            c0 = np.uint64(blk.block_collider_base[b] + j * width)
+            if (shape_a[c0] == PLANE
+                    or _lanes_in_bounds(next_pos, scale, aabb_min, aabb_max, k0, c0, lanes, width, radius) > 0):
+                near = True
+                break
+        if not near:  # no collider near in any lane: no push, friction kept, no contact normal
+            for i in range(width):
+                bstore3(normal_a, k0 + np.uint64(i), z)
+            continue
         for i in range(width):
             k = k0 + np.uint64(i)
             bstore3(sum_push_a, k, z)
@@ -235,6 +260,9 @@ def point_collision_block(m, bs, prm, blk, b):
         for j in range(slots):
             c0 = np.uint64(blk.block_collider_base[b] + j * width)
             shape = shape_a[c0]
+            if shape != PLANE and _lanes_in_bounds(next_pos, scale, aabb_min, aabb_max, k0, c0, lanes, width,
+                                                   radius) == 0:
+                continue  # no lane's particle near this slot's collider: every lane keeps its sums
             if shape == PLANE:
                 for i in range(width):
                     k = k0 + np.uint64(i)
@@ -267,6 +295,15 @@ def point_collision_block(m, bs, prm, blk, b):
                                              bload4(inverse_old_rot, c), bload4(now_rot, c))
                     _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d if hit else FAR,
                               n if hit else z, x2 if hit else x, suspend_a[c])
+        touching = 0
+        for i in range(width):
+            k = k0 + np.uint64(i)
+            hit = count_a[k] > 0 or min_dist_a[k] <= radius * scale[lanes + np.uint64(i)]
+            touching += 1 if hit else 0
+        if touching == 0:  # no lane pushed or in range: the sums are as initialised, the normal 0
+            for i in range(width):
+                min_dist_a[k0 + np.uint64(i)] = 0.0
+            continue
         for i in range(width):
             k = k0 + np.uint64(i)
             r = radius * scale[lanes + np.uint64(i)]
