@@ -310,3 +310,53 @@ def test_write_back_gives_the_scalar_formulation_bits(crowd):
         h.local_rotation[:] = lq0
         h.lossy_scale[:] = scale0
         restore(crowd, before)
+
+
+# ----------------------------------------------------------------------------- E.1 display
+@pytest.mark.parametrize("time_based", [False, True])
+def test_display_gives_the_scalar_formulation_bits(crowd, time_based):
+    from magica_py.solver.display import MAX_DISTANCE_RATIO, display_team
+
+    m, ps, prm, ts, _cs, _tt, _h = crowd.kernel_tables()
+    state, model, params = crowd.particles, crowd.model, crowd.parameters
+    before = snapshot(crowd)
+    saved = params.time_based_smoothing.copy()
+    dt, time, old_time, now_update = 1.0 / 90.0, 1.004, 1.0 - 1.0 / 90.0, 1.0 - 1.0 / 90.0
+    try:
+        params.time_based_smoothing[:] = 1 if time_based else 0
+        params_mode = params.inextensibility.copy()
+        for t in _teams(crowd):
+            blend = float(crowd.teams.blend_weight[t])
+            interval = (now_update + dt) - old_time
+            frac = (time - old_time) / interval
+            ahead = min(max(time - now_update, 0.0), dt)
+            pos = state.position.copy()
+            want_disp, want_pos = state.disp_pos.copy(), pos.copy()
+            for p in _rows(crowd, t):
+                pos0 = tuple(want_pos[p])
+                if model.attribute[p] & 0x02:
+                    if time_based:
+                        f = m3.v_add(tuple(state.old_pos[p]), m3.v_scale(tuple(state.real_velocity[p]), ahead))
+                    else:
+                        f = m3.v_add(tuple(state.old_pos[p]), m3.v_scale(tuple(state.real_velocity[p]), dt))
+                        f = m3.v_lerp(tuple(state.disp_pos[p]), f, frac)
+                    r = int(model.root_index[p])
+                    if r >= 0:
+                        rp = tuple(want_pos[r])
+                        limit = MAX_DISTANCE_RATIO * m3.v_length(m3.v_sub(rp, pos0))
+                        f = m3.v_add(rp, m3.clamp_length(m3.v_sub(f, rp), limit))
+                    want_disp[p] = f
+                    want_pos[p] = m3.v_lerp(pos0, f, blend)
+                else:
+                    want_disp[p] = pos0
+            if params_mode[t] in (2, 3, 5) and time_based:
+                continue  # the FTL options post-process the display (quality.py)
+            display_team(m, ps, prm, ts, t, dt, time, old_time, now_update, True)
+            rows = list(_rows(crowd, t))
+            assert (_bits(state.disp_pos[rows]) == _bits(want_disp[rows])).all(), t
+            assert (_bits(state.position[rows]) == _bits(want_pos[rows])).all(), t
+            assert (_bits(state.base_pos_buffer[rows]) == _bits(pos[rows])).all(), t
+            assert (_bits(state.old_position[rows]) == _bits(pos[rows])).all(), t
+    finally:
+        params.time_based_smoothing[:] = saved
+        restore(crowd, before)

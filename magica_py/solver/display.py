@@ -10,11 +10,12 @@ extrapolated by the time elapsed since that step (docs/quality-mode.md).
 """
 from __future__ import annotations
 
+import numpy as np
+
 from magica_py.jit import kernel
+from magica_py.kernels.math3d import clamp_length, v_add, v_length, v_lerp, v_scale, v_sub
 from magica_py.solver.quality import display_ftl_team
-from magica_py.kernels.math3d import (
-    clamp_length, load3, load4, store3, store4, v_add, v_length, v_lerp, v_scale, v_sub,
-)
+from magica_py.solver.rotations import flat, row3, row4, set_row3, set_row4
 
 MOVE = 0x02
 MAX_DISTANCE_RATIO = 1.3   # MaxDistanceRatioFutuerPrediction
@@ -30,29 +31,39 @@ def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, runn
     # exact timing), a function of time only; E.1's lerp from the last display is a
     # per-frame filter whose strength depends on the frame rate
     ahead = min(max(time - now_update_time, 0.0), dt)
-    start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        pos0 = load3(ps.position, p)
-        rot0 = load4(ps.rotation, p)
-        if (m.attribute[p] & MOVE) != 0:
+    # arrays as locals, flat rows, unsigned indices: through the tables the array pointers
+    # are reloaded after every store. One pass in particle order (the root read below)
+    attribute, root_index = m.attribute, m.root_index
+    position, rotation, disp_pos = flat(ps.position), flat(ps.rotation), flat(ps.disp_pos)
+    old_pos, real_velocity = flat(ps.old_pos), flat(ps.real_velocity)
+    old_position, old_rotation = flat(ps.old_position), flat(ps.old_rotation)
+    base_pos_buffer, base_rot_buffer = flat(ps.base_pos_buffer), flat(ps.base_rot_buffer)
+    first = np.uint64(m.team_particle_start[team])
+    for j in range(m.team_particle_count[team]):
+        p = first + np.uint64(j)
+        v = np.uint64(3) * p
+        q = np.uint64(4) * p
+        pos0 = row3(position, v)
+        rot0 = row4(rotation, q)
+        if (attribute[p] & MOVE) != 0:
             if time_based:
-                f = v_add(load3(ps.old_pos, p), v_scale(load3(ps.real_velocity, p), ahead))
+                f = v_add(row3(old_pos, v), v_scale(row3(real_velocity, v), ahead))
             else:
-                f = v_add(load3(ps.old_pos, p), v_scale(load3(ps.real_velocity, p), dt))
-                f = v_lerp(load3(ps.disp_pos, p), f, t)
-            r = m.root_index[p]
+                f = v_add(row3(old_pos, v), v_scale(row3(real_velocity, v), dt))
+                f = v_lerp(row3(disp_pos, v), f, t)
+            r = root_index[p]
             if r >= 0:
-                rp = load3(ps.position, r)
+                rp = row3(position, np.uint64(3) * np.uint64(r))
                 f = v_add(rp, clamp_length(v_sub(f, rp), MAX_DISTANCE_RATIO * v_length(v_sub(rp, pos0))))
-            store3(ps.disp_pos, p, f)
-            store3(ps.position, p, v_lerp(pos0, f, blend))
+            set_row3(disp_pos, v, f)
+            set_row3(position, v, v_lerp(pos0, f, blend))
         else:
-            store3(ps.disp_pos, p, pos0)
+            set_row3(disp_pos, v, pos0)
         if running:
-            store3(ps.old_position, p, pos0)
-            store4(ps.old_rotation, p, rot0)
-        store3(ps.base_pos_buffer, p, pos0)
-        store4(ps.base_rot_buffer, p, rot0)
+            set_row3(old_position, v, pos0)
+            set_row4(old_rotation, q, rot0)
+        set_row3(base_pos_buffer, v, pos0)
+        set_row4(base_rot_buffer, q, rot0)
     mode = prm.inextensibility[team]
     if time_based and (mode == 2 or mode == 3 or mode == 5):  # the FTL options
         display_ftl_team(m, ps, ts, team)
