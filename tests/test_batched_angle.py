@@ -34,17 +34,19 @@ CLEARED = ["angle_length", "angle_local_pos", "angle_rest_vector"]
 
 @pytest.fixture(scope="module")
 def crowd():
-    return crowd_system(instances=6, frames=25)
+    # 32 instances: blocks of 32 lanes. LLVM enters a lane loop's vector path only from
+    # 12-28 lanes on (runtime overlap checks), so 6 lanes would test the scalar loops only
+    return crowd_system(instances=32, frames=25)
 
 
-@numba.njit
+@numba.njit(cache=True)  # the block wrapper inlines angle_block: a long compile
 def _angle_teams(m, ps, prm, ts, cs, tt, teams):
     m, ps, prm, ts = borrow(m), borrow(ps), borrow(prm), borrow(ts)
     for t in teams:
         angle_team(m, ps, prm, ts, t, FREQUENCY_RATIO, POWER_W, LIMIT_ATTENUATION, prm.restoration_attenuation[t])
 
 
-@numba.njit
+@numba.njit(cache=True)
 def _angle_blocks(m, ps, prm, ts, cs, tt, blk, bs, blocks):
     m, prm, blk, bs = borrow(m), borrow(prm), borrow(blk), borrow(bs)
     for b in blocks:

@@ -48,12 +48,15 @@ def solve_pivot_pair(pp, cp, v, r, pivot_ratio, wp, wc):
 
 
 
-@kernel
-def swing_rotation(a, b):
+@kernel(inline="always")
+def swing_rotation(a, b, full):
     """``rotations.full_swing(a, b)`` (unit a, b), the same bits on every path, without the
     branch full_swing can never take: its degenerate cases call ``from_to_rotation_unit``
     whose general (acos, sincos) branch is excluded by the very tests that led there. A lane
-    loop computes every branch of its body, so the dead one would cost an acos and a sincos."""
+    loop computes every branch of its body, so the dead one would cost an acos and a sincos.
+
+    Returns (rotation, opposite); ``full`` False (a literal) leaves the opposite case (pi
+    about the fallback axis) out: the result is then wrong exactly where ``opposite``."""
     c = v_dot(a, b)
     c = 1.0 if c > 1.0 else c
     c = -1.0 if c < -1.0 else c
@@ -61,26 +64,33 @@ def swing_rotation(a, b):
     w = 1.0 + c
     inv = 1.0 / math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + w * w)
     half_angle = (x[0] * inv, x[1] * inv, x[2] * inv, w * inv)
-    opposite = q_axis_angle(orthogonal_axis(a), math.pi * 1.0)
-    return opposite if abs(1.0 + c) < 1e-6 else (IDENTITY if abs(1.0 - c) < 1e-6 else half_angle)
+    opposite = abs(1.0 + c) < 1e-6
+    flip = IDENTITY
+    if full:
+        flip = q_axis_angle(orthogonal_axis(a), math.pi * 1.0)
+    return (flip if opposite else (IDENTITY if abs(1.0 - c) < 1e-6 else half_angle)), opposite
 
 
-@kernel
-def from_to_rotation_fraction(a, b, t):
+@kernel(inline="always")
+def from_to_rotation_fraction(a, b, t, full):
     """``from_to_rotation_unit(a, b, t)`` (unit a, b), the same bits on every path, with one
     sincos for both the opposite and the general case (the axis and angle are selected
-    first): a lane loop computes every branch, so two q_axis_angle would cost two sincos."""
+    first): a lane loop computes every branch, so two q_axis_angle would cost two sincos.
+
+    Returns (rotation, opposite); ``full`` False (a literal) leaves the opposite case out."""
     c = v_dot(a, b)
     c = 1.0 if c > 1.0 else c
     c = -1.0 if c < -1.0 else c
     opposite = abs(1.0 + c) < 1e-6
     parallel = abs(1.0 - c) < 1e-6
-    fallback_axis = orthogonal_axis(a)
     axis = v_normalize(v_cross(a, b))
-    axis = fallback_axis if opposite else axis
-    angle = math.pi * t if opposite else trig.acos(c) * t
+    angle = trig.acos(c) * t
+    if full:
+        fallback_axis = orthogonal_axis(a)
+        axis = fallback_axis if opposite else axis
+        angle = math.pi * t if opposite else angle
     q = q_axis_angle(axis, angle)
-    return IDENTITY if (not opposite) & parallel else q
+    return (IDENTITY if (not opposite) & parallel else q), opposite
 
 # ----------------------------------------------------------------------------- per element
 @kernel
@@ -127,7 +137,7 @@ def angle_buffer_entry(cp, pp, c_basic_pos, p_basic_pos, c_basic_rot, p_basic_ro
 
 @kernel(inline="always")
 def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, length, max_angle,
-                      max_angle_cos, wc, wp, p_move, stiffness, attenuation):
+                      max_angle_cos, wc, wp, p_move, stiffness, attenuation, full):
     """The angle-limit half of one iteration for child c (positions cp, pp read at its start).
 
     ``vel_*`` velocity_pos, ``rot_*`` angle_rotation, ``local_*`` / ``length`` the buffered
@@ -137,7 +147,11 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     reference's order: segment shorter than 1e-8 m: nothing; degenerate rest direction: c
     snaps onto p but the returned cp stays as it was (quirk); degenerate rest length:
     nothing; otherwise the limit is solved about the pivot at 0.4 and c's rotation swung
-    (kept when the new segment is degenerate)."""
+    (kept when the new segment is degenerate).
+
+    Also returns ``rare``: the solve path met a limit violation or an opposite swing. With
+    ``full`` False (a literal: the block's vector pass) those two cases are left out and the
+    result is exact wherever ``rare`` is False; ``full`` True computes every path."""
     v = v_sub(cp, pp)
     vl = v_length(v)
     tv = q_rotate(rot_p, local_pos)
@@ -147,11 +161,10 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     tn = v_scale(tv, 1.0 / tl)
     lc = (vl + length) * 0.5
     v = v_scale(vn, lc)
-    # alpha > max angle <=> cos(alpha) < cos(max angle): acos only for a violation. A branch,
-    # not a select: the lane loop if-converts it (it vectorises either way, measured), and
-    # the per-team path keeps its shortcut (a select cost it 30 %, 270 -> 360 ns/particle)
+    # alpha > max angle <=> cos(alpha) < cos(max angle): acos only for a violation
     r = v
-    if v_dot(vn, tn) < max_angle_cos:
+    violated = v_dot(vn, tn) < max_angle_cos
+    if full and violated:
         alpha = angle_between_vectors(v, tn)
         if alpha > max_angle:
             r = clamp_angle(v, tn, lerp(alpha, max_angle, stiffness))
@@ -162,7 +175,8 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     solved_vel_p = v_add(vel_p, v_scale(dp, attenuation)) if p_move else vel_p
     u = v_sub(solved_c, solved_p)
     ul = v_length(u)
-    swung = q_mul(swing_rotation(tn, v_scale(u, 1.0 / ul)), rest_rot)
+    swing, opposite = swing_rotation(tn, v_scale(u, 1.0 / ul), full)
+    swung = q_mul(swing, rest_rot)
     solved_rot = rot_c if ul < 1e-8 else swung
     # path selection (a NaN compares false everywhere, as the reference's early returns do)
     skip = vl < 1e-8
@@ -175,20 +189,22 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     rot_c = solved_rot if solve else (rest_rot if snap else rot_c)
     cp = solved_c if solve else cp
     pp = solved_p if solve else pp
-    return cp, pp, next_c, vel_c, vel_p, rot_c
+    rare = solve & (violated | ((not (ul < 1e-8)) & opposite))
+    return cp, pp, next_c, vel_c, vel_p, rot_c, rare
 
 
 @kernel(inline="always")
 def angle_restoration_entry(cp, pp, next_c, vel_c, next_p, vel_p, rest_length, rest_direction, stiffness,
-                            pivot, wc, wp, p_move, attenuation):
+                            pivot, wc, wp, p_move, attenuation, full):
     """The restoration half of one iteration for child c: the edge cp - pp (as the limit
     pass returned it) turned towards ``rest_direction`` by ``stiffness`` about the point at
     ``pivot``, the corrections added to the current next_pos / velocity_pos of c and p.
     A degenerate rest edge snaps c onto pp; a degenerate edge does nothing.
-    Returns (next_c, vel_c, next_p, vel_p)."""
+    Returns (next_c, vel_c, next_p, vel_p, rare): ``rare``, the solve path met an opposite
+    edge (left out when ``full`` is a literal False, see ``angle_limit_entry``)."""
     v = v_sub(cp, pp)
     vl = v_length(v)
-    q = from_to_rotation_fraction(v_scale(v, 1.0 / vl), rest_direction, stiffness)
+    q, opposite = from_to_rotation_fraction(v_scale(v, 1.0 / vl), rest_direction, stiffness, full)
     r = q_rotate(q, v)
     dp, dc = solve_pivot_pair(pp, cp, v, r, pivot, wp, wc)
     snap = rest_length < 1e-8
@@ -203,7 +219,7 @@ def angle_restoration_entry(cp, pp, next_c, vel_c, next_p, vel_p, rest_length, r
     vel_c_out = solved_vel_c if solve else (snapped_vel_c if snap else vel_c)
     next_p = solved_next_p if move_p else next_p
     vel_p = solved_vel_p if move_p else vel_p
-    return next_c_out, vel_c_out, next_p, vel_p
+    return next_c_out, vel_c_out, next_p, vel_p, solve & opposite
 
 
 # ----------------------------------------------------------------------------- per team
@@ -267,18 +283,18 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
                 wc = ps.angle_inverse_mass[c]
                 wp = ps.angle_inverse_mass[p]
                 if use_limit:
-                    cp, pp, next_c, vel_c, vel_p, rot_c = angle_limit_entry(
+                    cp, pp, next_c, vel_c, vel_p, rot_c, _rare = angle_limit_entry(
                         cp, pp, vel_c, vel_p, load4(ps.angle_rotation, c), load4(ps.angle_rotation, p),
                         load3(ps.angle_local_pos, c), load4(ps.angle_local_rot, c), ps.angle_length[c],
                         ps.angle_limit[c], ps.angle_limit_cos[c], wc, wp, p_move, limit_stiffness,
-                        limit_attenuation)
+                        limit_attenuation, True)
                     store4(ps.angle_rotation, c, rot_c)
                 next_p = pp
                 if use_restoration:
-                    next_c, vel_c, next_p, vel_p = angle_restoration_entry(
+                    next_c, vel_c, next_p, vel_p, _rare = angle_restoration_entry(
                         cp, pp, next_c, vel_c, next_p, vel_p, ps.angle_rest_length[c],
                         load3(ps.angle_rest_direction, c), ps.angle_restoration_k[c], rest_pivot, wc, wp,
-                        p_move, restoration_attenuation)
+                        p_move, restoration_attenuation, True)
                 store3(ps.next_pos, c, next_c)
                 store3(ps.velocity_pos, c, vel_c)
                 store3(ps.next_pos, p, next_p)
@@ -383,26 +399,25 @@ def angle_block(m, bs, prm, blk, b, frequency_ratio, power_w, limit_attenuation,
                 max_angle = shared_limit[shared + c]
                 max_angle_cos = shared_limit_cos[shared + c]
                 rate = shared_k[shared + c]
+                # literal feature flags: each variant is its own loop without the other's maths
                 if use_limit and use_restoration:
-                    for i in range(width):
-                        _limit_and_restoration_lane(
-                            kc0 + np.uint64(i), kp0 + np.uint64(i), lanes + np.uint64(i), next_pos,
-                            velocity_pos, angle_rotation, angle_inverse_mass, angle_local_pos, angle_local_rot,
-                            angle_length, angle_rest_length, angle_rest_direction, gravity_dot, max_angle,
-                            max_angle_cos, rate, falloff, rest_pivot, p_move, limit_stiffness,
-                            limit_attenuation, restoration_attenuation)
+                    _entry_lanes(kc0, kp0, lanes, width, next_pos, velocity_pos, angle_rotation,
+                                 angle_inverse_mass, angle_local_pos, angle_local_rot, angle_length,
+                                 angle_rest_length, angle_rest_direction, gravity_dot, max_angle, max_angle_cos,
+                                 rate, falloff, rest_pivot, p_move, limit_stiffness, limit_attenuation,
+                                 restoration_attenuation, True, True)
                 elif use_limit:
-                    for i in range(width):
-                        _limit_lane(kc0 + np.uint64(i), kp0 + np.uint64(i), next_pos, velocity_pos,
-                                    angle_rotation, angle_inverse_mass, angle_local_pos, angle_local_rot,
-                                    angle_length, max_angle, max_angle_cos, p_move, limit_stiffness,
-                                    limit_attenuation)
+                    _entry_lanes(kc0, kp0, lanes, width, next_pos, velocity_pos, angle_rotation,
+                                 angle_inverse_mass, angle_local_pos, angle_local_rot, angle_length,
+                                 angle_rest_length, angle_rest_direction, gravity_dot, max_angle, max_angle_cos,
+                                 rate, falloff, rest_pivot, p_move, limit_stiffness, limit_attenuation,
+                                 restoration_attenuation, True, False)
                 else:
-                    for i in range(width):
-                        _restoration_lane(kc0 + np.uint64(i), kp0 + np.uint64(i), lanes + np.uint64(i),
-                                          next_pos, velocity_pos, angle_inverse_mass, angle_rest_length,
-                                          angle_rest_direction, gravity_dot, rate, falloff, rest_pivot, p_move,
-                                          restoration_attenuation)
+                    _entry_lanes(kc0, kp0, lanes, width, next_pos, velocity_pos, angle_rotation,
+                                 angle_inverse_mass, angle_local_pos, angle_local_rot, angle_length,
+                                 angle_rest_length, angle_rest_direction, gravity_dot, max_angle, max_angle_cos,
+                                 rate, falloff, rest_pivot, p_move, limit_stiffness, limit_attenuation,
+                                 restoration_attenuation, False, True)
         # clear the buffers
         for e in range(e0, e1):
             kc0 = np.uint64(row_base + (m.baseline_data[e] - p0) * width)
@@ -414,58 +429,67 @@ def angle_block(m, bs, prm, blk, b, frequency_ratio, power_w, limit_attenuation,
 
 
 @kernel(inline="always")
-def _limit_and_restoration_lane(kc, kp, L, next_pos, velocity_pos, angle_rotation, angle_inverse_mass,
-                                angle_local_pos, angle_local_rot, angle_length, angle_rest_length,
-                                angle_rest_direction, gravity_dot, max_angle, max_angle_cos, rate, falloff,
-                                rest_pivot, p_move, limit_stiffness, limit_attenuation, restoration_attenuation):
-    """One lane of one iteration entry, both halves (``angle_team``'s loop body)."""
+def _entry_lanes(kc0, kp0, lanes, width, next_pos, velocity_pos, angle_rotation, angle_inverse_mass,
+                 angle_local_pos, angle_local_rot, angle_length, angle_rest_length, angle_rest_direction,
+                 gravity_dot, max_angle, max_angle_cos, rate, falloff, rest_pivot, p_move, limit_stiffness,
+                 limit_attenuation, restoration_attenuation, use_limit, use_restoration):
+    """One iteration entry over every lane (rows kc0 + lane, kp0 + lane). The vector pass
+    leaves out the rare paths (a limit violation, an opposite edge) and leaves the lanes that
+    need them untouched; those lanes then run every path, one by one (lanes are independent:
+    each keeps the per-team order)."""
+    rare_lanes = np.uint64(0)
+    for i in range(width):
+        rare = _lane_entry(kc0 + np.uint64(i), kp0 + np.uint64(i), lanes + np.uint64(i), next_pos, velocity_pos,
+                           angle_rotation, angle_inverse_mass, angle_local_pos, angle_local_rot, angle_length,
+                           angle_rest_length, angle_rest_direction, gravity_dot, max_angle, max_angle_cos, rate,
+                           falloff, rest_pivot, p_move, limit_stiffness, limit_attenuation,
+                           restoration_attenuation, use_limit, use_restoration, False)
+        rare_lanes |= np.uint64(1 if rare else 0) << np.uint64(i)
+    lane = 0
+    while rare_lanes != 0:  # not a counted loop: never vectorised
+        if (rare_lanes & np.uint64(1)) != 0:
+            _lane_entry(kc0 + np.uint64(lane), kp0 + np.uint64(lane), lanes + np.uint64(lane), next_pos,
+                        velocity_pos, angle_rotation, angle_inverse_mass, angle_local_pos, angle_local_rot,
+                        angle_length, angle_rest_length, angle_rest_direction, gravity_dot, max_angle,
+                        max_angle_cos, rate, falloff, rest_pivot, p_move, limit_stiffness, limit_attenuation,
+                        restoration_attenuation, use_limit, use_restoration, True)
+        rare_lanes >>= np.uint64(1)
+        lane += 1
+
+
+@kernel(inline="always")
+def _lane_entry(kc, kp, L, next_pos, velocity_pos, angle_rotation, angle_inverse_mass, angle_local_pos,
+                angle_local_rot, angle_length, angle_rest_length, angle_rest_direction, gravity_dot, max_angle,
+                max_angle_cos, rate, falloff, rest_pivot, p_move, limit_stiffness, limit_attenuation,
+                restoration_attenuation, use_limit, use_restoration, full):
+    """One lane of one iteration entry (``angle_team``'s loop body) on block rows kc (child),
+    kp (parent), lane L. ``full`` False: the vector pass, which leaves the lane as it was and
+    returns True where a rare path needs ``full`` True (see ``angle_limit_entry``)."""
     cp = bload3(next_pos, kc)
     pp = bload3(next_pos, kp)
+    vel_c0 = bload3(velocity_pos, kc)
+    vel_p0 = bload3(velocity_pos, kp)
+    rot_c0 = bload4(angle_rotation, kc)
     wc = angle_inverse_mass[kc]
     wp = angle_inverse_mass[kp]
-    cp, pp, next_c, vel_c, vel_p, rot_c = angle_limit_entry(
-        cp, pp, bload3(velocity_pos, kc), bload3(velocity_pos, kp), bload4(angle_rotation, kc),
-        bload4(angle_rotation, kp), bload3(angle_local_pos, kc), bload4(angle_local_rot, kc), angle_length[kc],
-        max_angle, max_angle_cos, wc, wp, p_move, limit_stiffness, limit_attenuation)
-    bstore4(angle_rotation, kc, rot_c)
-    next_c, vel_c, next_p, vel_p = angle_restoration_entry(
-        cp, pp, next_c, vel_c, pp, vel_p, angle_rest_length[kc], bload3(angle_rest_direction, kc),
-        rate * restoration_gravity_factor(falloff, gravity_dot[L]), rest_pivot, wc, wp, p_move,
-        restoration_attenuation)
-    bstore3(next_pos, kc, next_c)
-    bstore3(velocity_pos, kc, vel_c)
-    bstore3(next_pos, kp, next_p)
-    bstore3(velocity_pos, kp, vel_p)
-
-
-@kernel(inline="always")
-def _limit_lane(kc, kp, next_pos, velocity_pos, angle_rotation, angle_inverse_mass, angle_local_pos,
-                angle_local_rot, angle_length, max_angle, max_angle_cos, p_move, limit_stiffness,
-                limit_attenuation):
-    """One lane of one iteration entry, angle limit only."""
-    _cp, pp, next_c, vel_c, vel_p, rot_c = angle_limit_entry(
-        bload3(next_pos, kc), bload3(next_pos, kp), bload3(velocity_pos, kc), bload3(velocity_pos, kp),
-        bload4(angle_rotation, kc), bload4(angle_rotation, kp), bload3(angle_local_pos, kc),
-        bload4(angle_local_rot, kc), angle_length[kc], max_angle, max_angle_cos, angle_inverse_mass[kc],
-        angle_inverse_mass[kp], p_move, limit_stiffness, limit_attenuation)
-    bstore4(angle_rotation, kc, rot_c)
-    bstore3(next_pos, kc, next_c)
-    bstore3(velocity_pos, kc, vel_c)
-    bstore3(next_pos, kp, pp)
-    bstore3(velocity_pos, kp, vel_p)
-
-
-@kernel(inline="always")
-def _restoration_lane(kc, kp, L, next_pos, velocity_pos, angle_inverse_mass, angle_rest_length,
-                      angle_rest_direction, gravity_dot, rate, falloff, rest_pivot, p_move, restoration_attenuation):
-    """One lane of one iteration entry, angle restoration only."""
-    cp = bload3(next_pos, kc)
-    pp = bload3(next_pos, kp)
-    next_c, vel_c, next_p, vel_p = angle_restoration_entry(
-        cp, pp, cp, bload3(velocity_pos, kc), pp, bload3(velocity_pos, kp), angle_rest_length[kc],
-        bload3(angle_rest_direction, kc), rate * restoration_gravity_factor(falloff, gravity_dot[L]),
-        rest_pivot, angle_inverse_mass[kc], angle_inverse_mass[kp], p_move, restoration_attenuation)
-    bstore3(next_pos, kc, next_c)
-    bstore3(velocity_pos, kc, vel_c)
-    bstore3(next_pos, kp, next_p)
-    bstore3(velocity_pos, kp, vel_p)
+    next_c, vel_c, vel_p, rot_c, limited_c, limited_p = cp, vel_c0, vel_p0, rot_c0, cp, pp
+    rare = False
+    if use_limit:
+        limited_c, limited_p, next_c, vel_c, vel_p, rot_c, rare = angle_limit_entry(
+            cp, pp, vel_c0, vel_p0, rot_c0, bload4(angle_rotation, kp), bload3(angle_local_pos, kc),
+            bload4(angle_local_rot, kc), angle_length[kc], max_angle, max_angle_cos, wc, wp, p_move,
+            limit_stiffness, limit_attenuation, full)
+    next_p = limited_p
+    if use_restoration:
+        next_c, vel_c, next_p, vel_p, rare_restoration = angle_restoration_entry(
+            limited_c, limited_p, next_c, vel_c, next_p, vel_p, angle_rest_length[kc],
+            bload3(angle_rest_direction, kc), rate * restoration_gravity_factor(falloff, gravity_dot[L]),
+            rest_pivot, wc, wp, p_move, restoration_attenuation, full)
+        rare = rare | rare_restoration
+    keep = (not full) & rare
+    bstore4(angle_rotation, kc, rot_c0 if keep else rot_c)
+    bstore3(next_pos, kc, cp if keep else next_c)
+    bstore3(velocity_pos, kc, vel_c0 if keep else vel_c)
+    bstore3(next_pos, kp, pp if keep else next_p)
+    bstore3(velocity_pos, kp, vel_p0 if keep else vel_p)
+    return rare
