@@ -20,6 +20,9 @@ from numba.experimental import structref
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_angle, v_length, v_sub
 from magica_py.solver.batch_tables import borrow
+from magica_py.solver.batched.run import (
+    decide_blocks, gather_running, run_block_step, scatter_running, team_runs_alone,
+)
 from magica_py.runtime.team_time import (
     TeamTimeState, team_time_begin_step, team_time_end_frame, team_time_frame_update,
 )
@@ -245,10 +248,32 @@ def _max_update_count(m, ts, tt):
 
 
 @kernel
-def simulate_frame(m, ps, prm, ts, cs, tt, h, fi):
-    """The whole cloth frame for every team (see the module docstring)."""
-    m, ps, prm, ts, cs, tt, h = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
-                                 borrow(tt), borrow(h))  # no refcounting inside (batch_tables.py)
+def _steps_serial(m, ps, prm, ts, cs, tt, blk, bs, fi):
+    team_count = m.live_teams.shape[0]
+    block_count = blk.block_width.shape[0]
+    for b in range(block_count):
+        gather_running(m, ps, blk, bs, b)
+    for step in range(_max_update_count(m, ts, tt)):
+        team_time_begin_step(step, tt.active, tt.update_count, tt.time, tt.now_update_time,
+                             tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
+        for b in range(block_count):
+            if blk.block_run[b] != 0 and tt.step_running[blk.lane_team[blk.block_lane_base[b]]]:
+                run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi)
+        for i in range(team_count):
+            t = m.live_teams[i]
+            if ts.active[t] != 0 and tt.step_running[t] and team_runs_alone(blk, t):
+                run_step(m, ps, prm, ts, cs, tt, t, fi)
+    for b in range(block_count):
+        scatter_running(m, ps, blk, bs, b)
+
+
+@kernel
+def simulate_frame(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
+    """The whole cloth frame for every team (see the module docstring). Teams of a running
+    block (``solver/batched``) run their steps side by side, the others one by one: the
+    results are the same bits either way (tests/test_batched_frame.py)."""
+    m, ps, prm, ts, cs, tt, h, blk, bs = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
+                                          borrow(tt), borrow(h), borrow(blk), borrow(bs))  # batch_tables.py
     team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
@@ -256,13 +281,8 @@ def simulate_frame(m, ps, prm, ts, cs, tt, h, fi):
         t = m.live_teams[i]
         if ts.active[t] != 0:
             begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t)
-    for step in range(_max_update_count(m, ts, tt)):
-        team_time_begin_step(step, tt.active, tt.update_count, tt.time, tt.now_update_time,
-                             tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
-        for i in range(team_count):
-            t = m.live_teams[i]
-            if ts.active[t] != 0 and tt.step_running[t]:
-                run_step(m, ps, prm, ts, cs, tt, t, fi)
+    decide_blocks(m, ts, tt, blk)
+    _steps_serial(m, ps, prm, ts, cs, tt, blk, bs, fi)
     for i in range(team_count):
         t = m.live_teams[i]
         if ts.active[t] != 0:
@@ -273,28 +293,48 @@ def simulate_frame(m, ps, prm, ts, cs, tt, h, fi):
     h.build_pose_pending[0] = 0  # teams added or reset later reset at their first frame
 
 
-@kernel(parallel=True)
-def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, fi):
-    """``simulate_frame`` with teams spread over threads (opt-in: ``ClothSystem(parallel=True)``).
+@kernel
+def _block_work(m, ps, prm, ts, cs, tt, blk, bs, fi, b, step):
+    """A prange body (tech-notes LAYOUT: a prange body that calls a function keeps full speed)."""
+    if blk.block_run[b] != 0 and step < tt.update_count[blk.lane_team[blk.block_lane_base[b]]]:
+        run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi)
 
-    Teams are independent and each runs in its own order, so the results are bit-identical
-    to the serial kernel (element-wise, no reductions)."""
-    m, ps, prm, ts, cs, tt, h = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
-                                 borrow(tt), borrow(h))  # no refcounting inside (batch_tables.py)
+
+@kernel
+def _team_work(m, ps, prm, ts, cs, tt, blk, fi, t):
+    if ts.active[t] != 0 and tt.step_running[t] and team_runs_alone(blk, t):
+        run_step(m, ps, prm, ts, cs, tt, t, fi)
+
+
+@kernel(parallel=True)
+def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
+    """``simulate_frame`` with blocks and teams spread over threads (opt-in:
+    ``ClothSystem(parallel=True)``).
+
+    Blocks and teams are independent and each runs in its own order, so the results are
+    bit-identical to the serial kernel (element-wise, no reductions)."""
+    m, ps, prm, ts, cs, tt, h, blk, bs = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
+                                          borrow(tt), borrow(h), borrow(blk), borrow(bs))  # batch_tables.py
     team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)
+    block_count = blk.block_width.shape[0]
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
     for i in prange(team_count):
         t = m.live_teams[i]
         if ts.active[t] != 0:
             begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t)
+    decide_blocks(m, ts, tt, blk)
+    for b in prange(block_count):
+        gather_running(m, ps, blk, bs, b)
     for step in range(_max_update_count(m, ts, tt)):
         team_time_begin_step(step, tt.active, tt.update_count, tt.time, tt.now_update_time,
                              tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
+        for b in prange(block_count):
+            _block_work(m, ps, prm, ts, cs, tt, blk, bs, fi, b, step)
         for i in prange(team_count):
-            t = m.live_teams[i]
-            if ts.active[t] != 0 and tt.step_running[t]:
-                run_step(m, ps, prm, ts, cs, tt, t, fi)
+            _team_work(m, ps, prm, ts, cs, tt, blk, fi, m.live_teams[i])
+    for b in prange(block_count):
+        scatter_running(m, ps, blk, bs, b)
     for i in prange(team_count):
         t = m.live_teams[i]
         if ts.active[t] != 0:

@@ -54,13 +54,16 @@ class ClothSystem:
     ``models`` may be given (prebuilt ``build.ClothModel`` in the same order); otherwise each
     spec is built with ``build.build_cloth`` from the hierarchy's current (rest) pose.
     ``parallel=True`` spreads teams over numba threads (same results bit for bit; worth it
-    for crowds on idle cores only, tech-notes §8: off by default).
+    for crowds on idle cores only, tech-notes §8: off by default). ``batched=True`` (default)
+    runs the steps of teams with identical topology and parameters side by side in blocks
+    (``solver/batched``: same results bit for bit, several times faster for crowds);
+    ``batched=False`` runs every team alone (benchmarks, debugging).
     """
 
     name = "cloth"
 
     def __init__(self, hierarchy, cloth_specs, colliders=None, settings=None, models=None,
-                 parallel: bool = False):
+                 parallel: bool = False, batched: bool = True):
         from magica_py.build import build_cloth
 
         self.hierarchy = hierarchy
@@ -106,6 +109,9 @@ class ClothSystem:
         self._entry_point = None
         self._tables = None
         self._kernel = simulate_frame_parallel if parallel else simulate_frame
+        self.batched = bool(batched)
+        self._block_tables = None
+        self._form_blocks()
 
     # ------------------------------------------------------------------ registration
     def attach(self, player, scene=None) -> "ClothSystem":
@@ -200,12 +206,21 @@ class ClothSystem:
                 or self.models[int(team)] is None:
             raise KeyError(f"no cloth team {team} (teams in use: {self.live_teams})")
 
+    def _form_blocks(self) -> None:
+        """Teams that run side by side (``solver/batched``); formed again after any change of
+        teams or parameters (outside the frame path; same table types)."""
+        from magica_py.solver.batched.blocks import form_blocks
+
+        self.block_table, self.block_state = form_blocks(self, enabled=self.batched)
+        self._block_tables = None
+
     def _tables_changed(self) -> None:
         """After add/remove: new model, new kernel tables (same types: the compiled entry point
         stays valid), restored bones re-registered with the player."""
         self.model = self.layout.model()
         self._time = time_arrays(self.time_state)
         self._tables = None
+        self._form_blocks()
         if self._player is not None:
             self._player.unregister_restored_bones(self)
             self._player.register_restored_bones(self.restored_bones(), owner=self)
@@ -291,6 +306,7 @@ class ClothSystem:
             if key == "collider_collision.mode":
                 self.collision_modes[t] = str(value)
             self._write_parameters(t)
+        self._form_blocks()  # a changed team may leave (or join) a block
 
     def reset_cloth(self, cloth, keep_pose: bool = False) -> None:
         for t in self.teams_of(cloth):
@@ -341,10 +357,16 @@ class ClothSystem:
                 self._time, self._hierarchy))
         return self._tables
 
+    def block_kernel_tables(self) -> tuple:
+        """The block table and block state (``solver/batched``) as kernel StructRefs."""
+        if self._block_tables is None:
+            self._block_tables = (as_kernel_table(self.block_table), as_kernel_table(self.block_state))
+        return self._block_tables
+
     def _call_frame(self, fi) -> None:
         """One numba call per frame; after the first, through the compiled entry point of its
         signature (skips numba's argument typing; the table types never change)."""
-        tables = self.kernel_tables()
+        tables = self.kernel_tables() + self.block_kernel_tables()
         if self._entry_point is None:
             self._kernel(*tables, fi)
             from numba import typeof

@@ -1,0 +1,97 @@
+"""The block step: ``run_step`` of ``solver/frame.py`` for every lane of a block at once.
+
+The per-team parts of a step (C.3 team update, G.3 collider poses, the collider end of step)
+stay per lane; the particle stages run in block form, in ``run_step``'s order with the same
+arguments (computed from the exemplar's parameter row, equal in every lane by formation).
+"""
+from __future__ import annotations
+
+from magica_py.jit import kernel
+from magica_py.solver.batched.transfer import gather_block, load_lanes, scatter_block
+from magica_py.solver.colliders import collider_end_step_team, collider_step_team
+from magica_py.solver.constraints.angle import LIMIT_ATTENUATION, angle_block
+from magica_py.solver.constraints.bending import apply_accumulated_block, bending_block
+from magica_py.solver.constraints.collision import point_collision_block
+from magica_py.solver.constraints.distance import VELOCITY_ATTENUATION as DISTANCE_ATTENUATION
+from magica_py.solver.constraints.distance import distance_block
+from magica_py.solver.constraints.motion import VELOCITY_ATTENUATION as MOTION_ATTENUATION
+from magica_py.solver.constraints.motion import motion_block
+from magica_py.solver.constraints.tether import VELOCITY_ATTENUATION as TETHER_ATTENUATION
+from magica_py.solver.constraints.tether import tether_block
+from magica_py.solver.parameters import step_rate
+from magica_py.solver.quality import (
+    quality_distance_attenuation, quality_hard_attenuation, quality_restoration_attenuation,
+)
+from magica_py.solver.step import end_step_block, predict_block, step_basic_pose_block, team_step_update
+
+
+@kernel
+def decide_blocks(m, ts, tt, blk):
+    """``blk.block_run``: 1 for a block whose lanes all run this frame with the same number
+    of steps (after the team time); its teams then skip the per-team step path."""
+    for b in range(blk.block_width.shape[0]):
+        lanes = blk.block_lane_base[b]
+        first = blk.lane_team[lanes]
+        count = tt.update_count[first]
+        run = count > 0
+        for i in range(blk.block_width[b]):
+            t = blk.lane_team[lanes + i]
+            if ts.active[t] == 0 or tt.update_count[t] != count:
+                run = False
+        blk.block_run[b] = 1 if run else 0
+
+
+@kernel
+def team_runs_alone(blk, t):
+    """True when team t's steps run per team this frame (no block, or its block does not run)."""
+    b = blk.team_block[t]
+    return b < 0 or blk.block_run[b] == 0
+
+
+@kernel
+def gather_running(m, ps, blk, bs, b):
+    if blk.block_run[b] != 0:
+        gather_block(m, ps, blk, bs, b)
+
+
+@kernel
+def scatter_running(m, ps, blk, bs, b):
+    if blk.block_run[b] != 0:
+        scatter_block(m, ps, blk, bs, b)
+
+
+@kernel
+def run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi):
+    """One simulation step of every lane of block b (``frame.run_step`` in block form)."""
+    dt = fi.dt
+    ratio = fi.frequency_ratio
+    ex = blk.block_exemplar[b]
+    mode = prm.rate_mode[ex]
+    lanes = blk.block_lane_base[b]
+    width = blk.block_width[b]
+    for i in range(width):
+        t = blk.lane_team[lanes + i]
+        frac = tt.frame_interpolation[t]
+        team_step_update(m, ts, prm, frac, t, dt)
+        collider_step_team(cs, ts, t, frac)
+    load_lanes(blk, bs, ts, tt, cs, b)
+    predict_block(m, bs, prm, blk, b, dt, ratio, fi.power_z)
+    step_basic_pose_block(m, bs, prm, blk, b)
+    tether_block(m, bs, prm, blk, b, quality_hard_attenuation(prm, ex, ratio, TETHER_ATTENUATION,
+                                                             step_rate(TETHER_ATTENUATION, ratio, 1.0, mode)))
+    distance_attenuation = quality_distance_attenuation(prm, ex, step_rate(DISTANCE_ATTENUATION, ratio, 1.0, mode))
+    distance_block(m, bs, prm, blk, b, ratio, fi.power_y, distance_attenuation)
+    angle_block(m, bs, prm, blk, b, ratio, fi.power_w,
+                quality_hard_attenuation(prm, ex, ratio, LIMIT_ATTENUATION, step_rate(LIMIT_ATTENUATION, ratio, 1.0, mode)),
+                quality_restoration_attenuation(prm, ex, ratio, step_rate(prm.restoration_attenuation[ex], ratio, 1.0, mode)))
+    if m.team_bend_count[ex] > 0 or m.team_volume_count[ex] > 0:
+        bending_block(m, bs, prm, blk, b, ratio, fi.power_y)
+        apply_accumulated_block(m, bs, blk, b, True)
+    if blk.block_collider_count[b] > 0 and prm.collision_mode[ex] == 1:
+        point_collision_block(m, bs, prm, blk, b)
+    distance_block(m, bs, prm, blk, b, ratio, fi.power_y, distance_attenuation)
+    motion_block(m, bs, prm, blk, b, quality_hard_attenuation(prm, ex, ratio, MOTION_ATTENUATION,
+                                                             step_rate(MOTION_ATTENUATION, ratio, 1.0, mode)))
+    end_step_block(m, bs, prm, blk, b, dt, ratio)
+    for i in range(width):
+        collider_end_step_team(cs, ts, blk.lane_team[lanes + i])
