@@ -275,49 +275,55 @@ def line_rotations_team(m, ps, prm, ts, team):
     rr = prm.root_rotation[team]
     a = prm.animation_pose_ratio[team]
     bw = ts.blend_weight[team]
+    # arrays as locals, flat rows, unsigned indices (through the tables the array pointers
+    # are reloaded after every store); the walk and the maths are unchanged
+    attribute, child_start, child_count, child_data = m.attribute, m.child_start, m.child_count, m.child_data
+    rest_position, rest_rotation = flat(m.baseline_local_position), flat(m.baseline_local_rotation)
+    position, rotation = flat(ps.position), flat(ps.rotation)
+    base_pos_buffer, base_rot_buffer = flat(ps.base_pos_buffer), flat(ps.base_rot_buffer)
     b0 = m.team_baseline_start[team]
     for b in range(b0, b0 + m.team_baseline_count[team]):
         if (m.baseline_flags[b] & INCLUDE_LINE) == 0:
             continue
         e0 = m.baseline_start[b]
         for e in range(e0, e0 + m.baseline_count[b]):
-            x = m.baseline_data[e]
-            attr = m.attribute[x]
-            pos = load3(ps.position, x)
-            q = load4(ps.rotation, x)
-            bp = load3(ps.base_pos_buffer, x)
-            bq = load4(ps.base_rot_buffer, x)
-            cn = m.child_count[x]
+            x = np.uint64(m.baseline_data[e])
+            attr = attribute[x]
+            pos = row3(position, np.uint64(3) * x)
+            q = row4(rotation, np.uint64(4) * x)
+            bp = row3(base_pos_buffer, np.uint64(3) * x)
+            bq = row4(base_rot_buffer, np.uint64(4) * x)
+            cn = child_count[x]
             if cn > 0 and (attr & (FIXED | MOVE)) != 0:
                 ibq = q_inverse(bq)
                 ctv = (0.0, 0.0, 0.0)
                 cv = (0.0, 0.0, 0.0)
-                c0 = m.child_start[x]
+                c0 = child_start[x]
                 for k in range(c0, c0 + cn):
-                    c = m.child_data[k]
-                    lp = v_lerp(load3(m.baseline_local_position, c),
-                                q_rotate(ibq, v_sub(load3(ps.base_pos_buffer, c), bp)), a)
+                    c = np.uint64(child_data[k])
+                    c3 = np.uint64(3) * c
+                    c4 = np.uint64(4) * c
+                    lp = v_lerp(row3(rest_position, c3), q_rotate(ibq, v_sub(row3(base_pos_buffer, c3), bp)), a)
                     if a == 0.0:  # slerp at 0 is its first argument
-                        lq = load4(m.baseline_local_rotation, c)
+                        lq = row4(rest_rotation, c4)
                     else:
-                        lq = q_slerp(load4(m.baseline_local_rotation, c),
-                                     q_mul(ibq, load4(ps.base_rot_buffer, c)), a)
-                    zero = (m.attribute[c] & ZERO_DISTANCE) != 0
+                        lq = q_slerp(row4(rest_rotation, c4), q_mul(ibq, row4(base_rot_buffer, c4)), a)
+                    zero = (attribute[c] & ZERO_DISTANCE) != 0
                     tv = (0.0, 0.0, 0.0) if zero else q_rotate(q, lp)
                     ctv = v_add(ctv, tv)
-                    if (m.attribute[c] & MOVE) != 0:
-                        cur = v_sub(load3(ps.position, c), pos)
+                    if (attribute[c] & MOVE) != 0:
+                        cur = v_sub(row3(position, c3), pos)
                         cv = v_add(cv, cur)
                         qc = q_mul(q, lq)
                         if not zero:
                             qc = q_mul(full_swing(v_normalize(tv), v_normalize(cur)), qc)
-                        store4(ps.rotation, c, qc)
+                        set_row4(rotation, c4, qc)
                     else:
                         cv = v_add(cv, tv)
                 t = ri if (attr & MOVE) != 0 else rr
                 if v_length(ctv) >= 1e-8 and v_length(cv) >= 1e-8:
                     q = q_mul(from_to_rotation(ctv, cv, t), q)
-            store4(ps.rotation, x, q if bw == 1.0 else q_slerp(bq, q, bw))
+            set_row4(rotation, np.uint64(4) * x, q if bw == 1.0 else q_slerp(bq, q, bw))
 
 
 TRIANGLES_PER_VERTEX = 6   # E.3's vectorised pass sums up to this many triangles per vertex
