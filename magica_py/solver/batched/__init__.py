@@ -23,12 +23,11 @@ this frame (a lane culled, suspended or on another step count) leaves its teams 
 per-team path: nothing is lost, only speed.
 
 Modules: ``blocks`` (formation, tables, Python), ``state`` (block and lane arrays),
-``transfer`` (gather/scatter, per-step lane values).
+``transfer`` (gather/scatter, per-step lane values), ``run`` (block decision per frame and
+the block step). The block stages live next to their per-team stages (``step.predict_block``,
+``constraints.angle.angle_block``, ...), calling the same per-element functions.
 
-**Status (issue 4, in progress):** the layout, formation, transfer and the first block stage
-(D.1 ``step.predict_block``, bit-identical to ``predict_team``: tests/test_batched_stages.py)
-exist; the frame kernel does not call blocks yet, so every scene still runs per team. What a
-lane loop needs to vectorise (measured on ``predict_block``, 80 -> 35-43 ns per particle):
+What a lane loop needs to vectorise (measured while writing the block stages):
 
 * per-element maths inlined (``jit.INLINE_THRESHOLD``) and without libm (``kernels/trig``);
 * the block's arrays read into locals before the loops (through the table, their pointers
@@ -37,5 +36,8 @@ lane loop needs to vectorise (measured on ``predict_block``, 80 -> 35-43 ns per 
   "unsafe indirect dependence");
 * a runtime overlap-check budget above LLVM's default of 8 arrays (``jit.py``);
 * branch-free per-element functions: both sides computed and selected (a slerp under a
-  branch is not if-converted).
+  branch is not if-converted);
+* where a loop updates many rows in place (bending's accumulators), alias scopes that tell
+  LLVM which loads and stores cannot overlap (``constraints/bending.py``), or it guards the
+  vector path with overlap checks that only pay off from ~40 lanes.
 """
