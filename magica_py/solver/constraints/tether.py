@@ -25,19 +25,18 @@ ZERO3 = (0.0, 0.0, 0.0)
 def solve_tether(position, root_position, rest_length, compression_limit):
     """Correction of ``position`` towards the allowed band around ``rest_length``: zero inside
     the band, when the particle sits on its root (< 1e-8) or when the rest length is zero.
-    Branch-free (both sides computed, then selected) so that a lane loop over it vectorises."""
+    Branch-free (selects, no branches) so that a lane loop over it vectorises."""
     v = v_sub(root_position, position)
     length = v_length(v)
     ratio = length / rest_length
     stretch_limit = 1.0 + STRETCH_LIMIT
     compressed = ratio < compression_limit
     stretched = ratio > stretch_limit
-    d_compression = length - compression_limit * rest_length
-    k_compression = saturate((compression_limit - ratio) / STIFFNESS_WIDTH) * COMPRESSION_STIFFNESS
-    d_stretch = length - stretch_limit * rest_length
-    k_stretch = saturate((ratio - stretch_limit) / STIFFNESS_WIDTH) * STRETCH_STIFFNESS
-    d = d_compression if compressed else d_stretch
-    k = k_compression if compressed else k_stretch
+    # the side's operands are selected before the arithmetic: one division for both sides
+    limit = compression_limit if compressed else stretch_limit
+    excess = (compression_limit - ratio) if compressed else (ratio - stretch_limit)
+    d = length - limit * rest_length
+    k = saturate(excess / STIFFNESS_WIDTH) * (COMPRESSION_STIFFNESS if compressed else STRETCH_STIFFNESS)
     corr = v_scale(v, d * k / length)
     active = (compressed | stretched) & (length >= 1e-8) & (rest_length != 0.0)
     return corr if active else ZERO3
