@@ -9,8 +9,14 @@ Two forms of the same maths (``solver/batched``): ``angle_team`` (one team, rows
 per-element functions ``angle_buffer_entry`` (buffering pass), ``angle_limit_entry`` (D.5 half of
 an iteration) and ``angle_restoration_entry`` (D.6 half): tuples in and out, no array access,
 every path computed and the taken one selected (the reference's early returns become
-selects), so that a lane loop over them vectorises and gives the per-team bits. The one
-branch left, the limit's acos shortcut, is if-converted by LLVM in the lane loop.
+selects), so that a lane loop over them vectorises and gives the per-team bits.
+
+Rare paths (a limit violation: acos and clamp; an edge opposite its target: the fallback
+axis) would cost every lane in a vector loop. The iteration functions take a literal
+``full``: the block's vector pass runs them with ``full=False``, which leaves those paths
+out and flags the lanes that need them; the block leaves those lanes untouched and then runs
+them with ``full=True``, one by one (``_entry_lanes``). The per-team stage always runs
+``full=True`` (its scalar branches keep the acos shortcut of the reference).
 """
 from __future__ import annotations
 
