@@ -44,7 +44,9 @@ def crowd_system(instances: int = 6, frames: int = 25, overrides: dict | None = 
     sets.update(overrides or {})
     scene = load_scene(ROOT / "configs" / f"{config}.yaml", overrides=[f"{k}={v}" for k, v in sets.items()])
     player = Player.for_scene(scene)
-    system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player)
+    # per team: with blocks, the step-internal fields of block teams (next_pos, base and step
+    # basic pose, ...) stay in the block state and their team rows would be stale
+    system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings, batched=False).attach(player)
     player.run(frames)
     system._player_for_tests = player
     return system

@@ -75,6 +75,7 @@ PARTICLE_BLOCK_FIELDS = [
     ("accum_vector", 3, F64, False, False),
     ("accum_count", 0, I32, False, False),
     ("bend_inverse_mass", 0, F64, False, False),
+    ("distance_inverse_mass", 0, F64, False, False),
     ("accum_friction", 0, F64, False, False),
     ("accum_normal", 3, F64, False, False),
 ]

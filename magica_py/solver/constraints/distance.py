@@ -134,8 +134,7 @@ def distance_block(m, bs, prm, blk, b, frequency_ratio, power_y, attenuation):
     loop for every link; what depends on topology or parameters only (zero-rest link,
     stiffness) is decided outside the lane loop. The
     inverse masses (friction does not change during the pass) are computed once per particle
-    and lane into ``bend_inverse_mass``, the bending pass's per-call scratch (it rewrites it
-    before reading it), instead of twice per link."""
+    and lane into the block scratch ``distance_inverse_mass``, instead of twice per link."""
     ex = blk.block_exemplar[b]
     width = blk.block_width[b]
     lanes = np.uint64(blk.block_lane_base[b])
@@ -145,7 +144,7 @@ def distance_block(m, bs, prm, blk, b, frequency_ratio, power_y, attenuation):
     a = prm.animation_pose_ratio[ex]
     init_scale = m.team_init_scale[ex, 0]
     next_pos_a, velocity_pos_a, base_pos_a, friction = bs.next_pos, bs.velocity_pos, bs.base_pos, bs.friction
-    acc_a, count_a, lane_scale, w = bs.accum_vector, bs.accum_count, bs.lane_scale_ratio, bs.bend_inverse_mass
+    acc_a, count_a, lane_scale, w = bs.accum_vector, bs.accum_count, bs.lane_scale_ratio, bs.distance_inverse_mass
     for p in range(count):
         k0 = np.uint64(row_base + p * width)
         if (m.attribute[p0 + p] & MOVE) == 0:
