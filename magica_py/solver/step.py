@@ -118,6 +118,14 @@ def predict_move(old_pos, velocity, depth, old_world_pos, inertia_vector, inerti
     off = k == 0.0
     iv = inertia_vector if off else iv_mixed
     iq = inertia_rotation if off else iq_mixed
+    return predict_move_shifted(old_pos, velocity, depth, old_world_pos, iv, iq, velocity_weight,
+                                damping_keep, gravity, force_mode, impact, scale, dt)
+
+
+@kernel
+def predict_move_shifted(old_pos, velocity, depth, old_world_pos, iv, iq, velocity_weight, damping_keep,
+                         gravity, force_mode, impact, scale, dt):
+    """``predict_move`` after the depth-inertia mix: the inertia shift (iv, iq), damping, forces."""
     w = v_add(v_add(old_world_pos, q_rotate(iq, v_sub(old_pos, old_world_pos))), iv)
     velocity_pos = w  # old_pos + (w - old_pos)
     velocity = q_rotate(iq, velocity)
@@ -200,6 +208,12 @@ def predict_block(m, bs, prm, blk, b, dt, frequency_ratio, power_z):
     lane_vw, lane_gr, lane_fm, lane_f, lane_scale = (bs.lane_velocity_weight, bs.lane_gravity_ratio,
                                                      bs.lane_external_force_mode, bs.lane_external_force,
                                                      bs.lane_scale_ratio)
+    # block-uniform shortcuts (same bits: they take the value the per-element select takes):
+    # at the last step of a frame in every lane the base rotation is the frame's rotation
+    last_step = True
+    for i in range(width):
+        if interpolation[lanes + np.uint64(i)] != 1.0:
+            last_step = False
     for p in range(blk.block_particle_count[b]):
         # unsigned row indices: numba wraps negative signed indices (a select per access that
         # hides the affine address from LLVM's vectoriser)
@@ -207,20 +221,42 @@ def predict_block(m, bs, prm, blk, b, dt, frequency_ratio, power_z):
         move = (m.attribute[p0 + p] & MOVE) != 0
         depth = m.depth[p0 + p]
         damping_keep = damping_keep_at(prm, ex, depth, frequency_ratio, power_z)
-        for i in range(width):
-            k = k0 + np.uint64(i)
-            base_pos, base_rot = predict_base_pose(bload3(old_position, k), bload3(position, k),
-                                                   bload4(old_rotation, k), bload4(rotation, k),
-                                                   interpolation[lanes + np.uint64(i)])
-            bstore3(base_pos_a, k, base_pos)
-            bstore4(base_rot_a, k, base_rot)
-            bstore3(sbp, k, base_pos)
-            bstore4(sbr, k, base_rot)
+        if last_step:
+            for i in range(width):
+                k = k0 + np.uint64(i)
+                base_pos = v_lerp(bload3(old_position, k), bload3(position, k), interpolation[lanes + np.uint64(i)])
+                bstore3(base_pos_a, k, base_pos)
+                bstore4(base_rot_a, k, bload4(rotation, k))
+                bstore3(sbp, k, base_pos)
+                bstore4(sbr, k, bload4(rotation, k))
+        else:
+            for i in range(width):
+                k = k0 + np.uint64(i)
+                base_pos, base_rot = predict_base_pose(bload3(old_position, k), bload3(position, k),
+                                                       bload4(old_rotation, k), bload4(rotation, k),
+                                                       interpolation[lanes + np.uint64(i)])
+                bstore3(base_pos_a, k, base_pos)
+                bstore4(base_rot_a, k, base_rot)
+                bstore3(sbp, k, base_pos)
+                bstore4(sbr, k, base_rot)
         if not move:
             for i in range(width):
                 k = k0 + np.uint64(i)
                 bstore3(next_pos_a, k, bload3(base_pos_a, k))
                 bstore3(velocity_pos_a, k, bload3(base_pos_a, k))
+            continue
+        if depth_inertia * (1.0 - depth * depth) == 0.0:  # no depth-inertia mix (predict_move's k)
+            for i in range(width):
+                k = k0 + np.uint64(i)
+                L = lanes + np.uint64(i)
+                velocity, velocity_pos, next_pos = predict_move_shifted(
+                    bload3(old_pos_a, k), bload3(velocity_a, k), depth, bload3(lane_old_world_pos, L),
+                    bload3(lane_iv, L), bload4(lane_iq, L), lane_vw[L], damping_keep,
+                    v_scale(gravity_direction, gravity * lane_gr[L]), lane_fm[L], bload3(lane_f, L),
+                    lane_scale[L], dt)
+                bstore3(velocity_a, k, velocity)
+                bstore3(velocity_pos_a, k, velocity_pos)
+                bstore3(next_pos_a, k, next_pos)
             continue
         for i in range(width):
             k = k0 + np.uint64(i)

@@ -6,8 +6,9 @@ same per-particle model data the steps read (depth, rest lengths and angles, bas
 pose, build scale and gravity reference), the same parameter row (hierarchy-node parameters
 such as the anchor are read per team, outside the steps) and the same collider shapes in the
 same slots, and a feature set the block stages implement (``unsupported_reason``). Blocks
-hold at most ``BLOCK_WIDTH`` lanes; a group of 100 teams becomes blocks of 32, 32, 32, 4...
-balanced to 25 x 4 (equal widths keep the two threads' work equal).
+hold at most ``BLOCK_WIDTH`` lanes; a group of 100 teams becomes blocks of equal widths (2 x 50
+at a width of 64: equal widths keep the threads' work equal), and blocks of different groups
+are interleaved.
 
 Formation runs when the system is built, after ``add_cloth`` / ``remove_cloth`` and after
 ``set_parameter`` (a changed team leaves its block: its parameter row differs).
@@ -82,14 +83,19 @@ def form_blocks(system, enabled: bool = True):
             key = _team_signature(system, int(t))
             if key is not None:
                 groups.setdefault(key, []).append(int(t))
-    blocks: list[list[int]] = []
+    per_group: list[list[list[int]]] = []
     for teams in groups.values():
         if len(teams) < MIN_LANES:
             continue
         n_blocks = math.ceil(len(teams) / BLOCK_WIDTH)
         width = math.ceil(len(teams) / n_blocks)
-        blocks += [teams[i:i + width] for i in range(0, len(teams), width)]
-    blocks = [b for b in blocks if len(b) >= MIN_LANES]
+        chunks = [teams[i:i + width] for i in range(0, len(teams), width)]
+        per_group.append([c for c in chunks if len(c) >= MIN_LANES])
+    # groups interleaved (hair 0, skirt 0, hair 1, skirt 1, ...): the parallel frame hands
+    # each thread a contiguous range of blocks, which then holds a share of every group
+    blocks: list[list[int]] = []
+    for k in range(max((len(g) for g in per_group), default=0)):
+        blocks += [g[k] for g in per_group if k < len(g)]
     m = system.model
     nb = len(blocks)
     width = np.array([len(b) for b in blocks], dtype=I32)

@@ -39,10 +39,10 @@ def gather_block(m, ps, blk, bs, b):
     base = blk.block_row_base[b]
     lanes = blk.block_lane_base[b]
     count = blk.block_particle_count[b]
-    for i in range(width):
-        start = m.team_particle_start[blk.lane_team[lanes + i]]
-        for p in range(count):
-            r = start + p
+    # particle outer, lane inner: the block side is written (read) contiguously
+    for p in range(count):
+        for i in range(width):
+            r = m.team_particle_start[blk.lane_team[lanes + i]] + p
             k = base + p * width + i
             _in(bs.position, ps.position, k, r, 3)
             _in(bs.rotation, ps.rotation, k, r, 4)
@@ -127,10 +127,10 @@ def scatter_block(m, ps, blk, bs, b):
     base = blk.block_row_base[b]
     lanes = blk.block_lane_base[b]
     count = blk.block_particle_count[b]
-    for i in range(width):
-        start = m.team_particle_start[blk.lane_team[lanes + i]]
-        for p in range(count):
-            r = start + p
+    # particle outer, lane inner: the block side is written (read) contiguously
+    for p in range(count):
+        for i in range(width):
+            r = m.team_particle_start[blk.lane_team[lanes + i]] + p
             k = base + p * width + i
             _out(ps.old_pos, bs.old_pos, r, k, 3)
             _out(ps.velocity, bs.velocity, r, k, 3)
