@@ -167,8 +167,12 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
     scale = ts.scale_ratio[team]
     start = m.team_particle_start[team]
     for p in range(start, start + m.team_particle_count[team]):
-        base_pos, base_rot = predict_base_pose(load3(ps.old_position, p), load3(ps.position, p),
-                                               load4(ps.old_rotation, p), load4(ps.rotation, p), t)
+        if t == 1.0:  # the last step of a frame: predict_base_pose's select, without the slerp
+            base_pos = v_lerp(load3(ps.old_position, p), load3(ps.position, p), t)
+            base_rot = load4(ps.rotation, p)
+        else:
+            base_pos, base_rot = predict_base_pose(load3(ps.old_position, p), load3(ps.position, p),
+                                                   load4(ps.old_rotation, p), load4(ps.rotation, p), t)
         store3(ps.base_pos, p, base_pos)
         store4(ps.base_rot, p, base_rot)
         store3(ps.step_basic_pos, p, base_pos)
@@ -178,10 +182,16 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
             store3(ps.velocity_pos, p, base_pos)
             continue
         depth = m.depth[p]
-        velocity, velocity_pos, next_pos = predict_move(
-            load3(ps.old_pos, p), load3(ps.velocity, p), depth, old_world_pos, inertia_vector,
-            inertia_rotation, step_vector, step_rotation, depth_inertia, velocity_weight,
-            damping_keep_at(prm, team, depth, frequency_ratio, power_z), gravity, force_mode, impact, scale, dt)
+        damping_keep = damping_keep_at(prm, team, depth, frequency_ratio, power_z)
+        if depth_inertia * (1.0 - depth * depth) == 0.0:  # no depth-inertia mix: predict_move's select
+            velocity, velocity_pos, next_pos = predict_move_shifted(
+                load3(ps.old_pos, p), load3(ps.velocity, p), depth, old_world_pos, inertia_vector,
+                inertia_rotation, velocity_weight, damping_keep, gravity, force_mode, impact, scale, dt)
+        else:
+            velocity, velocity_pos, next_pos = predict_move(
+                load3(ps.old_pos, p), load3(ps.velocity, p), depth, old_world_pos, inertia_vector,
+                inertia_rotation, step_vector, step_rotation, depth_inertia, velocity_weight,
+                damping_keep, gravity, force_mode, impact, scale, dt)
         store3(ps.velocity, p, velocity)
         store3(ps.velocity_pos, p, velocity_pos)
         store3(ps.next_pos, p, next_pos)
