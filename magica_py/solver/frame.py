@@ -19,6 +19,7 @@ from numba.experimental import structref
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_angle, v_length, v_sub
+from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.batch_tables import borrow
 from magica_py.solver.batched.run import (
     decide_blocks, gather_running, run_block_step, scatter_running, team_runs_alone,
@@ -33,21 +34,16 @@ from magica_py.solver.center import (
 from magica_py.solver.colliders import (
     collider_end_frame_team, collider_end_step_team, collider_frame_team, collider_step_team,
 )
-from magica_py.solver.constraints.angle import LIMIT_ATTENUATION, angle_team
+from magica_py.solver.constraints.angle import angle_team
 from magica_py.solver.constraints.bending import apply_accumulated, bending_team
 from magica_py.solver.constraints.collision import edge_collision_team, point_collision_team
-from magica_py.solver.constraints.distance import VELOCITY_ATTENUATION as DISTANCE_ATTENUATION
 from magica_py.solver.constraints.distance import distance_team
-from magica_py.solver.constraints.motion import VELOCITY_ATTENUATION as MOTION_ATTENUATION
 from magica_py.solver.constraints.motion import motion_team
-from magica_py.solver.constraints.tether import VELOCITY_ATTENUATION as TETHER_ATTENUATION
 from magica_py.solver.constraints.tether import tether_team
 from magica_py.solver.display import display_team
 from magica_py.solver.guards import check_team, reset_team_to_base
-from magica_py.solver.parameters import step_rate
 from magica_py.solver.quality import (
-    display_collision_team, quality_distance_attenuation, quality_end_of_step, quality_hard_attenuation,
-    quality_restoration_attenuation,
+    display_collision_team, quality_end_of_step,
 )
 from magica_py.solver.rotations import line_rotations_team, triangle_rotations_team
 from magica_py.solver.step import end_step_team, predict_team, step_basic_pose_team, team_step_update
@@ -113,19 +109,16 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi):
     """One simulation step of team t (ref §D.0 order) at frame interpolation fi."""
     dt = fi.dt
     ratio = fi.frequency_ratio
-    mode = prm.rate_mode[t]
     frac = tt.frame_interpolation[t]
+    tether_attenuation, distance_attenuation, limit_attenuation, restoration_attenuation, motion_attenuation = \
+        step_attenuations(prm, t, ratio)
     team_step_update(m, ts, prm, frac, t, dt)
     collider_step_team(cs, ts, t, frac)
     predict_team(m, ps, prm, ts, t, frac, dt, ratio, fi.power_z)
     step_basic_pose_team(m, ps, prm, ts, t)
-    tether_team(m, ps, prm, t, quality_hard_attenuation(prm, t, ratio, TETHER_ATTENUATION,
-                                                         step_rate(TETHER_ATTENUATION, ratio, 1.0, mode)))
-    distance_attenuation = quality_distance_attenuation(prm, t, step_rate(DISTANCE_ATTENUATION, ratio, 1.0, mode))
+    tether_team(m, ps, prm, t, tether_attenuation)
     distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
-    angle_team(m, ps, prm, ts, t, ratio, fi.power_w,
-               quality_hard_attenuation(prm, t, ratio, LIMIT_ATTENUATION, step_rate(LIMIT_ATTENUATION, ratio, 1.0, mode)),
-               quality_restoration_attenuation(prm, t, ratio, step_rate(prm.restoration_attenuation[t], ratio, 1.0, mode)))
+    angle_team(m, ps, prm, ts, t, ratio, fi.power_w, limit_attenuation, restoration_attenuation)
     if m.team_bend_count[t] > 0 or m.team_volume_count[t] > 0:
         bending_team(m, ps, prm, ts, t, ratio, fi.power_y)
         apply_accumulated(m, ps, t, True)
@@ -135,8 +128,7 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi):
         elif prm.collision_mode[t] == 2:
             edge_collision_team(m, ps, prm, ts, cs, t)
     distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
-    motion_team(m, ps, prm, t, quality_hard_attenuation(prm, t, ratio, MOTION_ATTENUATION,
-                                                         step_rate(MOTION_ATTENUATION, ratio, 1.0, mode)))
+    motion_team(m, ps, prm, t, motion_attenuation)
     if prm.inextensibility[t] != 0 or prm.collision_last[t] != 0:  # quality mode (issue 8)
         quality_end_of_step(m, ps, prm, ts, cs, t, ratio, fi.power_y, distance_attenuation)
     end_step_team(m, ps, prm, ts, t, dt, ratio)

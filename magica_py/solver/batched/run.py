@@ -2,26 +2,21 @@
 
 The per-team parts of a step (C.3 team update, G.3 collider poses, the collider end of step)
 stay per lane; the particle stages run in block form, in ``run_step``'s order with the same
-arguments (computed from the exemplar's parameter row, equal in every lane by formation).
+arguments (``attenuations.step_attenuations`` of the exemplar's parameter row, equal in every
+lane by formation).
 """
 from __future__ import annotations
 
 from magica_py.jit import kernel
 from magica_py.solver.batched.transfer import gather_block, load_lanes, scatter_block
 from magica_py.solver.colliders import collider_end_step_team, collider_step_team
-from magica_py.solver.constraints.angle import LIMIT_ATTENUATION, angle_block
+from magica_py.solver.attenuations import step_attenuations
+from magica_py.solver.constraints.angle import angle_block
 from magica_py.solver.constraints.bending import apply_accumulated_block, bending_block
 from magica_py.solver.constraints.collision import point_collision_block
-from magica_py.solver.constraints.distance import VELOCITY_ATTENUATION as DISTANCE_ATTENUATION
 from magica_py.solver.constraints.distance import distance_block
-from magica_py.solver.constraints.motion import VELOCITY_ATTENUATION as MOTION_ATTENUATION
 from magica_py.solver.constraints.motion import motion_block
-from magica_py.solver.constraints.tether import VELOCITY_ATTENUATION as TETHER_ATTENUATION
 from magica_py.solver.constraints.tether import tether_block
-from magica_py.solver.parameters import step_rate
-from magica_py.solver.quality import (
-    quality_distance_attenuation, quality_hard_attenuation, quality_restoration_attenuation,
-)
 from magica_py.solver.step import end_step_block, predict_block, step_basic_pose_block, team_step_update
 
 
@@ -66,9 +61,10 @@ def run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi):
     dt = fi.dt
     ratio = fi.frequency_ratio
     ex = blk.block_exemplar[b]
-    mode = prm.rate_mode[ex]
     lanes = blk.block_lane_base[b]
     width = blk.block_width[b]
+    tether_attenuation, distance_attenuation, limit_attenuation, restoration_attenuation, motion_attenuation = \
+        step_attenuations(prm, ex, ratio)
     for i in range(width):
         t = blk.lane_team[lanes + i]
         frac = tt.frame_interpolation[t]
@@ -77,21 +73,16 @@ def run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi):
     load_lanes(blk, bs, ts, tt, cs, b)
     predict_block(m, bs, prm, blk, b, dt, ratio, fi.power_z)
     step_basic_pose_block(m, bs, prm, blk, b)
-    tether_block(m, bs, prm, blk, b, quality_hard_attenuation(prm, ex, ratio, TETHER_ATTENUATION,
-                                                             step_rate(TETHER_ATTENUATION, ratio, 1.0, mode)))
-    distance_attenuation = quality_distance_attenuation(prm, ex, step_rate(DISTANCE_ATTENUATION, ratio, 1.0, mode))
+    tether_block(m, bs, prm, blk, b, tether_attenuation)
     distance_block(m, bs, prm, blk, b, ratio, fi.power_y, distance_attenuation)
-    angle_block(m, bs, prm, blk, b, ratio, fi.power_w,
-                quality_hard_attenuation(prm, ex, ratio, LIMIT_ATTENUATION, step_rate(LIMIT_ATTENUATION, ratio, 1.0, mode)),
-                quality_restoration_attenuation(prm, ex, ratio, step_rate(prm.restoration_attenuation[ex], ratio, 1.0, mode)))
+    angle_block(m, bs, prm, blk, b, ratio, fi.power_w, limit_attenuation, restoration_attenuation)
     if m.team_bend_count[ex] > 0 or m.team_volume_count[ex] > 0:
         bending_block(m, bs, prm, blk, b, ratio, fi.power_y)
         apply_accumulated_block(m, bs, blk, b, True)
     if blk.block_collider_count[b] > 0 and prm.collision_mode[ex] == 1:
         point_collision_block(m, bs, prm, blk, b)
     distance_block(m, bs, prm, blk, b, ratio, fi.power_y, distance_attenuation)
-    motion_block(m, bs, prm, blk, b, quality_hard_attenuation(prm, ex, ratio, MOTION_ATTENUATION,
-                                                             step_rate(MOTION_ATTENUATION, ratio, 1.0, mode)))
+    motion_block(m, bs, prm, blk, b, motion_attenuation)
     end_step_block(m, bs, prm, blk, b, dt, ratio)
     for i in range(width):
         collider_end_step_team(cs, ts, blk.lane_team[lanes + i])
