@@ -240,49 +240,76 @@ def _max_update_count(m, ts, tt):
 
 
 @kernel
-def _steps_serial(m, ps, prm, ts, cs, tt, blk, bs, fi):
-    team_count = m.live_teams.shape[0]
-    block_count = blk.block_width.shape[0]
-    for b in range(block_count):
-        gather_running(m, ps, blk, bs, b)
-    for step in range(_max_update_count(m, ts, tt)):
-        team_time_begin_step(step, tt.active, tt.update_count, tt.time, tt.now_update_time,
-                             tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
-        for b in range(block_count):
-            if blk.block_run[b] != 0 and tt.step_running[blk.lane_team[blk.block_lane_base[b]]]:
-                run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi)
-        for i in range(team_count):
-            t = m.live_teams[i]
-            if ts.active[t] != 0 and tt.step_running[t] and team_runs_alone(blk, t):
-                run_step(m, ps, prm, ts, cs, tt, t, fi)
-    for b in range(block_count):
-        scatter_running(m, ps, blk, bs, b)
-
-
-@kernel
-def simulate_frame(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
-    """The whole cloth frame for every team (see the module docstring). Teams of a running
-    block (``solver/batched``) run their steps side by side, the others one by one: the
-    results are the same bits either way (tests/test_batched_frame.py)."""
-    m, ps, prm, ts, cs, tt, h, blk, bs = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
-                                          borrow(tt), borrow(h), borrow(blk), borrow(bs))  # batch_tables.py
-    team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)
+def _frame_begin(m, ps, prm, ts, cs, tt, h, fi):
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
-    for i in range(team_count):
+    for i in range(m.live_teams.shape[0]):
         t = m.live_teams[i]
         if ts.active[t] != 0:
             begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t)
-    decide_blocks(m, ts, tt, blk)
-    _steps_serial(m, ps, prm, ts, cs, tt, blk, bs, fi)
-    for i in range(team_count):
+
+
+@kernel
+def _frame_end(m, ps, prm, ts, cs, tt, h, fi):
+    for i in range(m.live_teams.shape[0]):
         t = m.live_teams[i]
         if ts.active[t] != 0:
             end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t)
+    _frame_close(tt, h, fi)
+
+
+@kernel
+def _frame_close(tt, h, fi):
     team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
                         tt.now_update_time, tt.old_update_time, tt.frame_update_time,
                         tt.frame_old_time, fi.timing)
     h.build_pose_pending[0] = 0  # teams added or reset later reset at their first frame
+
+
+@kernel
+def _begin_step(tt, fi, step):
+    team_time_begin_step(step, tt.active, tt.update_count, tt.time, tt.now_update_time,
+                         tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
+
+
+@kernel
+def simulate_frame(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
+    """The whole cloth frame for every team, one team after another (see the module
+    docstring). ``blk``/``bs`` are not read: scenes without blocks do not compile the block
+    path (``simulate_frame_blocks``)."""
+    m, ps, prm, ts, cs, tt, h = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
+                                 borrow(tt), borrow(h))  # no refcounting inside (batch_tables.py)
+    _frame_begin(m, ps, prm, ts, cs, tt, h, fi)
+    for step in range(_max_update_count(m, ts, tt)):
+        _begin_step(tt, fi, step)
+        for i in range(m.live_teams.shape[0]):
+            t = m.live_teams[i]
+            if ts.active[t] != 0 and tt.step_running[t]:
+                run_step(m, ps, prm, ts, cs, tt, t, fi)
+    _frame_end(m, ps, prm, ts, cs, tt, h, fi)
+
+
+@kernel
+def simulate_frame_blocks(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
+    """``simulate_frame`` with the teams of a running block (``solver/batched``) stepping side
+    by side: the same bits (tests/test_batched_frame.py)."""
+    m, ps, prm, ts, cs, tt, h, blk, bs = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
+                                          borrow(tt), borrow(h), borrow(blk), borrow(bs))  # batch_tables.py
+    team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)
+    block_count = blk.block_width.shape[0]
+    _frame_begin(m, ps, prm, ts, cs, tt, h, fi)
+    decide_blocks(m, ts, tt, blk)
+    for b in range(block_count):
+        gather_running(m, ps, blk, bs, b)
+    for step in range(_max_update_count(m, ts, tt)):
+        _begin_step(tt, fi, step)
+        for b in range(block_count):
+            _block_work(m, ps, prm, ts, cs, tt, blk, bs, fi, b, step)
+        for i in range(team_count):
+            _team_work(m, ps, prm, ts, cs, tt, blk, fi, m.live_teams[i])
+    for b in range(block_count):
+        scatter_running(m, ps, blk, bs, b)
+    _frame_end(m, ps, prm, ts, cs, tt, h, fi)
 
 
 @kernel
@@ -300,11 +327,36 @@ def _team_work(m, ps, prm, ts, cs, tt, blk, fi, t):
 
 @kernel(parallel=True)
 def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
-    """``simulate_frame`` with blocks and teams spread over threads (opt-in:
-    ``ClothSystem(parallel=True)``).
+    """``simulate_frame`` with teams spread over threads (opt-in: ``ClothSystem(parallel=True)``).
 
-    Blocks and teams are independent and each runs in its own order, so the results are
-    bit-identical to the serial kernel (element-wise, no reductions)."""
+    Teams are independent and each runs in its own order, so the results are bit-identical
+    to the serial kernel (element-wise, no reductions)."""
+    m, ps, prm, ts, cs, tt, h = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
+                                 borrow(tt), borrow(h))  # no refcounting inside (batch_tables.py)
+    team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)
+    prepare_teams(m, ts, prm, tt, h)
+    _time_frame_update(tt, fi)
+    for i in prange(team_count):
+        t = m.live_teams[i]
+        if ts.active[t] != 0:
+            begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t)
+    for step in range(_max_update_count(m, ts, tt)):
+        _begin_step(tt, fi, step)
+        for i in prange(team_count):
+            t = m.live_teams[i]
+            if ts.active[t] != 0 and tt.step_running[t]:
+                run_step(m, ps, prm, ts, cs, tt, t, fi)
+    for i in prange(team_count):
+        t = m.live_teams[i]
+        if ts.active[t] != 0:
+            end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t)
+    _frame_close(tt, h, fi)
+
+
+@kernel(parallel=True)
+def simulate_frame_parallel_blocks(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
+    """``simulate_frame_blocks`` with blocks and teams spread over threads: blocks and teams
+    are independent and each runs in its own order, so the results are bit-identical."""
     m, ps, prm, ts, cs, tt, h, blk, bs = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
                                           borrow(tt), borrow(h), borrow(blk), borrow(bs))  # batch_tables.py
     team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)
@@ -319,8 +371,7 @@ def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
     for b in prange(block_count):
         gather_running(m, ps, blk, bs, b)
     for step in range(_max_update_count(m, ts, tt)):
-        team_time_begin_step(step, tt.active, tt.update_count, tt.time, tt.now_update_time,
-                             tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
+        _begin_step(tt, fi, step)
         for b in prange(block_count):
             _block_work(m, ps, prm, ts, cs, tt, blk, bs, fi, b, step)
         for i in prange(team_count):
@@ -331,10 +382,7 @@ def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
         t = m.live_teams[i]
         if ts.active[t] != 0:
             end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t)
-    team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
-                        tt.now_update_time, tt.old_update_time, tt.frame_update_time,
-                        tt.frame_old_time, fi.timing)
-    h.build_pose_pending[0] = 0  # teams added or reset later reset at their first frame
+    _frame_close(tt, h, fi)
 
 
 # ----------------------------------------------------------------------------- kernel tables

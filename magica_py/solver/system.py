@@ -33,7 +33,8 @@ from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, u
 from magica_py.solver.colliders import fill_slots
 from magica_py.solver.fields import F64
 from magica_py.solver.frame import (
-    FrameInputs, as_kernel_table, hierarchy_arrays, simulate_frame, simulate_frame_parallel, time_arrays,
+    FrameInputs, as_kernel_table, hierarchy_arrays, simulate_frame, simulate_frame_blocks, simulate_frame_parallel,
+    simulate_frame_parallel_blocks, time_arrays,
 )
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
 from magica_py.solver.fields import grow
@@ -106,9 +107,9 @@ class ClothSystem:
         self._hierarchy = hierarchy_arrays(hierarchy)
         self.frame_count = 0
         self._player = None
-        self._entry_point = None
         self._tables = None
-        self._kernel = simulate_frame_parallel if parallel else simulate_frame
+        self.parallel = bool(parallel)
+        self._entry_points = {}
         self.batched = bool(batched)
         self._block_tables = None
         self._form_blocks()
@@ -213,6 +214,11 @@ class ClothSystem:
 
         self.block_table, self.block_state = form_blocks(self, enabled=self.batched)
         self._block_tables = None
+        # a scene without blocks runs (and compiles) the per-team kernel only
+        if len(self.block_table.block_width):
+            self._kernel = simulate_frame_parallel_blocks if self.parallel else simulate_frame_blocks
+        else:
+            self._kernel = simulate_frame_parallel if self.parallel else simulate_frame
 
     def _tables_changed(self) -> None:
         """After add/remove: new model, new kernel tables (same types: the compiled entry point
@@ -367,13 +373,14 @@ class ClothSystem:
         """One numba call per frame; after the first, through the compiled entry point of its
         signature (skips numba's argument typing; the table types never change)."""
         tables = self.kernel_tables() + self.block_kernel_tables()
-        if self._entry_point is None:
+        entry = self._entry_points.get(self._kernel)
+        if entry is None:
             self._kernel(*tables, fi)
             from numba import typeof
             key = tuple(typeof(a) for a in tables) + (typeof(fi),)
-            self._entry_point = self._kernel.overloads[key].entry_point
+            self._entry_points[self._kernel] = self._kernel.overloads[key].entry_point
             return
-        self._entry_point(*tables, fi)
+        entry(*tables, fi)
 
     def _parameter(self, team, key, default):
         params = self.team_parameters[team]

@@ -15,7 +15,8 @@ trigonometry is branch-free polynomial (``kernels/trig.py``) rather than libm; t
 fastmath. A block therefore produces exactly the bits the per-team path produces; the tests
 compare the two on whole runs (``tests/test_batched_steps.py``).
 
-Frame flow (``solver/frame.py``): the per-frame stages stay per team; after them the
+Frame flow (``solver/frame.py``, ``simulate_frame_blocks``: a scene without blocks runs and
+compiles the plain per-team kernel): the per-frame stages stay per team; after them the
 *running* blocks (every lane active, the same number of steps this frame) gather their
 lanes' particle state into the block arrays, run every step (per-team C.3/G.3, then the block
 stages), and scatter the state back before the end-of-frame stages. A block that cannot run
