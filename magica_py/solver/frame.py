@@ -327,36 +327,10 @@ def _team_work(m, ps, prm, ts, cs, tt, blk, fi, t):
 
 @kernel(parallel=True)
 def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
-    """``simulate_frame`` with teams spread over threads (opt-in: ``ClothSystem(parallel=True)``).
-
-    Teams are independent and each runs in its own order, so the results are bit-identical
-    to the serial kernel (element-wise, no reductions)."""
-    m, ps, prm, ts, cs, tt, h = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
-                                 borrow(tt), borrow(h))  # no refcounting inside (batch_tables.py)
-    team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)
-    prepare_teams(m, ts, prm, tt, h)
-    _time_frame_update(tt, fi)
-    for i in prange(team_count):
-        t = m.live_teams[i]
-        if ts.active[t] != 0:
-            begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t)
-    for step in range(_max_update_count(m, ts, tt)):
-        _begin_step(tt, fi, step)
-        for i in prange(team_count):
-            t = m.live_teams[i]
-            if ts.active[t] != 0 and tt.step_running[t]:
-                run_step(m, ps, prm, ts, cs, tt, t, fi)
-    for i in prange(team_count):
-        t = m.live_teams[i]
-        if ts.active[t] != 0:
-            end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t)
-    _frame_close(tt, h, fi)
-
-
-@kernel(parallel=True)
-def simulate_frame_parallel_blocks(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
-    """``simulate_frame_blocks`` with blocks and teams spread over threads: blocks and teams
-    are independent and each runs in its own order, so the results are bit-identical."""
+    """``simulate_frame_blocks`` with blocks and teams spread over threads (opt-in:
+    ``ClothSystem(parallel=True)``; also for scenes without blocks, whose teams all take the
+    per-team path). Blocks and teams are independent and each runs in its own order, so the
+    results are bit-identical to the serial kernels (element-wise, no reductions)."""
     m, ps, prm, ts, cs, tt, h, blk, bs = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
                                           borrow(tt), borrow(h), borrow(blk), borrow(bs))  # batch_tables.py
     team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)

@@ -34,7 +34,7 @@ from magica_py.solver.colliders import fill_slots
 from magica_py.solver.fields import F64
 from magica_py.solver.frame import (
     FrameInputs, as_kernel_table, hierarchy_arrays, simulate_frame, simulate_frame_blocks, simulate_frame_parallel,
-    simulate_frame_parallel_blocks, time_arrays,
+    time_arrays,
 )
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
 from magica_py.solver.fields import grow
@@ -214,11 +214,11 @@ class ClothSystem:
 
         self.block_table, self.block_state = form_blocks(self, enabled=self.batched)
         self._block_tables = None
-        # a scene without blocks runs (and compiles) the per-team kernel only
-        if len(self.block_table.block_width):
-            self._kernel = simulate_frame_parallel_blocks if self.parallel else simulate_frame_blocks
+        # a serial scene without blocks runs (and compiles) the per-team kernel only
+        if self.parallel:
+            self._kernel = simulate_frame_parallel
         else:
-            self._kernel = simulate_frame_parallel if self.parallel else simulate_frame
+            self._kernel = simulate_frame_blocks if len(self.block_table.block_width) else simulate_frame
 
     def _tables_changed(self) -> None:
         """After add/remove: new model, new kernel tables (same types: the compiled entry point
