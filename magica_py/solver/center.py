@@ -17,10 +17,10 @@ from magica_py.kernels.math3d import (
     q_rotate, q_slerp, q_tangent_axis, rot_from_normal_tangent, saturate, shift_position,
     store3, store4, unlerp, v_add, v_length, v_lerp, v_normalize, v_scale, v_sub,
 )
-from magica_py.solver.rotations import (
-    flat, load_input, load_input3, load_input4, normalize_or_zero, rot_from_normal_tangent_select, row3, row4,
-    set_row3, set_row4, store_output3, store_output4,
+from magica_py.kernels.rows import (
+    flat, load_input, load_input3, load_input4, row3, row4, set_row3, set_row4, store_output3, store_output4,
 )
+from magica_py.solver.rotations import normalize_or_zero, rot_from_normal_tangent_select
 
 MOVE = 0x02
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -55,7 +55,7 @@ def skin_vertex(l0, l1, l2, b0, b1, b2, b3, local_position, local_normal, local_
 def skin_team(m, ps, local_to_world, team):
     """C.1: one-bone skinning of every vertex with this frame's bone matrices.
 
-    Vectorised over the team's vertices (``rotations.load_input``: the loop only reads the
+    Vectorised over the team's vertices (``kernels.rows.load_input``: the loop only reads the
     model and the bone matrices and only writes position and rotation)."""
     l2w = flat(local_to_world)          # (nodes * 16,) bone matrices, gathered per vertex
     bind = flat(m.skin_bind_pose)       # (N * 16,)

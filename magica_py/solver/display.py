@@ -15,7 +15,7 @@ import numpy as np
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import clamp_length, v_add, v_length, v_lerp, v_scale, v_sub
 from magica_py.solver.quality import display_ftl_team
-from magica_py.solver.rotations import flat, row3, row4, set_row3, set_row4
+from magica_py.kernels.rows import flat, row3, row4, set_row3, set_row4
 
 MOVE = 0x02
 MAX_DISTANCE_RATIO = 1.3   # MaxDistanceRatioFutuerPrediction

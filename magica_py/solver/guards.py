@@ -10,7 +10,7 @@ import numpy as np
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, store3, store4
 from magica_py.solver.center import snap_particles_to_base_pose
-from magica_py.solver.rotations import flat
+from magica_py.kernels.rows import flat
 
 GUARD_OK = 0
 GUARD_NON_FINITE = 1

@@ -14,7 +14,8 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import q_inverse, q_mul, q_normalize, q_rotate, v_sub
-from magica_py.solver.rotations import flat, q_normalize_or_identity, row3, row4, set_row3, set_row4
+from magica_py.kernels.rows import flat, row3, row4, set_row3, set_row4
+from magica_py.solver.rotations import q_normalize_or_identity
 
 FIXED = 0x01
 MOVE = 0x02
@@ -58,7 +59,7 @@ def write_transforms_team(m, ps, team, parent_node, world_rotation, lossy_scale,
 
     Scalar: the writes are scatters (through transform_index) of 3- and 4-value rows, which
     LLVM's vectoriser cannot check for overlap (measured: "cannot identify array bounds" even
-    with every access alias-tagged, ``rotations.load_input``), so the branches stay."""
+    with every access alias-tagged, ``kernels.rows.load_input``), so the branches stay."""
     # arrays as locals and flat rows: through the tables their pointers would be reloaded
     # after every store (the stores may alias the tables as far as LLVM knows)
     attribute, node_of, parent_of = m.attribute, m.transform_index, m.parent
