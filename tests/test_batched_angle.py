@@ -32,29 +32,11 @@ SCRATCH = ["angle_length", "angle_local_pos", "angle_rest_vector", "angle_rotati
 CLEARED = ["angle_length", "angle_local_pos", "angle_rest_vector"]
 
 
-def per_team_crowd(instances):
-    """``crowd_system`` run per team (``batched=False``): with blocks, the team rows of block
-    teams keep stale step-internal fields (step basic pose, ...), not a mid-motion state."""
-    from magica_py.solver.system import ClothSystem
-
-    original = ClothSystem.__init__
-
-    def per_team(self, *args, **kwargs):
-        kwargs["batched"] = False
-        original(self, *args, **kwargs)
-
-    ClothSystem.__init__ = per_team
-    try:
-        return crowd_system(instances=instances, frames=25)
-    finally:
-        ClothSystem.__init__ = original
-
-
 @pytest.fixture(scope="module")
 def crowd():
     # 32 instances: blocks of 32 lanes. LLVM enters a lane loop's vector path only from
     # 12-28 lanes on (runtime overlap checks), so 6 lanes would test the scalar loops only
-    return per_team_crowd(32)
+    return crowd_system(instances=32, frames=25)  # per team (the harness)
 
 
 @numba.njit

@@ -20,33 +20,14 @@ MOTION_OVERRIDES = {f"cloths.{c}.parameters.motion.{k}": v for c in ("hair", "sk
                                  ("backstop_radius", 0.3), ("backstop_distance", 0.01))}
 
 
-def per_team_crowd(overrides: dict | None = None):
-    """``crowd_system(instances=6, frames=25)`` run per team: with blocks, the step-internal
-    fields (next_pos, base and step basic pose, ...) of block teams stay in the block state
-    and their team rows would be stale, not a mid-motion state."""
-    from magica_py.solver.system import ClothSystem
-
-    original = ClothSystem.__init__
-
-    def per_team(self, *args, **kwargs):
-        kwargs["batched"] = False
-        original(self, *args, **kwargs)
-
-    ClothSystem.__init__ = per_team
-    try:
-        return crowd_system(instances=6, frames=25, overrides=overrides)
-    finally:
-        ClothSystem.__init__ = original
-
-
 @pytest.fixture(scope="module")
 def crowd():
-    return per_team_crowd()
+    return crowd_system(instances=6, frames=25)
 
 
 @pytest.fixture(scope="module")
 def motion_crowd():
-    return per_team_crowd(MOTION_OVERRIDES)
+    return crowd_system(instances=6, frames=25, overrides=MOTION_OVERRIDES)
 
 
 # ------------------------------------------------------------------ stage wrappers (harness API)
