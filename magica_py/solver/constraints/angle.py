@@ -26,12 +26,12 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels import trig
+from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
 from magica_py.kernels.math3d import (
     angle_between_vectors, clamp_angle, inverse_mass_friction, lerp, load3, load4, orthogonal_axis,
     q_axis_angle, q_inverse, q_mul, q_rotate, saturate, store3, store4, v_add, v_cross, v_dot, v_length,
     v_normalize, v_scale, v_sub,
 )
-from magica_py.solver.batched.transfer import bload3, bload4, bstore3, bstore4
 from magica_py.solver.parameters import curve_at, curve_at_clamp01, step_rate
 
 MOVE = 0x02
@@ -351,10 +351,11 @@ def angle_block(m, bs, prm, blk, b, frequency_ratio, power_w, limit_attenuation,
             c = m.baseline_data[e] - p0
             kc0 = np.uint64(row_base + c * width)
             if e == e0:
+                open_streams()
                 for i in range(width):
                     kc = kc0 + np.uint64(i)
-                    bstore4(angle_rotation, kc, bload4(step_basic_rot, kc))
-                    angle_inverse_mass[kc] = inverse_mass_friction(friction[kc])
+                    sstore4(angle_rotation, kc, sload4(step_basic_rot, kc, READ), 1)
+                    sstore(angle_inverse_mass, kc, inverse_mass_friction(sload(friction, kc, READ)), 5)
                 continue
             p = m.parent[c + p0] - p0
             kp0 = np.uint64(row_base + p * width)
@@ -365,33 +366,24 @@ def angle_block(m, bs, prm, blk, b, frequency_ratio, power_w, limit_attenuation,
                 max_angle = limit_angle_at(prm, ex, depth)
                 shared_limit[shared + c] = max_angle
                 shared_limit_cos[shared + c] = trig.cos(max_angle)
-            # three lane loops rather than one: each touches fewer arrays, so LLVM's runtime
-            # overlap checks stay cheap enough for it to enter the vector loop at <= 32 lanes
-            # (one loop wanted 88 lanes); the unused outputs of each call are not computed
-            for i in range(width):
-                kc = kc0 + np.uint64(i)
-                bstore4(angle_rotation, kc, bload4(step_basic_rot, kc))
-                angle_inverse_mass[kc] = inverse_mass_friction(friction[kc])
+            # streams: rotation 1-4, inverse mass 5, length 6, local pos 7-9, local rot 10-13,
+            # rest vector 14-16, rest length 17, rest direction 18-20 (read and written)
+            open_streams()
             for i in range(width):
                 kc = kc0 + np.uint64(i)
                 kp = kp0 + np.uint64(i)
-                length, local_pos, local_rot, _rv, _rl, _rd = angle_buffer_entry(
-                    bload3(next_pos, kc), bload3(next_pos, kp), bload3(step_basic_pos, kc),
-                    bload3(step_basic_pos, kp), bload4(step_basic_rot, kc), bload4(step_basic_rot, kp),
-                    bload3(angle_rest_direction, kc))
-                angle_length[kc] = length
-                bstore3(angle_local_pos, kc, local_pos)
-                bstore4(angle_local_rot, kc, local_rot)
-            for i in range(width):
-                kc = kc0 + np.uint64(i)
-                kp = kp0 + np.uint64(i)
-                _l, _lp, _lr, rest_vector, rest_length, rest_direction = angle_buffer_entry(
-                    bload3(next_pos, kc), bload3(next_pos, kp), bload3(step_basic_pos, kc),
-                    bload3(step_basic_pos, kp), bload4(step_basic_rot, kc), bload4(step_basic_rot, kp),
-                    bload3(angle_rest_direction, kc))
-                bstore3(angle_rest_vector, kc, rest_vector)
-                angle_rest_length[kc] = rest_length
-                bstore3(angle_rest_direction, kc, rest_direction)
+                sstore4(angle_rotation, kc, sload4(step_basic_rot, kc, READ), 1)
+                sstore(angle_inverse_mass, kc, inverse_mass_friction(sload(friction, kc, READ)), 5)
+                length, local_pos, local_rot, rest_vector, rest_length, rest_direction = angle_buffer_entry(
+                    sload3(next_pos, kc, READ), sload3(next_pos, kp, READ), sload3(step_basic_pos, kc, READ),
+                    sload3(step_basic_pos, kp, READ), sload4(step_basic_rot, kc, READ),
+                    sload4(step_basic_rot, kp, READ), sload3(angle_rest_direction, kc, 18))
+                sstore(angle_length, kc, length, 6)
+                sstore3(angle_local_pos, kc, local_pos, 7)
+                sstore4(angle_local_rot, kc, local_rot, 10)
+                sstore3(angle_rest_vector, kc, rest_vector, 14)
+                sstore(angle_rest_length, kc, rest_length, 17)
+                sstore3(angle_rest_direction, kc, rest_direction, 18)
         for it in range(ITERATIONS):
             rest_pivot = lerp(0.1, 0.5, it / 2.0)
             for e in range(e0 + 1, e1):
@@ -427,11 +419,12 @@ def angle_block(m, bs, prm, blk, b, frequency_ratio, power_w, limit_attenuation,
         # clear the buffers
         for e in range(e0, e1):
             kc0 = np.uint64(row_base + (m.baseline_data[e] - p0) * width)
+            open_streams()
             for i in range(width):
                 kc = kc0 + np.uint64(i)
-                angle_length[kc] = 0.0
-                bstore3(angle_local_pos, kc, ZERO3)
-                bstore3(angle_rest_vector, kc, ZERO3)
+                sstore(angle_length, kc, 0.0, 1)
+                sstore3(angle_local_pos, kc, ZERO3, 2)
+                sstore3(angle_rest_vector, kc, ZERO3, 5)
 
 
 @kernel(inline="always")
@@ -444,6 +437,7 @@ def _entry_lanes(kc0, kp0, lanes, width, next_pos, velocity_pos, angle_rotation,
     need them untouched; those lanes then run every path, one by one (lanes are independent:
     each keeps the per-team order)."""
     rare_lanes = np.uint64(0)
+    open_streams()
     for i in range(width):
         rare = _lane_entry(kc0 + np.uint64(i), kp0 + np.uint64(i), lanes + np.uint64(i), next_pos, velocity_pos,
                            angle_rotation, angle_inverse_mass, angle_local_pos, angle_local_rot, angle_length,
@@ -470,32 +464,36 @@ def _lane_entry(kc, kp, L, next_pos, velocity_pos, angle_rotation, angle_inverse
                 restoration_attenuation, use_limit, use_restoration, full):
     """One lane of one iteration entry (``angle_team``'s loop body) on block rows kc (child),
     kp (parent), lane L. ``full`` False: the vector pass, which leaves the lane as it was and
-    returns True where a rare path needs ``full`` True (see ``angle_limit_entry``)."""
-    cp = bload3(next_pos, kc)
-    pp = bload3(next_pos, kp)
-    vel_c0 = bload3(velocity_pos, kc)
-    vel_p0 = bload3(velocity_pos, kp)
-    rot_c0 = bload4(angle_rotation, kc)
-    wc = angle_inverse_mass[kc]
-    wp = angle_inverse_mass[kp]
+    returns True where a rare path needs ``full`` True (see ``angle_limit_entry``).
+
+    Streams (``kernels/streams``): next_pos of c 1-3 and of p 4-6, velocity_pos of c 7-9 and
+    of p 10-12, angle_rotation of c 13-16; everything else is read only (p's rotation too)."""
+    cp = sload3(next_pos, kc, 1)
+    pp = sload3(next_pos, kp, 4)
+    vel_c0 = sload3(velocity_pos, kc, 7)
+    vel_p0 = sload3(velocity_pos, kp, 10)
+    rot_c0 = sload4(angle_rotation, kc, 13)
+    wc = sload(angle_inverse_mass, kc, READ)
+    wp = sload(angle_inverse_mass, kp, READ)
     next_c, vel_c, vel_p, rot_c, limited_c, limited_p = cp, vel_c0, vel_p0, rot_c0, cp, pp
     rare = False
     if use_limit:
         limited_c, limited_p, next_c, vel_c, vel_p, rot_c, rare = angle_limit_entry(
-            cp, pp, vel_c0, vel_p0, rot_c0, bload4(angle_rotation, kp), bload3(angle_local_pos, kc),
-            bload4(angle_local_rot, kc), angle_length[kc], max_angle, max_angle_cos, wc, wp, p_move,
-            limit_stiffness, limit_attenuation, full)
+            cp, pp, vel_c0, vel_p0, rot_c0, sload4(angle_rotation, kp, READ), sload3(angle_local_pos, kc, READ),
+            sload4(angle_local_rot, kc, READ), sload(angle_length, kc, READ), max_angle, max_angle_cos, wc, wp,
+            p_move, limit_stiffness, limit_attenuation, full)
     next_p = limited_p
     if use_restoration:
         next_c, vel_c, next_p, vel_p, rare_restoration = angle_restoration_entry(
-            limited_c, limited_p, next_c, vel_c, next_p, vel_p, angle_rest_length[kc],
-            bload3(angle_rest_direction, kc), rate * restoration_gravity_factor(falloff, gravity_dot[L]),
+            limited_c, limited_p, next_c, vel_c, next_p, vel_p, sload(angle_rest_length, kc, READ),
+            sload3(angle_rest_direction, kc, READ),
+            rate * restoration_gravity_factor(falloff, sload(gravity_dot, L, READ)),
             rest_pivot, wc, wp, p_move, restoration_attenuation, full)
         rare = rare | rare_restoration
     keep = (not full) & rare
-    bstore4(angle_rotation, kc, rot_c0 if keep else rot_c)
-    bstore3(next_pos, kc, cp if keep else next_c)
-    bstore3(velocity_pos, kc, vel_c0 if keep else vel_c)
-    bstore3(next_pos, kp, pp if keep else next_p)
-    bstore3(velocity_pos, kp, vel_p0 if keep else vel_p)
+    sstore4(angle_rotation, kc, rot_c0 if keep else rot_c, 13)
+    sstore3(next_pos, kc, cp if keep else next_c, 1)
+    sstore3(velocity_pos, kc, vel_c0 if keep else vel_c, 7)
+    sstore3(next_pos, kp, pp if keep else next_p, 4)
+    sstore3(velocity_pos, kp, vel_p0 if keep else vel_p, 10)
     return rare
