@@ -23,7 +23,8 @@ from magica_py.kernels.math3d import (
     closest_segment_segment, load3, load4, q_rotate, saturate, store3, v_add, v_dot, v_length, v_length_sq, v_lerp,
     v_normalize, v_scale, v_sub,
 )
-from magica_py.solver.batched.transfer import bload3, bload4, bstore3
+from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3
+from magica_py.solver.batched.transfer import bload3
 from magica_py.solver.constraints.bending import FIXED_POINT
 from magica_py.solver.parameters import curve_at
 
@@ -182,17 +183,20 @@ def point_collision_team(m, ps, prm, ts, cs, team):
 @kernel
 def _add_lane(sum_push_a, sum_n_a, n_acc_a, count_a, min_dist_a, k, x, r, d, n, x2, suspended):
     """point_contact_add on the sums a block keeps in its scratch rows (row k); a suspended
-    collider (scale_suspend) leaves them as they are."""
-    old_push, old_n, old_near, old_count, old_min = (bload3(sum_push_a, k), bload3(sum_n_a, k), bload3(n_acc_a, k),
-                                                     count_a[k], min_dist_a[k])
+    collider (scale_suspend) leaves them as they are. Lane streams: the five sums are updated
+    in place, push 1-3, normals 4-6, near normals 7-9, count 10, closest distance 11 (see
+    ``point_collision_block``)."""
+    old_push, old_n, old_near, old_count, old_min = (sload3(sum_push_a, k, 1), sload3(sum_n_a, k, 4),
+                                                     sload3(n_acc_a, k, 7), sload(count_a, k, 10),
+                                                     sload(min_dist_a, k, 11))
     sum_push, sum_n, n_acc, count, min_dist = point_contact_add(old_push, old_n, old_near, old_count, old_min,
                                                                 x, r, d, n, x2)
     keep = suspended != 0
-    bstore3(sum_push_a, k, old_push if keep else sum_push)
-    bstore3(sum_n_a, k, old_n if keep else sum_n)
-    bstore3(n_acc_a, k, old_near if keep else n_acc)
-    count_a[k] = old_count if keep else count
-    min_dist_a[k] = old_min if keep else min_dist
+    sstore3(sum_push_a, k, old_push if keep else sum_push, 1)
+    sstore3(sum_n_a, k, old_n if keep else sum_n, 4)
+    sstore3(n_acc_a, k, old_near if keep else n_acc, 7)
+    sstore(count_a, k, old_count if keep else count, 10)
+    sstore(min_dist_a, k, old_min if keep else min_dist, 11)
 
 
 @kernel
@@ -217,7 +221,12 @@ def point_collision_block(m, bs, prm, blk, b):
     normals in ``accum_normal``, near normals in ``collision_normal`` (its final value is built
     from them), count in ``accum_count``, closest distance in ``accum_friction``; the scratch is
     cleared again at the end. A slot's shape is the same in every lane (block formation), so
-    the shape branch is outside the lane loop; AABB early-outs and suspension are selects."""
+    the shape branch is outside the lane loop; AABB early-outs and suspension are selects.
+
+    Lane streams (``kernels/streams``): every lane loop writes only the particle's own rows
+    (k0 + lane) of the arrays it writes, each of which is either read at those rows in the same
+    stream (an in-place update) or not read; the collider rows and next_pos (except in the last
+    loop, where it is updated in place) are only read."""
     ex = blk.block_exemplar[b]
     width = blk.block_width[b]
     lanes = np.uint64(blk.block_lane_base[b])
@@ -239,83 +248,96 @@ def point_collision_block(m, bs, prm, blk, b):
             continue
         radius = max(curve_at(prm.radius_curve, ex, m.depth[p0 + p]), 0.0001)
         k0 = np.uint64(blk.block_row_base[b] + p * width)
-        near = False
+        first_near = slots  # the first slot that is a plane or in some lane's bounds
         for j in range(slots):
             c0 = np.uint64(blk.block_collider_base[b] + j * width)
             if (shape_a[c0] == PLANE
                     or _lanes_in_bounds(next_pos, scale, aabb_min, aabb_max, k0, c0, lanes, width, radius) > 0):
-                near = True
+                first_near = j
                 break
-        if not near:  # no collider near in any lane: no push, friction kept, no contact normal
+        if first_near == slots:  # no collider near in any lane: no push, friction kept, no contact normal
+            open_streams()
             for i in range(width):
-                bstore3(normal_a, k0 + np.uint64(i), z)
+                sstore3(normal_a, k0 + np.uint64(i), z, 1)
             continue
+        open_streams()
         for i in range(width):
             k = k0 + np.uint64(i)
-            bstore3(sum_push_a, k, z)
-            bstore3(sum_n_a, k, z)
-            bstore3(normal_a, k, z)
-            count_a[k] = 0
-            min_dist_a[k] = FAR
-        for j in range(slots):
+            sstore3(sum_push_a, k, z, 1)
+            sstore3(sum_n_a, k, z, 4)
+            sstore3(normal_a, k, z, 7)
+            sstore(count_a, k, 0, 10)
+            sstore(min_dist_a, k, FAR, 11)
+        # the slots before first_near reach no lane (their sums stay), first_near is known near;
+        # next_pos does not change before the result loop, so the bounds tests stand
+        for j in range(first_near, slots):
             c0 = np.uint64(blk.block_collider_base[b] + j * width)
             shape = shape_a[c0]
-            if shape != PLANE and _lanes_in_bounds(next_pos, scale, aabb_min, aabb_max, k0, c0, lanes, width,
-                                                   radius) == 0:
+            if shape != PLANE and j != first_near and _lanes_in_bounds(next_pos, scale, aabb_min, aabb_max, k0, c0,
+                                                                       lanes, width, radius) == 0:
                 continue  # no lane's particle near this slot's collider: every lane keeps its sums
+            open_streams()
             if shape == PLANE:
                 for i in range(width):
                     k = k0 + np.uint64(i)
                     c = c0 + np.uint64(i)
-                    x = bload3(next_pos, k)
-                    r = radius * scale[lanes + np.uint64(i)]
-                    d, n, x2 = point_plane(x, r, bload3(start_new, c), bload3(plane_normal, c))
-                    _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d, n, x2, suspend_a[c])
+                    x = sload3(next_pos, k, READ)
+                    r = radius * sload(scale, lanes + np.uint64(i), READ)
+                    d, n, x2 = point_plane(x, r, sload3(start_new, c, READ), sload3(plane_normal, c, READ))
+                    _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d, n, x2,
+                              sload(suspend_a, c, READ))
             elif shape == SPHERE:
                 for i in range(width):
                     k = k0 + np.uint64(i)
                     c = c0 + np.uint64(i)
-                    x = bload3(next_pos, k)
-                    r = radius * scale[lanes + np.uint64(i)]
+                    x = sload3(next_pos, k, READ)
+                    r = radius * sload(scale, lanes + np.uint64(i), READ)
                     bmin, bmax = point_bounds(x, r)
-                    hit = aabb_overlap(bmin, bmax, bload3(aabb_min, c), bload3(aabb_max, c))
-                    d, n, x2 = point_sphere(x, r, bload3(start_old, c), bload3(start_new, c), radius_start[c])
+                    hit = aabb_overlap(bmin, bmax, sload3(aabb_min, c, READ), sload3(aabb_max, c, READ))
+                    d, n, x2 = point_sphere(x, r, sload3(start_old, c, READ), sload3(start_new, c, READ),
+                                            sload(radius_start, c, READ))
                     _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d if hit else FAR,
-                              n if hit else z, x2 if hit else x, suspend_a[c])
+                              n if hit else z, x2 if hit else x, sload(suspend_a, c, READ))
             else:
                 for i in range(width):
                     k = k0 + np.uint64(i)
                     c = c0 + np.uint64(i)
-                    x = bload3(next_pos, k)
-                    r = radius * scale[lanes + np.uint64(i)]
+                    x = sload3(next_pos, k, READ)
+                    r = radius * sload(scale, lanes + np.uint64(i), READ)
                     bmin, bmax = point_bounds(x, r)
-                    hit = aabb_overlap(bmin, bmax, bload3(aabb_min, c), bload3(aabb_max, c))
-                    d, n, x2 = point_capsule(x, r, bload3(start_old, c), bload3(end_old, c), bload3(start_new, c),
-                                             bload3(end_new, c), radius_start[c], radius_end[c],
-                                             bload4(inverse_old_rot, c), bload4(now_rot, c))
+                    hit = aabb_overlap(bmin, bmax, sload3(aabb_min, c, READ), sload3(aabb_max, c, READ))
+                    d, n, x2 = point_capsule(x, r, sload3(start_old, c, READ), sload3(end_old, c, READ),
+                                             sload3(start_new, c, READ), sload3(end_new, c, READ),
+                                             sload(radius_start, c, READ), sload(radius_end, c, READ),
+                                             sload4(inverse_old_rot, c, READ), sload4(now_rot, c, READ))
                     _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d if hit else FAR,
-                              n if hit else z, x2 if hit else x, suspend_a[c])
+                              n if hit else z, x2 if hit else x, sload(suspend_a, c, READ))
         touching = 0
         for i in range(width):
             k = k0 + np.uint64(i)
             hit = count_a[k] > 0 or min_dist_a[k] <= radius * scale[lanes + np.uint64(i)]
             touching += 1 if hit else 0
         if touching == 0:  # no lane pushed or in range: the sums are as initialised, the normal 0
+            open_streams()
             for i in range(width):
-                min_dist_a[k0 + np.uint64(i)] = 0.0
+                sstore(min_dist_a, k0 + np.uint64(i), 0.0, 1)
             continue
+        # streams: next_pos 1-3, push 4-6, normals 7-9, count 10, near normals 11-13, closest
+        # distance 14, friction 15 (each read and written at the particle's rows)
+        open_streams()
         for i in range(width):
             k = k0 + np.uint64(i)
-            r = radius * scale[lanes + np.uint64(i)]
-            new_x, f, normal = point_contact_result(bload3(next_pos, k), bload3(sum_push_a, k), bload3(sum_n_a, k),
-                                                    count_a[k], bload3(normal_a, k), min_dist_a[k], r, friction[k])
-            bstore3(next_pos, k, new_x)
-            friction[k] = f
-            bstore3(normal_a, k, normal)
-            bstore3(sum_push_a, k, z)
-            bstore3(sum_n_a, k, z)
-            count_a[k] = 0
-            min_dist_a[k] = 0.0
+            r = radius * sload(scale, lanes + np.uint64(i), READ)
+            new_x, f, normal = point_contact_result(
+                sload3(next_pos, k, 1), sload3(sum_push_a, k, 4), sload3(sum_n_a, k, 7), sload(count_a, k, 10),
+                sload3(normal_a, k, 11), sload(min_dist_a, k, 14), r, sload(friction, k, 15))
+            sstore3(next_pos, k, new_x, 1)
+            sstore(friction, k, f, 15)
+            sstore3(normal_a, k, normal, 11)
+            sstore3(sum_push_a, k, z, 4)
+            sstore3(sum_n_a, k, z, 7)
+            sstore(count_a, k, 0, 10)
+            sstore(min_dist_a, k, 0.0, 14)
 
 
 @kernel

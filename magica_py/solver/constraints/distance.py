@@ -16,7 +16,7 @@ from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     inverse_mass_friction_depth, lerp, load3, saturate, store3, v_add, v_length, v_length_sq, v_scale, v_sub,
 )
-from magica_py.solver.batched.transfer import bload3, bstore3
+from magica_py.kernels.streams import READ, open_streams, sload, sload3, sstore, sstore3
 from magica_py.solver.parameters import curve_at_clamp01, step_rate
 
 MOVE = 0x02
@@ -108,33 +108,106 @@ def distance_team(m, ps, prm, ts, team, frequency_ratio, power_y, attenuation):
         store3(ps.velocity_pos, p, velocity_pos)
 
 
+@kernel(inline="always")
+def _link_sum(acc, n, p_pos, q_pos, p_base, q_base, w_p, w_q, signed_rest, scale, animation_pose_ratio, stiffness,
+              zero):
+    """(acc, n) after one link of ``distance_team``'s loop: for a zero-rest link (``zero``,
+    the same in every lane) the assignment, otherwise the correction added when the link
+    counts. Both are computed and one selected, so the lane loop has no branch."""
+    rest = distance_rest_length(signed_rest, scale, p_base, q_base, animation_pose_ratio)
+    corr, ok = distance_link(p_pos, q_pos, rest, w_p, w_q, stiffness)
+    summed = v_add(acc, corr)
+    assigned = v_scale(v_sub(q_pos, p_pos), 0.5)
+    return (assigned if zero else (summed if ok else acc)), (n + 1 if (zero | ok) else n)
+
+
 @kernel
 def _link_lanes(k0, q0, width, scale_base, lanes, lane_scale, signed_rest, animation_pose_ratio, stiffness,
-                next_pos_a, base_pos_a, w, acc_a, count_a):
-    """One non-zero-rest link of particle rows k0 + i to rows q0 + i, every lane i: the
-    correction is added to the particle's running sum and count (``accum_*`` scratch)."""
+                next_pos_a, base_pos_a, w, acc_a, count_a, first):
+    """One link of particle rows k0 + i to rows q0 + i, every lane i, into the particle's running
+    sum and count (``accum_*`` scratch); ``first``: the sums start from zero (the per-team
+    stage's initial values) rather than from the scratch.
+
+    Lane streams: the sum (1-3) and count (4) of the particle's rows, updated in place;
+    positions, inverse masses and scales are only read."""
+    zero = signed_rest == 0.0
+    open_streams()
     for i in range(width):
         k = k0 + np.uint64(i)
         kq = q0 + np.uint64(i)
-        rest = distance_rest_length(signed_rest, scale_base * lane_scale[lanes + np.uint64(i)],
-                                    bload3(base_pos_a, k), bload3(base_pos_a, kq), animation_pose_ratio)
-        corr, ok = distance_link(bload3(next_pos_a, k), bload3(next_pos_a, kq), rest, w[k], w[kq], stiffness)
-        acc = bload3(acc_a, k)
-        bstore3(acc_a, k, v_add(acc, corr) if ok else acc)
-        count_a[k] += 1 if ok else 0
+        loaded_acc, loaded_n = sload3(acc_a, k, 1), sload(count_a, k, 4)
+        acc, n = _link_sum(ZERO3 if first else loaded_acc, 0 if first else loaded_n,
+                           sload3(next_pos_a, k, READ), sload3(next_pos_a, kq, READ),
+                           sload3(base_pos_a, k, READ), sload3(base_pos_a, kq, READ),
+                           sload(w, k, READ), sload(w, kq, READ), signed_rest,
+                           scale_base * sload(lane_scale, lanes + np.uint64(i), READ), animation_pose_ratio,
+                           stiffness, zero)
+        sstore3(acc_a, k, acc, 1)
+        sstore(count_a, k, n, 4)
+
+
+@kernel
+def _last_link_lanes(k0, q0, width, scale_base, lanes, lane_scale, signed_rest, animation_pose_ratio, stiffness,
+                     attenuation, next_pos_a, velocity_pos_a, base_pos_a, w, acc_a, count_a, first):
+    """The particle's last link (``_link_lanes``) and the mean correction applied
+    (``distance_apply``) in one loop; the scratch is left zero.
+
+    Lane streams: sum 1-3, count 4, next_pos 5-7 and velocity_pos 8-10 of the particle's rows,
+    each updated in place; the target's next_pos (another particle: the caller checks), base
+    poses, inverse masses and scales are only read."""
+    zero = signed_rest == 0.0
+    open_streams()
+    for i in range(width):
+        k = k0 + np.uint64(i)
+        kq = q0 + np.uint64(i)
+        loaded_acc, loaded_n = sload3(acc_a, k, 1), sload(count_a, k, 4)
+        position = sload3(next_pos_a, k, 5)
+        acc, n = _link_sum(ZERO3 if first else loaded_acc, 0 if first else loaded_n,
+                           position, sload3(next_pos_a, kq, READ),
+                           sload3(base_pos_a, k, READ), sload3(base_pos_a, kq, READ),
+                           sload(w, k, READ), sload(w, kq, READ), signed_rest,
+                           scale_base * sload(lane_scale, lanes + np.uint64(i), READ), animation_pose_ratio,
+                           stiffness, zero)
+        next_pos, velocity_pos = distance_apply(position, sload3(velocity_pos_a, k, 8), acc, n, attenuation)
+        sstore3(next_pos_a, k, next_pos, 5)
+        sstore3(velocity_pos_a, k, velocity_pos, 8)
+        sstore3(acc_a, k, ZERO3, 1)
+        sstore(count_a, k, 0, 4)
+
+
+@kernel
+def _apply_lanes(k0, width, attenuation, next_pos_a, velocity_pos_a, acc_a, count_a):
+    """``distance_apply`` from the scratch sums, which are left zero. Lane streams: next_pos
+    1-3, velocity_pos 4-6, sum 7-9, count 10 of the particle's rows, each updated in place."""
+    open_streams()
+    for i in range(width):
+        k = k0 + np.uint64(i)
+        next_pos, velocity_pos = distance_apply(sload3(next_pos_a, k, 1), sload3(velocity_pos_a, k, 4),
+                                                sload3(acc_a, k, 7), sload(count_a, k, 10), attenuation)
+        sstore3(next_pos_a, k, next_pos, 1)
+        sstore3(velocity_pos_a, k, velocity_pos, 4)
+        sstore3(acc_a, k, ZERO3, 7)
+        sstore(count_a, k, 0, 10)
 
 
 @kernel
 def distance_block(m, bs, prm, blk, b, frequency_ratio, power_y, attenuation):
     """D.4 for every lane of block b: ``distance_team``'s maths, lanes innermost.
 
-    Each lane visits particles and links in the per-team order (Gauss-Seidel). A particle's
-    running sum and count live in the ``accum_vector`` / ``accum_count`` scratch rows of that
-    particle (zero between stages, left zero here), so that the lane loop is the innermost
-    loop for every link; what depends on topology or parameters only (zero-rest link,
-    stiffness) is decided outside the lane loop. The
-    inverse masses (friction does not change during the pass) are computed once per particle
-    and lane into the block scratch ``distance_inverse_mass``, instead of twice per link."""
+    Each lane visits particles and links in the per-team order (Gauss-Seidel). The lane loop
+    is the innermost loop for every link; between a particle's links its running sum and count
+    live in the ``accum_vector`` / ``accum_count`` scratch rows of that particle (zero between
+    stages, left zero here). The first link starts from zero, the last one also applies the
+    mean correction, so a one-link particle never touches the scratch; a particle without
+    links is left as it is (``distance_apply`` with n == 0 returns its inputs). What depends on
+    topology or parameters only (zero-rest link, stiffness) is decided outside the lane loop.
+    The inverse masses (friction does not change during the pass) are computed once per
+    particle and lane into the block scratch ``distance_inverse_mass``, instead of twice per link.
+
+    Lane streams (``kernels/streams``): each loop writes only the particle's own rows. The last
+    link's loop also writes next_pos there while reading the target's: if a link targeted its
+    own particle (never in a built model: links join distinct vertices) the last link runs as
+    any other and the correction is applied in a loop of its own."""
     ex = blk.block_exemplar[b]
     width = blk.block_width[b]
     lanes = np.uint64(blk.block_lane_base[b])
@@ -147,35 +220,32 @@ def distance_block(m, bs, prm, blk, b, frequency_ratio, power_y, attenuation):
     acc_a, count_a, lane_scale, w = bs.accum_vector, bs.accum_count, bs.lane_scale_ratio, bs.distance_inverse_mass
     for p in range(count):
         k0 = np.uint64(row_base + p * width)
+        open_streams()
         if (m.attribute[p0 + p] & MOVE) == 0:
             for i in range(width):
-                w[k0 + np.uint64(i)] = 1.0 / FIX_MASS
+                sstore(w, k0 + np.uint64(i), 1.0 / FIX_MASS, 1)
         else:
             depth = m.depth[p0 + p]
             for i in range(width):
-                w[k0 + np.uint64(i)] = inverse_mass_friction_depth(friction[k0 + np.uint64(i)], depth)
+                k = k0 + np.uint64(i)
+                sstore(w, k, inverse_mass_friction_depth(sload(friction, k, READ), depth), 1)
     for p in range(count):
-        if (m.attribute[p0 + p] & MOVE) == 0:
+        links = m.distance_count[p0 + p]
+        if (m.attribute[p0 + p] & MOVE) == 0 or links == 0:
             continue
         k_vertical, k_horizontal = distance_stiffness(prm, ex, m.depth[p0 + p], frequency_ratio, power_y)
         k0 = np.uint64(row_base + p * width)
-        for link in range(m.distance_start[p0 + p], m.distance_start[p0 + p] + m.distance_count[p0 + p]):
+        first_link = m.distance_start[p0 + p]
+        last_link = first_link + links - 1
+        for link in range(first_link, last_link + 1):
             r = m.distance_rest[link]
             q0 = np.uint64(row_base + (m.distance_target[link] - p0) * width)
             stiffness = k_vertical if r > 0.0 else k_horizontal
-            if r == 0.0:  # zero-distance link: assignment, not accumulation (quirk)
-                for i in range(width):
-                    k = k0 + np.uint64(i)
-                    bstore3(acc_a, k, v_scale(v_sub(bload3(next_pos_a, q0 + np.uint64(i)), bload3(next_pos_a, k)), 0.5))
-                    count_a[k] += 1
+            if link == last_link and q0 != k0:
+                _last_link_lanes(k0, q0, width, init_scale, lanes, lane_scale, r, a, stiffness, attenuation,
+                                 next_pos_a, velocity_pos_a, base_pos_a, w, acc_a, count_a, link == first_link)
             else:
                 _link_lanes(k0, q0, width, init_scale, lanes, lane_scale, r, a, stiffness,
-                            next_pos_a, base_pos_a, w, acc_a, count_a)
-        for i in range(width):
-            k = k0 + np.uint64(i)
-            next_pos, velocity_pos = distance_apply(bload3(next_pos_a, k), bload3(velocity_pos_a, k),
-                                                    bload3(acc_a, k), count_a[k], attenuation)
-            bstore3(next_pos_a, k, next_pos)
-            bstore3(velocity_pos_a, k, velocity_pos)
-            bstore3(acc_a, k, ZERO3)
-            count_a[k] = 0
+                            next_pos_a, base_pos_a, w, acc_a, count_a, link == first_link)
+                if link == last_link:
+                    _apply_lanes(k0, width, attenuation, next_pos_a, velocity_pos_a, acc_a, count_a)
