@@ -20,6 +20,7 @@ from magica_py.kernels.math3d import (
     q_normalize, q_rotate, q_slerp, q_to_angle_axis, saturate, store3, store4, v_add, v_cross,
     v_dot, v_length, v_length_sq, v_lerp, v_mul, v_normalize, v_scale, v_sub,
 )
+from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
 from magica_py.solver.batched.transfer import bload3, bload4, bstore3, bstore4
 from magica_py.solver.parameters import curve_at_clamp01, step_keep, step_rate
 
@@ -197,9 +198,63 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
         store3(ps.next_pos, p, next_pos)
 
 
+# lane kinds of predict_block's particle loop (constant at each call of _predict_lane)
+_FIXED = 0
+_SHIFTED = 1   # Move, no depth-inertia mix (predict_move's k == 0)
+_MIXED = 2     # Move, depth-inertia mix
+
+
+@kernel
+def _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr, next_pos_a,
+                  velocity_pos_a, velocity_a, old_pos_a, interpolation, lane_old_world_pos, lane_iv, lane_iq,
+                  lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k, L, depth, depth_inertia,
+                  damping_keep, gravity_direction, gravity, dt, last_step, kind):
+    """``predict_team``'s body for block row k, lane L. Flags constant at each call site (they
+    fold away): ``last_step`` every lane is at the last step of its frame (t == 1: the base
+    rotation is the frame's, predict_base_pose's select without the slerp), ``kind`` _FIXED,
+    _SHIFTED or _MIXED.
+
+    Streams (``kernels/streams``; all rows k of one particle, distinct arrays): base_pos 1-3,
+    base_rot 4-7, step_basic_pos 8-10, step_basic_rot 11-14, next_pos 15-17, velocity_pos
+    18-20, velocity 21-23 (read and written in place); everything else is read only."""
+    t = sload(interpolation, L, READ)
+    old_p = sload3(old_position, k, READ)
+    new_p = sload3(position, k, READ)
+    if last_step:
+        base_pos = v_lerp(old_p, new_p, t)
+        base_rot = sload4(rotation, k, READ)
+    else:
+        base_pos, base_rot = predict_base_pose(old_p, new_p, sload4(old_rotation, k, READ),
+                                               sload4(rotation, k, READ), t)
+    sstore3(base_pos_a, k, base_pos, 1)
+    sstore4(base_rot_a, k, base_rot, 4)
+    sstore3(sbp, k, base_pos, 8)
+    sstore4(sbr, k, base_rot, 11)
+    if kind == _FIXED:
+        sstore3(next_pos_a, k, base_pos, 15)
+        sstore3(velocity_pos_a, k, base_pos, 18)
+        return
+    gravity_vector = v_scale(gravity_direction, gravity * sload(lane_gr, L, READ))
+    if kind == _SHIFTED:
+        velocity, velocity_pos, next_pos = predict_move_shifted(
+            sload3(old_pos_a, k, READ), sload3(velocity_a, k, 21), depth, sload3(lane_old_world_pos, L, READ),
+            sload3(lane_iv, L, READ), sload4(lane_iq, L, READ), sload(lane_vw, L, READ), damping_keep,
+            gravity_vector, sload(lane_fm, L, READ), sload3(lane_f, L, READ), sload(lane_scale, L, READ), dt)
+    else:
+        velocity, velocity_pos, next_pos = predict_move(
+            sload3(old_pos_a, k, READ), sload3(velocity_a, k, 21), depth, sload3(lane_old_world_pos, L, READ),
+            sload3(lane_iv, L, READ), sload4(lane_iq, L, READ), sload3(lane_sv, L, READ),
+            sload4(lane_sq, L, READ), depth_inertia, sload(lane_vw, L, READ), damping_keep, gravity_vector,
+            sload(lane_fm, L, READ), sload3(lane_f, L, READ), sload(lane_scale, L, READ), dt)
+    sstore3(velocity_a, k, velocity, 21)
+    sstore3(velocity_pos_a, k, velocity_pos, 18)
+    sstore3(next_pos_a, k, next_pos, 15)
+
+
 @kernel
 def predict_block(m, bs, prm, blk, b, dt, frequency_ratio, power_z):
-    """D.1 for every lane of block b (``solver/batched``): ``predict_team``'s maths, lanes innermost."""
+    """D.1 for every lane of block b (``solver/batched``): ``predict_team``'s maths, lanes innermost,
+    one lane loop per particle (``_predict_lane``)."""
     ex = blk.block_exemplar[b]
     width = blk.block_width[b]
     lanes = np.uint64(blk.block_lane_base[b])
@@ -218,7 +273,7 @@ def predict_block(m, bs, prm, blk, b, dt, frequency_ratio, power_z):
     lane_vw, lane_gr, lane_fm, lane_f, lane_scale = (bs.lane_velocity_weight, bs.lane_gravity_ratio,
                                                      bs.lane_external_force_mode, bs.lane_external_force,
                                                      bs.lane_scale_ratio)
-    # block-uniform shortcuts (same bits: they take the value the per-element select takes):
+    # block-uniform shortcut (same bits: it takes the value the per-element select takes):
     # at the last step of a frame in every lane the base rotation is the frame's rotation
     last_step = True
     for i in range(width):
@@ -228,57 +283,57 @@ def predict_block(m, bs, prm, blk, b, dt, frequency_ratio, power_z):
         # unsigned row indices: numba wraps negative signed indices (a select per access that
         # hides the affine address from LLVM's vectoriser)
         k0 = np.uint64(blk.block_row_base[b] + p * width)
-        move = (m.attribute[p0 + p] & MOVE) != 0
         depth = m.depth[p0 + p]
-        damping_keep = damping_keep_at(prm, ex, depth, frequency_ratio, power_z)
+        kind = _FIXED
+        if (m.attribute[p0 + p] & MOVE) != 0:
+            kind = _SHIFTED if depth_inertia * (1.0 - depth * depth) == 0.0 else _MIXED
+        damping_keep = damping_keep_at(prm, ex, depth, frequency_ratio, power_z) if kind != _FIXED else 1.0
+        # one loop per (last_step, kind): the flags are literal in each, so the lane body is
+        # branch-free; one loop per particle (base pose and prediction together)
+        open_streams()
         if last_step:
+            if kind == _FIXED:
+                for i in range(width):
+                    _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
+                                  next_pos_a, velocity_pos_a, velocity_a, old_pos_a, interpolation,
+                                  lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm,
+                                  lane_f, lane_scale, k0 + np.uint64(i), lanes + np.uint64(i), depth, depth_inertia,
+                                  damping_keep, gravity_direction, gravity, dt, True, _FIXED)
+            elif kind == _SHIFTED:
+                for i in range(width):
+                    _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
+                                  next_pos_a, velocity_pos_a, velocity_a, old_pos_a, interpolation,
+                                  lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm,
+                                  lane_f, lane_scale, k0 + np.uint64(i), lanes + np.uint64(i), depth, depth_inertia,
+                                  damping_keep, gravity_direction, gravity, dt, True, _SHIFTED)
+            else:
+                for i in range(width):
+                    _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
+                                  next_pos_a, velocity_pos_a, velocity_a, old_pos_a, interpolation,
+                                  lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm,
+                                  lane_f, lane_scale, k0 + np.uint64(i), lanes + np.uint64(i), depth, depth_inertia,
+                                  damping_keep, gravity_direction, gravity, dt, True, _MIXED)
+        elif kind == _FIXED:
             for i in range(width):
-                k = k0 + np.uint64(i)
-                base_pos = v_lerp(bload3(old_position, k), bload3(position, k), interpolation[lanes + np.uint64(i)])
-                bstore3(base_pos_a, k, base_pos)
-                bstore4(base_rot_a, k, bload4(rotation, k))
-                bstore3(sbp, k, base_pos)
-                bstore4(sbr, k, bload4(rotation, k))
+                _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
+                              next_pos_a, velocity_pos_a, velocity_a, old_pos_a, interpolation,
+                              lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm,
+                              lane_f, lane_scale, k0 + np.uint64(i), lanes + np.uint64(i), depth, depth_inertia,
+                              damping_keep, gravity_direction, gravity, dt, False, _FIXED)
+        elif kind == _SHIFTED:
+            for i in range(width):
+                _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
+                              next_pos_a, velocity_pos_a, velocity_a, old_pos_a, interpolation,
+                              lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm,
+                              lane_f, lane_scale, k0 + np.uint64(i), lanes + np.uint64(i), depth, depth_inertia,
+                              damping_keep, gravity_direction, gravity, dt, False, _SHIFTED)
         else:
             for i in range(width):
-                k = k0 + np.uint64(i)
-                base_pos, base_rot = predict_base_pose(bload3(old_position, k), bload3(position, k),
-                                                       bload4(old_rotation, k), bload4(rotation, k),
-                                                       interpolation[lanes + np.uint64(i)])
-                bstore3(base_pos_a, k, base_pos)
-                bstore4(base_rot_a, k, base_rot)
-                bstore3(sbp, k, base_pos)
-                bstore4(sbr, k, base_rot)
-        if not move:
-            for i in range(width):
-                k = k0 + np.uint64(i)
-                bstore3(next_pos_a, k, bload3(base_pos_a, k))
-                bstore3(velocity_pos_a, k, bload3(base_pos_a, k))
-            continue
-        if depth_inertia * (1.0 - depth * depth) == 0.0:  # no depth-inertia mix (predict_move's k)
-            for i in range(width):
-                k = k0 + np.uint64(i)
-                L = lanes + np.uint64(i)
-                velocity, velocity_pos, next_pos = predict_move_shifted(
-                    bload3(old_pos_a, k), bload3(velocity_a, k), depth, bload3(lane_old_world_pos, L),
-                    bload3(lane_iv, L), bload4(lane_iq, L), lane_vw[L], damping_keep,
-                    v_scale(gravity_direction, gravity * lane_gr[L]), lane_fm[L], bload3(lane_f, L),
-                    lane_scale[L], dt)
-                bstore3(velocity_a, k, velocity)
-                bstore3(velocity_pos_a, k, velocity_pos)
-                bstore3(next_pos_a, k, next_pos)
-            continue
-        for i in range(width):
-            k = k0 + np.uint64(i)
-            L = lanes + np.uint64(i)
-            velocity, velocity_pos, next_pos = predict_move(
-                bload3(old_pos_a, k), bload3(velocity_a, k), depth, bload3(lane_old_world_pos, L),
-                bload3(lane_iv, L), bload4(lane_iq, L), bload3(lane_sv, L), bload4(lane_sq, L), depth_inertia,
-                lane_vw[L], damping_keep, v_scale(gravity_direction, gravity * lane_gr[L]),
-                lane_fm[L], bload3(lane_f, L), lane_scale[L], dt)
-            bstore3(velocity_a, k, velocity)
-            bstore3(velocity_pos_a, k, velocity_pos)
-            bstore3(next_pos_a, k, next_pos)
+                _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
+                              next_pos_a, velocity_pos_a, velocity_a, old_pos_a, interpolation,
+                              lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm,
+                              lane_f, lane_scale, k0 + np.uint64(i), lanes + np.uint64(i), depth, depth_inertia,
+                              damping_keep, gravity_direction, gravity, dt, False, _MIXED)
 
 
 @kernel
@@ -345,6 +400,20 @@ def step_basic_pose_block(m, bs, prm, blk, b):
             kp = np.uint64(row_base + (m.parent[v] - p0) * width)
             local_position = load3(m.baseline_local_position, v)
             local_rotation = load4(m.baseline_local_rotation, v)
+            if kp != kv:
+                # streams: the child's rows (step_basic_pos 1-3, step_basic_rot 4-7) are
+                # written; the parent's rows, a multiple of width >= width away, are only read
+                open_streams()
+                for i in range(width):
+                    s = v_scale(init_scale, sload(scale, lanes + np.uint64(i), READ))
+                    pos, rot = basic_pose_child(sload3(sbp, kp + np.uint64(i), READ),
+                                                sload4(sbr, kp + np.uint64(i), READ),
+                                                local_position, local_rotation, s)
+                    sstore3(sbp, kv + np.uint64(i), pos, 1)
+                    sstore4(sbr, kv + np.uint64(i), rot, 4)
+                continue
+            # a vertex its own parent (never built: the parent links come from the bone tree);
+            # plain loads and stores, LLVM keeps the order
             for i in range(width):
                 s = v_scale(init_scale, scale[lanes + np.uint64(i)])
                 pos, rot = basic_pose_child(bload3(sbp, kp + np.uint64(i)), bload4(sbr, kp + np.uint64(i)),
@@ -354,12 +423,14 @@ def step_basic_pose_block(m, bs, prm, blk, b):
         if a > 1e-8:
             for e in range(e0, e1):
                 kv = np.uint64(row_base + (m.baseline_data[e] - p0) * width)
+                # streams: step_basic_pos 1-3 and step_basic_rot 4-7 updated in place
+                open_streams()
                 for i in range(width):
                     k = kv + np.uint64(i)
-                    pos, rot = basic_pose_blend(bload3(sbp, k), bload4(sbr, k), bload3(base_pos, k),
-                                                bload4(base_rot, k), a)
-                    bstore3(sbp, k, pos)
-                    bstore4(sbr, k, rot)
+                    pos, rot = basic_pose_blend(sload3(sbp, k, 1), sload4(sbr, k, 4), sload3(base_pos, k, READ),
+                                                sload4(base_rot, k, READ), a)
+                    sstore3(sbp, k, pos, 1)
+                    sstore4(sbr, k, rot, 4)
 
 
 @kernel
@@ -466,13 +537,18 @@ def _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_veloc
     """end_step_team's Move-particle body on block row k, branch-free. Flags, constant at each
     call site so that they fold away: ``spin`` the block's centrifugal acceleration is on;
     ``touch`` some lane of this particle is in contact (else the friction work is skipped: its
-    results would be discarded in every lane)."""
-    old_pos = bload3(old_pos_a, k)
-    next_pos = bload3(next_pos_a, k)
-    velocity_pos = bload3(velocity_pos_a, k)
-    cn = bload3(normal_a, k)
-    f = friction_a[k]
-    sf = static_friction_a[k]
+    results would be discarded in every lane).
+
+    Streams (``kernels/streams``; every access is to row k, arrays distinct): next_pos 1-3,
+    old_pos 4-6, velocity 7-9, real_velocity 10-12, friction 13, static_friction 14 (the
+    in-place updates load in the stream they store to); velocity_pos and the collision
+    normal are read only."""
+    old_pos = sload3(old_pos_a, k, 4)
+    next_pos = sload3(next_pos_a, k, 1)
+    velocity_pos = sload3(velocity_pos_a, k, READ)
+    cn = sload3(normal_a, k, READ)
+    f = sload(friction_a, k, 13)
+    sf = sload(static_friction_a, k, 14)
     static_threshold = dynamic * scale
     contact = v_length_sq(cn) > 1e-8 and f > 1e-8
     released = saturate(sf - STATIC_FRICTION_LOSS)
@@ -483,20 +559,20 @@ def _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_veloc
         next_pos = stuck_pos if sticking else next_pos
         velocity_pos = stuck_velocity_pos if sticking else velocity_pos
         released = stuck_sf if sticking else released
-    static_friction_a[k] = released
+    sstore(static_friction_a, k, released, 14)
     vel, direction, moving = end_step_velocity(next_pos, velocity_pos, dt)
     if touch:
         braked = dynamic_friction_brake(vel, direction, cn, f, dynamic)
         vel = braked if (moving and contact and dynamic > 0.0) else vel
-    friction_a[k] = f * friction_keep
+    sstore(friction_a, k, f * friction_keep, 13)
     limited = clamp_length(vel, speed_limit * scale)
     vel = limited if speed_limit >= 0.0 else vel
     if spin:
         vel = centrifugal_velocity(vel, next_pos, direction, moving, depth, angular_velocity, centrifugal, axis, center)
-    bstore3(next_pos_a, k, next_pos)
-    bstore3(velocity_a, k, v_scale(vel, velocity_weight))
-    bstore3(real_velocity_a, k, v_scale(v_sub(next_pos, old_pos), 1.0 / dt))
-    bstore3(old_pos_a, k, next_pos)
+    sstore3(next_pos_a, k, next_pos, 1)
+    sstore3(velocity_a, k, v_scale(vel, velocity_weight), 7)
+    sstore3(real_velocity_a, k, v_scale(v_sub(next_pos, old_pos), 1.0 / dt), 10)
+    sstore3(old_pos_a, k, next_pos, 4)
 
 
 @kernel
@@ -521,43 +597,50 @@ def end_step_block(m, bs, prm, blk, b, dt, frequency_ratio):
     for p in range(blk.block_particle_count[b]):
         k0 = np.uint64(blk.block_row_base[b] + p * width)
         if (m.attribute[p0 + p] & MOVE) == 0:
+            # streams: real_velocity 1-3, old_pos 4-6 (in place); next_pos read only
+            open_streams()
             for i in range(width):
                 k = k0 + np.uint64(i)
-                next_pos = bload3(next_pos_a, k)
-                bstore3(real_velocity_a, k, v_scale(v_sub(next_pos, bload3(old_pos_a, k)), 1.0 / dt))
-                bstore3(old_pos_a, k, next_pos)
+                next_pos = sload3(next_pos_a, k, READ)
+                sstore3(real_velocity_a, k, v_scale(v_sub(next_pos, sload3(old_pos_a, k, 4)), 1.0 / dt), 1)
+                sstore3(old_pos_a, k, next_pos, 4)
             continue
         depth = m.depth[p0 + p]
         touching = 0
-        for i in range(width):
+        for i in range(width):  # read only: no stores to order
             k = k0 + np.uint64(i)
-            touching += 1 if (v_length_sq(bload3(normal_a, k)) > 1e-8 and friction_a[k] > 1e-8) else 0
-        # four variants of one lane loop (flags constant in each): centrifugal on, contact in some lane
+            in_contact = v_length_sq(sload3(normal_a, k, READ)) > 1e-8 and sload(friction_a, k, READ) > 1e-8
+            touching += 1 if in_contact else 0
+        # four variants of one lane loop (flags constant in each): centrifugal on, contact in some lane;
+        # the streams of each are _end_step_lane's
+        open_streams()
         if centrifugal > 1e-8 and touching > 0:
             for i in range(width):
                 L = lanes + np.uint64(i)
                 _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_velocity_a, normal_a,
                                friction_a, static_friction_a, k0 + np.uint64(i), depth, dt, dynamic, gain,
-                               friction_keep, speed_limit, centrifugal, True, True, lane_scale[L], lane_av[L],
-                               bload3(lane_axis, L), bload3(lane_center, L), lane_vw[L])
+                               friction_keep, speed_limit, centrifugal, True, True, sload(lane_scale, L, READ),
+                               sload(lane_av, L, READ), sload3(lane_axis, L, READ), sload3(lane_center, L, READ),
+                               sload(lane_vw, L, READ))
         elif centrifugal > 1e-8:
             for i in range(width):
                 L = lanes + np.uint64(i)
                 _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_velocity_a, normal_a,
                                friction_a, static_friction_a, k0 + np.uint64(i), depth, dt, dynamic, gain,
-                               friction_keep, speed_limit, centrifugal, True, False, lane_scale[L], lane_av[L],
-                               bload3(lane_axis, L), bload3(lane_center, L), lane_vw[L])
+                               friction_keep, speed_limit, centrifugal, True, False, sload(lane_scale, L, READ),
+                               sload(lane_av, L, READ), sload3(lane_axis, L, READ), sload3(lane_center, L, READ),
+                               sload(lane_vw, L, READ))
         elif touching > 0:
             for i in range(width):
                 L = lanes + np.uint64(i)
                 _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_velocity_a, normal_a,
                                friction_a, static_friction_a, k0 + np.uint64(i), depth, dt, dynamic, gain,
-                               friction_keep, speed_limit, centrifugal, False, True, lane_scale[L], 0.0,
-                               (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), lane_vw[L])
+                               friction_keep, speed_limit, centrifugal, False, True, sload(lane_scale, L, READ),
+                               0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), sload(lane_vw, L, READ))
         else:
             for i in range(width):
                 L = lanes + np.uint64(i)
                 _end_step_lane(next_pos_a, old_pos_a, velocity_pos_a, velocity_a, real_velocity_a, normal_a,
                                friction_a, static_friction_a, k0 + np.uint64(i), depth, dt, dynamic, gain,
-                               friction_keep, speed_limit, centrifugal, False, False, lane_scale[L], 0.0,
-                               (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), lane_vw[L])
+                               friction_keep, speed_limit, centrifugal, False, False, sload(lane_scale, L, READ),
+                               0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), sload(lane_vw, L, READ))
