@@ -176,6 +176,58 @@ def _last_link_lanes(k0, q0, width, scale_base, lanes, lane_scale, signed_rest, 
 
 
 @kernel
+def _link_pair_lanes(k0, qa0, qb0, width, scale_base, lanes, lane_scale, rest_a, rest_b, animation_pose_ratio,
+                     stiffness_a, stiffness_b, next_pos_a, base_pos_a, w, acc_a, count_a, first):
+    """Two consecutive links of the particle (targets at rows qa0 + i, then qb0 + i) in one
+    loop (``_link_lanes`` twice, the sums kept in registers between them)."""
+    zero_a = rest_a == 0.0
+    zero_b = rest_b == 0.0
+    open_streams()
+    for i in range(width):
+        k = k0 + np.uint64(i)
+        ka = qa0 + np.uint64(i)
+        kb = qb0 + np.uint64(i)
+        loaded_acc, loaded_n = sload3(acc_a, k, 1), sload(count_a, k, 4)
+        position, base, w_p = sload3(next_pos_a, k, READ), sload3(base_pos_a, k, READ), sload(w, k, READ)
+        scale = scale_base * sload(lane_scale, lanes + np.uint64(i), READ)
+        acc, n = _link_sum(ZERO3 if first else loaded_acc, 0 if first else loaded_n, position,
+                           sload3(next_pos_a, ka, READ), base, sload3(base_pos_a, ka, READ), w_p, sload(w, ka, READ),
+                           rest_a, scale, animation_pose_ratio, stiffness_a, zero_a)
+        acc, n = _link_sum(acc, n, position, sload3(next_pos_a, kb, READ), base, sload3(base_pos_a, kb, READ),
+                           w_p, sload(w, kb, READ), rest_b, scale, animation_pose_ratio, stiffness_b, zero_b)
+        sstore3(acc_a, k, acc, 1)
+        sstore(count_a, k, n, 4)
+
+
+@kernel
+def _last_link_pair_lanes(k0, qa0, qb0, width, scale_base, lanes, lane_scale, rest_a, rest_b, animation_pose_ratio,
+                          stiffness_a, stiffness_b, attenuation, next_pos_a, velocity_pos_a, base_pos_a, w, acc_a,
+                          count_a, first):
+    """The particle's last two links (``_link_pair_lanes``) and the mean correction applied
+    (``_last_link_lanes``: the same streams; neither target is the particle, the caller checks)."""
+    zero_a = rest_a == 0.0
+    zero_b = rest_b == 0.0
+    open_streams()
+    for i in range(width):
+        k = k0 + np.uint64(i)
+        ka = qa0 + np.uint64(i)
+        kb = qb0 + np.uint64(i)
+        loaded_acc, loaded_n = sload3(acc_a, k, 1), sload(count_a, k, 4)
+        position, base, w_p = sload3(next_pos_a, k, 5), sload3(base_pos_a, k, READ), sload(w, k, READ)
+        scale = scale_base * sload(lane_scale, lanes + np.uint64(i), READ)
+        acc, n = _link_sum(ZERO3 if first else loaded_acc, 0 if first else loaded_n, position,
+                           sload3(next_pos_a, ka, READ), base, sload3(base_pos_a, ka, READ), w_p, sload(w, ka, READ),
+                           rest_a, scale, animation_pose_ratio, stiffness_a, zero_a)
+        acc, n = _link_sum(acc, n, position, sload3(next_pos_a, kb, READ), base, sload3(base_pos_a, kb, READ),
+                           w_p, sload(w, kb, READ), rest_b, scale, animation_pose_ratio, stiffness_b, zero_b)
+        next_pos, velocity_pos = distance_apply(position, sload3(velocity_pos_a, k, 8), acc, n, attenuation)
+        sstore3(next_pos_a, k, next_pos, 5)
+        sstore3(velocity_pos_a, k, velocity_pos, 8)
+        sstore3(acc_a, k, ZERO3, 1)
+        sstore(count_a, k, 0, 4)
+
+
+@kernel
 def _apply_lanes(k0, width, attenuation, next_pos_a, velocity_pos_a, acc_a, count_a):
     """``distance_apply`` from the scratch sums, which are left zero. Lane streams: next_pos
     1-3, velocity_pos 4-6, sum 7-9, count 10 of the particle's rows, each updated in place."""
@@ -197,17 +249,18 @@ def distance_block(m, bs, prm, blk, b, frequency_ratio, power_y, attenuation):
     Each lane visits particles and links in the per-team order (Gauss-Seidel). The lane loop
     is the innermost loop for every link; between a particle's links its running sum and count
     live in the ``accum_vector`` / ``accum_count`` scratch rows of that particle (zero between
-    stages, left zero here). The first link starts from zero, the last one also applies the
-    mean correction, so a one-link particle never touches the scratch; a particle without
+    stages, left zero here). Links run two per lane loop (the sums in registers between the
+    two); the first link starts from zero, the last loop also applies the mean correction, so
+    a particle with one or two links never touches the scratch; a particle without
     links is left as it is (``distance_apply`` with n == 0 returns its inputs). What depends on
     topology or parameters only (zero-rest link, stiffness) is decided outside the lane loop.
     The inverse masses (friction does not change during the pass) are computed once per
     particle and lane into the block scratch ``distance_inverse_mass``, instead of twice per link.
 
     Lane streams (``kernels/streams``): each loop writes only the particle's own rows. The last
-    link's loop also writes next_pos there while reading the target's: if a link targeted its
-    own particle (never in a built model: links join distinct vertices) the last link runs as
-    any other and the correction is applied in a loop of its own."""
+    loop also writes next_pos there while reading its targets': if one of them were the
+    particle itself (never in a built model: links join distinct vertices, but the test is one
+    compare) its links run as any others and the correction is applied in a loop of its own."""
     ex = blk.block_exemplar[b]
     width = blk.block_width[b]
     lanes = np.uint64(blk.block_lane_base[b])
@@ -236,16 +289,34 @@ def distance_block(m, bs, prm, blk, b, frequency_ratio, power_y, attenuation):
         k_vertical, k_horizontal = distance_stiffness(prm, ex, m.depth[p0 + p], frequency_ratio, power_y)
         k0 = np.uint64(row_base + p * width)
         first_link = m.distance_start[p0 + p]
-        last_link = first_link + links - 1
-        for link in range(first_link, last_link + 1):
+        end_link = first_link + links
+        link = first_link
+        while link < end_link:  # two links per lane loop, the sums in registers between them
+            first = link == first_link
             r = m.distance_rest[link]
             q0 = np.uint64(row_base + (m.distance_target[link] - p0) * width)
             stiffness = k_vertical if r > 0.0 else k_horizontal
-            if link == last_link and q0 != k0:
+            if link + 1 < end_link:
+                r_b = m.distance_rest[link + 1]
+                qb0 = np.uint64(row_base + (m.distance_target[link + 1] - p0) * width)
+                stiffness_b = k_vertical if r_b > 0.0 else k_horizontal
+                last = link + 2 == end_link
+                if last and q0 != k0 and qb0 != k0:
+                    _last_link_pair_lanes(k0, q0, qb0, width, init_scale, lanes, lane_scale, r, r_b, a, stiffness,
+                                          stiffness_b, attenuation, next_pos_a, velocity_pos_a, base_pos_a, w, acc_a,
+                                          count_a, first)
+                else:
+                    _link_pair_lanes(k0, q0, qb0, width, init_scale, lanes, lane_scale, r, r_b, a, stiffness,
+                                     stiffness_b, next_pos_a, base_pos_a, w, acc_a, count_a, first)
+                    if last:
+                        _apply_lanes(k0, width, attenuation, next_pos_a, velocity_pos_a, acc_a, count_a)
+                link += 2
+                continue
+            if q0 != k0:
                 _last_link_lanes(k0, q0, width, init_scale, lanes, lane_scale, r, a, stiffness, attenuation,
-                                 next_pos_a, velocity_pos_a, base_pos_a, w, acc_a, count_a, link == first_link)
+                                 next_pos_a, velocity_pos_a, base_pos_a, w, acc_a, count_a, first)
             else:
                 _link_lanes(k0, q0, width, init_scale, lanes, lane_scale, r, a, stiffness,
-                            next_pos_a, base_pos_a, w, acc_a, count_a, link == first_link)
-                if link == last_link:
-                    _apply_lanes(k0, width, attenuation, next_pos_a, velocity_pos_a, acc_a, count_a)
+                            next_pos_a, base_pos_a, w, acc_a, count_a, first)
+                _apply_lanes(k0, width, attenuation, next_pos_a, velocity_pos_a, acc_a, count_a)
+            link += 1
