@@ -259,3 +259,40 @@ def test_end_step_block_with_centrifugal_force_on_some_lanes(crowd):
         prm.centrifugal_acceleration[:] = saved_c
     _e, _n, mixed = lane_paths(crowd, blk, spinning)
     assert spinning.sum() > 50 and mixed > 0, (spinning.sum(), mixed)
+
+
+# --------------------------------------------------------------------------- D.8: slots out of reach
+def test_point_collision_block_skips_leading_slots_that_reach_no_lane(crowd):
+    """Every team's first collider slot moved 100 m away (out of every particle's bounds), the
+    skirt's second slot put where its first was: the hair's only slot reaches nothing (no
+    contact anywhere), the skirt's second slot is the first one near (the block starts there
+    without re-testing it). Bit-identical, scratch cleared, and the skirt still in contact."""
+    saved = snapshot(crowd)
+    m, cs, ts, prm = crowd.model, crowd.collider_state, crowd.teams, crowd.parameters
+    saved_radius = prm.radius_curve.copy()
+    try:
+        blk, _bs = block_tables(crowd)
+        run_team_stage(crowd, _predict_teams, blk)
+        prm.radius_curve[:] *= 2.0  # more contacts
+        for t in blk.lane_team[1::2]:
+            crowd.particles.next_pos[m.team_particle_start[t]:m.team_particle_start[t] + m.team_particle_count[t]] \
+                += (0.02, 0.0, 0.01)
+        first = ts.collider_start[blk.lane_team]
+        assert (cs.shape[first] != 2).all()  # not planes: planes are near at any distance
+        several = first[ts.collider_count[blk.lane_team] > 1]
+        for name in ("shape", "start_old", "end_old", "start_new", "end_new", "radius_start", "radius_end",
+                     "inverse_old_rot", "now_rot", "aabb_min", "aabb_max"):
+            getattr(cs, name)[several + 1] = getattr(cs, name)[several]  # the second slot takes the first's place
+        for name in ("start_old", "end_old", "start_new", "end_new", "aabb_min", "aabb_max"):
+            getattr(cs, name)[first] += 100.0
+        before, after, blk = compare(crowd, _collide_teams, _collide_blocks, COLLISION_FIELDS, SCRATCH)
+    finally:
+        restore(crowd, saved)
+        prm.radius_curve[:] = saved_radius
+    touched = np.abs(after["ps.collision_normal"]).sum(axis=1) > 0
+    single = [t for t in blk.lane_team if ts.collider_count[t] == 1]
+    several = [t for t in blk.lane_team if ts.collider_count[t] > 1]
+    rows = lambda teams: np.concatenate([np.arange(m.team_particle_start[t],  # noqa: E731
+                                                   m.team_particle_start[t] + m.team_particle_count[t]) for t in teams])
+    assert single and several
+    assert not touched[rows(single)].any() and touched[rows(several)].sum() >= 5, touched[rows(several)].sum()

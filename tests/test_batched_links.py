@@ -304,3 +304,78 @@ def test_motion_block_does_nothing_when_the_team_uses_neither_limit(crowd):
         before = ps.next_pos.copy(), ps.velocity_pos.copy()
         run_block_stage(crowd, _motion_blocks, blk, bs)
         assert np.array_equal(ps.next_pos, before[0]) and np.array_equal(ps.velocity_pos, before[1])
+
+
+# ------------------------------------------------------------------ lane-stream fallbacks
+class _Writable:
+    """Model arrays edited for one test (they are read-only after build), restored after."""
+
+    def __init__(self, *arrays):
+        self.arrays = arrays
+
+    def __enter__(self):
+        self.saved = [a.copy() for a in self.arrays]
+        for a in self.arrays:
+            a.flags.writeable = True
+        return self.arrays
+
+    def __exit__(self, *exc):
+        for a, s in zip(self.arrays, self.saved):
+            a[...] = s
+            a.flags.writeable = False
+
+
+def test_distance_block_matches_with_self_links_and_particles_without_links(crowd):
+    """The block's fallbacks, never reached by a built model: a particle whose last link
+    targets itself (its links run without applying, then a separate apply loop; with 1, 2, 5
+    and 8 links: after a pair and after a single link) and a moving particle without links
+    (left as it is). The same team-local particles are edited in every team, so that the
+    blocks stay valid."""
+    m = crowd.model
+    with _Writable(m.distance_target, m.distance_count) as (target, count):
+        edited = {"self": {}, "none": 0}
+        for t in range(len(m.team_particle_start)):
+            rows = _team_rows(crowd, t)
+            for local, p in enumerate(rows):
+                n = int(count[p])
+                if not (m.attribute[p] & 0x02) or n == 0:
+                    continue
+                if local % 3 == 0:
+                    target[m.distance_start[p] + n - 1] = p
+                    edited["self"][n] = edited["self"].get(n, 0) + 1
+                elif local % 7 == 1:
+                    count[p] = 0
+                    edited["none"] += 1
+        assert edited["none"] >= 6 and all(edited["self"].get(n, 0) >= 6 for n in (1, 2, 5, 8)), edited
+        blk, _bs = block_tables(crowd)
+        with _Modified(crowd) as ps:
+            before = ps.next_pos.copy()
+            compare_stage(crowd, _distance_teams, _distance_blocks, ["next_pos", "velocity_pos"])
+            from batched_harness import run_team_stage
+            run_team_stage(crowd, _distance_teams, blk)
+            linkless = [p for t in blk.lane_team for p in _team_rows(crowd, t)
+                        if (m.attribute[p] & 0x02) and count[p] == 0]
+            moved = [p for t in blk.lane_team for p in _team_rows(crowd, t) if (before[p] != ps.next_pos[p]).any()]
+            assert linkless and not set(linkless) & set(moved) and len(moved) > 100, (len(linkless), len(moved))
+
+
+def test_tether_block_matches_when_a_particle_is_its_own_root(crowd):
+    """A particle that is its own root (never in a built model) takes the block's second lane
+    loop, which reads the particle's row for both roles; the others the streamed loop."""
+    m = crowd.model
+    with _Writable(m.root_index) as (root_index,):
+        own = 0
+        for t in range(len(m.team_particle_start)):
+            for local, p in enumerate(_team_rows(crowd, t)):
+                if (m.attribute[p] & 0x02) and root_index[p] >= 0 and local % 2 == 0:
+                    root_index[p] = p
+                    own += 1
+        assert own >= 50, own
+        with _Modified(crowd) as ps:
+            blk, _bs = block_tables(crowd)
+            for b in range(len(blk.block_width)):  # lane 0 squeezed: the others keep their roots' paths
+                for p in _team_rows(crowd, _lanes(blk, b)[0]):
+                    r = root_index[p]
+                    if (m.attribute[p] & 0x02) and r >= 0 and r != p:
+                        ps.next_pos[p] = ps.next_pos[r] + 0.1 * (ps.next_pos[p] - ps.next_pos[r])
+            compare_stage(crowd, _tether_teams, _tether_blocks, ["next_pos", "velocity_pos"])
