@@ -106,3 +106,25 @@ def test_blocks_keep_the_bits_at_other_frame_rates(sets):
     _, with_blocks = _run(True, frames=40, sets=sets)
     _, without = _run(False, frames=40, sets=sets)
     _assert_identical(with_blocks, without)
+
+
+def test_the_parallel_frame_deals_every_unit_to_one_thread_by_load():
+    """``frame.assign_workers``: each running block and each team outside one goes to one
+    thread; the loads add up to the frame's work and the largest is within one unit of even."""
+    from magica_py.solver.frame import assign_workers
+
+    # one hair instance culled by a time-scale difference: its block falls back, 12 lone teams
+    system, _ = _run(True, frames=2, instances=12)
+    blk, m, ts, tt = system.block_table, system.model, system.teams, system._time
+    tt.update_count[:] = 2
+    blk.block_run[:] = 1
+    blk.block_run[0] = 0
+    assign_workers.py_func(m, ts, tt, blk, 2)
+    assert blk.block_worker[0] == -1 and set(blk.block_worker[1:].tolist()) <= {0, 1}
+    live = [int(t) for t in m.live_teams]
+    alone = [t for t in live if blk.team_block[t] < 0 or blk.block_run[blk.team_block[t]] == 0]
+    assert sorted(t for t in live if blk.team_worker[t] >= 0) == sorted(alone)
+    costs = [int(blk.block_width[b] * blk.block_particle_count[b]) * 3 for b in range(1, len(blk.block_width))]
+    costs += [int(m.team_particle_count[t]) * 3 for t in alone]
+    assert int(blk.worker_load[:2].sum()) == sum(costs)
+    assert abs(int(blk.worker_load[0]) - int(blk.worker_load[1])) <= max(costs)

@@ -38,7 +38,7 @@ def test_numba_step_matches_the_numpy_reference(frames, overrides):
     s.time_state.frame_interpolation[0] = frac
     M, S, P, T, C = (table(x) for x in (s.model, s.particles, s.parameters, s.teams, s.collider_state))
     naive_step(M, S, P, T, C, 0, frac, 1.0 / 90.0)
-    fi = FrameInputs(1 / 60, 1 / 60, 0.02, 0, 1.0, 1.0 / 90.0, 3, 0, 1.0, 1.0, 1.0, 1.0)
+    fi = FrameInputs(1 / 60, 1 / 60, 0.02, 0, 1.0, 1.0 / 90.0, 3, 0, 1.0, 1.0, 1.0, 1.0, 1)
     m, ps, prm, ts, cs, tt, _h = s.kernel_tables()
     run_step(m, ps, prm, ts, cs, tt, 0, fi)
     for name in ("next_pos", "old_pos", "velocity_pos", "velocity", "real_velocity", "base_pos",

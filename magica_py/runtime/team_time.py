@@ -255,19 +255,28 @@ def team_time_frame_update(active, suspended, update_mode, team_time_scale,
 def team_time_begin_step(step, active, update_count, time, now_update_time, frame_old_time,
                          frame_interpolation, step_running, dt, timing):
     """§A.6 at the start of step ``step`` (0-based): teams with ``step < update_count`` advance."""
-    single = timing == TIMING_FAITHFUL32
     for t in range(active.shape[0]):
-        if not active[t] or step >= update_count[t]:
-            step_running[t] = False
-            continue
-        step_running[t] = True
-        now = _r(now_update_time[t] + dt, single)
-        now_update_time[t] = now
-        span = _r(time[t] - frame_old_time[t], single)
-        if span > 0.0:
-            frame_interpolation[t] = saturate(_r(_r(now - frame_old_time[t], single) / span, single))
-        else:
-            frame_interpolation[t] = 1.0
+        team_time_begin_step_team(step, t, active, update_count, time, now_update_time, frame_old_time,
+                                  frame_interpolation, step_running, dt, timing)
+
+
+@kernel
+def team_time_begin_step_team(step, t, active, update_count, time, now_update_time, frame_old_time,
+                              frame_interpolation, step_running, dt, timing):
+    """``team_time_begin_step`` for team t alone (teams are independent: the parallel frame
+    kernel runs each team's steps on the thread that owns it)."""
+    single = timing == TIMING_FAITHFUL32
+    if not active[t] or step >= update_count[t]:
+        step_running[t] = False
+        return
+    step_running[t] = True
+    now = _r(now_update_time[t] + dt, single)
+    now_update_time[t] = now
+    span = _r(time[t] - frame_old_time[t], single)
+    if span > 0.0:
+        frame_interpolation[t] = saturate(_r(_r(now - frame_old_time[t], single) / span, single))
+    else:
+        frame_interpolation[t] = 1.0
 
 
 @kernel

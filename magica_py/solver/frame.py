@@ -21,11 +21,11 @@ from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_angle, v_length, v_sub
 from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.batch_tables import borrow
-from magica_py.solver.batched.run import (
-    decide_blocks, gather_running, run_block_step, scatter_running, team_runs_alone,
-)
+from magica_py.solver.batched.run import decide_blocks, run_block_step, team_runs_alone
+from magica_py.solver.batched.transfer import gather_block, scatter_block
 from magica_py.runtime.team_time import (
-    TeamTimeState, team_time_begin_step, team_time_end_frame, team_time_frame_update,
+    TeamTimeState, team_time_begin_step, team_time_begin_step_team, team_time_end_frame,
+    team_time_frame_update,
 )
 from magica_py.solver.center import (
     center_and_inertia_team, distance_culling_team, end_frame_team, reset_or_shift_team, skin_team,
@@ -62,7 +62,8 @@ HierarchyArrays = namedtuple("HierarchyArrays", [
 FrameInputs = namedtuple("FrameInputs", [
     "delta_time", "unscaled_delta_time", "fixed_delta_time", "fixed_update_count",
     "global_time_scale", "dt", "max_steps", "timing", "frequency_ratio",
-    "power_y", "power_z", "power_w"])
+    "power_y", "power_z", "power_w",
+    "threads"])   # threads the parallel kernel deals its work to (numba.get_num_threads() at the call)
 
 
 def time_arrays(state: TeamTimeState) -> TimeArrays:
@@ -292,71 +293,136 @@ def simulate_frame(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
 @kernel
 def simulate_frame_blocks(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
     """``simulate_frame`` with the teams of a running block (``solver/batched``) stepping side
-    by side: the same bits (tests/test_batched_frame.py)."""
+    by side: the same bits (tests/test_batched_frame.py). Everything runs as the parallel
+    kernel's one worker (``_worker_steps``, ``_worker_end``)."""
     m, ps, prm, ts, cs, tt, h, blk, bs = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
                                           borrow(tt), borrow(h), borrow(blk), borrow(bs))  # batch_tables.py
-    team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)
-    block_count = blk.block_width.shape[0]
-    _frame_begin(m, ps, prm, ts, cs, tt, h, fi)
+    prepare_teams(m, ts, prm, tt, h)
+    _time_frame_update(tt, fi)
     decide_blocks(m, ts, tt, blk)
-    for b in range(block_count):
-        gather_running(m, ps, blk, bs, b)
-    for step in range(_max_update_count(m, ts, tt)):
-        _begin_step(tt, fi, step)
-        for b in range(block_count):
-            _block_work(m, ps, prm, ts, cs, tt, blk, bs, fi, b, step)
-        for i in range(team_count):
-            _team_work(m, ps, prm, ts, cs, tt, blk, fi, m.live_teams[i])
-    for b in range(block_count):
-        scatter_running(m, ps, blk, bs, b)
-    _frame_end(m, ps, prm, ts, cs, tt, h, fi)
-
-
-@kernel
-def _block_work(m, ps, prm, ts, cs, tt, blk, bs, fi, b, step):
-    """A prange body (tech-notes LAYOUT: a prange body that calls a function keeps full speed)."""
-    if blk.block_run[b] != 0 and step < tt.update_count[blk.lane_team[blk.block_lane_base[b]]]:
-        run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi)
-
-
-@kernel
-def _team_work(m, ps, prm, ts, cs, tt, blk, fi, t):
-    if ts.active[t] != 0 and tt.step_running[t] and team_runs_alone(blk, t):
-        run_step(m, ps, prm, ts, cs, tt, t, fi)
+    assign_workers(m, ts, tt, blk, 1)
+    _worker_steps(m, ps, prm, ts, cs, tt, h, blk, bs, fi, 0)
+    _worker_end(m, ps, prm, ts, cs, tt, h, blk, fi, 0)
+    _frame_close(tt, h, fi)
 
 
 @kernel(parallel=True)
 def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
-    """``simulate_frame_blocks`` with blocks and teams spread over threads (opt-in:
-    ``ClothSystem(parallel=True)``; also for scenes without blocks, whose teams all take the
-    per-team path). Blocks and teams are independent and each runs in its own order, so the
-    results are bit-identical to the serial kernels (element-wise, no reductions)."""
+    """``simulate_frame_blocks`` over threads (opt-in: ``ClothSystem(parallel=True)``; also
+    for scenes without blocks, whose teams all take the per-team path).
+
+    Work units (a running block with all its lanes, or a team stepping alone) are dealt to
+    the threads each frame (``assign_workers``: greedy, largest first); each thread then runs
+    the whole frame of its units up to the write-back (begin, gather, every step, scatter) in
+    one parallel region, and their end-of-frame stages in a second. Two thread launches per
+    frame, and a balance that does not depend on team order. Units are independent and each
+    runs in its own order, so the results are bit-identical to the serial kernels
+    (element-wise, no reductions). The barrier between the regions keeps the serial order
+    of begin-of-frame reads (transforms) before any write-back."""
     m, ps, prm, ts, cs, tt, h, blk, bs = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
                                           borrow(tt), borrow(h), borrow(blk), borrow(bs))  # batch_tables.py
-    team_count = m.live_teams.shape[0]  # teams in use (removed ones are left out)
-    block_count = blk.block_width.shape[0]
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
-    for i in prange(team_count):
+    decide_blocks(m, ts, tt, blk)
+    workers = max(1, min(fi.threads, blk.worker_load.shape[0]))
+    assign_workers(m, ts, tt, blk, workers)
+    for w in prange(workers):
+        _worker_steps(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w)
+    for w in prange(workers):
+        _worker_end(m, ps, prm, ts, cs, tt, h, blk, fi, w)
+    _frame_close(tt, h, fi)
+
+
+@kernel
+def _unit_cost(particles, steps):
+    """Work of a unit in particle-steps, the frame stages counted as about one step."""
+    return np.int64(particles) * np.int64(steps + 1)
+
+
+@kernel
+def _least_loaded(blk, workers):
+    best = 0
+    for w in range(1, workers):
+        if blk.worker_load[w] < blk.worker_load[best]:
+            best = w
+    return best
+
+
+@kernel
+def assign_workers(m, ts, tt, blk, workers):
+    """``blk.block_worker`` / ``blk.team_worker`` for this frame: running blocks (largest
+    first), then the teams outside them, each to the least loaded of ``workers`` threads."""
+    for w in range(workers):
+        blk.worker_load[w] = 0
+    for j in range(blk.block_width.shape[0]):
+        b = blk.block_order[j]
+        if blk.block_run[b] == 0:
+            blk.block_worker[b] = -1
+            continue
+        w = _least_loaded(blk, workers)
+        blk.block_worker[b] = w
+        first = blk.lane_team[blk.block_lane_base[b]]
+        blk.worker_load[w] += _unit_cost(blk.block_width[b] * blk.block_particle_count[b], tt.update_count[first])
+    for i in range(m.live_teams.shape[0]):
         t = m.live_teams[i]
+        if not team_runs_alone(blk, t):
+            blk.team_worker[t] = -1
+            continue
+        w = _least_loaded(blk, workers)
+        blk.team_worker[t] = w
+        if ts.active[t] != 0:
+            blk.worker_load[w] += _unit_cost(m.team_particle_count[t], tt.update_count[t])
+
+
+@kernel
+def _begin_step_team(tt, fi, step, t):
+    team_time_begin_step_team(step, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
+                              tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
+
+
+@kernel
+def _worker_steps(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w):
+    """Thread w's units up to the write-back: begin of frame, the steps (each team advancing
+    its own clock, A.6), and for a block the gather and the scatter around them."""
+    for b in range(blk.block_width.shape[0]):
+        if blk.block_worker[b] != w:
+            continue
+        lanes = blk.block_lane_base[b]
+        width = blk.block_width[b]
+        for i in range(width):
+            begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, blk.lane_team[lanes + i])
+        gather_block(m, ps, blk, bs, b)
+        for step in range(tt.update_count[blk.lane_team[lanes]]):
+            for i in range(width):
+                _begin_step_team(tt, fi, step, blk.lane_team[lanes + i])
+            run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi)
+        scatter_block(m, ps, blk, bs, b)
+    for i in range(m.live_teams.shape[0]):
+        t = m.live_teams[i]
+        if blk.team_worker[t] != w:
+            continue
         if ts.active[t] != 0:
             begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t)
-    decide_blocks(m, ts, tt, blk)
-    for b in prange(block_count):
-        gather_running(m, ps, blk, bs, b)
-    for step in range(_max_update_count(m, ts, tt)):
-        _begin_step(tt, fi, step)
-        for b in prange(block_count):
-            _block_work(m, ps, prm, ts, cs, tt, blk, bs, fi, b, step)
-        for i in prange(team_count):
-            _team_work(m, ps, prm, ts, cs, tt, blk, fi, m.live_teams[i])
-    for b in prange(block_count):
-        scatter_running(m, ps, blk, bs, b)
-    for i in prange(team_count):
+        # the clock of a suspended (but enabled) team advances too, as in simulate_frame
+        for step in range(tt.update_count[t]):
+            _begin_step_team(tt, fi, step, t)
+            if ts.active[t] != 0 and tt.step_running[t]:
+                run_step(m, ps, prm, ts, cs, tt, t, fi)
+
+
+@kernel
+def _worker_end(m, ps, prm, ts, cs, tt, h, blk, fi, w):
+    """Thread w's end-of-frame stages (guards, E.1-E.4, A.7) of the teams of its units."""
+    for b in range(blk.block_width.shape[0]):
+        if blk.block_worker[b] != w:
+            continue
+        lanes = blk.block_lane_base[b]
+        for i in range(blk.block_width[b]):
+            end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, blk.lane_team[lanes + i])
+    for i in range(m.live_teams.shape[0]):
         t = m.live_teams[i]
-        if ts.active[t] != 0:
+        if blk.team_worker[t] == w and ts.active[t] != 0:
             end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t)
-    _frame_close(tt, h, fi)
 
 
 # ----------------------------------------------------------------------------- kernel tables

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import time as _time
 
+import numba
 import numpy as np
 
 from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, update_mode_code
@@ -263,7 +264,8 @@ class ClothSystem:
         fi = FrameInputs(float(delta_time), float(delta_time if unscaled_delta_time is None else unscaled_delta_time),
                          float(fixed_delta_time), int(fixed_update_count), float(s.global_time_scale),
                          float(s.simulation_delta_time), int(s.max_steps_per_frame), int(s.timing_code),
-                         90.0 / s.frequency, float(power[1]), float(power[2]), float(power[3]))
+                         90.0 / s.frequency, float(power[1]), float(power[2]), float(power[3]),
+                         int(numba.get_num_threads()) if self.parallel else 1)
         clock = _time.perf_counter
         t0 = clock()
         self._call_frame(fi)

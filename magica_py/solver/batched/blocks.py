@@ -22,7 +22,7 @@ import numpy as np
 
 from magica_py.solver.batched.state import (
     BLOCK_WIDTH, BlockTable, COLLIDER_FIELDS, LANE_FIELDS, PARTICLE_BLOCK_FIELDS,
-    SHARED_PARTICLE_FIELDS, allocate_block_state,
+    I64, SHARED_PARTICLE_FIELDS, allocate_block_state, worker_capacity,
 )
 from magica_py.solver.fields import I32, U8
 
@@ -115,8 +115,11 @@ def form_blocks(system, enabled: bool = True):
     team_block = np.full(max(team_total, 1), -1, dtype=I32)
     for k, b in enumerate(blocks):
         team_block[b] = k
+    # largest blocks first: the frame kernel's greedy thread assignment balances better
+    order = np.argsort(-(pcount.astype(np.int64) * width), kind="stable").astype(I32)
     table = BlockTable(width, exemplar, pcount, row_base, lane_base, shared_base, ccount, collider_base,
-                       np.zeros(nb, dtype=U8), lane_team, team_block)
+                       np.zeros(nb, dtype=U8), lane_team, team_block, order, np.full(nb, -1, dtype=I32),
+                       np.zeros(max(team_total, 1), dtype=I32), np.zeros(worker_capacity(), dtype=I64))
     state = allocate_block_state(int((pcount * width).sum()), int(pcount.sum()), int(width.sum()),
                                  int((ccount * width).sum()))
     return table, state

@@ -8,7 +8,7 @@ lane by formation).
 from __future__ import annotations
 
 from magica_py.jit import kernel
-from magica_py.solver.batched.transfer import gather_block, load_lanes, scatter_block
+from magica_py.solver.batched.transfer import load_lanes
 from magica_py.solver.colliders import collider_end_step_team, collider_step_team
 from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.constraints.angle import angle_block
@@ -41,18 +41,6 @@ def team_runs_alone(blk, t):
     """True when team t's steps run per team this frame (no block, or its block does not run)."""
     b = blk.team_block[t]
     return b < 0 or blk.block_run[b] == 0
-
-
-@kernel
-def gather_running(m, ps, blk, bs, b):
-    if blk.block_run[b] != 0:
-        gather_block(m, ps, blk, bs, b)
-
-
-@kernel
-def scatter_running(m, ps, blk, bs, b):
-    if blk.block_run[b] != 0:
-        scatter_block(m, ps, blk, bs, b)
 
 
 @kernel

@@ -27,6 +27,8 @@ import numpy as np
 
 from magica_py.solver.fields import F64, I32, U8, make_soa
 
+I64 = np.int64
+
 BLOCK_WIDTH = 64   # lanes per block at most (LLVM's runtime overlap checks send narrower lane loops down their scalar path: measured 25 -> 50 lanes +8 %)
 
 BLOCK_FIELDS = [
@@ -41,6 +43,11 @@ BLOCK_FIELDS = [
     ("block_run", "block", (), U8, "1: runs its steps in block form this frame (frame kernel)"),
     ("lane_team", "lane", (), I32, "team of each lane"),
     ("team_block", "team", (), I32, "block of each team id, -1 if none"),
+    # thread assignment of the parallel frame kernel (``frame.assign_workers``, each frame)
+    ("block_order", "block", (), I32, "blocks by decreasing size (particles x lanes): assignment order"),
+    ("block_worker", "block", (), I32, "thread running the block's frame, -1: the block does not run"),
+    ("team_worker", "team", (), I32, "thread running the team's frame, -1: its running block does"),
+    ("worker_load", "worker", (), I64, "particle-steps assigned to each thread this frame"),
 ]
 BlockTable = make_soa("BlockTable", BLOCK_FIELDS)
 
@@ -129,4 +136,11 @@ def empty_block_table(team_count: int) -> BlockTable:
     """No blocks: every team runs per team."""
     z = np.zeros(0, dtype=I32)
     return BlockTable(z, z, z, z, z, z, z, z, np.zeros(0, dtype=U8), z,
-                      np.full(max(team_count, 1), -1, dtype=I32))
+                      np.full(max(team_count, 1), -1, dtype=I32), z, z.copy(),
+                      np.zeros(max(team_count, 1), dtype=I32), np.zeros(worker_capacity(), dtype=I64))
+
+
+def worker_capacity() -> int:
+    """Threads the parallel frame kernel can use (numba's pool size, fixed at import)."""
+    import numba
+    return max(1, int(numba.config.NUMBA_NUM_THREADS))
