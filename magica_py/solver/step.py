@@ -203,20 +203,19 @@ _FIXED = 0
 _SHIFTED = 1   # Move, no depth-inertia mix (predict_move's k == 0)
 _MIXED = 2     # Move, depth-inertia mix
 
+# predict_block's lane streams (``kernels/streams``; every access is to row k of one particle or
+# lane L, arrays distinct): base_pos 1-3, base_rot 4-7, step_basic_pos 8-10, step_basic_rot
+# 11-14, next_pos 15-17, velocity_pos 18-20, velocity 21-23 (read and written in place);
+# everything else is read only.
+
 
 @kernel
-def _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr, next_pos_a,
-                  velocity_pos_a, velocity_a, old_pos_a, interpolation, lane_old_world_pos, lane_iv, lane_iq,
-                  lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k, L, depth, depth_inertia,
-                  damping_keep, gravity_direction, gravity, dt, last_step, kind):
-    """``predict_team``'s body for block row k, lane L. Flags constant at each call site (they
-    fold away): ``last_step`` every lane is at the last step of its frame (t == 1: the base
-    rotation is the frame's, predict_base_pose's select without the slerp), ``kind`` _FIXED,
-    _SHIFTED or _MIXED.
-
-    Streams (``kernels/streams``; all rows k of one particle, distinct arrays): base_pos 1-3,
-    base_rot 4-7, step_basic_pos 8-10, step_basic_rot 11-14, next_pos 15-17, velocity_pos
-    18-20, velocity 21-23 (read and written in place); everything else is read only."""
+def _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr, next_pos_a,
+                    velocity_pos_a, interpolation, k, L, last_step, fixed):
+    """``predict_team``'s animated pose for block row k, lane L, and for a Fixed particle its
+    prediction (the pose). Flags constant at each call site (they fold away): ``last_step``
+    every lane is at the last step of its frame (t == 1: the base rotation is the frame's,
+    predict_base_pose's select without the slerp)."""
     t = sload(interpolation, L, READ)
     old_p = sload3(old_position, k, READ)
     new_p = sload3(position, k, READ)
@@ -230,22 +229,29 @@ def _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, ba
     sstore4(base_rot_a, k, base_rot, 4)
     sstore3(sbp, k, base_pos, 8)
     sstore4(sbr, k, base_rot, 11)
-    if kind == _FIXED:
+    if fixed:
         sstore3(next_pos_a, k, base_pos, 15)
         sstore3(velocity_pos_a, k, base_pos, 18)
-        return
+
+
+@kernel
+def _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv, lane_iq, lane_sv,
+               lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k, L, depth, depth_inertia, damping_keep,
+               gravity_direction, gravity, dt, mixed):
+    """``predict_team``'s Move-particle prediction for block row k, lane L; ``mixed`` (constant at
+    each call site) the depth-inertia mix is on for this particle (predict_move's k != 0)."""
     gravity_vector = v_scale(gravity_direction, gravity * sload(lane_gr, L, READ))
-    if kind == _SHIFTED:
-        velocity, velocity_pos, next_pos = predict_move_shifted(
-            sload3(old_pos_a, k, READ), sload3(velocity_a, k, 21), depth, sload3(lane_old_world_pos, L, READ),
-            sload3(lane_iv, L, READ), sload4(lane_iq, L, READ), sload(lane_vw, L, READ), damping_keep,
-            gravity_vector, sload(lane_fm, L, READ), sload3(lane_f, L, READ), sload(lane_scale, L, READ), dt)
-    else:
+    if mixed:
         velocity, velocity_pos, next_pos = predict_move(
             sload3(old_pos_a, k, READ), sload3(velocity_a, k, 21), depth, sload3(lane_old_world_pos, L, READ),
             sload3(lane_iv, L, READ), sload4(lane_iq, L, READ), sload3(lane_sv, L, READ),
             sload4(lane_sq, L, READ), depth_inertia, sload(lane_vw, L, READ), damping_keep, gravity_vector,
             sload(lane_fm, L, READ), sload3(lane_f, L, READ), sload(lane_scale, L, READ), dt)
+    else:
+        velocity, velocity_pos, next_pos = predict_move_shifted(
+            sload3(old_pos_a, k, READ), sload3(velocity_a, k, 21), depth, sload3(lane_old_world_pos, L, READ),
+            sload3(lane_iv, L, READ), sload4(lane_iq, L, READ), sload(lane_vw, L, READ), damping_keep,
+            gravity_vector, sload(lane_fm, L, READ), sload3(lane_f, L, READ), sload(lane_scale, L, READ), dt)
     sstore3(velocity_a, k, velocity, 21)
     sstore3(velocity_pos_a, k, velocity_pos, 18)
     sstore3(next_pos_a, k, next_pos, 15)
@@ -253,8 +259,7 @@ def _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, ba
 
 @kernel
 def predict_block(m, bs, prm, blk, b, dt, frequency_ratio, power_z):
-    """D.1 for every lane of block b (``solver/batched``): ``predict_team``'s maths, lanes innermost,
-    one lane loop per particle (``_predict_lane``)."""
+    """D.1 for every lane of block b (``solver/batched``): ``predict_team``'s maths, lanes innermost."""
     ex = blk.block_exemplar[b]
     width = blk.block_width[b]
     lanes = np.uint64(blk.block_lane_base[b])
@@ -288,52 +293,56 @@ def predict_block(m, bs, prm, blk, b, dt, frequency_ratio, power_z):
         if (m.attribute[p0 + p] & MOVE) != 0:
             kind = _SHIFTED if depth_inertia * (1.0 - depth * depth) == 0.0 else _MIXED
         damping_keep = damping_keep_at(prm, ex, depth, frequency_ratio, power_z) if kind != _FIXED else 1.0
-        # one loop per (last_step, kind): the flags are literal in each, so the lane body is
-        # branch-free; one loop per particle (base pose and prediction together)
+        # flags literal in each loop, so that the lane bodies are branch-free
         open_streams()
         if last_step:
             if kind == _FIXED:
                 for i in range(width):
-                    _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
-                                  next_pos_a, velocity_pos_a, velocity_a, old_pos_a, interpolation,
-                                  lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm,
-                                  lane_f, lane_scale, k0 + np.uint64(i), lanes + np.uint64(i), depth, depth_inertia,
-                                  damping_keep, gravity_direction, gravity, dt, True, _FIXED)
-            elif kind == _SHIFTED:
+                    _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp,
+                                    sbr, next_pos_a, velocity_pos_a, interpolation, k0 + np.uint64(i),
+                                    lanes + np.uint64(i), True, True)
+                continue
+            # without the slerp the pose is cheap: pose and prediction in one loop
+            if kind == _SHIFTED:
                 for i in range(width):
-                    _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
-                                  next_pos_a, velocity_pos_a, velocity_a, old_pos_a, interpolation,
-                                  lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm,
-                                  lane_f, lane_scale, k0 + np.uint64(i), lanes + np.uint64(i), depth, depth_inertia,
-                                  damping_keep, gravity_direction, gravity, dt, True, _SHIFTED)
+                    k, L = k0 + np.uint64(i), lanes + np.uint64(i)
+                    _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp,
+                                    sbr, next_pos_a, velocity_pos_a, interpolation, k, L, True, False)
+                    _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv,
+                               lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k, L, depth,
+                               depth_inertia, damping_keep, gravity_direction, gravity, dt, False)
             else:
                 for i in range(width):
-                    _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
-                                  next_pos_a, velocity_pos_a, velocity_a, old_pos_a, interpolation,
-                                  lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm,
-                                  lane_f, lane_scale, k0 + np.uint64(i), lanes + np.uint64(i), depth, depth_inertia,
-                                  damping_keep, gravity_direction, gravity, dt, True, _MIXED)
-        elif kind == _FIXED:
+                    k, L = k0 + np.uint64(i), lanes + np.uint64(i)
+                    _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp,
+                                    sbr, next_pos_a, velocity_pos_a, interpolation, k, L, True, False)
+                    _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv,
+                               lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k, L, depth,
+                               depth_inertia, damping_keep, gravity_direction, gravity, dt, True)
+            continue
+        if kind == _FIXED:
             for i in range(width):
-                _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
-                              next_pos_a, velocity_pos_a, velocity_a, old_pos_a, interpolation,
-                              lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm,
-                              lane_f, lane_scale, k0 + np.uint64(i), lanes + np.uint64(i), depth, depth_inertia,
-                              damping_keep, gravity_direction, gravity, dt, False, _FIXED)
-        elif kind == _SHIFTED:
+                _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
+                                next_pos_a, velocity_pos_a, interpolation, k0 + np.uint64(i), lanes + np.uint64(i),
+                                False, True)
+            continue
+        for i in range(width):
+            _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
+                            next_pos_a, velocity_pos_a, interpolation, k0 + np.uint64(i), lanes + np.uint64(i),
+                            False, False)
+        open_streams()
+        if kind == _SHIFTED:
             for i in range(width):
-                _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
-                              next_pos_a, velocity_pos_a, velocity_a, old_pos_a, interpolation,
-                              lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm,
-                              lane_f, lane_scale, k0 + np.uint64(i), lanes + np.uint64(i), depth, depth_inertia,
-                              damping_keep, gravity_direction, gravity, dt, False, _SHIFTED)
+                _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv, lane_iq,
+                           lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k0 + np.uint64(i),
+                           lanes + np.uint64(i), depth, depth_inertia, damping_keep, gravity_direction, gravity, dt,
+                           False)
         else:
             for i in range(width):
-                _predict_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
-                              next_pos_a, velocity_pos_a, velocity_a, old_pos_a, interpolation,
-                              lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm,
-                              lane_f, lane_scale, k0 + np.uint64(i), lanes + np.uint64(i), depth, depth_inertia,
-                              damping_keep, gravity_direction, gravity, dt, False, _MIXED)
+                _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv, lane_iq,
+                           lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k0 + np.uint64(i),
+                           lanes + np.uint64(i), depth, depth_inertia, damping_keep, gravity_direction, gravity, dt,
+                           True)
 
 
 @kernel
