@@ -181,14 +181,16 @@ def point_collision_team(m, ps, prm, ts, cs, team):
 
 
 @kernel
-def _add_lane(sum_push_a, sum_n_a, n_acc_a, count_a, min_dist_a, k, x, r, d, n, x2, suspended):
+def _add_lane(sum_push_a, sum_n_a, n_acc_a, count_a, min_dist_a, k, x, r, d, n, x2, suspended, first):
     """point_contact_add on the sums a block keeps in its scratch rows (row k); a suspended
-    collider (scale_suspend) leaves them as they are. Lane streams: the five sums are updated
-    in place, push 1-3, normals 4-6, near normals 7-9, count 10, closest distance 11 (see
-    ``point_collision_block``)."""
-    old_push, old_n, old_near, old_count, old_min = (sload3(sum_push_a, k, 1), sload3(sum_n_a, k, 4),
-                                                     sload3(n_acc_a, k, 7), sload(count_a, k, 10),
-                                                     sload(min_dist_a, k, 11))
+    collider (scale_suspend) leaves them as they are. ``first`` (the same in every lane): the
+    sums start from their initial values (``point_collision_team``'s) instead of the scratch.
+    Lane streams: the five sums are updated in place, push 1-3, normals 4-6, near normals 7-9,
+    count 10, closest distance 11 (see ``point_collision_block``)."""
+    z = (0.0, 0.0, 0.0)
+    loaded = (sload3(sum_push_a, k, 1), sload3(sum_n_a, k, 4), sload3(n_acc_a, k, 7), sload(count_a, k, 10),
+              sload(min_dist_a, k, 11))
+    old_push, old_n, old_near, old_count, old_min = (z, z, z, 0, FAR) if first else loaded
     sum_push, sum_n, n_acc, count, min_dist = point_contact_add(old_push, old_n, old_near, old_count, old_min,
                                                                 x, r, d, n, x2)
     keep = suspended != 0
@@ -219,8 +221,9 @@ def point_collision_block(m, bs, prm, blk, b):
     maths, lanes innermost. Per particle, collider slot after slot (the per-team order), a
     particle's sums live in block scratch between slots: push in ``accum_vector``, penetrating
     normals in ``accum_normal``, near normals in ``collision_normal`` (its final value is built
-    from them), count in ``accum_count``, closest distance in ``accum_friction``; the scratch is
-    cleared again at the end. A slot's shape is the same in every lane (block formation), so
+    from them), count in ``accum_count``, closest distance in ``accum_friction``; the first slot
+    near any lane starts them from their initial values, the scratch is cleared again at the
+    end. A slot's shape is the same in every lane (block formation), so
     the shape branch is outside the lane loop; AABB early-outs and suspension are selects.
 
     Lane streams (``kernels/streams``): every lane loop writes only the particle's own rows
@@ -260,17 +263,11 @@ def point_collision_block(m, bs, prm, blk, b):
             for i in range(width):
                 sstore3(normal_a, k0 + np.uint64(i), z, 1)
             continue
-        open_streams()
-        for i in range(width):
-            k = k0 + np.uint64(i)
-            sstore3(sum_push_a, k, z, 1)
-            sstore3(sum_n_a, k, z, 4)
-            sstore3(normal_a, k, z, 7)
-            sstore(count_a, k, 0, 10)
-            sstore(min_dist_a, k, FAR, 11)
-        # the slots before first_near reach no lane (their sums stay), first_near is known near;
-        # next_pos does not change before the result loop, so the bounds tests stand
+        # the slots before first_near reach no lane (their sums stay as initialised), first_near
+        # is known near and starts the sums; next_pos does not change before the result loop,
+        # so the bounds tests stand
         for j in range(first_near, slots):
+            first = j == first_near
             c0 = np.uint64(blk.block_collider_base[b] + j * width)
             shape = shape_a[c0]
             if shape != PLANE and j != first_near and _lanes_in_bounds(next_pos, scale, aabb_min, aabb_max, k0, c0,
@@ -285,7 +282,7 @@ def point_collision_block(m, bs, prm, blk, b):
                     r = radius * sload(scale, lanes + np.uint64(i), READ)
                     d, n, x2 = point_plane(x, r, sload3(start_new, c, READ), sload3(plane_normal, c, READ))
                     _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d, n, x2,
-                              sload(suspend_a, c, READ))
+                              sload(suspend_a, c, READ), first)
             elif shape == SPHERE:
                 for i in range(width):
                     k = k0 + np.uint64(i)
@@ -297,7 +294,7 @@ def point_collision_block(m, bs, prm, blk, b):
                     d, n, x2 = point_sphere(x, r, sload3(start_old, c, READ), sload3(start_new, c, READ),
                                             sload(radius_start, c, READ))
                     _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d if hit else FAR,
-                              n if hit else z, x2 if hit else x, sload(suspend_a, c, READ))
+                              n if hit else z, x2 if hit else x, sload(suspend_a, c, READ), first)
             else:
                 for i in range(width):
                     k = k0 + np.uint64(i)
@@ -311,11 +308,11 @@ def point_collision_block(m, bs, prm, blk, b):
                                              sload(radius_start, c, READ), sload(radius_end, c, READ),
                                              sload4(inverse_old_rot, c, READ), sload4(now_rot, c, READ))
                     _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d if hit else FAR,
-                              n if hit else z, x2 if hit else x, sload(suspend_a, c, READ))
+                              n if hit else z, x2 if hit else x, sload(suspend_a, c, READ), first)
         touching = 0
         for i in range(width):
             k = k0 + np.uint64(i)
-            hit = count_a[k] > 0 or min_dist_a[k] <= radius * scale[lanes + np.uint64(i)]
+            hit = (count_a[k] > 0) | (min_dist_a[k] <= radius * scale[lanes + np.uint64(i)])
             touching += 1 if hit else 0
         if touching == 0:  # no lane pushed or in range: the sums are as initialised, the normal 0
             open_streams()
