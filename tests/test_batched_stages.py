@@ -91,3 +91,41 @@ def test_predict_block_is_bit_identical_on_every_lane_loop_variant(crowd, interp
     finally:
         tt.frame_interpolation[:] = saved_t
         prm.depth_inertia[:] = saved_di
+
+
+def _axis_angle(axis, degrees):
+    a = np.radians(degrees) / 2.0
+    return np.array([*(np.asarray(axis, float) / np.linalg.norm(axis) * np.sin(a)), np.cos(a)])
+
+
+@pytest.mark.parametrize("last_step", [True, False])
+@pytest.mark.parametrize("rotations", ["near, sign flipped in some lanes", "far in some lanes"])
+def test_predict_block_is_bit_identical_whichever_path_the_depth_inertia_slerp_takes(crowd, rotations, last_step):
+    """The depth-inertia slerp (inertia rotation towards the step rotation) skips its acos and
+    sines in a block whose lanes all take its lerp path (dot >= 0.9995, either sign), and
+    computes both paths otherwise: step rotations of 2 degrees with the step rotation's sign
+    flipped in every third lane (same rotation, negative dot), or of 2 degrees against 40 in
+    every fourth lane."""
+    ts, tt = crowd.teams, crowd.time_state
+    saved = {n: getattr(ts, n).copy() for n in ("inertia_rotation", "step_rotation")}
+    saved_t = tt.frame_interpolation.copy()
+    try:
+        blk, _bs = block_tables(crowd)
+        lanes = blk.lane_team
+        tt.frame_interpolation[lanes] = 1.0 if last_step else 0.37
+        ts.inertia_rotation[lanes] = _axis_angle((0.2, 1.0, 0.1), 1.0)
+        ts.step_rotation[lanes] = _axis_angle((0.0, 1.0, 0.3), 2.0)
+        if rotations.startswith("near"):
+            ts.step_rotation[lanes[::3]] *= -1.0
+        else:
+            ts.step_rotation[lanes[::4]] = _axis_angle((1.0, 0.0, 0.0), 40.0)
+        d = (ts.inertia_rotation[lanes] * ts.step_rotation[lanes]).sum(axis=1)
+        if rotations.startswith("near"):
+            assert (np.abs(d) >= 0.9995).all() and (d < 0).sum() > 0
+        else:
+            assert (np.abs(d) < 0.9995).sum() > 0 and (np.abs(d) >= 0.9995).sum() > 0
+        compare_stage(crowd, _predict_teams, _predict_blocks, PREDICT_FIELDS)
+    finally:
+        for n, v in saved.items():
+            getattr(ts, n)[:] = v
+        tt.frame_interpolation[:] = saved_t

@@ -16,7 +16,7 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    clamp_length, depth_mass, lerp, load3, load4, project_on_plane, q_angle, q_from_to, q_mul,
+    clamp_length, depth_mass, lerp, load3, load4, project_on_plane, q_angle, q_dot, q_from_to, q_mul,
     q_normalize, q_rotate, q_slerp, q_to_angle_axis, saturate, store3, store4, v_add, v_cross,
     v_dot, v_length, v_length_sq, v_lerp, v_mul, v_normalize, v_scale, v_sub,
 )
@@ -124,6 +124,47 @@ def predict_move(old_pos, velocity, depth, old_world_pos, inertia_vector, inerti
 
 
 @kernel
+def slerp_is_near(q1, q2):
+    """True where ``q_slerp(q1, q2, t)`` takes its normalised-lerp path (the rotations within
+    about 3.6 degrees: no acos, no sines), for every t; NaN counts as near, as there."""
+    d = q_dot(q1, q2)
+    if d < 0.0:
+        d = -d
+    return not d < 0.9995
+
+
+@kernel
+def slerp_near(q1, q2, t):
+    """``q_slerp(q1, q2, t)`` where ``slerp_is_near(q1, q2)``: its lerp path alone (same bits)."""
+    b = q2
+    if q_dot(q1, q2) < 0.0:
+        b = (-q2[0], -q2[1], -q2[2], -q2[3])
+    r = (
+        q1[0] + (b[0] - q1[0]) * t,
+        q1[1] + (b[1] - q1[1]) * t,
+        q1[2] + (b[2] - q1[2]) * t,
+        q1[3] + (b[3] - q1[3]) * t,
+    )
+    return q_normalize(r)
+
+
+@kernel
+def predict_move_near(old_pos, velocity, depth, old_world_pos, inertia_vector, inertia_rotation, step_vector,
+                      step_rotation, depth_inertia, velocity_weight, damping_keep, gravity, force_mode, impact,
+                      scale, dt):
+    """``predict_move`` where ``slerp_is_near(inertia_rotation, step_rotation)`` (the usual case:
+    both are one step's rotation of the team): the same bits without the slerp's acos and sines."""
+    k = depth_inertia * (1.0 - depth * depth)
+    iv_mixed = v_lerp(inertia_vector, step_vector, k)
+    iq_mixed = slerp_near(inertia_rotation, step_rotation, k)
+    off = k == 0.0
+    iv = inertia_vector if off else iv_mixed
+    iq = inertia_rotation if off else iq_mixed
+    return predict_move_shifted(old_pos, velocity, depth, old_world_pos, iv, iq, velocity_weight,
+                                damping_keep, gravity, force_mode, impact, scale, dt)
+
+
+@kernel
 def predict_move_shifted(old_pos, velocity, depth, old_world_pos, iv, iq, velocity_weight, damping_keep,
                          gravity, force_mode, impact, scale, dt):
     """``predict_move`` after the depth-inertia mix: the inertia shift (iv, iq), damping, forces."""
@@ -198,11 +239,6 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
         store3(ps.next_pos, p, next_pos)
 
 
-# lane kinds of predict_block's particle loop (constant at each call of _predict_lane)
-_FIXED = 0
-_SHIFTED = 1   # Move, no depth-inertia mix (predict_move's k == 0)
-_MIXED = 2     # Move, depth-inertia mix
-
 # predict_block's lane streams (``kernels/streams``; every access is to row k of one particle or
 # lane L, arrays distinct): base_pos 1-3, base_rot 4-7, step_basic_pos 8-10, step_basic_rot
 # 11-14, next_pos 15-17, velocity_pos 18-20, velocity 21-23 (read and written in place);
@@ -237,11 +273,18 @@ def _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, 
 @kernel
 def _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv, lane_iq, lane_sv,
                lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k, L, depth, depth_inertia, damping_keep,
-               gravity_direction, gravity, dt, mixed):
-    """``predict_team``'s Move-particle prediction for block row k, lane L; ``mixed`` (constant at
-    each call site) the depth-inertia mix is on for this particle (predict_move's k != 0)."""
+               gravity_direction, gravity, dt, mixed, near):
+    """``predict_team``'s Move-particle prediction for block row k, lane L. Flags constant at each
+    call site: ``mixed`` the depth-inertia mix is on for this particle (predict_move's k != 0),
+    ``near`` every lane's inertia and step rotations are near (``predict_move_near``)."""
     gravity_vector = v_scale(gravity_direction, gravity * sload(lane_gr, L, READ))
-    if mixed:
+    if mixed and near:
+        velocity, velocity_pos, next_pos = predict_move_near(
+            sload3(old_pos_a, k, READ), sload3(velocity_a, k, 21), depth, sload3(lane_old_world_pos, L, READ),
+            sload3(lane_iv, L, READ), sload4(lane_iq, L, READ), sload3(lane_sv, L, READ),
+            sload4(lane_sq, L, READ), depth_inertia, sload(lane_vw, L, READ), damping_keep, gravity_vector,
+            sload(lane_fm, L, READ), sload3(lane_f, L, READ), sload(lane_scale, L, READ), dt)
+    elif mixed:
         velocity, velocity_pos, next_pos = predict_move(
             sload3(old_pos_a, k, READ), sload3(velocity_a, k, 21), depth, sload3(lane_old_world_pos, L, READ),
             sload3(lane_iv, L, READ), sload4(lane_iq, L, READ), sload3(lane_sv, L, READ),
@@ -278,71 +321,93 @@ def predict_block(m, bs, prm, blk, b, dt, frequency_ratio, power_z):
     lane_vw, lane_gr, lane_fm, lane_f, lane_scale = (bs.lane_velocity_weight, bs.lane_gravity_ratio,
                                                      bs.lane_external_force_mode, bs.lane_external_force,
                                                      bs.lane_scale_ratio)
-    # block-uniform shortcut (same bits: it takes the value the per-element select takes):
-    # at the last step of a frame in every lane the base rotation is the frame's rotation
+    # block-uniform shortcuts (same bits: they take the value the per-element select takes):
+    # at the last step of a frame in every lane the base rotation is the frame's rotation;
+    # the depth-inertia slerp of every lane on its lerp path (inertia and step rotation are
+    # one step's rotation of the team: the usual case), its acos and sines are not computed
     last_step = True
+    near = True
     for i in range(width):
-        if interpolation[lanes + np.uint64(i)] != 1.0:
+        L = lanes + np.uint64(i)
+        if interpolation[L] != 1.0:
             last_step = False
+        if not slerp_is_near(bload4(lane_iq, L), bload4(lane_sq, L)):
+            near = False
+    # the block's arrays, in _predict_lanes' order
+    pa = (old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr, next_pos_a,
+          velocity_pos_a, velocity_a, old_pos_a)
+    la = (interpolation, lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f,
+          lane_scale)
     for p in range(blk.block_particle_count[b]):
         # unsigned row indices: numba wraps negative signed indices (a select per access that
         # hides the affine address from LLVM's vectoriser)
         k0 = np.uint64(blk.block_row_base[b] + p * width)
         depth = m.depth[p0 + p]
-        kind = _FIXED
-        if (m.attribute[p0 + p] & MOVE) != 0:
-            kind = _SHIFTED if depth_inertia * (1.0 - depth * depth) == 0.0 else _MIXED
-        damping_keep = damping_keep_at(prm, ex, depth, frequency_ratio, power_z) if kind != _FIXED else 1.0
-        # flags literal in each loop, so that the lane bodies are branch-free
-        open_streams()
-        if last_step:
-            if kind == _FIXED:
-                for i in range(width):
-                    _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp,
-                                    sbr, next_pos_a, velocity_pos_a, interpolation, k0 + np.uint64(i),
-                                    lanes + np.uint64(i), True, True)
-                continue
-            # without the slerp the pose is cheap: pose and prediction in one loop
-            if kind == _SHIFTED:
-                for i in range(width):
-                    k, L = k0 + np.uint64(i), lanes + np.uint64(i)
-                    _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp,
-                                    sbr, next_pos_a, velocity_pos_a, interpolation, k, L, True, False)
-                    _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv,
-                               lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k, L, depth,
-                               depth_inertia, damping_keep, gravity_direction, gravity, dt, False)
+        move = (m.attribute[p0 + p] & MOVE) != 0
+        mixed = depth_inertia * (1.0 - depth * depth) != 0.0
+        damping_keep = damping_keep_at(prm, ex, depth, frequency_ratio, power_z) if move else 1.0
+        c = (k0, lanes, width, depth, depth_inertia, damping_keep, gravity_direction, gravity, dt)
+        # flags literal at each call, so that the lane bodies are branch-free
+        if not move:
+            if last_step:
+                _predict_lanes(pa, la, c, True, True, False, False)
             else:
-                for i in range(width):
-                    k, L = k0 + np.uint64(i), lanes + np.uint64(i)
-                    _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp,
-                                    sbr, next_pos_a, velocity_pos_a, interpolation, k, L, True, False)
-                    _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv,
-                               lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k, L, depth,
-                               depth_inertia, damping_keep, gravity_direction, gravity, dt, True)
-            continue
-        if kind == _FIXED:
-            for i in range(width):
-                _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
-                                next_pos_a, velocity_pos_a, interpolation, k0 + np.uint64(i), lanes + np.uint64(i),
-                                False, True)
-            continue
+                _predict_lanes(pa, la, c, False, True, False, False)
+        elif not mixed:
+            if last_step:
+                _predict_lanes(pa, la, c, True, False, False, False)
+            else:
+                _predict_lanes(pa, la, c, False, False, False, False)
+        elif near:
+            if last_step:
+                _predict_lanes(pa, la, c, True, False, True, True)
+            else:
+                _predict_lanes(pa, la, c, False, False, True, True)
+        elif last_step:
+            _predict_lanes(pa, la, c, True, False, True, False)
+        else:
+            _predict_lanes(pa, la, c, False, False, True, False)
+
+
+@kernel
+def _predict_lanes(pa, la, c, last_step, fixed, mixed, near):
+    """predict_block's lane loops of one particle (rows k0 .. k0 + width - 1). Flags constant at
+    each call: ``last_step`` (``_base_pose_lane``), ``fixed`` a Fixed particle (its prediction
+    is the pose), ``mixed`` / ``near`` (``_move_lane``)."""
+    (old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr, next_pos_a, velocity_pos_a,
+     velocity_a, old_pos_a) = pa
+    (interpolation, lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f,
+     lane_scale) = la
+    k0, lanes, width, depth, depth_inertia, damping_keep, gravity_direction, gravity, dt = c
+    if fixed:
+        open_streams()
         for i in range(width):
             _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
                             next_pos_a, velocity_pos_a, interpolation, k0 + np.uint64(i), lanes + np.uint64(i),
-                            False, False)
+                            last_step, True)
+        return
+    if last_step:
+        # without the slerp the pose is cheap: pose and prediction in one loop (with it, the
+        # merged loop does not vectorise: 42 -> 102 ns/particle)
         open_streams()
-        if kind == _SHIFTED:
-            for i in range(width):
-                _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv, lane_iq,
-                           lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k0 + np.uint64(i),
-                           lanes + np.uint64(i), depth, depth_inertia, damping_keep, gravity_direction, gravity, dt,
-                           False)
-        else:
-            for i in range(width):
-                _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv, lane_iq,
-                           lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k0 + np.uint64(i),
-                           lanes + np.uint64(i), depth, depth_inertia, damping_keep, gravity_direction, gravity, dt,
-                           True)
+        for i in range(width):
+            k, L = k0 + np.uint64(i), lanes + np.uint64(i)
+            _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
+                            next_pos_a, velocity_pos_a, interpolation, k, L, True, False)
+            _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv, lane_iq,
+                       lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k, L, depth, depth_inertia,
+                       damping_keep, gravity_direction, gravity, dt, mixed, near)
+        return
+    open_streams()
+    for i in range(width):
+        _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
+                        next_pos_a, velocity_pos_a, interpolation, k0 + np.uint64(i), lanes + np.uint64(i),
+                        False, False)
+    open_streams()
+    for i in range(width):
+        _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv, lane_iq, lane_sv,
+                   lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k0 + np.uint64(i), lanes + np.uint64(i),
+                   depth, depth_inertia, damping_keep, gravity_direction, gravity, dt, mixed, near)
 
 
 @kernel
