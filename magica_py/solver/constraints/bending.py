@@ -17,13 +17,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from llvmlite import ir
-from numba.core import cgutils, types
 from numba import literally
-from numba.extending import intrinsic
 
 from magica_py.jit import kernel
 from magica_py.kernels import trig
+from magica_py.kernels.streams import READ, open_streams, sload, sload3, sstore, sstore3
 from magica_py.kernels.math3d import (
     inverse_mass_friction_depth, load3, saturate, store3, v_cross, v_dot, v_length, v_length_sq,
     v_scale, v_sub,
@@ -221,154 +219,30 @@ def _inverse_mass_rows(m, bs, blk, b):
         k0 = np.uint64(row_base + p * width)
         move = (m.attribute[p0 + p] & MOVE) != 0
         depth = m.depth[p0 + p]
+        open_streams()
         for i in range(width):
             r = k0 + np.uint64(i)
-            w[r] = particle_inverse_mass(move, friction[r], depth)
+            sstore(w, r, particle_inverse_mass(move, sload(friction, r, READ), depth), 1)
 
 
-# ----------------------------------------------------------------------------- pair scopes
+# ----------------------------------------------------------------------------- pair streams
 # A block's pair loop reads next_pos and the inverse masses of four vertices and updates their
 # accumulators (x, y, z, count): 16 read-modify-write streams at row offsets LLVM cannot
 # relate. Left to runtime overlap checks (hundreds of them) the vectorised loop only paid off
-# from 40 lanes, so blocks of 25 ran scalar. Scoped alias metadata states what is true of one
-# pair: the reads never touch an accumulator (other arrays), and the accumulator streams of
-# its four distinct vertices are disjoint in every lane (rows differ by multiples of the
-# width). ``_declare_pair_scopes`` opens new scope instances at each pair
-# (llvm.experimental.noalias.scope.decl), so nothing is claimed across pairs, which share
-# vertices. Only the memory model changes, not the arithmetic: the bits are the same.
-_DOMAIN = "magica_py.bending.pair"
-READ_SCOPE = 0          # next_pos, inverse masses, lane scale
-ACCUM_SCOPES = 16       # 1 + 4 * vertex + component (3: count)
-
-
-def _scope_node(module, i):
-    domain = module.add_metadata([ir.MetaDataString(module, _DOMAIN)])
-    return module.add_metadata([ir.MetaDataString(module, f"{_DOMAIN}.{i}"), domain])
-
-
-def _tag(module, instruction, scope):
-    instruction.set_metadata("alias.scope", module.add_metadata([_scope_node(module, scope)]))
-    others = [_scope_node(module, i) for i in range(ACCUM_SCOPES + 1) if i != scope]
-    instruction.set_metadata("noalias", module.add_metadata(others))
-
-
-def _element_pointer(context, builder, array_type, array, indices):
-    ary = context.make_array(array_type)(context, builder, array)
-    shape = cgutils.unpack_tuple(builder, ary.shape, array_type.ndim)
-    strides = cgutils.unpack_tuple(builder, ary.strides, array_type.ndim)
-    return cgutils.get_item_pointer2(context, builder, ary.data, shape, strides, array_type.layout, indices)
-
-
-def _index(context, builder, value_type, value):
-    return context.cast(builder, value, value_type, types.intp)
-
-
-def _scalar_load(offset):
-    def typer(typingctx, array, row, scope):
-        if not (isinstance(array, types.Array) and array.ndim == 1 and isinstance(scope, types.IntegerLiteral)):
-            return None
-        tag = scope.literal_value + offset
-
-        def codegen(context, builder, sig, args):
-            pointer = _element_pointer(context, builder, sig.args[0], args[0],
-                                       [_index(context, builder, sig.args[1], args[1])])
-            value = builder.load(pointer)
-            _tag(builder.module, value, tag)
-            return value
-
-        return array.dtype(array, row, scope), codegen
-
-    return intrinsic(typer)
-
-
-def _scalar_store(offset):
-    def typer(typingctx, array, row, value, scope):
-        if not (isinstance(array, types.Array) and array.ndim == 1 and isinstance(scope, types.IntegerLiteral)):
-            return None
-        tag = scope.literal_value + offset
-
-        def codegen(context, builder, sig, args):
-            pointer = _element_pointer(context, builder, sig.args[0], args[0],
-                                       [_index(context, builder, sig.args[1], args[1])])
-            store = builder.store(context.cast(builder, args[2], sig.args[2], sig.args[0].dtype), pointer)
-            _tag(builder.module, store, tag)
-            return context.get_dummy_value()
-
-        return types.none(array, row, value, scope), codegen
-
-    return intrinsic(typer)
-
-
-# ``array[row]`` (1-D) tagged with alias scope ``scope`` (a literal int)
-scoped_load = _scalar_load(0)
-# the count stream of a vertex whose x, y, z streams are scopes scope + 0..2
-scoped_count_load = _scalar_load(3)
-scoped_count_store = _scalar_store(3)
-
-
-@intrinsic
-def scoped_load3(typingctx, array, row, scope):
-    """``(array[0, row], array[1, row], array[2, row])`` with scopes ``scope + c`` (or all
-    ``scope`` when it is ``READ_SCOPE``)."""
-    if not (isinstance(array, types.Array) and array.ndim == 2 and isinstance(scope, types.IntegerLiteral)):
-        return None
-    tag = scope.literal_value
-    row_type = types.UniTuple(array.dtype, 3)
-
-    def codegen(context, builder, sig, args):
-        k = _index(context, builder, sig.args[1], args[1])
-        values = []
-        for c in range(3):
-            pointer = _element_pointer(context, builder, sig.args[0], args[0], [context.get_constant(types.intp, c), k])
-            value = builder.load(pointer)
-            _tag(builder.module, value, tag if tag == READ_SCOPE else tag + c)
-            values.append(value)
-        return context.make_tuple(builder, row_type, values)
-
-    return row_type(array, row, scope), codegen
-
-
-@intrinsic
-def scoped_store3(typingctx, array, row, value, scope):
-    """``array[:, row] = value`` with scopes ``scope + c``."""
-    if not (isinstance(array, types.Array) and array.ndim == 2 and isinstance(value, types.BaseTuple)
-            and len(value) == 3 and isinstance(scope, types.IntegerLiteral)):
-        return None
-    tag = scope.literal_value
-
-    def codegen(context, builder, sig, args):
-        k = _index(context, builder, sig.args[1], args[1])
-        for c in range(3):
-            pointer = _element_pointer(context, builder, sig.args[0], args[0], [context.get_constant(types.intp, c), k])
-            v = context.cast(builder, builder.extract_value(args[2], c), sig.args[2][c], sig.args[0].dtype)
-            _tag(builder.module, builder.store(v, pointer), tag + c)
-        return context.get_dummy_value()
-
-    return types.none(array, row, value, scope), codegen
-
-
-@intrinsic
-def _declare_pair_scopes(typingctx):
-    """New instances of the accumulator scopes (one pair): claims do not cross pairs."""
-    def codegen(context, builder, sig, args):
-        module = builder.module
-        fn = cgutils.get_or_insert_function(module, ir.FunctionType(ir.VoidType(), [ir.MetaDataType()]),
-                                            "llvm.experimental.noalias.scope.decl")
-        for i in range(1, ACCUM_SCOPES + 1):
-            builder.call(fn, [module.add_metadata([_scope_node(module, i)])])
-        return context.get_dummy_value()
-
-    return types.none(), codegen
-
-
+# from 40 lanes. ``kernels/streams`` states what is true of one pair: the reads never touch an
+# accumulator (other arrays), and the accumulator streams of its four distinct vertices are
+# disjoint in every lane (rows differ by multiples of the width). ``open_streams`` at each
+# pair: nothing is claimed across pairs, which share vertices. Only the memory model changes,
+# not the arithmetic: the bits are the same.
 @kernel
-def _accumulate_scoped(accum_vector, accum_count, r, v, ok, scope):
+def _accumulate_scoped(accum_vector, accum_count, r, v, ok, scope, count_scope):
     """``_accumulate_row`` with the accumulator scopes of one vertex (x, y, z: scope + 0..2,
-    count: scope + 3)."""
+    count: count_scope = scope + 3)."""
     literally(scope)
-    acc, n = accumulated(scoped_load3(accum_vector, r, scope), scoped_count_load(accum_count, r, scope), v, ok)
-    scoped_store3(accum_vector, r, acc, scope)
-    scoped_count_store(accum_count, r, n, scope)
+    literally(count_scope)
+    acc, n = accumulated(sload3(accum_vector, r, scope), sload(accum_count, r, count_scope), v, ok)
+    sstore3(accum_vector, r, acc, scope)
+    sstore(accum_count, r, n, count_scope)
 
 
 @kernel
@@ -399,18 +273,18 @@ def _dihedral_rows(m, bs, blk, b, k):
         rest_angle = m.bend_rest_angle[c]
         sign = m.bend_sign[c]
         if _distinct(r0, r1, r2, r3):
-            _declare_pair_scopes()
+            open_streams()
             for i in range(width):
                 u = np.uint64(i)
                 ok, c0, c1, c2, c3 = solve_dihedral(
-                    scoped_load3(next_pos, r0 + u, 0), scoped_load3(next_pos, r1 + u, 0),
-                    scoped_load3(next_pos, r2 + u, 0), scoped_load3(next_pos, r3 + u, 0),
-                    scoped_load(w, r0 + u, 0), scoped_load(w, r1 + u, 0), scoped_load(w, r2 + u, 0),
-                    scoped_load(w, r3 + u, 0), rest_angle, sign, k)
-                _accumulate_scoped(accum_vector, accum_count, r0 + u, c0, ok, 1)
-                _accumulate_scoped(accum_vector, accum_count, r1 + u, c1, ok, 5)
-                _accumulate_scoped(accum_vector, accum_count, r2 + u, c2, ok, 9)
-                _accumulate_scoped(accum_vector, accum_count, r3 + u, c3, ok, 13)
+                    sload3(next_pos, r0 + u, READ), sload3(next_pos, r1 + u, READ),
+                    sload3(next_pos, r2 + u, READ), sload3(next_pos, r3 + u, READ),
+                    sload(w, r0 + u, READ), sload(w, r1 + u, READ), sload(w, r2 + u, READ),
+                    sload(w, r3 + u, READ), rest_angle, sign, k)
+                _accumulate_scoped(accum_vector, accum_count, r0 + u, c0, ok, 1, 4)
+                _accumulate_scoped(accum_vector, accum_count, r1 + u, c1, ok, 5, 8)
+                _accumulate_scoped(accum_vector, accum_count, r2 + u, c2, ok, 9, 12)
+                _accumulate_scoped(accum_vector, accum_count, r3 + u, c3, ok, 13, 16)
             continue
         for i in range(width):
             u = np.uint64(i)
@@ -436,18 +310,18 @@ def _volume_rows(m, bs, blk, b, k):
         r0, r1, r2, r3 = _pair_rows(blk, b, p0, m.volume_vertices, c)
         rest_volume = m.volume_rest[c]
         if _distinct(r0, r1, r2, r3):
-            _declare_pair_scopes()
+            open_streams()
             for i in range(width):
                 u = np.uint64(i)
                 ok, c0, c1, c2, c3 = solve_volume(
-                    scoped_load3(next_pos, r0 + u, 0), scoped_load3(next_pos, r1 + u, 0),
-                    scoped_load3(next_pos, r2 + u, 0), scoped_load3(next_pos, r3 + u, 0),
-                    scoped_load(w, r0 + u, 0), scoped_load(w, r1 + u, 0), scoped_load(w, r2 + u, 0),
-                    scoped_load(w, r3 + u, 0), rest_volume * scoped_load(scale_ratio, lanes + u, 0), k)
-                _accumulate_scoped(accum_vector, accum_count, r0 + u, c0, ok, 1)
-                _accumulate_scoped(accum_vector, accum_count, r1 + u, c1, ok, 5)
-                _accumulate_scoped(accum_vector, accum_count, r2 + u, c2, ok, 9)
-                _accumulate_scoped(accum_vector, accum_count, r3 + u, c3, ok, 13)
+                    sload3(next_pos, r0 + u, READ), sload3(next_pos, r1 + u, READ),
+                    sload3(next_pos, r2 + u, READ), sload3(next_pos, r3 + u, READ),
+                    sload(w, r0 + u, READ), sload(w, r1 + u, READ), sload(w, r2 + u, READ),
+                    sload(w, r3 + u, READ), rest_volume * sload(scale_ratio, lanes + u, READ), k)
+                _accumulate_scoped(accum_vector, accum_count, r0 + u, c0, ok, 1, 4)
+                _accumulate_scoped(accum_vector, accum_count, r1 + u, c1, ok, 5, 8)
+                _accumulate_scoped(accum_vector, accum_count, r2 + u, c2, ok, 9, 12)
+                _accumulate_scoped(accum_vector, accum_count, r3 + u, c3, ok, 13, 16)
             continue
         for i in range(width):
             u = np.uint64(i)
@@ -487,11 +361,17 @@ def apply_accumulated_block(m, bs, blk, b, move_only):
     next_pos, accum_vector, accum_count = bs.next_pos, bs.accum_vector, bs.accum_count
     for p in range(blk.block_particle_count[b]):
         k0 = np.uint64(row_base + p * width)
+        # streams: next_pos 1-3, accumulator 4-6, count 7
+        open_streams()
         if not move_only or (m.attribute[p0 + p] & MOVE) != 0:
             for i in range(width):
                 r = k0 + np.uint64(i)
-                bstore3(next_pos, r, averaged(bload3(next_pos, r), bload3(accum_vector, r), accum_count[r]))
+                sstore3(next_pos, r, averaged(sload3(next_pos, r, 1), sload3(accum_vector, r, 4),
+                                              sload(accum_count, r, 7)), 1)
+                sstore3(accum_vector, r, ZERO3, 4)
+                sstore(accum_count, r, 0, 7)
+            continue
         for i in range(width):
             r = k0 + np.uint64(i)
-            bstore3(accum_vector, r, ZERO3)
-            accum_count[r] = 0
+            sstore3(accum_vector, r, ZERO3, 4)
+            sstore(accum_count, r, 0, 7)
