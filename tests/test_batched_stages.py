@@ -6,7 +6,8 @@ import pytest
 
 from batched_harness import block_tables, compare_stage, crowd_system
 from magica_py.solver.batch_tables import borrow
-from magica_py.solver.step import predict_block, predict_team
+from magica_py.kernels.math3d import q_slerp
+from magica_py.solver.step import predict_block, predict_team, slerp_is_near, slerp_near
 
 DT = 1.0 / 90.0
 MOVE = 0x02
@@ -129,3 +130,31 @@ def test_predict_block_is_bit_identical_whichever_path_the_depth_inertia_slerp_t
         for n, v in saved.items():
             getattr(ts, n)[:] = v
         tt.frame_interpolation[:] = saved_t
+
+
+def test_slerp_near_gives_the_bits_of_q_slerp_on_its_lerp_path():
+    """slerp_near is q_slerp's lerp path alone: on random pairs within 3 degrees (either sign of
+    the second quaternion) and random t, the same bits, and slerp_is_near says so; pairs 5 to
+    90 degrees apart are not near."""
+    rng = np.random.default_rng(4)
+    near_pairs = far_pairs = 0
+    for _ in range(300):
+        q1 = _axis_angle(rng.normal(size=3), rng.uniform(-180, 180))
+        q1 = q1 * (1.0 if rng.random() < 0.5 else -1.0)
+        for degrees, near in ((rng.uniform(0.0, 3.0), True), (rng.uniform(5.0, 90.0), False)):
+            dq = _axis_angle(rng.normal(size=3), degrees)
+            q2 = np.array([  # q1 * dq (Hamilton product, x y z w)
+                q1[3] * dq[0] + q1[0] * dq[3] + q1[1] * dq[2] - q1[2] * dq[1],
+                q1[3] * dq[1] - q1[0] * dq[2] + q1[1] * dq[3] + q1[2] * dq[0],
+                q1[3] * dq[2] + q1[0] * dq[1] - q1[1] * dq[0] + q1[2] * dq[3],
+                q1[3] * dq[3] - q1[0] * dq[0] - q1[1] * dq[1] - q1[2] * dq[2]])
+            q2 = q2 * (1.0 if rng.random() < 0.5 else -1.0)
+            a, b = tuple(q1), tuple(q2)
+            assert slerp_is_near(a, b) == near, (degrees, np.dot(q1, q2))
+            if near:
+                t = rng.uniform(0.0, 1.0)
+                assert slerp_near(a, b, t) == q_slerp(a, b, t)
+                near_pairs += 1
+            else:
+                far_pairs += 1
+    assert near_pairs == 300 and far_pairs == 300

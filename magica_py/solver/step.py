@@ -126,7 +126,8 @@ def predict_move(old_pos, velocity, depth, old_world_pos, inertia_vector, inerti
 @kernel
 def slerp_is_near(q1, q2):
     """True where ``q_slerp(q1, q2, t)`` takes its normalised-lerp path (the rotations within
-    about 3.6 degrees: no acos, no sines), for every t; NaN counts as near, as there."""
+    about 3.6 degrees: no acos, no sines), for every t; NaN counts as near, as there. Mirrors
+    q_slerp's test (kernels/math3d): the bit-identity tests of predict_block pin the two."""
     d = q_dot(q1, q2)
     if d < 0.0:
         d = -d
