@@ -296,3 +296,43 @@ def test_point_collision_block_skips_leading_slots_that_reach_no_lane(crowd):
                                                    m.team_particle_start[t] + m.team_particle_count[t]) for t in teams])
     assert single and several
     assert not touched[rows(single)].any() and touched[rows(several)].sum() >= 5, touched[rows(several)].sum()
+
+
+def _rotate_about_x(q, degrees):
+    """q * (rotation about X), rows of (x, y, z, w)."""
+    s, c = np.sin(np.radians(degrees) / 2.0), np.cos(np.radians(degrees) / 2.0)
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.stack([w * s + x * c, y * c + z * s, z * c - y * s, w * c - x * s], axis=1)
+
+
+def test_step_basic_pose_block_blends_with_either_slerp_path(crowd):
+    """The blend's slerp (rest shape towards the animated pose) skips its acos and sines for a
+    baseline entry whose lanes are all within 3.6 degrees of the animated pose, and takes both
+    paths otherwise: the animated rotation of every fourth hair lane turned 40 degrees, the
+    skirts left as they are; both kinds of entries occur, the result has the per-team bits."""
+    prm, ps, m = crowd.parameters, crowd.particles, crowd.model
+    saved_a, saved_rot = prm.animation_pose_ratio.copy(), ps.base_rot.copy()
+    try:
+        blk, _bs = block_tables(crowd)
+        prm.animation_pose_ratio[:] = 0.0  # the rest shape alone (no blend), to state the premise
+        _before, rest, _blk = compare(crowd, _basic_pose_teams, _basic_pose_blocks, BASIC_FIELDS)
+        hair = [t for t in blk.lane_team if m.team_particle_count[t] == 30]
+        for t in hair[::4]:
+            rows = slice(m.team_particle_start[t], m.team_particle_start[t] + m.team_particle_count[t])
+            ps.base_rot[rows] = _rotate_about_x(ps.base_rot[rows], 40.0)
+        dot = np.abs((rest["ps.step_basic_rot"] * ps.base_rot).sum(axis=1))
+        near_entries = far_entries = 0
+        for b in range(len(blk.block_width)):
+            w, base = int(blk.block_width[b]), int(blk.block_lane_base[b])
+            starts = np.array([m.team_particle_start[t] for t in blk.lane_team[base:base + w]])
+            for p in range(int(blk.block_particle_count[b])):
+                near = (dot[starts + p] >= 0.9995).all()
+                near_entries += near
+                far_entries += not near
+        assert near_entries > 10 and far_entries > 10, (near_entries, far_entries)
+        prm.animation_pose_ratio[:] = 0.5
+        before, after, _blk = compare(crowd, _basic_pose_teams, _basic_pose_blocks, BASIC_FIELDS)
+        assert ((after["ps.step_basic_rot"] != before["ps.step_basic_rot"]).any(axis=1)).sum() > 100
+    finally:
+        prm.animation_pose_ratio[:] = saved_a
+        ps.base_rot[:] = saved_rot

@@ -425,6 +425,13 @@ def basic_pose_blend(pos, rot, base_pos, base_rot, ratio):
 
 
 @kernel
+def basic_pose_blend_near(pos, rot, base_pos, base_rot, ratio):
+    """``basic_pose_blend`` where ``slerp_is_near(rot, base_rot)``: the same bits without the
+    slerp's acos and sines."""
+    return v_lerp(pos, base_pos, ratio), slerp_near(rot, base_rot, ratio)
+
+
+@kernel
 def step_basic_pose_team(m, ps, prm, ts, team):
     """D.2: rebuild the rest shape along each baseline and blend it to the animated pose."""
     a = prm.animation_pose_ratio[team]
@@ -498,8 +505,22 @@ def step_basic_pose_block(m, bs, prm, blk, b):
         if a > 1e-8:
             for e in range(e0, e1):
                 kv = np.uint64(row_base + (m.baseline_data[e] - p0) * width)
+                # the rest shape near the animated pose in every lane (the usual case): the
+                # blend's slerp on its lerp path, without its acos and sines (same bits)
+                far = 0
+                for i in range(width):  # read only: no stores to order
+                    k = kv + np.uint64(i)
+                    far += 0 if slerp_is_near(sload4(sbr, k, READ), sload4(base_rot, k, READ)) else 1
                 # streams: step_basic_pos 1-3 and step_basic_rot 4-7 updated in place
                 open_streams()
+                if far == 0:
+                    for i in range(width):
+                        k = kv + np.uint64(i)
+                        pos, rot = basic_pose_blend_near(sload3(sbp, k, 1), sload4(sbr, k, 4),
+                                                         sload3(base_pos, k, READ), sload4(base_rot, k, READ), a)
+                        sstore3(sbp, k, pos, 1)
+                        sstore4(sbr, k, rot, 4)
+                    continue
                 for i in range(width):
                     k = kv + np.uint64(i)
                     pos, rot = basic_pose_blend(sload3(sbp, k, 1), sload4(sbr, k, 4), sload3(base_pos, k, READ),
