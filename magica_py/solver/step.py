@@ -6,7 +6,9 @@ the stabilisation weights (C.3). ``predict_team`` is D.1, ``step_basic_pose_team
 ``end_step_team`` D.10. Each has a block form (``predict_block``, ``step_basic_pose_block``,
 ``end_step_block``: every lane of a block, lanes innermost, ``solver/batched``) calling the same
 branch-free per-element functions (``predict_move``, ``basic_pose_child``, ``end_step_velocity``, ...)
-so that both give the same bits.
+so that both give the same bits. Their lane loops load and store through ``kernels/streams``
+(no runtime overlap checks; each loop states its streams), and where every lane of a block
+takes a slerp's lerp path (``slerp_is_near``) they call ``slerp_near``, that path alone.
 """
 from __future__ import annotations
 
@@ -471,7 +473,8 @@ def step_basic_pose_block(m, bs, prm, blk, b):
     row_base = blk.block_row_base[b]
     p0 = m.team_particle_start[ex]
     init_scale = load3(m.team_init_scale, ex)
-    sbp, sbr, base_pos, base_rot, scale = bs.step_basic_pos, bs.step_basic_rot, bs.base_pos, bs.base_rot, bs.lane_scale_ratio
+    sbp, sbr, base_pos, base_rot = bs.step_basic_pos, bs.step_basic_rot, bs.base_pos, bs.base_rot
+    scale = bs.lane_scale_ratio
     b0 = m.team_baseline_start[ex]
     for bl in range(b0, b0 + m.team_baseline_count[ex]):
         e0 = m.baseline_start[bl]
