@@ -128,3 +128,17 @@ def test_the_parallel_frame_deals_every_unit_to_one_thread_by_load():
     costs += [int(m.team_particle_count[t]) * 3 for t in alone]
     assert int(blk.worker_load[:2].sum()) == sum(costs)
     assert abs(int(blk.worker_load[0]) - int(blk.worker_load[1])) <= max(costs)
+
+
+def test_block_widths_are_multiples_of_the_vector_width_where_the_count_allows():
+    from magica_py.solver.batched.blocks import LANE_ALIGN, block_widths
+    from magica_py.solver.batched.state import BLOCK_WIDTH
+
+    assert block_widths(100) == [52, 48]
+    assert block_widths(2) == [2] and block_widths(64) == [64]
+    for n in range(2, 400):
+        widths = block_widths(n)
+        assert sum(widths) == n and max(widths) <= BLOCK_WIDTH
+        assert len(widths) == -(-n // BLOCK_WIDTH)
+        assert all(w % LANE_ALIGN == 0 for w in widths[:-1])
+        assert widths[-1] % LANE_ALIGN == n % LANE_ALIGN

@@ -32,6 +32,7 @@ STEP_MODEL_FIELDS = ("depth", "baseline_local_position", "baseline_local_rotatio
 # parameters that name hierarchy nodes (per instance; read by the per-team frame stages only)
 PER_TEAM_PARAMETERS = ("anchor_transform", "culling_reference")
 MIN_LANES = 2
+LANE_ALIGN = 4   # doubles per vector register (LLVM prefers 256-bit vectors on this machine)
 
 
 def unsupported_reason(prm, team: int, collider_count: int) -> str | None:
@@ -74,6 +75,18 @@ def _team_signature(system, t: int) -> str | None:
     return h.hexdigest()
 
 
+def block_widths(n: int) -> list[int]:
+    """Widths of the blocks of a group of n teams: as few blocks as ``BLOCK_WIDTH`` allows,
+    of even widths that are multiples of ``LANE_ALIGN`` where the count allows (100 teams in
+    blocks of at most 32: 28 + 24 + 24 + 24, not 25 x 4): a lane loop's remainder runs
+    scalar, and 2 leftover lanes of 50 cost ~9 % of a step (measured)."""
+    n_blocks = math.ceil(n / BLOCK_WIDTH)
+    units, leftover = divmod(n, LANE_ALIGN)
+    widths = [LANE_ALIGN * (units // n_blocks + (1 if k < units % n_blocks else 0)) for k in range(n_blocks)]
+    widths[-1] += leftover
+    return [w for w in widths if w > 0]
+
+
 def form_blocks(system, enabled: bool = True):
     """(BlockTable, BlockState) for ``system``'s live teams."""
     team_total = len(system.models)
@@ -87,9 +100,10 @@ def form_blocks(system, enabled: bool = True):
     for teams in groups.values():
         if len(teams) < MIN_LANES:
             continue
-        n_blocks = math.ceil(len(teams) / BLOCK_WIDTH)
-        width = math.ceil(len(teams) / n_blocks)
-        chunks = [teams[i:i + width] for i in range(0, len(teams), width)]
+        chunks, start = [], 0
+        for width in block_widths(len(teams)):
+            chunks.append(teams[start:start + width])
+            start += width
         per_group.append([c for c in chunks if len(c) >= MIN_LANES])
     # groups interleaved (hair 0, skirt 0, hair 1, skirt 1, ...): the parallel frame hands
     # each thread a contiguous range of blocks, which then holds a share of every group
