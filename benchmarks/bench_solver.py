@@ -1,6 +1,7 @@
 """Solver benchmark: per-frame wall time by phase and particle-steps per second.
 
     python benchmarks/bench_solver.py [--frames N] [--scenes tail_orbit crowd ...] [--parallel] [--stages] [--no-batched]
+                                      [--set rigs.0.instances.count=200 ...]
 
 For each scene (``configs/<name>.yaml``): load, build the ``ClothSystem``, attach it to a
 ``Player`` (no recording sink), warm up (JIT from the cache, first frames), then time
@@ -21,12 +22,12 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 
 def bench(name: str, frames: int, warmup: int = 30, parallel: bool = False, stages: bool = False,
-          batched: bool = True) -> dict:
+          batched: bool = True, overrides: tuple = ()) -> dict:
     from magica_py.config import load_scene
     from magica_py.runtime.player import Player
     from magica_py.solver.system import ClothSystem
 
-    scene = load_scene(ROOT / "configs" / f"{name}.yaml")
+    scene = load_scene(ROOT / "configs" / f"{name}.yaml", overrides=list(overrides))
     player = Player.for_scene(scene)
     t0 = time.perf_counter()
     system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings,
@@ -65,9 +66,12 @@ def main(argv=None) -> int:
     ap.add_argument("--parallel", action="store_true", help="teams spread over numba threads")
     ap.add_argument("--stages", action="store_true", help="also time each stage kernel alone")
     ap.add_argument("--no-batched", action="store_true", help="every team alone (no blocks, solver/batched)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="scene override, as magica-py run --set (e.g. rigs.0.instances.count=200)")
     args = ap.parse_args(argv)
     for name in args.scenes:
-        r = bench(name, args.frames, parallel=args.parallel, stages=args.stages, batched=not args.no_batched)
+        r = bench(name, args.frames, parallel=args.parallel, stages=args.stages, batched=not args.no_batched,
+                  overrides=tuple(args.set))
         print(f"== {r['scene']}{' (parallel)' if args.parallel else ''}: {r['teams']} teams, {r['particles']} particles, "
               f"build {r['build_s']:.2f} s, warm-up {r['warmup_s']:.2f} s, {r['blocks']} blocks / {r['lanes']} lanes")
         print(f"   whole frame {r['frame_us']:9.1f} us   particle-steps/frame {r['steps_per_frame']:.0f}")
