@@ -18,13 +18,14 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    clamp_length, depth_mass, lerp, load3, load4, project_on_plane, q_angle, q_dot, q_from_to, q_mul,
-    q_normalize, q_rotate, q_slerp, q_to_angle_axis, saturate, store3, store4, v_add, v_cross,
+    clamp_length, depth_mass, load3, load4, project_on_plane, q_dot, q_mul,
+    q_normalize, q_rotate, q_slerp, saturate, store3, store4, v_add, v_cross,
     v_dot, v_length, v_length_sq, v_lerp, v_mul, v_normalize, v_scale, v_sub,
 )
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
 from magica_py.solver.batched.transfer import bload3, bload4, bstore3, bstore4
 from magica_py.solver.parameters import curve_at_clamp01, step_keep, step_rate
+from magica_py.solver.team_step import team_step_values
 
 MOVE = 0x02
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -36,64 +37,36 @@ CENTRIFUGAL_SCALE = 0.02
 
 @kernel
 def team_step_update(m, ts, prm, frame_interpolation, team, dt):
-    """C.3 for one team at the start of a step."""
-    t = frame_interpolation
+    """C.3 for one team at the start of a step (the maths: ``team_step.team_step_values``, also
+    run by the block form ``team_step.team_step_block``)."""
     old_pos = load3(ts.now_world_pos, team)
     old_rot = load4(ts.now_world_rot, team)
     store3(ts.old_world_pos, team, old_pos)
     store4(ts.old_world_rot, team, old_rot)
-    now_pos = v_lerp(load3(ts.old_frame_world_pos, team), load3(ts.frame_world_pos, team), t)
-    now_rot = q_normalize(q_slerp(load4(ts.old_frame_world_rot, team), load4(ts.frame_world_rot, team), t))
-    scale = v_lerp(load3(ts.old_frame_world_scale, team), load3(ts.frame_world_scale, team), t)
+    (now_pos, now_rot, step_vector, step_rotation, mv, rv, inertia_vector, inertia_rotation, w, axis,
+     scale_ratio, gravity_dot, gravity_ratio, velocity_weight, blend_weight) = team_step_values(
+        old_pos, old_rot, load3(ts.old_frame_world_pos, team), load3(ts.frame_world_pos, team),
+        load4(ts.old_frame_world_rot, team), load4(ts.frame_world_rot, team),
+        load3(ts.old_frame_world_scale, team), load3(ts.frame_world_scale, team), frame_interpolation, dt,
+        prm.local_inertia[team], prm.local_movement_speed_limit[team], prm.local_rotation_speed_limit[team],
+        v_length(load3(m.team_init_scale, team)), load3(prm.gravity_direction, team),
+        load3(m.team_init_local_gravity, team), prm.gravity[team], prm.gravity_falloff[team],
+        prm.stabilization_time[team], ts.velocity_weight[team], prm.blend_weight[team], ts.distance_weight[team])
     store3(ts.now_world_pos, team, now_pos)
     store4(ts.now_world_rot, team, now_rot)
-    step_vector = v_sub(now_pos, old_pos)
-    step_rotation = q_from_to(old_rot, now_rot)
-    step_angle = q_angle(old_rot, now_rot)
     store3(ts.step_vector, team, step_vector)
     store4(ts.step_rotation, team, step_rotation)
-    # local inertia: m of the step motion is removed rigidly
-    li = prm.local_inertia[team]
-    mv = 1.0 - li
-    rv = 1.0 - li
-    limit = prm.local_movement_speed_limit[team]
-    felt = v_length(step_vector) * (1.0 - mv) / dt
-    if limit >= 0.0 and felt > limit:
-        mv = lerp(1.0, mv, limit / felt)
-    limit = prm.local_rotation_speed_limit[team]
-    felt = math.degrees(step_angle * (1.0 - rv) / dt)
-    if limit >= 0.0 and felt > limit:
-        rv = lerp(1.0, rv, limit / felt)
     ts.step_move_inertia_ratio[team] = mv
     ts.step_rotation_inertia_ratio[team] = rv
-    store3(ts.inertia_vector, team, v_scale(step_vector, mv))
-    store4(ts.inertia_rotation, team, q_slerp(IDENTITY, step_rotation, rv))
-    # centrifugal helpers
-    w = step_angle / dt
+    store3(ts.inertia_vector, team, inertia_vector)
+    store4(ts.inertia_rotation, team, inertia_rotation)
     ts.angular_velocity[team] = w
-    axis = (0.0, 0.0, 0.0)
-    if w > 1e-8:
-        _angle, axis = q_to_angle_axis(step_rotation)
     store3(ts.rotation_axis, team, axis)
-    init_scale = v_length(load3(m.team_init_scale, team))
-    ts.scale_ratio[team] = max(v_length(scale) / init_scale if init_scale > 0.0 else 1.0, 1e-6)
-    # gravity falloff
-    g = load3(prm.gravity_direction, team)
-    gravity_dot = 1.0
-    if v_length_sq(g) > 1e-8:
-        f = q_rotate(now_rot, load3(m.team_init_local_gravity, team))
-        gravity_dot = saturate(v_dot(f, g) * 0.5 + 0.5)
+    ts.scale_ratio[team] = scale_ratio
     ts.gravity_dot[team] = gravity_dot
-    ratio = 1.0
-    falloff = prm.gravity_falloff[team]
-    if prm.gravity[team] > 1e-6 and falloff > 1e-6:
-        ratio = lerp(saturate(1.0 - falloff), 1.0, saturate(1.0 - gravity_dot))
-    ts.gravity_ratio[team] = ratio
-    # stabilisation after a reset, then the blend weight
-    if ts.velocity_weight[team] < 1.0:
-        stab = prm.stabilization_time[team]
-        ts.velocity_weight[team] = saturate(ts.velocity_weight[team] + (dt / stab if stab > 1e-6 else 1.0))
-    ts.blend_weight[team] = saturate(ts.velocity_weight[team] * prm.blend_weight[team] * ts.distance_weight[team])
+    ts.gravity_ratio[team] = gravity_ratio
+    ts.velocity_weight[team] = velocity_weight
+    ts.blend_weight[team] = blend_weight
 
 
 @kernel

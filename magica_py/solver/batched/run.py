@@ -1,15 +1,15 @@
 """The block step: ``run_step`` of ``solver/frame.py`` for every lane of a block at once.
 
-The per-team parts of a step (C.3 team update, G.3 collider poses, the collider end of step)
-stay per lane; the particle stages run in block form, in ``run_step``'s order with the same
+The per-team parts of a step run for all lanes at once too (C.3 ``team_step.team_step_block``,
+G.3 ``colliders.collider_step_block``: copy-in, lane loop, copy-out; the collider end of step
+stays per lane, copies only); the particle stages run in block form, in ``run_step``'s order with the same
 arguments (``attenuations.step_attenuations`` of the exemplar's parameter row, equal in every
 lane by formation).
 """
 from __future__ import annotations
 
 from magica_py.jit import kernel
-from magica_py.solver.batched.transfer import load_lanes
-from magica_py.solver.colliders import collider_end_step_team, collider_step_team
+from magica_py.solver.colliders import collider_end_step_team, collider_step_block
 from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.constraints.angle import angle_block
 from magica_py.solver.constraints.bending import apply_accumulated_block, bending_block
@@ -17,7 +17,8 @@ from magica_py.solver.constraints.collision import point_collision_block
 from magica_py.solver.constraints.distance import distance_block
 from magica_py.solver.constraints.motion import motion_block
 from magica_py.solver.constraints.tether import tether_block
-from magica_py.solver.step import end_step_block, predict_block, step_basic_pose_block, team_step_update
+from magica_py.solver.step import end_step_block, predict_block, step_basic_pose_block
+from magica_py.solver.team_step import team_step_block
 
 
 @kernel
@@ -53,12 +54,10 @@ def run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi):
     width = blk.block_width[b]
     tether_attenuation, distance_attenuation, limit_attenuation, restoration_attenuation, motion_attenuation = \
         step_attenuations(prm, ex, ratio)
-    for i in range(width):
-        t = blk.lane_team[lanes + i]
-        frac = tt.frame_interpolation[t]
-        team_step_update(m, ts, prm, frac, t, dt)
-        collider_step_team(cs, ts, t, frac)
-    load_lanes(blk, bs, ts, tt, cs, b)
+    # C.3 and G.3 of every lane, lanes innermost; they fill the lane arrays (load_lanes' values)
+    team_step_block(m, prm, ts, tt, blk, bs, b, dt)
+    if blk.block_collider_count[b] > 0:
+        collider_step_block(cs, ts, blk, bs, b)
     predict_block(m, bs, prm, blk, b, dt, ratio, fi.power_z)
     step_basic_pose_block(m, bs, prm, blk, b)
     tether_block(m, bs, prm, blk, b, tether_attenuation)

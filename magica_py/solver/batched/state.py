@@ -100,6 +100,11 @@ LANE_FIELDS = [
     ("step_rotation", 4, F64), ("velocity_weight", 0, F64), ("gravity_ratio", 0, F64),
     ("gravity_dot", 0, F64), ("scale_ratio", 0, F64), ("external_force_mode", 0, I32),
     ("external_force", 3, F64), ("angular_velocity", 0, F64), ("rotation_axis", 3, F64),
+    # C.3 in lane form (``solver/team_step.team_step_block``): its other inputs and results
+    ("now_world_rot", 4, F64), ("old_frame_world_pos", 3, F64), ("frame_world_pos", 3, F64),
+    ("old_frame_world_rot", 4, F64), ("frame_world_rot", 4, F64), ("old_frame_world_scale", 3, F64),
+    ("frame_world_scale", 3, F64), ("distance_weight", 0, F64), ("step_move_inertia_ratio", 0, F64),
+    ("step_rotation_inertia_ratio", 0, F64), ("blend_weight", 0, F64),
 ]
 # ColliderState values of each lane's collider slots at the current step
 COLLIDER_FIELDS = [
@@ -107,6 +112,10 @@ COLLIDER_FIELDS = [
     ("start_new", 3, F64), ("end_new", 3, F64), ("radius_start", 0, F64), ("radius_end", 0, F64),
     ("plane_normal", 3, F64), ("inverse_old_rot", 4, F64), ("now_rot", 4, F64),
     ("aabb_min", 3, F64), ("aabb_max", 3, F64),
+    # G.3 in lane form (``colliders.collider_step_block``): its other inputs and results
+    ("old_frame_pos", 3, F64), ("frame_pos", 3, F64), ("old_frame_rot", 4, F64), ("frame_rot", 4, F64),
+    ("old_pos", 3, F64), ("old_rot", 4, F64), ("now_pos", 3, F64),
+    ("axis_scale", 0, F64),
 ]
 
 BlockState = namedtuple("BlockState",
