@@ -103,7 +103,7 @@ def capsule_ends(pos, rot, direction, reverse, aligned, size, s):
     return (v_add(pos, q_rotate(rot, v_scale(axis, a))), v_sub(pos, q_rotate(rot, v_scale(axis, b))), rs, re)
 
 
-@kernel
+@kernel(inline="always")  # numba-level: too big for LLVM's inliner, and a call stops vectorisation
 def collider_step_pose(old_frame_pos, frame_pos, old_frame_rot, frame_rot, old_pos, old_rot, t, mv, rv):
     """G.3 pose of one slot, branch-free: (now_pos, now_rot, old_pos, old_rot, inverse old_rot)
     at frame interpolation t, the old pose pulled towards the new one by the team's local
@@ -346,7 +346,7 @@ def collider_step_lanes(cs, ts, blk, bs, b):
                            reverse, aligned, size)
 
 
-@kernel
+@kernel(inline="always")
 def _slot_lane(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
                old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a, start_new_a,
                end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio, rotation_ratio, k, L,

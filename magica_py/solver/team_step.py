@@ -77,7 +77,7 @@ def rotation_axis_select(q):
 
 
 # ----------------------------------------------------------------------------- per element
-@kernel
+@kernel(inline="always")  # numba-level: too big for LLVM's inliner, and a call stops vectorisation
 def team_step_values(old_pos, old_rot, old_frame_pos, frame_pos, old_frame_rot, frame_rot, old_frame_scale,
                      frame_scale, t, dt, local_inertia, move_limit, rotation_limit, init_scale_length,
                      gravity_direction, init_local_gravity, gravity, gravity_falloff, stabilization_time,
