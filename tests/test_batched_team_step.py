@@ -1,6 +1,7 @@
 """The block step's C.3 team update and G.3 collider poses in lane form
 (``team_step.team_step_block``, ``colliders.collider_step_block``) give exactly the bits of the
-per-team functions (``step.team_step_update``, ``colliders.collider_step_team``) on every
+per-team functions (``step.team_step_update``, ``colliders.collider_step_team`` and, folded in,
+``collider_end_step_team``) on every
 TeamState / ColliderState field and on the lane arrays ``transfer.load_lanes`` fills, with
 lanes on both sides of each of C.3's branches."""
 import math
@@ -14,7 +15,7 @@ from magica_py.kernels.math3d import q_angle, q_slerp, q_to_angle_axis
 from magica_py.solver.batch_tables import borrow
 from magica_py.solver.batched.state import COLLIDER_FIELDS, LANE_FIELDS, allocate_block_state
 from magica_py.solver.batched.transfer import load_lanes
-from magica_py.solver.colliders import collider_step_block, collider_step_team
+from magica_py.solver.colliders import collider_end_step_team, collider_step_block, collider_step_team
 from magica_py.solver.frame import as_kernel_table
 from magica_py.solver.step import team_step_update
 from magica_py.solver.team_step import q_angle_select, rotation_axis_select, slerp_select, team_step_block
@@ -32,6 +33,13 @@ def _team_steps(m, prm, ts, cs, tt, teams, dt):
         frac = tt.frame_interpolation[t]
         team_step_update(m, ts, prm, frac, t, dt)
         collider_step_team(cs, ts, t, frac)
+
+
+@numba.njit
+def _collider_end_steps(cs, ts, teams):
+    cs, ts = borrow(cs), borrow(ts)
+    for t in teams:
+        collider_end_step_team(cs, ts, t)
 
 
 @numba.njit
@@ -101,9 +109,11 @@ def test_team_and_collider_step_in_lane_form_are_bit_identical(crowd):
     vw_before = system.teams.velocity_weight[teams].copy()
 
     _team_steps(m, prm, ts, cs, tt, teams, DT)
-    expected = snapshot(system)
     expected_lanes = _fresh_lanes(blk)
     _load_all(ts, cs, tt, kb, as_kernel_table(expected_lanes))
+    # the block form leaves the slots as the step's end does (old pose = now pose)
+    _collider_end_steps(cs, ts, teams)
+    expected = snapshot(system)
 
     restore(system, before)
     lanes = _fresh_lanes(blk)

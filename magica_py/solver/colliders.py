@@ -260,7 +260,10 @@ def collider_step_copy_in(cs, ts, blk, bs, b):
 
 @kernel
 def collider_step_copy_out(cs, ts, blk, bs, b):
-    """The slot fields G.3 writes, from the lane-collider arrays back to each lane's slots."""
+    """The slot fields G.3 writes, from the lane-collider arrays back to each lane's slots, with
+    the end of step (``collider_end_step_team``: old pose = now pose) folded in: nothing reads a
+    slot's old pose from ColliderState during a block step (the block stages read ``bs.col_*``),
+    so it is stored once, as the step leaves it."""
     width = blk.block_width[b]
     lanes = blk.block_lane_base[b]
     cbase = blk.block_collider_base[b]
@@ -272,8 +275,8 @@ def collider_step_copy_out(cs, ts, blk, bs, b):
             k = cbase + j * width + i
             _out3(cs.now_pos, s, bs.col_now_pos, k)
             _out4(cs.now_rot, s, bs.col_now_rot, k)
-            _out3(cs.old_pos, s, bs.col_old_pos, k)
-            _out4(cs.old_rot, s, bs.col_old_rot, k)
+            _out3(cs.old_pos, s, bs.col_now_pos, k)
+            _out4(cs.old_rot, s, bs.col_now_rot, k)
             _out4(cs.inverse_old_rot, s, bs.col_inverse_old_rot, k)
             _out3(cs.start_old, s, bs.col_start_old, k)
             _out3(cs.start_new, s, bs.col_start_new, k)
@@ -396,7 +399,8 @@ def _slot_lane(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_p
 def collider_step_block(cs, ts, blk, bs, b):
     """G.3 of every lane of block b (``collider_step_team`` for each lane's team, the same
     bits), after the block's C.3 (``team_step.team_step_block``): slots written as there and
-    this step's lane-collider values (``bs.col_*``) filled."""
+    this step's lane-collider values (``bs.col_*``) filled. The slots' old pose is left as the
+    step's end leaves it (``collider_end_step_team`` included: the block step does not call it)."""
     collider_step_copy_in(cs, ts, blk, bs, b)
     collider_step_lanes(cs, ts, blk, bs, b)
     collider_step_copy_out(cs, ts, blk, bs, b)

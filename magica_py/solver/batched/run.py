@@ -1,15 +1,15 @@
 """The block step: ``run_step`` of ``solver/frame.py`` for every lane of a block at once.
 
 The per-team parts of a step run for all lanes at once too (C.3 ``team_step.team_step_block``,
-G.3 ``colliders.collider_step_block``: copy-in, lane loop, copy-out; the collider end of step
-stays per lane, copies only); the particle stages run in block form, in ``run_step``'s order with the same
+G.3 ``colliders.collider_step_block``: copy-in, lane loop, copy-out, the collider end of step
+folded into the copy-out); the particle stages run in block form, in ``run_step``'s order with the same
 arguments (``attenuations.step_attenuations`` of the exemplar's parameter row, equal in every
 lane by formation).
 """
 from __future__ import annotations
 
 from magica_py.jit import kernel
-from magica_py.solver.colliders import collider_end_step_team, collider_step_block
+from magica_py.solver.colliders import collider_step_block
 from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.constraints.angle import angle_block
 from magica_py.solver.constraints.bending import apply_accumulated_block, bending_block
@@ -50,8 +50,6 @@ def run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi):
     dt = fi.dt
     ratio = fi.frequency_ratio
     ex = blk.block_exemplar[b]
-    lanes = blk.block_lane_base[b]
-    width = blk.block_width[b]
     tether_attenuation, distance_attenuation, limit_attenuation, restoration_attenuation, motion_attenuation = \
         step_attenuations(prm, ex, ratio)
     # C.3 and G.3 of every lane, lanes innermost; they fill the lane arrays (load_lanes' values)
@@ -71,5 +69,4 @@ def run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi):
     distance_block(m, bs, prm, blk, b, ratio, fi.power_y, distance_attenuation)
     motion_block(m, bs, prm, blk, b, motion_attenuation)
     end_step_block(m, bs, prm, blk, b, dt, ratio)
-    for i in range(width):
-        collider_end_step_team(cs, ts, blk.lane_team[lanes + i])
+    # the colliders' end of step (old pose = now pose) is done by collider_step_block's copy-out
