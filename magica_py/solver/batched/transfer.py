@@ -188,7 +188,10 @@ def _lane4(dst, src, lane, t):
 
 @kernel
 def load_lanes(blk, bs, ts, tt, cs, b):
-    """This step's team values (after C.3) and collider slots (after G.3) of every lane."""
+    """This step's team values (after C.3) and collider slots (after G.3) of every lane, from the
+    team rows. The block step no longer calls it (``team_step.team_step_block`` and
+    ``colliders.collider_step_block`` fill these lane arrays as they compute them); the stage
+    tests (``tests/batched_harness``) and ``benchmarks/bench_blocks`` load lanes with it."""
     width = blk.block_width[b]
     lanes = blk.block_lane_base[b]
     colliders = blk.block_collider_count[b]
