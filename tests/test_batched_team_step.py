@@ -74,6 +74,7 @@ def crowd():
     prm.local_rotation_speed_limit[:] = 60.0     # deg/s
     prm.gravity_falloff[:] = 0.5
     prm.stabilization_time[:] = 0.25
+    system._pristine_for_tests = snapshot(system)
     return system
 
 
@@ -98,10 +99,25 @@ def _shape_lanes(system, blk):
             ts.velocity_weight[t] = 0.3 + 0.01 * n
 
 
-def test_team_and_collider_step_in_lane_form_are_bit_identical(crowd):
+def _all_near(a, b):
+    """Per row: q_slerp(a, b, t) takes its lerp path (step.slerp_is_near)."""
+    return ~(np.abs(np.sum(a * b, axis=1)) < 0.9995)
+
+
+@pytest.mark.parametrize("shaped", [False, True], ids=["as_simulated", "lanes_on_every_path"])
+def test_team_and_collider_step_in_lane_form_are_bit_identical(crowd, shaped):
     system = crowd
+    restore(system, system._pristine_for_tests)
     blk, _ = block_tables(system)
-    _shape_lanes(system, blk)
+    if shaped:
+        _shape_lanes(system, blk)
+    else:
+        # as simulated, whole blocks have every slerp near (the lane loops' LANES_NEAR form)
+        ts, cs = system.teams, system.collider_state
+        b0 = np.asarray(blk.lane_team[blk.block_lane_base[0]:blk.block_lane_base[0] + blk.block_width[0]])
+        assert _all_near(ts.old_frame_world_rot[b0], ts.frame_world_rot[b0]).all()
+        slots = ts.collider_start[b0]
+        assert _all_near(cs.old_frame_rot[slots], cs.frame_rot[slots]).all()
     m, _ps, prm, ts, cs, tt, _h = system.kernel_tables()
     kb = as_kernel_table(blk)
     teams = blk.lane_team.copy()
@@ -132,6 +148,8 @@ def test_team_and_collider_step_in_lane_form_are_bit_identical(crowd):
         a, b = getattr(lanes, "col_" + name)[..., slots], getattr(expected_lanes, "col_" + name)[..., slots]
         assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), f"col_{name} differs"
 
+    if not shaped:
+        return
     # both sides of each branch occurred (from the per-team results)
     e_mv = expected["ts.step_move_inertia_ratio"][teams]
     e_rv = expected["ts.step_rotation_inertia_ratio"][teams]

@@ -15,7 +15,7 @@ from magica_py.kernels.math3d import (
     load3, load4, q_inverse, q_mul, q_normalize, q_rotate, shift_position, store3,
     store4, v_add, v_lerp, v_scale, v_sub,
 )
-from magica_py.solver.team_step import slerp_select
+from magica_py.solver.team_step import LANES, LANES_NEAR, SCALAR, slerp_in_mode, slerp_is_near, slerp_lerp_path
 
 SPHERE = 0
 CAPSULE = 1
@@ -104,14 +104,15 @@ def capsule_ends(pos, rot, direction, reverse, aligned, size, s):
 
 
 @kernel(inline="always")  # numba-level: too big for LLVM's inliner, and a call stops vectorisation
-def collider_step_pose(old_frame_pos, frame_pos, old_frame_rot, frame_rot, old_pos, old_rot, t, mv, rv):
-    """G.3 pose of one slot, branch-free: (now_pos, now_rot, old_pos, old_rot, inverse old_rot)
-    at frame interpolation t, the old pose pulled towards the new one by the team's local
-    inertia ratios (mv, rv: ``step_move/rotation_inertia_ratio``)."""
+def collider_step_pose(old_frame_pos, frame_pos, old_frame_rot, frame_rot, old_pos, old_rot, t, mv, rv, mode):
+    """G.3 pose of one slot: (now_pos, now_rot, old_pos, old_rot, inverse old_rot) at frame
+    interpolation t, the old pose pulled towards the new one by the team's local inertia ratios
+    (mv, rv: ``step_move/rotation_inertia_ratio``). ``mode`` (a literal) as in
+    ``team_step``: SCALAR per team, LANES branch-free, LANES_NEAR where both slerps are near."""
     now_pos = v_lerp(old_frame_pos, frame_pos, t)
-    now_rot = q_normalize(slerp_select(old_frame_rot, frame_rot, t))
+    now_rot = q_normalize(slerp_in_mode(old_frame_rot, frame_rot, t, mode))
     old_pos = v_lerp(old_pos, now_pos, mv)
-    old_rot = q_normalize(slerp_select(old_rot, now_rot, rv))
+    old_rot = q_normalize(slerp_in_mode(old_rot, now_rot, rv, mode))
     return now_pos, now_rot, old_pos, old_rot, q_inverse(old_rot)
 
 
@@ -144,7 +145,7 @@ def collider_step_team(cs, ts, team, frame_interpolation):
     for k in range(c0, c0 + ts.collider_count[team]):
         now_pos, now_rot, old_pos, old_rot, inverse_old_rot = collider_step_pose(
             load3(cs.old_frame_pos, k), load3(cs.frame_pos, k), load4(cs.old_frame_rot, k), load4(cs.frame_rot, k),
-            load3(cs.old_pos, k), load4(cs.old_rot, k), t, mv, rv)
+            load3(cs.old_pos, k), load4(cs.old_rot, k), t, mv, rv, SCALAR)
         store3(cs.now_pos, k, now_pos)
         store4(cs.now_rot, k, now_rot)
         store3(cs.old_pos, k, old_pos)
@@ -323,43 +324,82 @@ def collider_step_lanes(cs, ts, blk, bs, b):
         reverse = cs.reverse_direction[e] != 0
         aligned = cs.aligned_on_center[e] != 0
         size = (cs.size[e, 0], cs.size[e, 1], cs.size[e, 2])
+        geometry = (direction, reverse, aligned, size)
         k0 = np.uint64(cbase + j * width)
-        # one lane loop per shape (the shape constant in each: its branches fold away)
+        # every lane's slerps near (the usual case): their lerp path alone; the second slerp's
+        # target is the first's result (read only, no stores)
+        far = 0
+        for i in range(width):
+            k = k0 + np.uint64(i)
+            far += 0 if slerp_is_near(sload4(old_frame_rot_a, k, READ), sload4(frame_rot_a, k, READ)) else 1
+        if far == 0:
+            for i in range(width):
+                k = k0 + np.uint64(i)
+                now_rot = q_normalize(slerp_lerp_path(sload4(old_frame_rot_a, k, READ), sload4(frame_rot_a, k, READ),
+                                                      sload(interpolation, lanes + np.uint64(i), READ)))
+                far += 0 if slerp_is_near(sload4(old_rot_a, k, READ), now_rot) else 1
+        # one lane loop per (shape, mode), both constant in each: their branches fold away
         open_streams()
-        if shape == SPHERE:
-            for i in range(width):
-                _slot_lane(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a,
-                           old_pos_a, old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a,
-                           end_old_a, start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation,
-                           move_ratio, rotation_ratio, k0 + np.uint64(i), lanes + np.uint64(i), SPHERE, direction,
-                           reverse, aligned, size)
+        if shape == SPHERE and far == 0:
+            _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
+                       old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
+                       start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
+                       rotation_ratio, k0, lanes, width, SPHERE, LANES_NEAR, geometry)
+        elif shape == SPHERE:
+            _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
+                       old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
+                       start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
+                       rotation_ratio, k0, lanes, width, SPHERE, LANES, geometry)
+        elif shape == CAPSULE and far == 0:
+            _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
+                       old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
+                       start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
+                       rotation_ratio, k0, lanes, width, CAPSULE, LANES_NEAR, geometry)
         elif shape == CAPSULE:
-            for i in range(width):
-                _slot_lane(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a,
-                           old_pos_a, old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a,
-                           end_old_a, start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation,
-                           move_ratio, rotation_ratio, k0 + np.uint64(i), lanes + np.uint64(i), CAPSULE, direction,
-                           reverse, aligned, size)
+            _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
+                       old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
+                       start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
+                       rotation_ratio, k0, lanes, width, CAPSULE, LANES, geometry)
+        elif far == 0:
+            _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
+                       old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
+                       start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
+                       rotation_ratio, k0, lanes, width, PLANE, LANES_NEAR, geometry)
         else:
-            for i in range(width):
-                _slot_lane(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a,
-                           old_pos_a, old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a,
-                           end_old_a, start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation,
-                           move_ratio, rotation_ratio, k0 + np.uint64(i), lanes + np.uint64(i), PLANE, direction,
-                           reverse, aligned, size)
+            _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
+                       old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
+                       start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
+                       rotation_ratio, k0, lanes, width, PLANE, LANES, geometry)
+
+
+@kernel(inline="always")
+def _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
+               old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a, start_new_a,
+               end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio, rotation_ratio, k0,
+               lanes, width, shape, mode, geometry):
+    """``collider_step_lanes``' lane loop of one slot (rows k0 + i, lanes + i); ``shape`` and
+    ``mode`` are literals. (Calls keep to 30 arguments: above that CPython passes them as
+    *args, which numba's inliner refuses.)"""
+    for i in range(width):
+        _slot_lane(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
+                   old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
+                   start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
+                   rotation_ratio, k0 + np.uint64(i), lanes + np.uint64(i), shape, geometry, mode)
 
 
 @kernel(inline="always")
 def _slot_lane(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
                old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a, start_new_a,
                end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio, rotation_ratio, k, L,
-               shape, direction, reverse, aligned, size):
+               shape, geometry, mode):
     """``collider_step_team``'s slot body on lane-collider row k, lane L (streams: see
-    ``collider_step_lanes``); ``shape`` is constant at each call site."""
+    ``collider_step_lanes``); ``shape`` and ``mode`` are constant at each call site, ``geometry``
+    the slot's (direction, reverse, aligned, size)."""
+    direction, reverse, aligned, size = geometry
     now_pos, now_rot, old_pos, old_rot, inverse_old_rot = collider_step_pose(
         sload3(old_frame_pos_a, k, READ), sload3(frame_pos_a, k, READ), sload4(old_frame_rot_a, k, READ),
         sload4(frame_rot_a, k, READ), sload3(old_pos_a, k, 8), sload4(old_rot_a, k, 11),
-        sload(interpolation, L, READ), sload(move_ratio, L, READ), sload(rotation_ratio, L, READ))
+        sload(interpolation, L, READ), sload(move_ratio, L, READ), sload(rotation_ratio, L, READ), mode)
     sstore3(now_pos_a, k, now_pos, 1)
     sstore4(now_rot_a, k, now_rot, 4)
     sstore3(old_pos_a, k, old_pos, 8)

@@ -25,7 +25,7 @@ from magica_py.kernels.math3d import (
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
 from magica_py.solver.batched.transfer import bload3, bload4, bstore3, bstore4
 from magica_py.solver.parameters import curve_at_clamp01, step_keep, step_rate
-from magica_py.solver.team_step import team_step_values
+from magica_py.solver.team_step import SCALAR, team_step_values
 
 MOVE = 0x02
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -51,7 +51,8 @@ def team_step_update(m, ts, prm, frame_interpolation, team, dt):
         prm.local_inertia[team], prm.local_movement_speed_limit[team], prm.local_rotation_speed_limit[team],
         v_length(load3(m.team_init_scale, team)), load3(prm.gravity_direction, team),
         load3(m.team_init_local_gravity, team), prm.gravity[team], prm.gravity_falloff[team],
-        prm.stabilization_time[team], ts.velocity_weight[team], prm.blend_weight[team], ts.distance_weight[team])
+        prm.stabilization_time[team], ts.velocity_weight[team], prm.blend_weight[team], ts.distance_weight[team],
+        SCALAR)
     store3(ts.now_world_pos, team, now_pos)
     store4(ts.now_world_rot, team, now_rot)
     store3(ts.step_vector, team, step_vector)

@@ -21,7 +21,7 @@ import numpy as np
 from magica_py.jit import kernel
 from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
-    lerp, q_dot, q_from_to, q_normalize, q_rotate, saturate, v_dot, v_length, v_length_sq, v_lerp, v_scale,
+    lerp, q_angle, q_dot, q_from_to, q_normalize, q_rotate, q_slerp, q_to_angle_axis, saturate, v_dot, v_length, v_length_sq, v_lerp, v_scale,
     v_sub,
 )
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
@@ -29,7 +29,49 @@ from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4,
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
 
+# How the per-element functions take their slerps, angles and axes (a literal at each call
+# site, folded away once inlined): SCALAR with math3d's branches (per team: a branch skips the
+# trigonometry where the rotations are near), LANES branch-free (a lane loop: both paths
+# computed and selected), LANES_NEAR the slerps' lerp path alone (a lane loop whose lanes were
+# all found near beforehand, ``slerp_is_near``). All three give the same bits.
+SCALAR = 0
+LANES = 1
+LANES_NEAR = 2
+
+
 # ----------------------------------------------------------------------------- branch-free twins
+@kernel
+def slerp_is_near(q1, q2):
+    """True where ``q_slerp(q1, q2, t)`` takes its lerp path, for every t (NaN counts as near,
+    as there). The same test as ``step.slerp_is_near`` (not imported: step imports this module)."""
+    d = q_dot(q1, q2)
+    d = -d if d < 0.0 else d
+    return not d < 0.9995
+
+
+@kernel
+def slerp_lerp_path(q1, q2, t):
+    """``q_slerp(q1, q2, t)`` where ``slerp_is_near(q1, q2)``: its lerp path alone (same bits;
+    ``step.slerp_near``'s twin, see above)."""
+    b = (-q2[0], -q2[1], -q2[2], -q2[3]) if q_dot(q1, q2) < 0.0 else q2
+    return q_normalize((
+        q1[0] + (b[0] - q1[0]) * t,
+        q1[1] + (b[1] - q1[1]) * t,
+        q1[2] + (b[2] - q1[2]) * t,
+        q1[3] + (b[3] - q1[3]) * t,
+    ))
+
+
+@kernel(inline="always")
+def slerp_in_mode(q1, q2, t, mode):
+    """``q_slerp(q1, q2, t)`` the way ``mode`` (SCALAR, LANES, LANES_NEAR; a literal) asks."""
+    if mode == SCALAR:
+        return q_slerp(q1, q2, t)
+    if mode == LANES_NEAR:
+        return slerp_lerp_path(q1, q2, t)
+    return slerp_select(q1, q2, t)
+
+
 @kernel
 def slerp_select(q1, q2, t):
     """``q_slerp(q1, q2, t)`` with both its paths computed and the one it takes selected (the
@@ -81,8 +123,10 @@ def rotation_axis_select(q):
 def team_step_values(old_pos, old_rot, old_frame_pos, frame_pos, old_frame_rot, frame_rot, old_frame_scale,
                      frame_scale, t, dt, local_inertia, move_limit, rotation_limit, init_scale_length,
                      gravity_direction, init_local_gravity, gravity, gravity_falloff, stabilization_time,
-                     velocity_weight, blend_parameter, distance_weight):
-    """C.3 of one team, branch-free. Inputs: the center's pose at the previous step (old_pos,
+                     velocity_weight, blend_parameter, distance_weight, mode):
+    """C.3 of one team; branch-free but for ``mode`` SCALAR (see above: the same bits in every
+    mode; LANES_NEAR where both slerps, of the frame rotations and of the inertia rotation,
+    are near). Inputs: the center's pose at the previous step (old_pos,
     old_rot = TeamState now_world_pos/rot before the step), its frame poses and scales, the frame
     interpolation t, the step dt (s), the team's parameters, ``init_scale_length`` = |build
     scale|, velocity_weight before the step. Returns (now_pos, now_rot, step_vector,
@@ -90,11 +134,14 @@ def team_step_values(old_pos, old_rot, old_frame_pos, frame_pos, old_frame_rot, 
     angular_velocity (rad/s), rotation_axis, scale_ratio, gravity_dot, gravity_ratio,
     velocity_weight, blend_weight)."""
     now_pos = v_lerp(old_frame_pos, frame_pos, t)
-    now_rot = q_normalize(slerp_select(old_frame_rot, frame_rot, t))
+    now_rot = q_normalize(slerp_in_mode(old_frame_rot, frame_rot, t, mode))
     scale = v_lerp(old_frame_scale, frame_scale, t)
     step_vector = v_sub(now_pos, old_pos)
     step_rotation = q_from_to(old_rot, now_rot)
-    step_angle = q_angle_select(old_rot, now_rot)
+    if mode == SCALAR:
+        step_angle = q_angle(old_rot, now_rot)
+    else:
+        step_angle = q_angle_select(old_rot, now_rot)
     # local inertia: (1 - ratio) of the step motion is removed rigidly; over a speed limit the
     # felt speed is brought down to it
     mv = 1.0 - local_inertia
@@ -106,11 +153,16 @@ def team_step_values(old_pos, old_rot, old_frame_pos, frame_pos, old_frame_rot, 
     limited = lerp(1.0, rv, rotation_limit / felt)
     rv = limited if (rotation_limit >= 0.0 and felt > rotation_limit) else rv
     inertia_vector = v_scale(step_vector, mv)
-    inertia_rotation = slerp_select(IDENTITY, step_rotation, rv)
+    inertia_rotation = slerp_in_mode(IDENTITY, step_rotation, rv, mode)
     # centrifugal helpers
     w = step_angle / dt
-    turning_axis = rotation_axis_select(step_rotation)
-    axis = turning_axis if w > 1e-8 else (0.0, 0.0, 0.0)
+    if mode == SCALAR:
+        axis = (0.0, 0.0, 0.0)
+        if w > 1e-8:
+            _angle, axis = q_to_angle_axis(step_rotation)
+    else:
+        turning_axis = rotation_axis_select(step_rotation)
+        axis = turning_axis if w > 1e-8 else (0.0, 0.0, 0.0)
     ratio_of_scale = v_length(scale) / init_scale_length
     scale_ratio = max(ratio_of_scale if init_scale_length > 0.0 else 1.0, 1e-6)
     # gravity falloff
@@ -249,32 +301,73 @@ def team_step_lanes(m, prm, blk, bs, b, dt):
     scale_ratio_a, gravity_dot_a, gravity_ratio_a, velocity_weight_a, blend_weight_a, distance_weight_a = (
         bs.lane_scale_ratio, bs.lane_gravity_dot, bs.lane_gravity_ratio, bs.lane_velocity_weight,
         bs.lane_blend_weight, bs.lane_distance_weight)
-    open_streams()
-    for i in range(blk.block_width[b]):
+    width = blk.block_width[b]
+    # every lane's slerps near (the usual case: a step's rotations are small): their lerp path
+    # alone; the inertia slerp's rotation needs the frame slerp's result (read only, no stores)
+    far = 0
+    for i in range(width):
         L = lanes + np.uint64(i)
-        (now_pos, now_rot, step_vector, step_rotation, mv, rv, inertia_vector, inertia_rotation, w, axis,
-         scale_ratio, gravity_dot, gravity_ratio, velocity_weight, blend_weight) = team_step_values(
-            sload3(old_world_pos, L, READ), sload4(now_world_rot, L, 4), sload3(old_frame_pos, L, READ),
-            sload3(frame_pos, L, READ), sload4(old_frame_rot, L, READ), sload4(frame_rot, L, READ),
-            sload3(old_frame_scale, L, READ), sload3(frame_scale, L, READ), sload(interpolation, L, READ), dt,
-            local_inertia, move_limit, rotation_limit, init_scale_length, gravity_direction, init_local_gravity,
-            gravity, falloff, stabilization_time, sload(velocity_weight_a, L, 31), blend_parameter,
-            sload(distance_weight_a, L, READ))
-        sstore3(now_world_pos, L, now_pos, 1)
-        sstore4(now_world_rot, L, now_rot, 4)
-        sstore3(step_vector_a, L, step_vector, 8)
-        sstore4(step_rotation_a, L, step_rotation, 11)
-        sstore(move_ratio_a, L, mv, 15)
-        sstore(rotation_ratio_a, L, rv, 16)
-        sstore3(inertia_vector_a, L, inertia_vector, 17)
-        sstore4(inertia_rotation_a, L, inertia_rotation, 20)
-        sstore(angular_velocity_a, L, w, 24)
-        sstore3(axis_a, L, axis, 25)
-        sstore(scale_ratio_a, L, scale_ratio, 28)
-        sstore(gravity_dot_a, L, gravity_dot, 29)
-        sstore(gravity_ratio_a, L, gravity_ratio, 30)
-        sstore(velocity_weight_a, L, velocity_weight, 31)
-        sstore(blend_weight_a, L, blend_weight, 32)
+        far += 0 if slerp_is_near(sload4(old_frame_rot, L, READ), sload4(frame_rot, L, READ)) else 1
+    if far == 0:
+        for i in range(width):
+            L = lanes + np.uint64(i)
+            now_rot = q_normalize(slerp_lerp_path(sload4(old_frame_rot, L, READ), sload4(frame_rot, L, READ),
+                                                  sload(interpolation, L, READ)))
+            far += 0 if slerp_is_near(IDENTITY, q_from_to(sload4(now_world_rot, L, READ), now_rot)) else 1
+    # two copies of one lane loop (its mode a literal in each, folded away once inlined)
+    open_streams()
+    if far == 0:
+        for i in range(width):
+            L = lanes + np.uint64(i)
+            (now_pos, now_rot, step_vector, step_rotation, mv, rv, inertia_vector, inertia_rotation, w, axis,
+             scale_ratio, gravity_dot, gravity_ratio, velocity_weight, blend_weight) = team_step_values(
+                sload3(old_world_pos, L, READ), sload4(now_world_rot, L, 4), sload3(old_frame_pos, L, READ),
+                sload3(frame_pos, L, READ), sload4(old_frame_rot, L, READ), sload4(frame_rot, L, READ),
+                sload3(old_frame_scale, L, READ), sload3(frame_scale, L, READ), sload(interpolation, L, READ), dt,
+                local_inertia, move_limit, rotation_limit, init_scale_length, gravity_direction, init_local_gravity,
+                gravity, falloff, stabilization_time, sload(velocity_weight_a, L, 31), blend_parameter,
+                sload(distance_weight_a, L, READ), LANES_NEAR)
+            sstore3(now_world_pos, L, now_pos, 1)
+            sstore4(now_world_rot, L, now_rot, 4)
+            sstore3(step_vector_a, L, step_vector, 8)
+            sstore4(step_rotation_a, L, step_rotation, 11)
+            sstore(move_ratio_a, L, mv, 15)
+            sstore(rotation_ratio_a, L, rv, 16)
+            sstore3(inertia_vector_a, L, inertia_vector, 17)
+            sstore4(inertia_rotation_a, L, inertia_rotation, 20)
+            sstore(angular_velocity_a, L, w, 24)
+            sstore3(axis_a, L, axis, 25)
+            sstore(scale_ratio_a, L, scale_ratio, 28)
+            sstore(gravity_dot_a, L, gravity_dot, 29)
+            sstore(gravity_ratio_a, L, gravity_ratio, 30)
+            sstore(velocity_weight_a, L, velocity_weight, 31)
+            sstore(blend_weight_a, L, blend_weight, 32)
+    else:
+        for i in range(width):
+            L = lanes + np.uint64(i)
+            (now_pos, now_rot, step_vector, step_rotation, mv, rv, inertia_vector, inertia_rotation, w, axis,
+             scale_ratio, gravity_dot, gravity_ratio, velocity_weight, blend_weight) = team_step_values(
+                sload3(old_world_pos, L, READ), sload4(now_world_rot, L, 4), sload3(old_frame_pos, L, READ),
+                sload3(frame_pos, L, READ), sload4(old_frame_rot, L, READ), sload4(frame_rot, L, READ),
+                sload3(old_frame_scale, L, READ), sload3(frame_scale, L, READ), sload(interpolation, L, READ), dt,
+                local_inertia, move_limit, rotation_limit, init_scale_length, gravity_direction, init_local_gravity,
+                gravity, falloff, stabilization_time, sload(velocity_weight_a, L, 31), blend_parameter,
+                sload(distance_weight_a, L, READ), LANES)
+            sstore3(now_world_pos, L, now_pos, 1)
+            sstore4(now_world_rot, L, now_rot, 4)
+            sstore3(step_vector_a, L, step_vector, 8)
+            sstore4(step_rotation_a, L, step_rotation, 11)
+            sstore(move_ratio_a, L, mv, 15)
+            sstore(rotation_ratio_a, L, rv, 16)
+            sstore3(inertia_vector_a, L, inertia_vector, 17)
+            sstore4(inertia_rotation_a, L, inertia_rotation, 20)
+            sstore(angular_velocity_a, L, w, 24)
+            sstore3(axis_a, L, axis, 25)
+            sstore(scale_ratio_a, L, scale_ratio, 28)
+            sstore(gravity_dot_a, L, gravity_dot, 29)
+            sstore(gravity_ratio_a, L, gravity_ratio, 30)
+            sstore(velocity_weight_a, L, velocity_weight, 31)
+            sstore(blend_weight_a, L, blend_weight, 32)
 
 
 @kernel
