@@ -1,14 +1,18 @@
-"""C.3, the team update at the start of a step (ref §C.3), as one branch-free per-element
-function, and its block form (every lane of a block at once, ``solver/batched``).
+"""C.3, the team update at the start of a step (ref §C.3), as one per-element function, and
+its block form (every lane of a block at once, ``solver/batched``).
 
-``team_step_values`` is the maths of ``step.team_step_update`` with every branch computed on
-both sides and selected: the per-team path (``team_step_update``) and the block path
-(``team_step_block``) call it, so both give the same bits, and a lane loop over it vectorises.
-The slerp / angle helpers below are branch-free twins of ``kernels/math3d``'s (``q_slerp``,
-``q_angle``, ``q_to_angle_axis``): the same operations on the path those take, then a select.
+``team_step_values`` is the maths of ``step.team_step_update``; the per-team path
+(``team_step_update``) and the block path (``team_step_block``) both call it, so both give
+the same bits. A literal ``mode`` picks how it takes its slerps, angle and axis: SCALAR with
+``kernels/math3d``'s branches (per team, the trigonometry is skipped where the rotations are
+near), LANES branch-free (both paths computed, the one math3d takes selected: a lane loop over
+it vectorises), LANES_NEAR the slerps' lerp path alone (a lane loop whose lanes were all found
+near beforehand: the usual case). The branch-free twins below (``slerp_select``,
+``q_angle_select``, ``rotation_axis_select``) give math3d's bits
+(tests/test_batched_team_step.py).
 
-``team_step_block`` runs in three loops: a scalar copy-in of each lane's team rows into the
-lane arrays (``bs.lane_*``: a gather through ``lane_team`` does not vectorise), the lane loop
+``team_step_block`` runs in three parts: a scalar copy-in of each lane's team rows into the
+lane arrays (``bs.lane_*``: a gather through ``lane_team`` does not vectorise), the lane loops
 (streams of ``kernels/streams``, no runtime overlap checks), and a scalar copy-out of what the
 team rows must keep (read by the next step, the per-team frame stages and the guards).
 """
