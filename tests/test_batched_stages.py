@@ -7,7 +7,8 @@ import pytest
 from batched_harness import block_tables, compare_stage, crowd_system
 from magica_py.solver.batch_tables import borrow
 from magica_py.kernels.math3d import q_slerp
-from magica_py.solver.step import predict_block, predict_team, slerp_is_near, slerp_near
+from magica_py.kernels.math3d import slerp_is_near, slerp_near
+from magica_py.solver.step import predict_block, predict_team
 
 DT = 1.0 / 90.0
 MOVE = 0x02

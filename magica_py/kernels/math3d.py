@@ -264,13 +264,29 @@ def q_slerp(q1, q2, t):
             (q1[3] * w1 + b[3] * w2) * inv_s,
         )
         return q_normalize(r)
-    r = (
+    return slerp_near(q1, q2, t)
+
+
+@kernel
+def slerp_is_near(q1, q2):
+    """True where ``q_slerp(q1, q2, t)`` takes its normalised-lerp path (the rotations within
+    about 3.6 degrees: no acos, no sines), for every t; NaN counts as near, as there."""
+    d = q_dot(q1, q2)
+    d = -d if d < 0.0 else d
+    return not d < 0.9995
+
+
+@kernel
+def slerp_near(q1, q2, t):
+    """``q_slerp(q1, q2, t)`` where ``slerp_is_near(q1, q2)``: its lerp path alone (the same
+    bits; a lane loop whose lanes are all near takes it without the trigonometry)."""
+    b = (-q2[0], -q2[1], -q2[2], -q2[3]) if q_dot(q1, q2) < 0.0 else q2
+    return q_normalize((
         q1[0] + (b[0] - q1[0]) * t,
         q1[1] + (b[1] - q1[1]) * t,
         q1[2] + (b[2] - q1[2]) * t,
         q1[3] + (b[3] - q1[3]) * t,
-    )
-    return q_normalize(r)
+    ))
 
 
 @kernel

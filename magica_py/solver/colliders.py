@@ -13,9 +13,9 @@ from magica_py.jit import kernel
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
 from magica_py.kernels.math3d import (
     load3, load4, q_inverse, q_mul, q_normalize, q_rotate, shift_position, store3,
-    store4, v_add, v_lerp, v_scale, v_sub,
+    slerp_is_near, slerp_near, store4, v_add, v_lerp, v_scale, v_sub,
 )
-from magica_py.solver.team_step import LANES, LANES_NEAR, SCALAR, slerp_in_mode, slerp_is_near, slerp_lerp_path
+from magica_py.solver.team_step import LANES, LANES_NEAR, SCALAR, slerp_in_mode
 
 SPHERE = 0
 CAPSULE = 1
@@ -335,7 +335,7 @@ def collider_step_lanes(cs, ts, blk, bs, b):
         if far == 0:
             for i in range(width):
                 k = k0 + np.uint64(i)
-                now_rot = q_normalize(slerp_lerp_path(sload4(old_frame_rot_a, k, READ), sload4(frame_rot_a, k, READ),
+                now_rot = q_normalize(slerp_near(sload4(old_frame_rot_a, k, READ), sload4(frame_rot_a, k, READ),
                                                       sload(interpolation, lanes + np.uint64(i), READ)))
                 far += 0 if slerp_is_near(sload4(old_rot_a, k, READ), now_rot) else 1
         # one lane loop per (shape, mode), both constant in each: their branches fold away

@@ -8,7 +8,7 @@ the stabilisation weights (C.3). ``predict_team`` is D.1, ``step_basic_pose_team
 branch-free per-element functions (``predict_move``, ``basic_pose_child``, ``end_step_velocity``, ...)
 so that both give the same bits. Their lane loops load and store through ``kernels/streams``
 (no runtime overlap checks; each loop states its streams), and where every lane of a block
-takes a slerp's lerp path (``slerp_is_near``) they call ``slerp_near``, that path alone.
+takes a slerp's lerp path (``math3d.slerp_is_near``) they call ``math3d.slerp_near``, that path alone.
 """
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ import numpy as np
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     clamp_length, depth_mass, load3, load4, project_on_plane, q_dot, q_mul,
-    q_normalize, q_rotate, q_slerp, saturate, store3, store4, v_add, v_cross,
+    q_normalize, q_rotate, q_slerp, saturate, slerp_is_near, slerp_near, store3, store4, v_add, v_cross,
     v_dot, v_length, v_length_sq, v_lerp, v_mul, v_normalize, v_scale, v_sub,
 )
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
@@ -97,32 +97,6 @@ def predict_move(old_pos, velocity, depth, old_world_pos, inertia_vector, inerti
     iq = inertia_rotation if off else iq_mixed
     return predict_move_shifted(old_pos, velocity, depth, old_world_pos, iv, iq, velocity_weight,
                                 damping_keep, gravity, force_mode, impact, scale, dt)
-
-
-@kernel
-def slerp_is_near(q1, q2):
-    """True where ``q_slerp(q1, q2, t)`` takes its normalised-lerp path (the rotations within
-    about 3.6 degrees: no acos, no sines), for every t; NaN counts as near, as there. Mirrors
-    q_slerp's test (kernels/math3d): the bit-identity tests of predict_block pin the two."""
-    d = q_dot(q1, q2)
-    if d < 0.0:
-        d = -d
-    return not d < 0.9995
-
-
-@kernel
-def slerp_near(q1, q2, t):
-    """``q_slerp(q1, q2, t)`` where ``slerp_is_near(q1, q2)``: its lerp path alone (same bits)."""
-    b = q2
-    if q_dot(q1, q2) < 0.0:
-        b = (-q2[0], -q2[1], -q2[2], -q2[3])
-    r = (
-        q1[0] + (b[0] - q1[0]) * t,
-        q1[1] + (b[1] - q1[1]) * t,
-        q1[2] + (b[2] - q1[2]) * t,
-        q1[3] + (b[3] - q1[3]) * t,
-    )
-    return q_normalize(r)
 
 
 @kernel

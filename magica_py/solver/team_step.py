@@ -25,8 +25,8 @@ import numpy as np
 from magica_py.jit import kernel
 from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
-    lerp, q_angle, q_dot, q_from_to, q_normalize, q_rotate, q_slerp, q_to_angle_axis, saturate, v_dot, v_length, v_length_sq, v_lerp, v_scale,
-    v_sub,
+    lerp, q_angle, q_dot, q_from_to, q_normalize, q_rotate, q_slerp, q_to_angle_axis, saturate, slerp_is_near,
+    slerp_near, v_dot, v_length, v_length_sq, v_lerp, v_scale, v_sub,
 )
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
 
@@ -37,42 +37,20 @@ IDENTITY = (0.0, 0.0, 0.0, 1.0)
 # site, folded away once inlined): SCALAR with math3d's branches (per team: a branch skips the
 # trigonometry where the rotations are near), LANES branch-free (a lane loop: both paths
 # computed and selected), LANES_NEAR the slerps' lerp path alone (a lane loop whose lanes were
-# all found near beforehand, ``slerp_is_near``). All three give the same bits.
+# all found near beforehand, ``math3d.slerp_is_near``). All three give the same bits.
 SCALAR = 0
 LANES = 1
 LANES_NEAR = 2
 
 
 # ----------------------------------------------------------------------------- branch-free twins
-@kernel
-def slerp_is_near(q1, q2):
-    """True where ``q_slerp(q1, q2, t)`` takes its lerp path, for every t (NaN counts as near,
-    as there). The same test as ``step.slerp_is_near`` (not imported: step imports this module)."""
-    d = q_dot(q1, q2)
-    d = -d if d < 0.0 else d
-    return not d < 0.9995
-
-
-@kernel
-def slerp_lerp_path(q1, q2, t):
-    """``q_slerp(q1, q2, t)`` where ``slerp_is_near(q1, q2)``: its lerp path alone (same bits;
-    ``step.slerp_near``'s twin, see above)."""
-    b = (-q2[0], -q2[1], -q2[2], -q2[3]) if q_dot(q1, q2) < 0.0 else q2
-    return q_normalize((
-        q1[0] + (b[0] - q1[0]) * t,
-        q1[1] + (b[1] - q1[1]) * t,
-        q1[2] + (b[2] - q1[2]) * t,
-        q1[3] + (b[3] - q1[3]) * t,
-    ))
-
-
 @kernel(inline="always")
 def slerp_in_mode(q1, q2, t, mode):
     """``q_slerp(q1, q2, t)`` the way ``mode`` (SCALAR, LANES, LANES_NEAR; a literal) asks."""
     if mode == SCALAR:
         return q_slerp(q1, q2, t)
     if mode == LANES_NEAR:
-        return slerp_lerp_path(q1, q2, t)
+        return slerp_near(q1, q2, t)
     return slerp_select(q1, q2, t)
 
 
@@ -315,7 +293,7 @@ def team_step_lanes(m, prm, blk, bs, b, dt):
     if far == 0:
         for i in range(width):
             L = lanes + np.uint64(i)
-            now_rot = q_normalize(slerp_lerp_path(sload4(old_frame_rot, L, READ), sload4(frame_rot, L, READ),
+            now_rot = q_normalize(slerp_near(sload4(old_frame_rot, L, READ), sload4(frame_rot, L, READ),
                                                   sload(interpolation, L, READ)))
             far += 0 if slerp_is_near(IDENTITY, q_from_to(sload4(now_world_rot, L, READ), now_rot)) else 1
     # two copies of one lane loop (its mode a literal in each, folded away once inlined)
