@@ -25,7 +25,7 @@ from magica_py.kernels.math3d import (
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
 from magica_py.solver.batched.transfer import bload3, bload4, bstore3, bstore4
 from magica_py.solver.parameters import curve_at_clamp01, step_keep, step_rate
-from magica_py.solver.team_step import SCALAR, team_step_values
+from magica_py.solver.team_step import LANES_NEAR, SCALAR, slerp_in_mode, team_step_values
 
 MOVE = 0x02
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -84,30 +84,17 @@ def predict_base_pose(old_position, position, old_rotation, rotation, t):
 @kernel
 def predict_move(old_pos, velocity, depth, old_world_pos, inertia_vector, inertia_rotation, step_vector,
                  step_rotation, depth_inertia, velocity_weight, damping_keep, gravity, force_mode, impact,
-                 scale, dt):
+                 scale, dt, mode):
     """D.1 for a Move particle: (velocity, velocity_pos, next_pos) after the inertia shift,
-    damping (``damping_keep`` = saturate(1 - step rate of the damping curve)) and forces."""
+    damping (``damping_keep`` = saturate(1 - step rate of the damping curve)) and forces.
+    ``mode`` (constant at each call site, ``team_step.slerp_in_mode``): SCALAR, or LANES_NEAR
+    where ``slerp_is_near(inertia_rotation, step_rotation)`` holds (the usual case: both are one
+    step's rotation of the team), the same bits without the slerp's acos and sines."""
     k = depth_inertia * (1.0 - depth * depth)
     # branch-free (computed both ways, then selected) so that a lane loop over it vectorises;
     # depth inertia off (k == 0): lerp/slerp at 0 are the first argument
     iv_mixed = v_lerp(inertia_vector, step_vector, k)
-    iq_mixed = q_slerp(inertia_rotation, step_rotation, k)
-    off = k == 0.0
-    iv = inertia_vector if off else iv_mixed
-    iq = inertia_rotation if off else iq_mixed
-    return predict_move_shifted(old_pos, velocity, depth, old_world_pos, iv, iq, velocity_weight,
-                                damping_keep, gravity, force_mode, impact, scale, dt)
-
-
-@kernel
-def predict_move_near(old_pos, velocity, depth, old_world_pos, inertia_vector, inertia_rotation, step_vector,
-                      step_rotation, depth_inertia, velocity_weight, damping_keep, gravity, force_mode, impact,
-                      scale, dt):
-    """``predict_move`` where ``slerp_is_near(inertia_rotation, step_rotation)`` (the usual case:
-    both are one step's rotation of the team): the same bits without the slerp's acos and sines."""
-    k = depth_inertia * (1.0 - depth * depth)
-    iv_mixed = v_lerp(inertia_vector, step_vector, k)
-    iq_mixed = slerp_near(inertia_rotation, step_rotation, k)
+    iq_mixed = slerp_in_mode(inertia_rotation, step_rotation, k, mode)
     off = k == 0.0
     iv = inertia_vector if off else iv_mixed
     iq = inertia_rotation if off else iq_mixed
@@ -184,7 +171,7 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
             velocity, velocity_pos, next_pos = predict_move(
                 load3(ps.old_pos, p), load3(ps.velocity, p), depth, old_world_pos, inertia_vector,
                 inertia_rotation, step_vector, step_rotation, depth_inertia, velocity_weight,
-                damping_keep, gravity, force_mode, impact, scale, dt)
+                damping_keep, gravity, force_mode, impact, scale, dt, SCALAR)
         store3(ps.velocity, p, velocity)
         store3(ps.velocity_pos, p, velocity_pos)
         store3(ps.next_pos, p, next_pos)
@@ -227,20 +214,15 @@ def _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world
                gravity_direction, gravity, dt, mixed, near):
     """``predict_team``'s Move-particle prediction for block row k, lane L. Flags constant at each
     call site: ``mixed`` the depth-inertia mix is on for this particle (predict_move's k != 0),
-    ``near`` every lane's inertia and step rotations are near (``predict_move_near``)."""
+    ``near`` every lane's inertia and step rotations are near (``predict_move``'s LANES_NEAR)."""
     gravity_vector = v_scale(gravity_direction, gravity * sload(lane_gr, L, READ))
-    if mixed and near:
-        velocity, velocity_pos, next_pos = predict_move_near(
-            sload3(old_pos_a, k, READ), sload3(velocity_a, k, 21), depth, sload3(lane_old_world_pos, L, READ),
-            sload3(lane_iv, L, READ), sload4(lane_iq, L, READ), sload3(lane_sv, L, READ),
-            sload4(lane_sq, L, READ), depth_inertia, sload(lane_vw, L, READ), damping_keep, gravity_vector,
-            sload(lane_fm, L, READ), sload3(lane_f, L, READ), sload(lane_scale, L, READ), dt)
-    elif mixed:
+    if mixed:
         velocity, velocity_pos, next_pos = predict_move(
             sload3(old_pos_a, k, READ), sload3(velocity_a, k, 21), depth, sload3(lane_old_world_pos, L, READ),
             sload3(lane_iv, L, READ), sload4(lane_iq, L, READ), sload3(lane_sv, L, READ),
             sload4(lane_sq, L, READ), depth_inertia, sload(lane_vw, L, READ), damping_keep, gravity_vector,
-            sload(lane_fm, L, READ), sload3(lane_f, L, READ), sload(lane_scale, L, READ), dt)
+            sload(lane_fm, L, READ), sload3(lane_f, L, READ), sload(lane_scale, L, READ), dt,
+            LANES_NEAR if near else SCALAR)
     else:
         velocity, velocity_pos, next_pos = predict_move_shifted(
             sload3(old_pos_a, k, READ), sload3(velocity_a, k, 21), depth, sload3(lane_old_world_pos, L, READ),
@@ -369,16 +351,10 @@ def basic_pose_child(parent_pos, parent_rot, local_position, local_rotation, sca
 
 
 @kernel
-def basic_pose_blend(pos, rot, base_pos, base_rot, ratio):
-    """D.2: the rest shape blended towards the animated pose by animation_pose_ratio."""
-    return v_lerp(pos, base_pos, ratio), q_slerp(rot, base_rot, ratio)
-
-
-@kernel
-def basic_pose_blend_near(pos, rot, base_pos, base_rot, ratio):
-    """``basic_pose_blend`` where ``slerp_is_near(rot, base_rot)``: the same bits without the
-    slerp's acos and sines."""
-    return v_lerp(pos, base_pos, ratio), slerp_near(rot, base_rot, ratio)
+def basic_pose_blend(pos, rot, base_pos, base_rot, ratio, mode):
+    """D.2: the rest shape blended towards the animated pose by animation_pose_ratio (``mode`` as
+    in ``predict_move``: LANES_NEAR where ``slerp_is_near(rot, base_rot)``)."""
+    return v_lerp(pos, base_pos, ratio), slerp_in_mode(rot, base_rot, ratio, mode)
 
 
 @kernel
@@ -403,7 +379,7 @@ def step_basic_pose_team(m, ps, prm, ts, team):
             for e in range(e0, e1):
                 v = m.baseline_data[e]
                 pos, rot = basic_pose_blend(load3(ps.step_basic_pos, v), load4(ps.step_basic_rot, v),
-                                            load3(ps.base_pos, v), load4(ps.base_rot, v), a)
+                                            load3(ps.base_pos, v), load4(ps.base_rot, v), a, SCALAR)
                 store3(ps.step_basic_pos, v, pos)
                 store4(ps.step_basic_rot, v, rot)
 
@@ -467,15 +443,15 @@ def step_basic_pose_block(m, bs, prm, blk, b):
                 if far == 0:
                     for i in range(width):
                         k = kv + np.uint64(i)
-                        pos, rot = basic_pose_blend_near(sload3(sbp, k, 1), sload4(sbr, k, 4),
-                                                         sload3(base_pos, k, READ), sload4(base_rot, k, READ), a)
+                        pos, rot = basic_pose_blend(sload3(sbp, k, 1), sload4(sbr, k, 4), sload3(base_pos, k, READ),
+                                                    sload4(base_rot, k, READ), a, LANES_NEAR)
                         sstore3(sbp, k, pos, 1)
                         sstore4(sbr, k, rot, 4)
                     continue
                 for i in range(width):
                     k = kv + np.uint64(i)
                     pos, rot = basic_pose_blend(sload3(sbp, k, 1), sload4(sbr, k, 4), sload3(base_pos, k, READ),
-                                                sload4(base_rot, k, READ), a)
+                                                sload4(base_rot, k, READ), a, SCALAR)
                     sstore3(sbp, k, pos, 1)
                     sstore4(sbr, k, rot, 4)
 
