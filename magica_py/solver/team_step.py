@@ -296,60 +296,56 @@ def team_step_lanes(m, prm, blk, bs, b, dt):
             now_rot = q_normalize(slerp_near(sload4(old_frame_rot, L, READ), sload4(frame_rot, L, READ),
                                                   sload(interpolation, L, READ)))
             far += 0 if slerp_is_near(IDENTITY, q_from_to(sload4(now_world_rot, L, READ), now_rot)) else 1
-    # two copies of one lane loop (its mode a literal in each, folded away once inlined)
+    # one lane loop per mode (a literal in each call, folded away once inlined)
+    inputs = (old_world_pos, old_frame_pos, frame_pos, old_frame_rot, frame_rot, old_frame_scale, frame_scale,
+              interpolation, distance_weight_a)
+    outputs = (now_world_pos, now_world_rot, step_vector_a, step_rotation_a, move_ratio_a, rotation_ratio_a,
+               inertia_vector_a, inertia_rotation_a, angular_velocity_a, axis_a, scale_ratio_a, gravity_dot_a,
+               gravity_ratio_a, velocity_weight_a, blend_weight_a)
+    params = (local_inertia, move_limit, rotation_limit, init_scale_length, gravity_direction, init_local_gravity,
+              gravity, falloff, stabilization_time, blend_parameter)
     open_streams()
     if far == 0:
         for i in range(width):
-            L = lanes + np.uint64(i)
-            (now_pos, now_rot, step_vector, step_rotation, mv, rv, inertia_vector, inertia_rotation, w, axis,
-             scale_ratio, gravity_dot, gravity_ratio, velocity_weight, blend_weight) = team_step_values(
-                sload3(old_world_pos, L, READ), sload4(now_world_rot, L, 4), sload3(old_frame_pos, L, READ),
-                sload3(frame_pos, L, READ), sload4(old_frame_rot, L, READ), sload4(frame_rot, L, READ),
-                sload3(old_frame_scale, L, READ), sload3(frame_scale, L, READ), sload(interpolation, L, READ), dt,
-                local_inertia, move_limit, rotation_limit, init_scale_length, gravity_direction, init_local_gravity,
-                gravity, falloff, stabilization_time, sload(velocity_weight_a, L, 31), blend_parameter,
-                sload(distance_weight_a, L, READ), LANES_NEAR)
-            sstore3(now_world_pos, L, now_pos, 1)
-            sstore4(now_world_rot, L, now_rot, 4)
-            sstore3(step_vector_a, L, step_vector, 8)
-            sstore4(step_rotation_a, L, step_rotation, 11)
-            sstore(move_ratio_a, L, mv, 15)
-            sstore(rotation_ratio_a, L, rv, 16)
-            sstore3(inertia_vector_a, L, inertia_vector, 17)
-            sstore4(inertia_rotation_a, L, inertia_rotation, 20)
-            sstore(angular_velocity_a, L, w, 24)
-            sstore3(axis_a, L, axis, 25)
-            sstore(scale_ratio_a, L, scale_ratio, 28)
-            sstore(gravity_dot_a, L, gravity_dot, 29)
-            sstore(gravity_ratio_a, L, gravity_ratio, 30)
-            sstore(velocity_weight_a, L, velocity_weight, 31)
-            sstore(blend_weight_a, L, blend_weight, 32)
+            _team_step_lane(lanes + np.uint64(i), inputs, outputs, params, dt, LANES_NEAR)
     else:
         for i in range(width):
-            L = lanes + np.uint64(i)
-            (now_pos, now_rot, step_vector, step_rotation, mv, rv, inertia_vector, inertia_rotation, w, axis,
-             scale_ratio, gravity_dot, gravity_ratio, velocity_weight, blend_weight) = team_step_values(
-                sload3(old_world_pos, L, READ), sload4(now_world_rot, L, 4), sload3(old_frame_pos, L, READ),
-                sload3(frame_pos, L, READ), sload4(old_frame_rot, L, READ), sload4(frame_rot, L, READ),
-                sload3(old_frame_scale, L, READ), sload3(frame_scale, L, READ), sload(interpolation, L, READ), dt,
-                local_inertia, move_limit, rotation_limit, init_scale_length, gravity_direction, init_local_gravity,
-                gravity, falloff, stabilization_time, sload(velocity_weight_a, L, 31), blend_parameter,
-                sload(distance_weight_a, L, READ), LANES)
-            sstore3(now_world_pos, L, now_pos, 1)
-            sstore4(now_world_rot, L, now_rot, 4)
-            sstore3(step_vector_a, L, step_vector, 8)
-            sstore4(step_rotation_a, L, step_rotation, 11)
-            sstore(move_ratio_a, L, mv, 15)
-            sstore(rotation_ratio_a, L, rv, 16)
-            sstore3(inertia_vector_a, L, inertia_vector, 17)
-            sstore4(inertia_rotation_a, L, inertia_rotation, 20)
-            sstore(angular_velocity_a, L, w, 24)
-            sstore3(axis_a, L, axis, 25)
-            sstore(scale_ratio_a, L, scale_ratio, 28)
-            sstore(gravity_dot_a, L, gravity_dot, 29)
-            sstore(gravity_ratio_a, L, gravity_ratio, 30)
-            sstore(velocity_weight_a, L, velocity_weight, 31)
-            sstore(blend_weight_a, L, blend_weight, 32)
+            _team_step_lane(lanes + np.uint64(i), inputs, outputs, params, dt, LANES)
+
+
+@kernel(inline="always")
+def _team_step_lane(L, inputs, outputs, params, dt, mode):
+    """C.3 of lane L (``team_step_lanes``' loop body; its streams)."""
+    (old_world_pos, old_frame_pos, frame_pos, old_frame_rot, frame_rot, old_frame_scale, frame_scale,
+     interpolation, distance_weight_a) = inputs
+    (now_world_pos, now_world_rot, step_vector_a, step_rotation_a, move_ratio_a, rotation_ratio_a,
+     inertia_vector_a, inertia_rotation_a, angular_velocity_a, axis_a, scale_ratio_a, gravity_dot_a,
+     gravity_ratio_a, velocity_weight_a, blend_weight_a) = outputs
+    (local_inertia, move_limit, rotation_limit, init_scale_length, gravity_direction, init_local_gravity,
+     gravity, falloff, stabilization_time, blend_parameter) = params
+    (now_pos, now_rot, step_vector, step_rotation, mv, rv, inertia_vector, inertia_rotation, w, axis,
+     scale_ratio, gravity_dot, gravity_ratio, velocity_weight, blend_weight) = team_step_values(
+        sload3(old_world_pos, L, READ), sload4(now_world_rot, L, 4), sload3(old_frame_pos, L, READ),
+        sload3(frame_pos, L, READ), sload4(old_frame_rot, L, READ), sload4(frame_rot, L, READ),
+        sload3(old_frame_scale, L, READ), sload3(frame_scale, L, READ), sload(interpolation, L, READ), dt,
+        local_inertia, move_limit, rotation_limit, init_scale_length, gravity_direction, init_local_gravity,
+        gravity, falloff, stabilization_time, sload(velocity_weight_a, L, 31), blend_parameter,
+        sload(distance_weight_a, L, READ), mode)
+    sstore3(now_world_pos, L, now_pos, 1)
+    sstore4(now_world_rot, L, now_rot, 4)
+    sstore3(step_vector_a, L, step_vector, 8)
+    sstore4(step_rotation_a, L, step_rotation, 11)
+    sstore(move_ratio_a, L, mv, 15)
+    sstore(rotation_ratio_a, L, rv, 16)
+    sstore3(inertia_vector_a, L, inertia_vector, 17)
+    sstore4(inertia_rotation_a, L, inertia_rotation, 20)
+    sstore(angular_velocity_a, L, w, 24)
+    sstore3(axis_a, L, axis, 25)
+    sstore(scale_ratio_a, L, scale_ratio, 28)
+    sstore(gravity_dot_a, L, gravity_dot, 29)
+    sstore(gravity_ratio_a, L, gravity_ratio, 30)
+    sstore(velocity_weight_a, L, velocity_weight, 31)
+    sstore(blend_weight_a, L, blend_weight, 32)
 
 
 @kernel
