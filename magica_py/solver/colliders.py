@@ -317,6 +317,8 @@ def collider_step_lanes(cs, ts, blk, bs, b):
     radius_start_a, radius_end_a, axis_scale_a = bs.col_radius_start, bs.col_radius_end, bs.col_axis_scale
     start_old_a, end_old_a, start_new_a, end_new_a = bs.col_start_old, bs.col_end_old, bs.col_start_new, bs.col_end_new
     aabb_min_a, aabb_max_a, plane_normal_a = bs.col_aabb_min, bs.col_aabb_max, bs.col_plane_normal
+    # the arrays as one tuple (numba's inliner refuses calls of more than 30 arguments)
+    arrays = (old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a, old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a, start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio, rotation_ratio)
     for j in range(blk.block_collider_count[b]):
         e = e0 + j
         shape = cs.shape[e]
@@ -341,60 +343,33 @@ def collider_step_lanes(cs, ts, blk, bs, b):
         # one lane loop per (shape, mode), both constant in each: their branches fold away
         open_streams()
         if shape == SPHERE and far == 0:
-            _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
-                       old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
-                       start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
-                       rotation_ratio, k0, lanes, width, SPHERE, LANES_NEAR, geometry)
+            _slot_loop(arrays, k0, lanes, width, SPHERE, LANES_NEAR, geometry)
         elif shape == SPHERE:
-            _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
-                       old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
-                       start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
-                       rotation_ratio, k0, lanes, width, SPHERE, LANES, geometry)
+            _slot_loop(arrays, k0, lanes, width, SPHERE, LANES, geometry)
         elif shape == CAPSULE and far == 0:
-            _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
-                       old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
-                       start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
-                       rotation_ratio, k0, lanes, width, CAPSULE, LANES_NEAR, geometry)
+            _slot_loop(arrays, k0, lanes, width, CAPSULE, LANES_NEAR, geometry)
         elif shape == CAPSULE:
-            _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
-                       old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
-                       start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
-                       rotation_ratio, k0, lanes, width, CAPSULE, LANES, geometry)
+            _slot_loop(arrays, k0, lanes, width, CAPSULE, LANES, geometry)
         elif far == 0:
-            _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
-                       old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
-                       start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
-                       rotation_ratio, k0, lanes, width, PLANE, LANES_NEAR, geometry)
+            _slot_loop(arrays, k0, lanes, width, PLANE, LANES_NEAR, geometry)
         else:
-            _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
-                       old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
-                       start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
-                       rotation_ratio, k0, lanes, width, PLANE, LANES, geometry)
+            _slot_loop(arrays, k0, lanes, width, PLANE, LANES, geometry)
 
 
 @kernel(inline="always")
-def _slot_loop(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
-               old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a, start_new_a,
-               end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio, rotation_ratio, k0,
-               lanes, width, shape, mode, geometry):
+def _slot_loop(arrays, k0, lanes, width, shape, mode, geometry):
     """``collider_step_lanes``' lane loop of one slot (rows k0 + i, lanes + i); ``shape`` and
-    ``mode`` are literals. (Calls keep to 30 arguments: above that CPython passes them as
-    *args, which numba's inliner refuses.)"""
+    ``mode`` are literals, ``arrays`` the lane and lane-collider arrays in ``_slot_lane``'s order."""
     for i in range(width):
-        _slot_lane(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
-                   old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a,
-                   start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio,
-                   rotation_ratio, k0 + np.uint64(i), lanes + np.uint64(i), shape, geometry, mode)
+        _slot_lane(arrays, k0 + np.uint64(i), lanes + np.uint64(i), shape, geometry, mode)
 
 
 @kernel(inline="always")
-def _slot_lane(old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a,
-               old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a, start_new_a,
-               end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio, rotation_ratio, k, L,
-               shape, geometry, mode):
+def _slot_lane(arrays, k, L, shape, geometry, mode):
     """``collider_step_team``'s slot body on lane-collider row k, lane L (streams: see
     ``collider_step_lanes``); ``shape`` and ``mode`` are constant at each call site, ``geometry``
     the slot's (direction, reverse, aligned, size)."""
+    (old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a, old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a, start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio, rotation_ratio) = arrays
     direction, reverse, aligned, size = geometry
     now_pos, now_rot, old_pos, old_rot, inverse_old_rot = collider_step_pose(
         sload3(old_frame_pos_a, k, READ), sload3(frame_pos_a, k, READ), sload4(old_frame_rot_a, k, READ),
