@@ -11,6 +11,7 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
+from magica_py.solver.batched.transfer import in3, in4, out3, out4
 from magica_py.kernels.math3d import (
     load3, load4, q_inverse, q_mul, q_normalize, q_rotate, shift_position, store3,
     slerp_is_near, slerp_near, store4, v_add, v_lerp, v_scale, v_sub,
@@ -188,36 +189,6 @@ def collider_step_team(cs, ts, team, frame_interpolation):
 
 # ----------------------------------------------------------------------------- block form
 @kernel
-def _in3(dst, k, src, s):
-    dst[0, k] = src[s, 0]
-    dst[1, k] = src[s, 1]
-    dst[2, k] = src[s, 2]
-
-
-@kernel
-def _in4(dst, k, src, s):
-    dst[0, k] = src[s, 0]
-    dst[1, k] = src[s, 1]
-    dst[2, k] = src[s, 2]
-    dst[3, k] = src[s, 3]
-
-
-@kernel
-def _out3(dst, s, src, k):
-    dst[s, 0] = src[0, k]
-    dst[s, 1] = src[1, k]
-    dst[s, 2] = src[2, k]
-
-
-@kernel
-def _out4(dst, s, src, k):
-    dst[s, 0] = src[0, k]
-    dst[s, 1] = src[1, k]
-    dst[s, 2] = src[2, k]
-    dst[s, 3] = src[3, k]
-
-
-@kernel
 def _scale_component(shape, direction):
     """The frame-scale component a slot's G.3 reads: x (sphere radius), the capsule's axis,
     y (plane normal)."""
@@ -241,22 +212,22 @@ def collider_step_copy_in(cs, ts, blk, bs, b):
             k = cbase + j * width + i
             bs.col_shape[k] = cs.shape[s]
             bs.col_scale_suspend[k] = cs.scale_suspend[s]
-            _in3(bs.col_old_frame_pos, k, cs.old_frame_pos, s)
-            _in3(bs.col_frame_pos, k, cs.frame_pos, s)
-            _in4(bs.col_old_frame_rot, k, cs.old_frame_rot, s)
-            _in4(bs.col_frame_rot, k, cs.frame_rot, s)
-            _in3(bs.col_old_pos, k, cs.old_pos, s)
-            _in4(bs.col_old_rot, k, cs.old_rot, s)
+            in3(bs.col_old_frame_pos, k, cs.old_frame_pos, s)
+            in3(bs.col_frame_pos, k, cs.frame_pos, s)
+            in4(bs.col_old_frame_rot, k, cs.old_frame_rot, s)
+            in4(bs.col_frame_rot, k, cs.frame_rot, s)
+            in3(bs.col_old_pos, k, cs.old_pos, s)
+            in4(bs.col_old_rot, k, cs.old_rot, s)
             bs.col_axis_scale[k] = cs.frame_scale[s, component]
             if shape == PLANE:
                 bs.col_radius_start[k] = cs.radius_start[s]
                 bs.col_radius_end[k] = cs.radius_end[s]
-                _in3(bs.col_end_old, k, cs.end_old, s)
-                _in3(bs.col_end_new, k, cs.end_new, s)
-                _in3(bs.col_aabb_min, k, cs.aabb_min, s)
-                _in3(bs.col_aabb_max, k, cs.aabb_max, s)
+                in3(bs.col_end_old, k, cs.end_old, s)
+                in3(bs.col_end_new, k, cs.end_new, s)
+                in3(bs.col_aabb_min, k, cs.aabb_min, s)
+                in3(bs.col_aabb_max, k, cs.aabb_max, s)
             else:
-                _in3(bs.col_plane_normal, k, cs.plane_normal, s)
+                in3(bs.col_plane_normal, k, cs.plane_normal, s)
 
 
 @kernel
@@ -274,22 +245,22 @@ def collider_step_copy_out(cs, ts, blk, bs, b):
         for i in range(width):
             s = ts.collider_start[blk.lane_team[lanes + i]] + j
             k = cbase + j * width + i
-            _out3(cs.now_pos, s, bs.col_now_pos, k)
-            _out4(cs.now_rot, s, bs.col_now_rot, k)
-            _out3(cs.old_pos, s, bs.col_now_pos, k)
-            _out4(cs.old_rot, s, bs.col_now_rot, k)
-            _out4(cs.inverse_old_rot, s, bs.col_inverse_old_rot, k)
-            _out3(cs.start_old, s, bs.col_start_old, k)
-            _out3(cs.start_new, s, bs.col_start_new, k)
+            out3(cs.now_pos, s, bs.col_now_pos, k)
+            out4(cs.now_rot, s, bs.col_now_rot, k)
+            out3(cs.old_pos, s, bs.col_now_pos, k)
+            out4(cs.old_rot, s, bs.col_now_rot, k)
+            out4(cs.inverse_old_rot, s, bs.col_inverse_old_rot, k)
+            out3(cs.start_old, s, bs.col_start_old, k)
+            out3(cs.start_new, s, bs.col_start_new, k)
             if plane:
-                _out3(cs.plane_normal, s, bs.col_plane_normal, k)
+                out3(cs.plane_normal, s, bs.col_plane_normal, k)
             else:
                 cs.radius_start[s] = bs.col_radius_start[k]
                 cs.radius_end[s] = bs.col_radius_end[k]
-                _out3(cs.end_old, s, bs.col_end_old, k)
-                _out3(cs.end_new, s, bs.col_end_new, k)
-                _out3(cs.aabb_min, s, bs.col_aabb_min, k)
-                _out3(cs.aabb_max, s, bs.col_aabb_max, k)
+                out3(cs.end_old, s, bs.col_end_old, k)
+                out3(cs.end_new, s, bs.col_end_new, k)
+                out3(cs.aabb_min, s, bs.col_aabb_min, k)
+                out3(cs.aabb_max, s, bs.col_aabb_max, k)
 
 
 @kernel

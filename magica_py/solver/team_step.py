@@ -29,6 +29,7 @@ from magica_py.kernels.math3d import (
     slerp_near, v_dot, v_length, v_length_sq, v_lerp, v_scale, v_sub,
 )
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
+from magica_py.solver.batched.transfer import in3, in4, out3, out4
 
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
@@ -164,36 +165,6 @@ def team_step_values(old_pos, old_rot, old_frame_pos, frame_pos, old_frame_rot, 
 
 # ----------------------------------------------------------------------------- block form
 @kernel
-def _in3(dst, lane, src, t):
-    dst[0, lane] = src[t, 0]
-    dst[1, lane] = src[t, 1]
-    dst[2, lane] = src[t, 2]
-
-
-@kernel
-def _in4(dst, lane, src, t):
-    dst[0, lane] = src[t, 0]
-    dst[1, lane] = src[t, 1]
-    dst[2, lane] = src[t, 2]
-    dst[3, lane] = src[t, 3]
-
-
-@kernel
-def _out3(dst, t, src, lane):
-    dst[t, 0] = src[0, lane]
-    dst[t, 1] = src[1, lane]
-    dst[t, 2] = src[2, lane]
-
-
-@kernel
-def _out4(dst, t, src, lane):
-    dst[t, 0] = src[0, lane]
-    dst[t, 1] = src[1, lane]
-    dst[t, 2] = src[2, lane]
-    dst[t, 3] = src[3, lane]
-
-
-@kernel
 def team_step_copy_in(ts, tt, blk, bs, b):
     """Each lane's team rows into its lane arrays (the lane loop's inputs), and the previous
     step's pose into old_world_pos/rot (C.3's first stores, copies)."""
@@ -206,18 +177,18 @@ def team_step_copy_in(ts, tt, blk, bs, b):
         for c in range(4):
             ts.old_world_rot[t, c] = ts.now_world_rot[t, c]
         bs.lane_frame_interpolation[L] = tt.frame_interpolation[t]
-        _in3(bs.lane_old_world_pos, L, ts.now_world_pos, t)
-        _in4(bs.lane_now_world_rot, L, ts.now_world_rot, t)
-        _in3(bs.lane_old_frame_world_pos, L, ts.old_frame_world_pos, t)
-        _in3(bs.lane_frame_world_pos, L, ts.frame_world_pos, t)
-        _in4(bs.lane_old_frame_world_rot, L, ts.old_frame_world_rot, t)
-        _in4(bs.lane_frame_world_rot, L, ts.frame_world_rot, t)
-        _in3(bs.lane_old_frame_world_scale, L, ts.old_frame_world_scale, t)
-        _in3(bs.lane_frame_world_scale, L, ts.frame_world_scale, t)
+        in3(bs.lane_old_world_pos, L, ts.now_world_pos, t)
+        in4(bs.lane_now_world_rot, L, ts.now_world_rot, t)
+        in3(bs.lane_old_frame_world_pos, L, ts.old_frame_world_pos, t)
+        in3(bs.lane_frame_world_pos, L, ts.frame_world_pos, t)
+        in4(bs.lane_old_frame_world_rot, L, ts.old_frame_world_rot, t)
+        in4(bs.lane_frame_world_rot, L, ts.frame_world_rot, t)
+        in3(bs.lane_old_frame_world_scale, L, ts.old_frame_world_scale, t)
+        in3(bs.lane_frame_world_scale, L, ts.frame_world_scale, t)
         bs.lane_velocity_weight[L] = ts.velocity_weight[t]
         bs.lane_distance_weight[L] = ts.distance_weight[t]
         bs.lane_external_force_mode[L] = ts.external_force_mode[t]
-        _in3(bs.lane_external_force, L, ts.external_force, t)
+        in3(bs.lane_external_force, L, ts.external_force, t)
 
 
 @kernel
@@ -228,16 +199,16 @@ def team_step_copy_out(ts, blk, bs, b):
     for i in range(blk.block_width[b]):
         L = lanes + i
         t = blk.lane_team[L]
-        _out3(ts.now_world_pos, t, bs.lane_now_world_pos, L)
-        _out4(ts.now_world_rot, t, bs.lane_now_world_rot, L)
-        _out3(ts.step_vector, t, bs.lane_step_vector, L)
-        _out4(ts.step_rotation, t, bs.lane_step_rotation, L)
+        out3(ts.now_world_pos, t, bs.lane_now_world_pos, L)
+        out4(ts.now_world_rot, t, bs.lane_now_world_rot, L)
+        out3(ts.step_vector, t, bs.lane_step_vector, L)
+        out4(ts.step_rotation, t, bs.lane_step_rotation, L)
         ts.step_move_inertia_ratio[t] = bs.lane_step_move_inertia_ratio[L]
         ts.step_rotation_inertia_ratio[t] = bs.lane_step_rotation_inertia_ratio[L]
-        _out3(ts.inertia_vector, t, bs.lane_inertia_vector, L)
-        _out4(ts.inertia_rotation, t, bs.lane_inertia_rotation, L)
+        out3(ts.inertia_vector, t, bs.lane_inertia_vector, L)
+        out4(ts.inertia_rotation, t, bs.lane_inertia_rotation, L)
         ts.angular_velocity[t] = bs.lane_angular_velocity[L]
-        _out3(ts.rotation_axis, t, bs.lane_rotation_axis, L)
+        out3(ts.rotation_axis, t, bs.lane_rotation_axis, L)
         ts.scale_ratio[t] = bs.lane_scale_ratio[L]
         ts.gravity_dot[t] = bs.lane_gravity_dot[L]
         ts.gravity_ratio[t] = bs.lane_gravity_ratio[L]

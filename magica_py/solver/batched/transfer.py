@@ -175,15 +175,35 @@ def scatter_block(m, ps, blk, bs, b):
 
 
 @kernel
-def _lane3(dst, src, lane, t):
-    for c in range(3):
-        dst[c, lane] = src[t, c]
+def in3(dst, k, src, s):
+    """dst[:, k] = src[s] (a team or slot row into a lane / lane-collider column)."""
+    dst[0, k] = src[s, 0]
+    dst[1, k] = src[s, 1]
+    dst[2, k] = src[s, 2]
 
 
 @kernel
-def _lane4(dst, src, lane, t):
-    for c in range(4):
-        dst[c, lane] = src[t, c]
+def in4(dst, k, src, s):
+    dst[0, k] = src[s, 0]
+    dst[1, k] = src[s, 1]
+    dst[2, k] = src[s, 2]
+    dst[3, k] = src[s, 3]
+
+
+@kernel
+def out3(dst, s, src, k):
+    """dst[s] = src[:, k] (a lane / lane-collider column back into its team or slot row)."""
+    dst[s, 0] = src[0, k]
+    dst[s, 1] = src[1, k]
+    dst[s, 2] = src[2, k]
+
+
+@kernel
+def out4(dst, s, src, k):
+    dst[s, 0] = src[0, k]
+    dst[s, 1] = src[1, k]
+    dst[s, 2] = src[2, k]
+    dst[s, 3] = src[3, k]
 
 
 @kernel
@@ -200,37 +220,37 @@ def load_lanes(blk, bs, ts, tt, cs, b):
         L = lanes + i
         t = blk.lane_team[L]
         bs.lane_frame_interpolation[L] = tt.frame_interpolation[t]
-        _lane3(bs.lane_old_world_pos, ts.old_world_pos, L, t)
-        _lane3(bs.lane_now_world_pos, ts.now_world_pos, L, t)
-        _lane3(bs.lane_inertia_vector, ts.inertia_vector, L, t)
-        _lane4(bs.lane_inertia_rotation, ts.inertia_rotation, L, t)
-        _lane3(bs.lane_step_vector, ts.step_vector, L, t)
-        _lane4(bs.lane_step_rotation, ts.step_rotation, L, t)
+        in3(bs.lane_old_world_pos, L, ts.old_world_pos, t)
+        in3(bs.lane_now_world_pos, L, ts.now_world_pos, t)
+        in3(bs.lane_inertia_vector, L, ts.inertia_vector, t)
+        in4(bs.lane_inertia_rotation, L, ts.inertia_rotation, t)
+        in3(bs.lane_step_vector, L, ts.step_vector, t)
+        in4(bs.lane_step_rotation, L, ts.step_rotation, t)
         bs.lane_velocity_weight[L] = ts.velocity_weight[t]
         bs.lane_gravity_ratio[L] = ts.gravity_ratio[t]
         bs.lane_gravity_dot[L] = ts.gravity_dot[t]
         bs.lane_scale_ratio[L] = ts.scale_ratio[t]
         bs.lane_external_force_mode[L] = ts.external_force_mode[t]
-        _lane3(bs.lane_external_force, ts.external_force, L, t)
+        in3(bs.lane_external_force, L, ts.external_force, t)
         bs.lane_angular_velocity[L] = ts.angular_velocity[t]
-        _lane3(bs.lane_rotation_axis, ts.rotation_axis, L, t)
+        in3(bs.lane_rotation_axis, L, ts.rotation_axis, t)
         start = ts.collider_start[t]
         for j in range(colliders):
             s = start + j
             k = cbase + j * width + i
             bs.col_shape[k] = cs.shape[s]
             bs.col_scale_suspend[k] = cs.scale_suspend[s]
-            _lane3(bs.col_start_old, cs.start_old, k, s)
-            _lane3(bs.col_end_old, cs.end_old, k, s)
-            _lane3(bs.col_start_new, cs.start_new, k, s)
-            _lane3(bs.col_end_new, cs.end_new, k, s)
+            in3(bs.col_start_old, k, cs.start_old, s)
+            in3(bs.col_end_old, k, cs.end_old, s)
+            in3(bs.col_start_new, k, cs.start_new, s)
+            in3(bs.col_end_new, k, cs.end_new, s)
             bs.col_radius_start[k] = cs.radius_start[s]
             bs.col_radius_end[k] = cs.radius_end[s]
-            _lane3(bs.col_plane_normal, cs.plane_normal, k, s)
-            _lane4(bs.col_inverse_old_rot, cs.inverse_old_rot, k, s)
-            _lane4(bs.col_now_rot, cs.now_rot, k, s)
-            _lane3(bs.col_aabb_min, cs.aabb_min, k, s)
-            _lane3(bs.col_aabb_max, cs.aabb_max, k, s)
+            in3(bs.col_plane_normal, k, cs.plane_normal, s)
+            in4(bs.col_inverse_old_rot, k, cs.inverse_old_rot, s)
+            in4(bs.col_now_rot, k, cs.now_rot, s)
+            in3(bs.col_aabb_min, k, cs.aabb_min, s)
+            in3(bs.col_aabb_max, k, cs.aabb_max, s)
 
 
 # ----------------------------------------------------------------------------- block access
