@@ -5,8 +5,10 @@ and a block's lane-innermost arrays (``BlockState``).
   (``state.PARTICLE_BLOCK_FIELDS`` marked *gathered*) from each lane's team rows;
 * ``scatter_block``: after the steps, the state the rest of the frame reads back (the
   step-internal fields stay in the block; ``scatter_block_full`` copies those too, for tests);
-* ``load_lanes``: at each step, after the per-team C.3 / G.3, the team and collider values
-  of this step into the ``lane_*`` / ``col_*`` arrays.
+* ``load_lanes``: a step's team and collider values (after the per-team C.3 / G.3) from the
+  team rows into the ``lane_*`` / ``col_*`` arrays, for the stage tests and ``bench_blocks``
+  (the block step's lane-form C.3 / G.3 fill them as they compute them);
+* ``in3/in4/out3/out4``: one team or slot row to or from one lane column.
 
 Copies only: values are moved, never recomputed, so they cannot change bits.
 """
