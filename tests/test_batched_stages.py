@@ -133,6 +133,50 @@ def test_predict_block_is_bit_identical_whichever_path_the_depth_inertia_slerp_t
         tt.frame_interpolation[:] = saved_t
 
 
+@pytest.mark.parametrize("rotations", ["near in every lane", "near, sign flipped in some lanes",
+                                       "far in some lanes"])
+def test_predict_block_is_bit_identical_whichever_path_the_base_pose_slerp_takes(crowd, rotations):
+    """At a step before the last of its frame, the animated pose slerps each particle's rotation
+    from the previous frame's towards this frame's; a particle whose lanes all take the slerp's
+    lerp path (dot >= 0.9995, either sign) skips its acos and sines. Frame rotations 1 degree
+    apart, the new one's sign flipped in every third lane, or 30 degrees apart in every fifth
+    lane: the per-team bits either way."""
+    ps, tt = crowd.particles, crowd.time_state
+    saved = {n: getattr(ps, n).copy() for n in ("old_rotation", "rotation")}
+    saved_t = tt.frame_interpolation.copy()
+    try:
+        blk, _bs = block_tables(crowd)
+        lanes = blk.lane_team
+        tt.frame_interpolation[lanes] = 0.37
+        rows = [np.arange(crowd.model.team_particle_start[t],
+                          crowd.model.team_particle_start[t] + crowd.model.team_particle_count[t]) for t in lanes]
+        rng = np.random.default_rng(11)
+        for i, r in enumerate(rows):
+            old = _axis_angle(rng.normal(size=3), rng.uniform(-170, 170))
+            turn = _axis_angle(rng.normal(size=3), 30.0 if (rotations.startswith("far") and i % 5 == 0) else 1.0)
+            new = np.array([  # old * turn (Hamilton product, x y z w)
+                old[3] * turn[0] + old[0] * turn[3] + old[1] * turn[2] - old[2] * turn[1],
+                old[3] * turn[1] - old[0] * turn[2] + old[1] * turn[3] + old[2] * turn[0],
+                old[3] * turn[2] + old[0] * turn[1] - old[1] * turn[0] + old[2] * turn[3],
+                old[3] * turn[3] - old[0] * turn[0] - old[1] * turn[1] - old[2] * turn[2]])
+            if rotations.startswith("near, sign") and i % 3 == 0:
+                new = -new
+            ps.old_rotation[r] = old
+            ps.rotation[r] = new
+        all_rows = np.concatenate(rows)
+        d = (ps.old_rotation[all_rows] * ps.rotation[all_rows]).sum(axis=1)
+        if rotations.startswith("far"):
+            assert (np.abs(d) < 0.9995).sum() > 0 and (np.abs(d) >= 0.9995).sum() > 0
+        else:
+            assert (np.abs(d) >= 0.9995).all()
+            assert ((d < 0).sum() > 0) == rotations.startswith("near, sign")
+        compare_stage(crowd, _predict_teams, _predict_blocks, PREDICT_FIELDS)
+    finally:
+        for n, v in saved.items():
+            getattr(ps, n)[:] = v
+        tt.frame_interpolation[:] = saved_t
+
+
 def test_slerp_near_gives_the_bits_of_q_slerp_on_its_lerp_path():
     """slerp_near is q_slerp's lerp path alone: on random pairs within 3 degrees (either sign of
     the second quaternion) and random t, the same bits, and slerp_is_near says so; pairs 5 to

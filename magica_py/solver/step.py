@@ -71,12 +71,14 @@ def team_step_update(m, ts, prm, frame_interpolation, team, dt):
 
 
 @kernel
-def predict_base_pose(old_position, position, old_rotation, rotation, t):
-    """D.1's animated pose of a particle at frame interpolation t: (base_pos, base_rot)."""
+def predict_base_pose(old_position, position, old_rotation, rotation, t, mode):
+    """D.1's animated pose of a particle at frame interpolation t: (base_pos, base_rot).
+    ``mode`` (a literal, ``team_step.slerp_in_mode``): SCALAR, or LANES_NEAR where
+    ``slerp_is_near(old_rotation, rotation)`` (the usual case: one frame's turn of a bone)."""
     base_pos = v_lerp(old_position, position, t)
     # at the last step of a frame (t == 1) the rotation is taken as is; the slerp is
     # computed either way and selected (no branch: a lane loop over it vectorises)
-    slerped = q_normalize(q_slerp(old_rotation, rotation, t))
+    slerped = q_normalize(slerp_in_mode(old_rotation, rotation, t, mode))
     base_rot = rotation if t == 1.0 else slerped
     return base_pos, base_rot
 
@@ -152,7 +154,7 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
             base_rot = load4(ps.rotation, p)
         else:
             base_pos, base_rot = predict_base_pose(load3(ps.old_position, p), load3(ps.position, p),
-                                                   load4(ps.old_rotation, p), load4(ps.rotation, p), t)
+                                                   load4(ps.old_rotation, p), load4(ps.rotation, p), t, SCALAR)
         store3(ps.base_pos, p, base_pos)
         store4(ps.base_rot, p, base_rot)
         store3(ps.step_basic_pos, p, base_pos)
@@ -185,11 +187,12 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
 
 @kernel
 def _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr, next_pos_a,
-                    velocity_pos_a, interpolation, k, L, last_step, fixed):
+                    velocity_pos_a, interpolation, k, L, last_step, fixed, base_near):
     """``predict_team``'s animated pose for block row k, lane L, and for a Fixed particle its
     prediction (the pose). Flags constant at each call site (they fold away): ``last_step``
     every lane is at the last step of its frame (t == 1: the base rotation is the frame's,
-    predict_base_pose's select without the slerp)."""
+    predict_base_pose's select without the slerp); ``base_near`` every lane's frame rotations
+    are near (``predict_base_pose``'s LANES_NEAR)."""
     t = sload(interpolation, L, READ)
     old_p = sload3(old_position, k, READ)
     new_p = sload3(position, k, READ)
@@ -198,7 +201,8 @@ def _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, 
         base_rot = sload4(rotation, k, READ)
     else:
         base_pos, base_rot = predict_base_pose(old_p, new_p, sload4(old_rotation, k, READ),
-                                               sload4(rotation, k, READ), t)
+                                               sload4(rotation, k, READ), t,
+                                               LANES_NEAR if base_near else SCALAR)
     sstore3(base_pos_a, k, base_pos, 1)
     sstore4(base_rot_a, k, base_rot, 4)
     sstore3(sbp, k, base_pos, 8)
@@ -281,32 +285,45 @@ def predict_block(m, bs, prm, blk, b, dt, frequency_ratio, power_z):
         damping_keep = damping_keep_at(prm, ex, depth, frequency_ratio, power_z) if move else 1.0
         c = (k0, lanes, width, depth, depth_inertia, damping_keep, gravity_direction, gravity, dt)
         # flags literal at each call, so that the lane bodies are branch-free
-        if not move:
-            if last_step:
-                _predict_lanes(pa, la, c, True, True, False, False)
-            else:
-                _predict_lanes(pa, la, c, False, True, False, False)
-        elif not mixed:
-            if last_step:
-                _predict_lanes(pa, la, c, True, False, False, False)
-            else:
-                _predict_lanes(pa, la, c, False, False, False, False)
-        elif near:
-            if last_step:
-                _predict_lanes(pa, la, c, True, False, True, True)
-            else:
-                _predict_lanes(pa, la, c, False, False, True, True)
-        elif last_step:
-            _predict_lanes(pa, la, c, True, False, True, False)
+        if last_step:
+            _predict_particle(pa, la, c, move, mixed, near, True, False)
+        elif _frame_rotations_near(old_rotation, rotation, k0, width):
+            _predict_particle(pa, la, c, move, mixed, near, False, True)
         else:
-            _predict_lanes(pa, la, c, False, False, True, False)
+            _predict_particle(pa, la, c, move, mixed, near, False, False)
 
 
 @kernel
-def _predict_lanes(pa, la, c, last_step, fixed, mixed, near):
+def _frame_rotations_near(old_rotation, rotation, k0, width):
+    """True when every lane of rows k0 .. k0 + width - 1 has its frame rotations (old, new) near:
+    ``predict_base_pose``'s slerp then takes its lerp path in every lane (read-only pre-pass)."""
+    near = True
+    for i in range(width):
+        k = k0 + np.uint64(i)
+        if not slerp_is_near(bload4(old_rotation, k), bload4(rotation, k)):
+            near = False
+    return near
+
+
+@kernel(inline="always")
+def _predict_particle(pa, la, c, move, mixed, near, last_step, base_near):
+    """One particle's lane loops: the variant of ``_predict_lanes`` its flags select
+    (``last_step`` and ``base_near`` literal here, the others chosen at run time)."""
+    if not move:
+        _predict_lanes(pa, la, c, last_step, True, False, False, base_near)
+    elif not mixed:
+        _predict_lanes(pa, la, c, last_step, False, False, False, base_near)
+    elif near:
+        _predict_lanes(pa, la, c, last_step, False, True, True, base_near)
+    else:
+        _predict_lanes(pa, la, c, last_step, False, True, False, base_near)
+
+
+@kernel
+def _predict_lanes(pa, la, c, last_step, fixed, mixed, near, base_near):
     """predict_block's lane loops of one particle (rows k0 .. k0 + width - 1). Flags constant at
-    each call: ``last_step`` (``_base_pose_lane``), ``fixed`` a Fixed particle (its prediction
-    is the pose), ``mixed`` / ``near`` (``_move_lane``)."""
+    each call: ``last_step`` / ``base_near`` (``_base_pose_lane``), ``fixed`` a Fixed particle
+    (its prediction is the pose), ``mixed`` / ``near`` (``_move_lane``)."""
     (old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr, next_pos_a, velocity_pos_a,
      velocity_a, old_pos_a) = pa
     (interpolation, lane_old_world_pos, lane_iv, lane_iq, lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f,
@@ -317,16 +334,17 @@ def _predict_lanes(pa, la, c, last_step, fixed, mixed, near):
         for i in range(width):
             _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
                             next_pos_a, velocity_pos_a, interpolation, k0 + np.uint64(i), lanes + np.uint64(i),
-                            last_step, True)
+                            last_step, True, base_near)
         return
     if last_step:
         # without the slerp the pose is cheap: pose and prediction in one loop (with it, the
-        # merged loop does not vectorise: 42 -> 102 ns/particle)
+        # merged loop does not vectorise: 42 -> 102 ns/particle; with the slerp's lerp path
+        # alone, base_near, merged and split measured the same)
         open_streams()
         for i in range(width):
             k, L = k0 + np.uint64(i), lanes + np.uint64(i)
             _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
-                            next_pos_a, velocity_pos_a, interpolation, k, L, True, False)
+                            next_pos_a, velocity_pos_a, interpolation, k, L, True, False, False)
             _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv, lane_iq,
                        lane_sv, lane_sq, lane_vw, lane_gr, lane_fm, lane_f, lane_scale, k, L, depth, depth_inertia,
                        damping_keep, gravity_direction, gravity, dt, mixed, near)
@@ -335,7 +353,7 @@ def _predict_lanes(pa, la, c, last_step, fixed, mixed, near):
     for i in range(width):
         _base_pose_lane(old_position, position, old_rotation, rotation, base_pos_a, base_rot_a, sbp, sbr,
                         next_pos_a, velocity_pos_a, interpolation, k0 + np.uint64(i), lanes + np.uint64(i),
-                        False, False)
+                        False, False, base_near)
     open_streams()
     for i in range(width):
         _move_lane(next_pos_a, velocity_pos_a, velocity_a, old_pos_a, lane_old_world_pos, lane_iv, lane_iq, lane_sv,
