@@ -22,6 +22,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from llvmlite import ir
+from numba.core import cgutils, types
+from numba.extending import intrinsic
 
 from magica_py.jit import kernel
 
@@ -136,3 +139,83 @@ def sin(x):
 @kernel
 def cos(x):
     return sincos(x)[1]
+
+
+# ----------------------------------------------------------------------------- low latency
+# The same functions evaluated for a short dependency chain (the angle restoration's lane loop
+# is latency-bound: acos then sincos on its critical path): fused multiply-adds (``fma``,
+# rounded once) and Estrin's scheme instead of Horner's (degree-11 asin polynomial: 5 dependent
+# operations instead of 24). Results differ from ``acos`` / ``sincos`` by round-off only
+# (tests/test_trig_fma.py: the same error bounds against libm).
+
+@intrinsic
+def fma(typingctx, a, b, c):
+    """``a * b + c`` rounded once (llvm.fma: one instruction on x86-64 since Haswell and on
+    arm64, correctly rounded, so the same bits everywhere; vectorised in lane loops)."""
+    if not all(isinstance(x, (types.Float, types.Integer)) for x in (a, b, c)):
+        return None
+    sig = types.float64(a, b, c)
+
+    def codegen(context, builder, signature, args):
+        values = [context.cast(builder, v, t, types.float64) for v, t in zip(args, signature.args)]
+        double = ir.DoubleType()
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(double, [double] * 3), "llvm.fma.f64")
+        return builder.call(fn, values)
+
+    return sig, codegen
+
+
+@kernel
+def _asin_small_fma(z):
+    """asin(z) for |z| <= 1/2 (``_asin_small``'s polynomial, Estrin's scheme)."""
+    u = z * z
+    u2 = u * u
+    u4 = u2 * u2
+    q0 = fma(fma(_A3, u, _A2), u2, fma(_A1, u, _A0))
+    q1 = fma(fma(_A7, u, _A6), u2, fma(_A5, u, _A4))
+    q2 = fma(fma(_A11, u, _A10), u2, fma(_A9, u, _A8))
+    p = fma(fma(q2, u4, q1), u4, q0)
+    return fma(z * u, p, z)
+
+
+@kernel
+def acos_fma(x):
+    """``acos`` (clamped to [-1, 1], selects only), evaluated with fma and Estrin's scheme."""
+    x = 1.0 if x > 1.0 else x
+    x = -1.0 if x < -1.0 else x
+    ax = abs(x)
+    big = ax > 0.5
+    z = math.sqrt((1.0 - ax) * 0.5) if big else x
+    a = _asin_small_fma(z)
+    if big:
+        r = 2.0 * a
+        return r if x > 0.0 else PI - r
+    return HALF_PI - a
+
+
+_S0, _S1, _S2, _S3 = -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0
+_S4, _S5, _S6, _S7 = -1.0 / 39916800.0, 1.0 / 6227020800.0, -1.0 / 1307674368000.0, 1.0 / 355687428096000.0
+_C0, _C1, _C2, _C3 = 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0, -1.0 / 3628800.0
+_C4, _C5, _C6, _C7 = 1.0 / 479001600.0, -1.0 / 87178291200.0, 1.0 / 20922789888000.0, -1.0 / 6402373705728000.0
+
+
+@kernel
+def sincos_fma(x):
+    """``sincos`` (same reduction, same Taylor polynomials, quadrant by selects), evaluated
+    with fma and Estrin's scheme. Accurate for |x| <= 1e4."""
+    k = np.floor(x * TWO_OVER_PI + 0.5)
+    r = fma(-k, PIO2_3, fma(-k, PIO2_2, fma(-k, PIO2_1, x)))
+    u = r * r
+    u2 = u * u
+    u4 = u2 * u2
+    ps = fma(fma(fma(_S7, u, _S6), u2, fma(_S5, u, _S4)), u4, fma(fma(_S3, u, _S2), u2, fma(_S1, u, _S0)))
+    pc = fma(fma(fma(_C7, u, _C6), u2, fma(_C5, u, _C4)), u4, fma(fma(_C3, u, _C2), u2, fma(_C1, u, _C0)))
+    s = fma(r * u, ps, r)
+    c = fma(u2, pc, fma(-0.5, u, 1.0))
+    q = k - 4.0 * np.floor(k * 0.25)
+    odd = q == 1.0 or q == 3.0
+    sin_x = c if odd else s
+    cos_x = s if odd else c
+    sin_x = -sin_x if q >= 2.0 else sin_x
+    cos_x = -cos_x if (q == 1.0 or q == 2.0) else cos_x
+    return sin_x, cos_x

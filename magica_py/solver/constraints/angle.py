@@ -11,6 +11,13 @@ an iteration) and ``angle_restoration_entry`` (D.6 half): tuples in and out, no 
 every path computed and the taken one selected (the reference's early returns become
 selects), so that a lane loop over them vectorises and gives the per-team bits.
 
+The solves are written on the edge v = cp - pp rather than on world positions, and the
+restoration's from-to rotation is applied as a turn in the plane of the edge and its rest
+direction (``restoration_offset``) with the fma forms of acos and sincos: the reference's
+results up to round-off, on a short dependency chain (the lane loop is latency-bound);
+docs/angle_maths.md says why each form is the same rotation, tests/test_angle_maths.py measures
+the difference per call.
+
 Rare paths (a limit violation: acos and clamp; an edge opposite its target: the fallback
 axis) would cost every lane in a vector loop. The iteration functions take a literal
 ``full``: the block's vector pass runs them with ``full=False``, which leaves those paths
@@ -30,7 +37,7 @@ from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4,
 from magica_py.kernels.math3d import (
     angle_between_vectors, clamp_angle, inverse_mass_friction, lerp, load3, load4, orthogonal_axis,
     q_axis_angle, q_inverse, q_mul, q_rotate, saturate, store3, store4, v_add, v_cross, v_dot, v_length,
-    v_normalize, v_scale, v_sub,
+    v_scale, v_sub,
 )
 from magica_py.solver.parameters import curve_at, curve_at_clamp01, step_rate
 
@@ -46,7 +53,10 @@ IDENTITY = (0.0, 0.0, 0.0, 1.0)
 def solve_pivot_pair(pp, cp, v, r, pivot_ratio, wp, wc):
     """Rotate the segment p->c from ``v`` to ``r`` about the point at ``pivot_ratio`` along it.
 
-    Returns the corrections (dp, dc) weighted by the inverse masses."""
+    Returns the corrections (dp, dc) weighted by the inverse masses. The reference's form, on
+    world positions; the stage's entries write it on the edge (with cp - pp = v the pivot
+    cancels: dp = (v - r) pivot_ratio wp, dc = (r - v) (1 - pivot_ratio) wc for the
+    restoration), the same result up to the world positions' round-off (docs/angle_maths.md)."""
     pivot = v_add(pp, v_scale(v, pivot_ratio))
     dp = v_scale(v_sub(v_sub(pivot, v_scale(r, pivot_ratio)), pp), wp)
     dc = v_scale(v_sub(v_add(pivot, v_scale(r, 1.0 - pivot_ratio)), cp), wc)
@@ -78,25 +88,34 @@ def swing_rotation(a, b, full):
 
 
 @kernel(inline="always")
-def from_to_rotation_fraction(a, b, t, full):
-    """``from_to_rotation_unit(a, b, t)`` (unit a, b), the same bits on every path, with one
-    sincos for both the opposite and the general case (the axis and angle are selected
-    first): a lane loop computes every branch, so two q_axis_angle would cost two sincos.
+def restoration_offset(a, v, vl, b, t, full):
+    """``r - v`` for ``r = from_to_rotation_unit(a, b, t) · v`` (a = v / vl unit, b unit): the
+    same rotation written for a short dependency chain (the restoration's lane loop is
+    latency-bound). v turns by t times the angle theta = acos(a·b) in the plane of a and b:
+    ``r = v cos(t theta) + vl sin(t theta) w / |w|``, w = b - (a·b) a the in-plane
+    direction towards b (``(axis x a) |a x b|`` for the reference's axis = normalize(a x b),
+    so the rotation about that axis of a vector orthogonal to it). No quaternion, no cross
+    product, one sincos of the full angle; acos and sincos in their fma forms
+    (``trig.acos_fma``, ``trig.sincos_fma``). Paths as the reference's: parallel (1 - c <
+    1e-6) gives 0, opposite (1 + c < 1e-6) turns t pi about ``orthogonal_axis(a)`` (w =
+    axis x a).
 
-    Returns (rotation, opposite); ``full`` False (a literal) leaves the opposite case out."""
+    Returns (r - v, opposite); ``full`` False (a literal) leaves the opposite case out."""
     c = v_dot(a, b)
     c = 1.0 if c > 1.0 else c
     c = -1.0 if c < -1.0 else c
     opposite = abs(1.0 + c) < 1e-6
     parallel = abs(1.0 - c) < 1e-6
-    axis = v_normalize(v_cross(a, b))
-    angle = trig.acos(c) * t
+    w = v_sub(b, v_scale(a, c))
+    theta = trig.acos_fma(c)
     if full:
-        fallback_axis = orthogonal_axis(a)
-        axis = fallback_axis if opposite else axis
-        angle = math.pi * t if opposite else angle
-    q = q_axis_angle(axis, angle)
-    return (IDENTITY if (not opposite) & parallel else q), opposite
+        w = v_cross(orthogonal_axis(a), a) if opposite else w
+        theta = math.pi if opposite else theta
+    k = vl / v_length(w)   # off the chain: ready before the sincos
+    s, co = trig.sincos_fma(theta * t)
+    d = v_sub(v_scale(w, s * k), v_scale(v, 1.0 - co))
+    return (ZERO3 if (not opposite) & parallel else d), opposite
+
 
 # ----------------------------------------------------------------------------- per element
 @kernel
@@ -142,14 +161,25 @@ def angle_buffer_entry(cp, pp, c_basic_pos, p_basic_pos, c_basic_rot, p_basic_ro
 
 
 @kernel(inline="always")
+def edge_of(cp, pp):
+    """(v, |v|, v / |v|) of the edge cp - pp: what the restoration turns when no limit pass
+    ran before it (``angle_limit_entry`` returns the same triple of the edge it leaves)."""
+    v = v_sub(cp, pp)
+    vl = v_length(v)
+    return v, vl, v_scale(v, 1.0 / vl)
+
+
+@kernel(inline="always")
 def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, length, max_angle,
                       max_angle_cos, wc, wp, p_move, stiffness, attenuation, full):
     """The angle-limit half of one iteration for child c (positions cp, pp read at its start).
 
     ``vel_*`` velocity_pos, ``rot_*`` angle_rotation, ``local_*`` / ``length`` the buffered
     angle_local_pos / angle_local_rot / angle_length of c. Returns (cp, pp, next_c, vel_c,
-    vel_p, rot_c): the positions the restoration sees, then c's next_pos, both velocity_pos
-    and c's angle_rotation after the pass (p's next_pos is the returned pp). Paths, in the
+    vel_p, rot_c, edge): the positions the restoration sees, then c's next_pos, both
+    velocity_pos and c's angle_rotation after the pass (p's next_pos is the returned pp), and
+    the edge the restoration turns, (cp - pp, its length, its direction) of the returned
+    positions, computed on the edge (``edge_of`` of them up to round-off). Paths, in the
     reference's order: segment shorter than 1e-8 m: nothing; degenerate rest direction: c
     snaps onto p but the returned cp stays as it was (quirk); degenerate rest length:
     nothing; otherwise the limit is solved about the pivot at 0.4 and c's rotation swung
@@ -163,27 +193,39 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     tv = q_rotate(rot_p, local_pos)
     tl = v_length(tv)
     rest_rot = q_mul(rot_p, local_rot)
-    vn = v_scale(v, 1.0 / vl)
+    inv_vl = 1.0 / vl
+    vn = v_scale(v, inv_vl)
     tn = v_scale(tv, 1.0 / tl)
     lc = (vl + length) * 0.5
-    v = v_scale(vn, lc)
     # alpha > max angle <=> cos(alpha) < cos(max angle): acos only for a violation
-    r = v
     violated = v_dot(vn, tn) < max_angle_cos
+    # solve_pivot_pair(pp, cp, vn lc, r, 0.4, wp, wc) with cp - pp = v, written on the edge:
+    # r = vn lc (no violation) leaves p in place and moves c along v by (lc / vl - 1) v, so the
+    # new edge is v (1 + s), s = (length - vl) / (2 vl) wc: same direction vn, no sqrt
+    stretch = (length - vl) * 0.5 * inv_vl   # lc / vl - 1
+    s = stretch * wc
+    dc = v_scale(v, s)
+    dp = ZERO3
+    edge = v_scale(v, 1.0 + s)
+    edge_length = vl * (1.0 + s)
+    edge_unit = vn
     if full and violated:
-        alpha = angle_between_vectors(v, tn)
+        rescaled = v_scale(vn, lc)
+        alpha = angle_between_vectors(rescaled, tn)
         if alpha > max_angle:
-            r = clamp_angle(v, tn, lerp(alpha, max_angle, stiffness))
-    dp, dc = solve_pivot_pair(pp, cp, v, r, LIMIT_PIVOT, wp, wc)
+            turn = v_sub(clamp_angle(rescaled, tn, lerp(alpha, max_angle, stiffness)), rescaled)
+            dp = v_scale(turn, -LIMIT_PIVOT * wp)
+            dc = v_scale(v_add(v_scale(v, stretch), v_scale(turn, 1.0 - LIMIT_PIVOT)), wc)
+            edge = v_add(v, v_sub(dc, dp) if p_move else dc)
+            edge_length = v_length(edge)
+            edge_unit = v_scale(edge, 1.0 / edge_length)
     solved_c = v_add(cp, dc)
     solved_vel_c = v_add(vel_c, v_scale(dc, attenuation))
     solved_p = v_add(pp, dp) if p_move else pp
     solved_vel_p = v_add(vel_p, v_scale(dp, attenuation)) if p_move else vel_p
-    u = v_sub(solved_c, solved_p)
-    ul = v_length(u)
-    swing, opposite = swing_rotation(tn, v_scale(u, 1.0 / ul), full)
+    swing, opposite = swing_rotation(tn, edge_unit, full)
     swung = q_mul(swing, rest_rot)
-    solved_rot = rot_c if ul < 1e-8 else swung
+    solved_rot = rot_c if edge_length < 1e-8 else swung
     # path selection (a NaN compares false everywhere, as the reference's early returns do)
     skip = vl < 1e-8
     snap = (not skip) & (tl < 1e-8)
@@ -195,24 +237,28 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     rot_c = solved_rot if solve else (rest_rot if snap else rot_c)
     cp = solved_c if solve else cp
     pp = solved_p if solve else pp
-    rare = solve & (violated | ((not (ul < 1e-8)) & opposite))
-    return cp, pp, next_c, vel_c, vel_p, rot_c, rare
+    edge = edge if solve else v
+    edge_length = edge_length if solve else vl
+    edge_unit = edge_unit if solve else vn
+    rare = solve & (violated | ((not (edge_length < 1e-8)) & opposite))
+    return cp, pp, next_c, vel_c, vel_p, rot_c, (edge, edge_length, edge_unit), rare
 
 
 @kernel(inline="always")
-def angle_restoration_entry(cp, pp, next_c, vel_c, next_p, vel_p, rest_length, rest_direction, stiffness,
+def angle_restoration_entry(cp, pp, edge, next_c, vel_c, next_p, vel_p, rest_length, rest_direction, stiffness,
                             pivot, wc, wp, p_move, attenuation, full):
     """The restoration half of one iteration for child c: the edge cp - pp (as the limit
-    pass returned it) turned towards ``rest_direction`` by ``stiffness`` about the point at
+    pass returned it; ``edge`` = (v, |v|, v / |v|) of it, from ``angle_limit_entry`` or
+    ``edge_of``) turned towards ``rest_direction`` by ``stiffness`` about the point at
     ``pivot``, the corrections added to the current next_pos / velocity_pos of c and p.
     A degenerate rest edge snaps c onto pp; a degenerate edge does nothing.
     Returns (next_c, vel_c, next_p, vel_p, rare): ``rare``, the solve path met an opposite
     edge (left out when ``full`` is a literal False, see ``angle_limit_entry``)."""
-    v = v_sub(cp, pp)
-    vl = v_length(v)
-    q, opposite = from_to_rotation_fraction(v_scale(v, 1.0 / vl), rest_direction, stiffness, full)
-    r = q_rotate(q, v)
-    dp, dc = solve_pivot_pair(pp, cp, v, r, pivot, wp, wc)
+    v, vl, a = edge
+    d, opposite = restoration_offset(a, v, vl, rest_direction, stiffness, full)
+    # solve_pivot_pair(pp, cp, v, v + d, pivot, wp, wc) with cp - pp = v: the pivot cancels
+    dp = v_scale(d, -pivot * wp)
+    dc = v_scale(d, (1.0 - pivot) * wc)
     snap = rest_length < 1e-8
     solve = (not snap) & (not (vl < 1e-8))
     move_p = solve & p_move
@@ -289,16 +335,18 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
                 wc = ps.angle_inverse_mass[c]
                 wp = ps.angle_inverse_mass[p]
                 if use_limit:
-                    cp, pp, next_c, vel_c, vel_p, rot_c, _rare = angle_limit_entry(
+                    cp, pp, next_c, vel_c, vel_p, rot_c, edge, _rare = angle_limit_entry(
                         cp, pp, vel_c, vel_p, load4(ps.angle_rotation, c), load4(ps.angle_rotation, p),
                         load3(ps.angle_local_pos, c), load4(ps.angle_local_rot, c), ps.angle_length[c],
                         ps.angle_limit[c], ps.angle_limit_cos[c], wc, wp, p_move, limit_stiffness,
                         limit_attenuation, True)
                     store4(ps.angle_rotation, c, rot_c)
+                else:
+                    edge = edge_of(cp, pp)
                 next_p = pp
                 if use_restoration:
                     next_c, vel_c, next_p, vel_p, _rare = angle_restoration_entry(
-                        cp, pp, next_c, vel_c, next_p, vel_p, ps.angle_rest_length[c],
+                        cp, pp, edge, next_c, vel_c, next_p, vel_p, ps.angle_rest_length[c],
                         load3(ps.angle_rest_direction, c), ps.angle_restoration_k[c], rest_pivot, wc, wp,
                         p_move, restoration_attenuation, True)
                 store3(ps.next_pos, c, next_c)
@@ -478,14 +526,16 @@ def _lane_entry(kc, kp, L, next_pos, velocity_pos, angle_rotation, angle_inverse
     next_c, vel_c, vel_p, rot_c, limited_c, limited_p = cp, vel_c0, vel_p0, rot_c0, cp, pp
     rare = False
     if use_limit:
-        limited_c, limited_p, next_c, vel_c, vel_p, rot_c, rare = angle_limit_entry(
+        limited_c, limited_p, next_c, vel_c, vel_p, rot_c, edge, rare = angle_limit_entry(
             cp, pp, vel_c0, vel_p0, rot_c0, sload4(angle_rotation, kp, READ), sload3(angle_local_pos, kc, READ),
             sload4(angle_local_rot, kc, READ), sload(angle_length, kc, READ), max_angle, max_angle_cos, wc, wp,
             p_move, limit_stiffness, limit_attenuation, full)
+    else:
+        edge = edge_of(cp, pp)
     next_p = limited_p
     if use_restoration:
         next_c, vel_c, next_p, vel_p, rare_restoration = angle_restoration_entry(
-            limited_c, limited_p, next_c, vel_c, next_p, vel_p, sload(angle_rest_length, kc, READ),
+            limited_c, limited_p, edge, next_c, vel_c, next_p, vel_p, sload(angle_rest_length, kc, READ),
             sload3(angle_rest_direction, kc, READ),
             rate * restoration_gravity_factor(falloff, sload(gravity_dot, L, READ)),
             rest_pivot, wc, wp, p_move, restoration_attenuation, full)
