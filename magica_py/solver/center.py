@@ -143,13 +143,24 @@ def mean_velocity_weight(w0, stabilization_time, span):
 
 
 @kernel
-def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation, lossy_scale,
-                            frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step=0.0):
-    """C.2 and C.4 for one team: center, anchor, teleport, smoothing, world inertia, shift.
+def center_fixed_terms(position, rotation, bind_rotation):
+    """C.2 terms of one center-fixed vertex: its position and the normal and tangent axes of
+    ``rotation * bind_rotation`` (summed over the fixed list by ``center_pose_team`` and, lanes
+    innermost, by ``batched/frame_begin.center_sums_block``). Branch-free."""
+    q = q_mul(rotation, bind_rotation)
+    return position, q_normal_axis(q), q_tangent_axis(q)
 
-    ``since_last_step``: team time (s) from the last step to the start of this frame; quality
-    mode uses it to read the stabilisation ramp, which C.3 advances per step, in continuous
-    time (the ramp at the frame's start, not at the last step before it)."""
+
+@kernel
+def center_from_sums(position_sum, normal_sum, tangent_sum, count):
+    """C.2 center pose from the sums of ``center_fixed_terms`` over ``count`` > 0 vertices."""
+    return (v_scale(position_sum, 1.0 / count),
+            rot_from_normal_tangent(v_normalize(normal_sum), v_normalize(tangent_sum)))
+
+
+@kernel
+def component_pose_team(m, ts, team, world_position, world_rotation, lossy_scale):
+    """C.2 component pose of one team (stored in ``ts``): (position, rotation, scale, scale ratio)."""
     comp = m.team_component_transform[team]
     cpos = load3(world_position, comp)
     crot = load4(world_rotation, comp)
@@ -160,24 +171,48 @@ def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation
     init_len = v_length(load3(m.team_init_scale, team))
     ratio = v_length(cscl) / init_len if init_len > 0.0 else 1.0
     ts.component_scale_ratio[team] = ratio
-    # center (C.2)
+    return cpos, crot, cscl, ratio
+
+
+@kernel
+def center_pose_team(m, ps, team, cpos, crot):
+    """C.2 center of one team from its skinned pose in the team rows (the component pose when
+    the team has no center-fixed vertex)."""
     c0 = m.team_center_start[team]
     cn = m.team_center_count[team]
-    if cn > 0:
-        sp = (0.0, 0.0, 0.0)
-        sn = (0.0, 0.0, 0.0)
-        st = (0.0, 0.0, 0.0)
-        for k in range(c0, c0 + cn):
-            f = m.center_fixed[k]
-            sp = v_add(sp, load3(ps.position, f))
-            q = q_mul(load4(ps.rotation, f), load4(m.bind_rotation, f))
-            sn = v_add(sn, q_normal_axis(q))
-            st = v_add(st, q_tangent_axis(q))
-        center_pos = v_scale(sp, 1.0 / cn)
-        center_rot = rot_from_normal_tangent(v_normalize(sn), v_normalize(st))
-    else:
-        center_pos = cpos
-        center_rot = crot
+    if cn == 0:
+        return cpos, crot
+    sp = (0.0, 0.0, 0.0)
+    sn = (0.0, 0.0, 0.0)
+    st = (0.0, 0.0, 0.0)
+    for k in range(c0, c0 + cn):
+        f = m.center_fixed[k]
+        pos, nor, tan = center_fixed_terms(load3(ps.position, f), load4(ps.rotation, f), load4(m.bind_rotation, f))
+        sp = v_add(sp, pos)
+        sn = v_add(sn, nor)
+        st = v_add(st, tan)
+    return center_from_sums(sp, sn, st, cn)
+
+
+@kernel
+def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation, lossy_scale,
+                            frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step=0.0):
+    """C.2 and C.4 for one team: center, anchor, teleport, smoothing, world inertia, shift.
+
+    ``since_last_step``: team time (s) from the last step to the start of this frame; quality
+    mode uses it to read the stabilisation ramp, which C.3 advances per step, in continuous
+    time (the ramp at the frame's start, not at the last step before it)."""
+    cpos, crot, cscl, ratio = component_pose_team(m, ts, team, world_position, world_rotation, lossy_scale)
+    center_pos, center_rot = center_pose_team(m, ps, team, cpos, crot)
+    inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot, world_position, world_rotation,
+                 frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step)
+
+
+@kernel
+def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot, world_position, world_rotation,
+                 frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step):
+    """C.4 for one team once its component pose and center (C.2) are known: anchor, teleport,
+    smoothing, world inertia, speed limits, the frame shift (see ``center_and_inertia_team``)."""
     store3(ts.frame_world_pos, team, center_pos)
     store4(ts.frame_world_rot, team, center_rot)
     store3(ts.frame_world_scale, team, cscl)
@@ -356,12 +391,18 @@ def snap_particles_to_base_pose(ps, start, end):
 
 
 @kernel
-def shift_particle(old_pos, old_position, disp_pos, old_rotation, velocity, real_velocity, pivot, vec, rot):
-    """C.5 inertia shift of one particle's history: positions moved rigidly about the pivot,
-    rotation and velocities turned (no branch: a loop over particles vectorises)."""
+def shift_history(old_pos, old_position, disp_pos, old_rotation, velocity, pivot, vec, rot):
+    """C.5 inertia shift of one particle's history but its real velocity: positions moved
+    rigidly about the pivot, rotation and velocity turned (no branch: a loop vectorises)."""
     return (shift_position(old_pos, pivot, vec, rot), shift_position(old_position, pivot, vec, rot),
-            shift_position(disp_pos, pivot, vec, rot), q_mul(rot, old_rotation), q_rotate(rot, velocity),
-            q_rotate(rot, real_velocity))
+            shift_position(disp_pos, pivot, vec, rot), q_mul(rot, old_rotation), q_rotate(rot, velocity))
+
+
+@kernel
+def shift_particle(old_pos, old_position, disp_pos, old_rotation, velocity, real_velocity, pivot, vec, rot):
+    """C.5 inertia shift of one particle's history (``shift_history``) and its real velocity."""
+    a, b, c, r, u = shift_history(old_pos, old_position, disp_pos, old_rotation, velocity, pivot, vec, rot)
+    return a, b, c, r, u, q_rotate(rot, real_velocity)
 
 
 @kernel
