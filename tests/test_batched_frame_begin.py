@@ -1,8 +1,8 @@
 """The begin of frame in block form (``frame.begin_frame_block``, ``batched/frame_begin``: C.1
 skinning into the block rows, C.2 sums lanes innermost, per-lane C.2/C.4/G.2, the history
 gathered through the C.5 shift, a Reset lane snapped) gives exactly the bits of the per-team
-``frame.begin_frame_team`` followed by the plain gather: block rows against team rows, every
-TeamState and ColliderState value, on mid-motion frames, the first frame (every lane resets),
+``frame.begin_frame_team`` followed by the plain gather: block rows against team rows, the team rows the block begin writes
+too, every TeamState and ColliderState value, on mid-motion frames, the first frame (every lane resets),
 a teleport in Reset and in Keep mode, and a lane that does not shift."""
 import numba
 import numpy as np
@@ -19,6 +19,9 @@ from magica_py.solver.frame import (
 # the team rows (position / rotation: C.1; the history: C.5; the rest: the plain gather)
 BEGIN_FIELDS = ("position", "rotation", "old_position", "old_rotation", "old_pos", "velocity", "disp_pos",
                 "collision_normal", "friction", "static_friction")
+# written to the team rows too (the per-team end-of-frame stages read them; the steps do not
+# change them)
+TEAM_ROW_FIELDS = ("position", "rotation", "old_position", "old_rotation", "disp_pos")
 # what a Reset also writes (C.5 snap), compared for lanes that reset
 SNAP_FIELDS = ("next_pos", "base_pos", "base_rot", "velocity_pos", "real_velocity")
 
@@ -89,9 +92,20 @@ def _compare_begin(system, edit=None):
             same = (got == want) | (np.isnan(got) & np.isnan(want))
             assert same.all(), f"{key} differs"
     assert np.array_equal(h.ramp_from_build, ramp_expected)
-    # the block begin does not write the particle team rows (the scatter does, after the steps)
+    # team rows: what the per-team begin leaves there and the steps do not change is there too
+    # (the per-team end-of-frame stages read it); a Reset lane's rows are all snapped; the rest
+    # stays in the block until the scatter
     for name in system.particles._fields:
-        assert np.array_equal(getattr(system.particles, name), before[f"ps.{name}"]), name
+        want = before[f"ps.{name}"].copy()
+        if want.shape[:1] != system.particles.position.shape[:1]:
+            continue   # not a per-particle field
+        if name in TEAM_ROW_FIELDS:
+            want[rows] = expected[f"ps.{name}"][rows]
+        for t in resets:
+            r = np.arange(m.team_particle_start[t], m.team_particle_start[t] + m.team_particle_count[t])
+            want[r] = expected[f"ps.{name}"][r]
+        got = getattr(system.particles, name)
+        assert np.array_equal(got, want), f"team rows of {name}: {int((got != want).sum())} values differ"
     return blk, bs, expected
 
 

@@ -29,26 +29,48 @@ TELEPORT_KEEP = 2
 
 
 @kernel
+def bind_point(b0, b1, b2, b3, v, w):
+    """``B @ (v, w)`` with ``B`` the bind pose (rows b0..b3, 4-tuples): the 4-vector C.1 then
+    takes to world space with the bone's matrix (``world_point``). Constant per vertex: the
+    block form computes it once, when the blocks are formed (``batched/frame_begin``)."""
+    return (b0[0] * v[0] + b0[1] * v[1] + b0[2] * v[2] + b0[3] * w,
+            b1[0] * v[0] + b1[1] * v[1] + b1[2] * v[2] + b1[3] * w,
+            b2[0] * v[0] + b2[1] * v[1] + b2[2] * v[2] + b2[3] * w,
+            b3[0] * v[0] + b3[1] * v[1] + b3[2] * v[2] + b3[3] * w)
+
+
+@kernel
+def world_point(l0, l1, l2, x):
+    """The first three rows l0..l2 of ``L`` (4-tuples) applied to the 4-vector x."""
+    return (l0[0] * x[0] + l0[1] * x[1] + l0[2] * x[2] + l0[3] * x[3],
+            l1[0] * x[0] + l1[1] * x[1] + l1[2] * x[2] + l1[3] * x[3],
+            l2[0] * x[0] + l2[1] * x[1] + l2[2] * x[2] + l2[3] * x[3])
+
+
+@kernel
 def transform_point_rows(l0, l1, l2, b0, b1, b2, b3, v, w):
     """``(L @ B) @ (v, w)`` without forming the product: ``B`` (rows b0..b3) first, then the
     first three rows l0..l2 of ``L`` (4-tuples)."""
-    x = b0[0] * v[0] + b0[1] * v[1] + b0[2] * v[2] + b0[3] * w
-    y = b1[0] * v[0] + b1[1] * v[1] + b1[2] * v[2] + b1[3] * w
-    z = b2[0] * v[0] + b2[1] * v[1] + b2[2] * v[2] + b2[3] * w
-    h = b3[0] * v[0] + b3[1] * v[1] + b3[2] * v[2] + b3[3] * w
-    return (l0[0] * x + l0[1] * y + l0[2] * z + l0[3] * h,
-            l1[0] * x + l1[1] * y + l1[2] * z + l1[3] * h,
-            l2[0] * x + l2[1] * y + l2[2] * z + l2[3] * h)
+    return world_point(l0, l1, l2, bind_point(b0, b1, b2, b3, v, w))
+
+
+@kernel
+def skin_bound_vertex(l0, l1, l2, bound_position, bound_normal, bound_tangent):
+    """C.1 for one vertex from its ``bind_point`` 4-vectors (position w = 1, normal and tangent
+    w = 0) and its bone's local-to-world rows l0..l2. Branch-free (a loop vectorises)."""
+    pos = world_point(l0, l1, l2, bound_position)
+    nor = normalize_or_zero(world_point(l0, l1, l2, bound_normal))
+    tan = normalize_or_zero(world_point(l0, l1, l2, bound_tangent))
+    return pos, rot_from_normal_tangent_select(nor, tan)
 
 
 @kernel
 def skin_vertex(l0, l1, l2, b0, b1, b2, b3, local_position, local_normal, local_tangent):
     """C.1 for one vertex: world (position, rotation) from its bone's local-to-world rows
     l0..l2 and its bind pose rows b0..b3. Branch-free (a loop over vertices vectorises)."""
-    pos = transform_point_rows(l0, l1, l2, b0, b1, b2, b3, local_position, 1.0)
-    nor = normalize_or_zero(transform_point_rows(l0, l1, l2, b0, b1, b2, b3, local_normal, 0.0))
-    tan = normalize_or_zero(transform_point_rows(l0, l1, l2, b0, b1, b2, b3, local_tangent, 0.0))
-    return pos, rot_from_normal_tangent_select(nor, tan)
+    return skin_bound_vertex(l0, l1, l2, bind_point(b0, b1, b2, b3, local_position, 1.0),
+                             bind_point(b0, b1, b2, b3, local_normal, 0.0),
+                             bind_point(b0, b1, b2, b3, local_tangent, 0.0))
 
 
 @kernel

@@ -23,10 +23,10 @@ from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.batch_tables import borrow
 from magica_py.solver.batched.run import decide_blocks, run_block_step, team_runs_alone
 from magica_py.solver.batched.frame_begin import (
-    SHIFT_RESET, begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block, skin_block,
-    snap_lane_block,
+    SHIFT_RESET, begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block, publish_history_block,
+    skin_block, snap_lane_block,
 )
-from magica_py.solver.batched.transfer import gather_block, scatter_block
+from magica_py.solver.batched.transfer import scatter_block
 from magica_py.runtime.team_time import (
     TeamTimeState, team_time_begin_step, team_time_begin_step_team, team_time_end_frame,
     team_time_frame_update,
@@ -212,20 +212,21 @@ def begin_frame_block(m, ps, prm, ts, cs, tt, h, fi, blk, bs, b):
     """``begin_frame_team`` for every lane of running block b and the gather, with the particle
     work on the block rows, lanes innermost (``batched/frame_begin``): C.1 skinning into the
     block, C.2 sums, then per lane the team-level stages (prelude, center, C.4, G.2), then the
-    history gathered through the C.5 shift, and a Reset lane snapped. The same bits."""
+    history gathered through the C.5 shift (with the plain copies of ``gather_block``), and a
+    Reset lane snapped. The same bits."""
     lanes = blk.block_lane_base[b]
     lane_starts_block(m, blk, bs, b)
-    skin_block(m, h.local_to_world, blk, bs, b)
+    skin_block(m, ps, h.local_to_world, blk, bs, b)
     center_sums_block(m, blk, bs, b)
     for i in range(blk.block_width[b]):
         t = blk.lane_team[lanes + i]
         since_last_step = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t)
         begin_lane_team(m, prm, ts, cs, tt, h, fi, bs, lanes + i, t, since_last_step)
-    gather_block(m, ps, blk, bs, b)
-    gather_shift_block(m, ps, blk, bs, b)
+    gather_shift_block(m, ps, blk, bs, b)   # with gather_block's copies
+    publish_history_block(ps, blk, bs, b)
     for i in range(blk.block_width[b]):
         if bs.lane_shift_mode[lanes + i] == SHIFT_RESET:
-            snap_lane_block(blk, bs, b, i)
+            snap_lane_block(m, ps, blk, bs, b, i)
 
 
 @kernel

@@ -4,18 +4,25 @@
 block's rows instead of the team rows:
 
 1. ``skin_block`` (C.1): every lane's skinned pose straight into ``bs.position`` /
-   ``bs.rotation`` (``center.skin_vertex``; each lane reads its own bone matrices and model
-   rows, a gather per lane);
+   ``bs.rotation`` (``center.skin_bound_vertex``; each lane reads its own bone matrices, a
+   gather per lane, and the constant half of C.1, ``center.bind_point`` of its vertex, from
+   ``bs.skin_bound_*``, which ``bind_rows_block`` fills when the blocks are formed);
 2. ``center_sums_block`` (C.2): the sums of ``center.center_fixed_terms`` over the
    center-fixed vertices into the lane arrays (in the fixed list's order, from 0: the per-team
    sums' bits);
 3. per lane, scalar, the team-level part: ``frame.begin_frame_prelude_team`` (running flag,
    first-frame build reset) and ``begin_lane_team`` (C.2 component pose and center from the
    sums, C.4 ``center.inertia_team``, G.2 ``collider_frame_team``, the lane's C.5 values);
-4. ``gather_block`` (collision normal, friction) and ``gather_shift_block`` (C.5): the history
-   (old_pos, old_position, disp_pos, old_rotation, velocity) read from the team rows, shifted
-   (``center.shift_history``) in the lanes that shift and stored in the block rows;
+4. ``gather_shift_block`` (C.5 and the gather): the history (old_pos, old_position, disp_pos,
+   old_rotation, velocity) read from the team rows, shifted (``center.shift_history``) in the
+   lanes that shift, stored in the block rows, with ``transfer.gather_block``'s plain copies
+   (collision normal, friction, static friction) in the same pass;
 5. ``snap_lane_block`` (C.5 Reset) for a lane that resets (rare: a per-lane loop).
+
+What the per-team begin leaves in the team rows and the steps do not change (position,
+rotation, old_position, old_rotation, disp_pos) is stored there too (``skin_block``, and
+``publish_history_block`` after the gather): the per-team end-of-frame stages read it, and no
+scatter is needed for it.
 
 The whole sequence is ``frame.begin_frame_block`` (frame.py: the prelude lives there).
 
@@ -32,7 +39,8 @@ from magica_py.kernels.math3d import load3, load4, store3, store4
 from magica_py.kernels.rows import flat
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
 from magica_py.solver.center import (
-    center_fixed_terms, center_from_sums, component_pose_team, inertia_team, shift_history, skin_vertex,
+    bind_point, center_fixed_terms, center_from_sums, component_pose_team, inertia_team, shift_history,
+    skin_bound_vertex, snap_particles_to_base_pose,
 )
 from magica_py.solver.colliders import collider_frame_team
 
@@ -72,15 +80,44 @@ def lane_starts_block(m, blk, bs, b):
 
 
 @kernel
-def skin_block(m, local_to_world, blk, bs, b):
-    """C.1 of every lane of block b into the block rows (``center.skin_team``'s maths).
+def bind_rows_block(m, blk, bs):
+    """``bs.skin_bound_*`` of every block: ``center.bind_point`` of each lane's vertex (its
+    team's model rows), lane-innermost (model data; run when the blocks are formed)."""
+    for b in range(blk.block_width.shape[0]):
+        width = blk.block_width[b]
+        lanes = blk.block_lane_base[b]
+        for p in range(blk.block_particle_count[b]):
+            for i in range(width):
+                r = m.team_particle_start[blk.lane_team[lanes + i]] + p
+                k = blk.block_row_base[b] + p * width + i
+                b0, b1, b2, b3 = (load4(m.skin_bind_pose[r], 0), load4(m.skin_bind_pose[r], 1),
+                                  load4(m.skin_bind_pose[r], 2), load4(m.skin_bind_pose[r], 3))
+                bp = bind_point(b0, b1, b2, b3, load3(m.local_position, r), 1.0)
+                bn = bind_point(b0, b1, b2, b3, load3(m.local_normal, r), 0.0)
+                bt = bind_point(b0, b1, b2, b3, load3(m.local_tangent, r), 0.0)
+                for c in range(4):
+                    bs.skin_bound_position[c, k] = bp[c]
+                    bs.skin_bound_normal[c, k] = bn[c]
+                    bs.skin_bound_tangent[c, k] = bt[c]
 
-    Streams (``kernels/streams``): position 1-3, rotation 4-7 (row k of the loop's particle);
-    every load is READ (model rows, bone matrices, lane starts: arrays the loop does not write)."""
+
+@kernel
+def skin_block(m, ps, local_to_world, blk, bs, b):
+    """C.1 of every lane of block b into the block rows (``center.skin_team``'s maths, its
+    constant half ``bind_point`` read from ``bs.skin_bound_*``).
+
+    The pose is also stored in the lanes' team rows (where the per-team begin leaves it: the
+    per-team end-of-frame stages read it there; no scatter after the steps, which do not
+    change it).
+
+    Streams (``kernels/streams``): block position 1-3, rotation 4-7 (row k of the loop's
+    particle), team-row position 8-10, rotation 11-14 (row r of each lane's team: distinct
+    teams, distinct rows); every load is READ (bound rows, bone matrices, model and lane rows:
+    arrays the loop does not write)."""
     l2w = flat(local_to_world)          # (nodes * 16,) bone matrices, gathered per lane
-    bind = flat(m.skin_bind_pose)       # (N * 16,) model rows of each lane's team
     node_of = m.transform_index
-    local_position, local_normal, local_tangent = flat(m.local_position), flat(m.local_normal), flat(m.local_tangent)
+    team_position, team_rotation = flat(ps.position), flat(ps.rotation)
+    bound_position, bound_normal, bound_tangent = bs.skin_bound_position, bs.skin_bound_normal, bs.skin_bound_tangent
     position, rotation = bs.position, bs.rotation
     starts = bs.lane_particle_start
     width = blk.block_width[b]
@@ -91,16 +128,21 @@ def skin_block(m, local_to_world, blk, bs, b):
         for i in range(width):
             r = np.uint64(sload(starts, lanes + np.uint64(i), READ)) + np.uint64(p)
             node = np.uint64(16) * np.uint64(sload(node_of, r, READ))
-            q = np.uint64(16) * r
-            v = np.uint64(3) * r
-            pos, rot = skin_vertex(_read4(l2w, node), _read4(l2w, node + np.uint64(4)),
-                                   _read4(l2w, node + np.uint64(8)),
-                                   _read4(bind, q), _read4(bind, q + np.uint64(4)), _read4(bind, q + np.uint64(8)),
-                                   _read4(bind, q + np.uint64(12)),
-                                   _read3(local_position, v), _read3(local_normal, v), _read3(local_tangent, v))
             k = k0 + np.uint64(i)
+            pos, rot = skin_bound_vertex(_read4(l2w, node), _read4(l2w, node + np.uint64(4)),
+                                         _read4(l2w, node + np.uint64(8)), sload4(bound_position, k, READ),
+                                         sload4(bound_normal, k, READ), sload4(bound_tangent, k, READ))
             sstore3(position, k, pos, 1)
             sstore4(rotation, k, rot, 4)
+            v = np.uint64(3) * r
+            q = np.uint64(4) * r
+            sstore(team_position, v, pos[0], 8)
+            sstore(team_position, v + np.uint64(1), pos[1], 9)
+            sstore(team_position, v + np.uint64(2), pos[2], 10)
+            sstore(team_rotation, q, rot[0], 11)
+            sstore(team_rotation, q + np.uint64(1), rot[1], 12)
+            sstore(team_rotation, q + np.uint64(2), rot[2], 13)
+            sstore(team_rotation, q + np.uint64(3), rot[3], 14)
 
 
 @kernel
@@ -182,9 +224,13 @@ def load3T(a, L):
 
 
 @kernel
-def snap_lane_block(blk, bs, b, i):
-    """C.5 Reset of lane i of block b on the block rows (``center.snap_particles_to_base_pose``):
-    every position history at the skinned pose, velocities, friction and normals zero."""
+def snap_lane_block(m, ps, blk, bs, b, i):
+    """C.5 Reset of lane i of block b (``center.snap_particles_to_base_pose``): every position
+    history at the skinned pose, velocities, friction and normals zero, on the block rows and
+    on the team's rows (as the per-team begin leaves them)."""
+    t = blk.lane_team[blk.block_lane_base[b] + i]
+    start = m.team_particle_start[t]
+    snap_particles_to_base_pose(ps, start, start + m.team_particle_count[t])
     width = blk.block_width[b]
     for p in range(blk.block_particle_count[b]):
         k = blk.block_row_base[b] + p * width + i
@@ -213,12 +259,19 @@ def gather_shift_block(m, ps, blk, bs, b):
     (``center.shift_history`` with the lane's pivot, vector and rotation) when the lane shifts,
     as they are otherwise, into the block rows (``center.reset_or_shift_team``'s loop).
 
-    Streams: old_pos 1-3, old_position 4-6, disp_pos 7-9, old_rotation 10-13, velocity 14-16
-    (block row k); the team rows and lane values are READ (the loop does not write them)."""
+    The rest of the state the steps read from the team rows (``transfer.gather_block``'s
+    collision normal, friction and static friction) is copied in the same pass.
+
+    Streams: old_pos 1-3, old_position 4-6, disp_pos 7-9, old_rotation 10-13, velocity 14-16,
+    collision normal 17-19, friction 20, static friction 21 (block row k); the team rows and
+    lane values are READ (the loop does not write them: storing the shifted history back in
+    place, in the same loop, stops its vectorisation, ``publish_history_block`` does that)."""
     old_pos, old_position, disp_pos = flat(ps.old_pos), flat(ps.old_position), flat(ps.disp_pos)
     old_rotation, velocity = flat(ps.old_rotation), flat(ps.velocity)
+    normal, friction, static_friction = flat(ps.collision_normal), ps.friction, ps.static_friction
     b_old_pos, b_old_position, b_disp_pos = bs.old_pos, bs.old_position, bs.disp_pos
     b_old_rotation, b_velocity = bs.old_rotation, bs.velocity
+    b_normal, b_friction, b_static_friction = bs.collision_normal, bs.friction, bs.static_friction
     modes, pivots, vectors, rotations = bs.lane_shift_mode, bs.lane_shift_pivot, bs.lane_shift_vector, bs.lane_shift_rotation
     starts = bs.lane_particle_start
     width = blk.block_width[b]
@@ -242,3 +295,42 @@ def gather_shift_block(m, ps, blk, bs, b):
             sstore3(b_disp_pos, k, _select3(move, c, c0), 7)
             sstore4(b_old_rotation, k, _select4(move, rr, r0), 10)
             sstore3(b_velocity, k, _select3(move, u, u0), 14)
+            sstore3(b_normal, k, _read3(normal, v), 17)
+            sstore(b_friction, k, sload(friction, r, READ), 20)
+            sstore(b_static_friction, k, sload(static_friction, r, READ), 21)
+
+
+@kernel
+def publish_history_block(ps, blk, bs, b):
+    """The shifted old_position, old_rotation and disp_pos of every lane back in its team rows
+    (as the per-team C.5 leaves them: the per-team end-of-frame stages read them there, and
+    the steps do not change them); old_pos and velocity change in the steps and are scattered.
+
+    Streams: team-row old_position 1-3, disp_pos 4-6, old_rotation 7-10 (row r of each lane's
+    team: distinct teams, distinct rows); the block rows and lane starts are READ."""
+    old_position, disp_pos, old_rotation = flat(ps.old_position), flat(ps.disp_pos), flat(ps.old_rotation)
+    b_old_position, b_disp_pos, b_old_rotation = bs.old_position, bs.disp_pos, bs.old_rotation
+    starts = bs.lane_particle_start
+    width = blk.block_width[b]
+    lanes = np.uint64(blk.block_lane_base[b])
+    for p in range(blk.block_particle_count[b]):
+        k0 = np.uint64(blk.block_row_base[b] + p * width)
+        open_streams()
+        for i in range(width):
+            r = np.uint64(sload(starts, lanes + np.uint64(i), READ)) + np.uint64(p)
+            k = k0 + np.uint64(i)
+            v = np.uint64(3) * r
+            q = np.uint64(4) * r
+            b1 = sload3(b_old_position, k, READ)
+            c1 = sload3(b_disp_pos, k, READ)
+            r1 = sload4(b_old_rotation, k, READ)
+            sstore(old_position, v, b1[0], 1)
+            sstore(old_position, v + np.uint64(1), b1[1], 2)
+            sstore(old_position, v + np.uint64(2), b1[2], 3)
+            sstore(disp_pos, v, c1[0], 4)
+            sstore(disp_pos, v + np.uint64(1), c1[1], 5)
+            sstore(disp_pos, v + np.uint64(2), c1[2], 6)
+            sstore(old_rotation, q, r1[0], 7)
+            sstore(old_rotation, q + np.uint64(1), r1[1], 8)
+            sstore(old_rotation, q + np.uint64(2), r1[2], 9)
+            sstore(old_rotation, q + np.uint64(3), r1[3], 10)

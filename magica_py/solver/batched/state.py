@@ -55,21 +55,27 @@ BlockTable = make_soa("BlockTable", BLOCK_FIELDS)
 
 # (name, components (0: scalar), dtype, gathered at frame start, scattered at frame end);
 # next_pos, velocity_pos, base and step basic pose are step-internal (D.1 rewrites them).
-# The begin of frame in block form (``frame_begin.begin_frame_block``) writes position and
-# rotation (C.1 skinning, not gathered) and gathers old_position, old_rotation, old_pos,
-# velocity and disp_pos through the C.5 shift (``gather_shift_block``); the per-team end-of-frame
-# stages read position, rotation, old_position, old_rotation and disp_pos from the team rows,
-# so they are scattered.
+# The begin of frame in block form (``frame.begin_frame_block``) computes position and rotation
+# (C.1 skinning, not gathered) and gathers old_position, old_rotation, old_pos, velocity and
+# disp_pos through the C.5 shift (``frame_begin.gather_shift_block``); it also stores position,
+# rotation, old_position, old_rotation and disp_pos in the team rows (the per-team end-of-frame
+# stages read them there; the steps do not change them), so they are not scattered.
 PARTICLE_BLOCK_FIELDS = [
-    ("position", 3, F64, False, True),
-    ("rotation", 4, F64, False, True),
-    ("old_position", 3, F64, True, True),
-    ("old_rotation", 4, F64, True, True),
+    ("position", 3, F64, False, False),
+    ("rotation", 4, F64, False, False),
+    ("old_position", 3, F64, True, False),
+    ("old_rotation", 4, F64, True, False),
     ("next_pos", 3, F64, False, False),
     ("old_pos", 3, F64, True, True),
     ("velocity_pos", 3, F64, False, False),
     ("velocity", 3, F64, True, True),
-    ("disp_pos", 3, F64, True, True),
+    ("disp_pos", 3, F64, True, False),
+    # model data: ``center.bind_point`` of the vertex's local position (w = 1), normal and
+    # tangent (w = 0), the constant half of C.1 (written when the blocks are formed,
+    # ``frame_begin.bind_rows_block``; read by ``frame_begin.skin_block``)
+    ("skin_bound_position", 4, F64, False, False),
+    ("skin_bound_normal", 4, F64, False, False),
+    ("skin_bound_tangent", 4, F64, False, False),
     ("real_velocity", 3, F64, False, True),
     ("base_pos", 3, F64, False, False),
     ("base_rot", 4, F64, False, False),

@@ -58,8 +58,10 @@ def _copy_out(dst, src, r, k, n):
 def gather_block(m, ps, blk, bs, b):
     """The particle state the block takes as is from the team rows: collision normal, friction
     and static friction. The rest of what the steps read comes from the begin of frame in
-    block form (``frame_begin.begin_frame_block``: the skinned pose computed in the block, the
-    history gathered through the C.5 shift)."""
+    block form (``frame.begin_frame_block``: the skinned pose computed in the block, the
+    history gathered through the C.5 shift, ``frame_begin.gather_shift_block``, which also
+    makes these copies in its pass: the frame does not call this; ``gather_block_full``,
+    the stage tests and ``bench_blocks`` do)."""
     width = blk.block_width[b]
     base = blk.block_row_base[b]
     lanes = blk.block_lane_base[b]
@@ -150,12 +152,10 @@ def scatter_block_full(m, ps, blk, bs, b):
 
 @kernel
 def scatter_block(m, ps, blk, bs, b):
-    """The state the block leaves for the rest of the frame and the next one: what the steps
-    write (old_pos, velocity, real_velocity, friction, static friction, collision normal) and
-    what the begin of frame in block form computed (position, rotation: C.1; old_position,
-    old_rotation, disp_pos: C.5), which the per-team end-of-frame stages read. next_pos,
-    velocity_pos, base_pos/rot and the step basic pose are step-internal (each step's D.1
-    writes them all before they are read) and stay in the block."""
+    """The state the steps leave for the rest of the frame and the next one: old_pos, velocity,
+    real_velocity, friction, static friction, collision normal. next_pos, velocity_pos,
+    base_pos/rot and the step basic pose are step-internal (each step's D.1 writes them all
+    before they are read) and stay in the block."""
     width = blk.block_width[b]
     base = blk.block_row_base[b]
     lanes = blk.block_lane_base[b]
@@ -163,13 +163,8 @@ def scatter_block(m, ps, blk, bs, b):
     old_pos, velocity, real_velocity, normal = (flat(ps.old_pos), flat(ps.velocity), flat(ps.real_velocity),
                                                 flat(ps.collision_normal))
     friction, static_friction = ps.friction, ps.static_friction
-    position, rotation, old_position, old_rotation, disp_pos = (flat(ps.position), flat(ps.rotation),
-                                                                flat(ps.old_position), flat(ps.old_rotation),
-                                                                flat(ps.disp_pos))
     b_old_pos, b_velocity, b_real_velocity, b_normal = bs.old_pos, bs.velocity, bs.real_velocity, bs.collision_normal
     b_friction, b_static_friction = bs.friction, bs.static_friction
-    b_position, b_rotation, b_old_position, b_old_rotation, b_disp_pos = (bs.position, bs.rotation, bs.old_position,
-                                                                          bs.old_rotation, bs.disp_pos)
     starts, lane_team = m.team_particle_start, blk.lane_team
     for p in range(count):
         for i in range(width):
@@ -181,12 +176,6 @@ def scatter_block(m, ps, blk, bs, b):
             _copy_out(normal, b_normal, r, k, 3)
             friction[r] = b_friction[k]
             static_friction[r] = b_static_friction[k]
-            # the begin of frame's results (until the end-of-frame stages run in block form)
-            _copy_out(position, b_position, r, k, 3)
-            _copy_out(rotation, b_rotation, r, k, 4)
-            _copy_out(old_position, b_old_position, r, k, 3)
-            _copy_out(old_rotation, b_old_rotation, r, k, 4)
-            _copy_out(disp_pos, b_disp_pos, r, k, 3)
 
 
 @kernel
