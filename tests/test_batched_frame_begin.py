@@ -1,16 +1,18 @@
 """The begin of frame in block form (``frame.begin_frame_block``, ``batched/frame_begin``: C.1
 skinning into the block rows, C.2 sums lanes innermost, per-lane C.2/C.4/G.2, the history
 gathered through the C.5 shift, a Reset lane snapped) gives exactly the bits of the per-team
-``frame.begin_frame_team`` followed by the plain gather: block rows against team rows, the team rows the block begin writes
-too, every TeamState and ColliderState value, on mid-motion frames, the first frame (every lane resets),
-a teleport in Reset and in Keep mode, and a lane that does not shift."""
+``frame.begin_frame_team`` followed by the plain gather: block rows against team rows, the
+team rows the block begin writes too, every TeamState and ColliderState value, on mid-motion
+frames, the first frame (every lane resets), a teleport in Reset and in Keep mode, and a lane
+that does not shift beside lanes that do. (A block that does not run leaves its teams to
+``begin_frame_team``: tests/test_batched_frame.py's fallback tests.)"""
 import numba
 import numpy as np
 import pytest
 
 from batched_harness import block_rows, block_tables, crowd_system, restore, snapshot
 from magica_py.solver.batch_tables import borrow
-from magica_py.solver.batched.frame_begin import SHIFT_KEEP, SHIFT_MOVE, SHIFT_RESET
+from magica_py.solver.batched.frame_begin import SHIFT_KEEP, SHIFT_MOVE, SHIFT_RESET, TEAM_ROWS
 from magica_py.solver.frame import (
     FrameInputs, _time_frame_update, as_kernel_table, begin_frame_block, begin_frame_team, prepare_teams,
 )
@@ -99,7 +101,7 @@ def _compare_begin(system, edit=None):
         want = before[f"ps.{name}"].copy()
         if want.shape[:1] != system.particles.position.shape[:1]:
             continue   # not a per-particle field
-        if name in TEAM_ROW_FIELDS:
+        if name in TEAM_ROW_FIELDS and TEAM_ROWS:
             want[rows] = expected[f"ps.{name}"][rows]
         for t in resets:
             r = np.arange(m.team_particle_start[t], m.team_particle_start[t] + m.team_particle_count[t])

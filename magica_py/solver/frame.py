@@ -23,8 +23,8 @@ from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.batch_tables import borrow
 from magica_py.solver.batched.run import decide_blocks, run_block_step, team_runs_alone
 from magica_py.solver.batched.frame_begin import (
-    SHIFT_RESET, begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block, publish_history_block,
-    skin_block, snap_lane_block,
+    SHIFT_RESET, TEAM_ROWS, begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block,
+    publish_history_block, skin_block, snap_lane_block,
 )
 from magica_py.solver.batched.transfer import scatter_block
 from magica_py.runtime.team_time import (
@@ -223,7 +223,8 @@ def begin_frame_block(m, ps, prm, ts, cs, tt, h, fi, blk, bs, b):
         since_last_step = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t)
         begin_lane_team(m, prm, ts, cs, tt, h, fi, bs, lanes + i, t, since_last_step)
     gather_shift_block(m, ps, blk, bs, b)   # with gather_block's copies
-    publish_history_block(ps, blk, bs, b)
+    if TEAM_ROWS:   # the per-team end-of-frame stages read the history from the team rows
+        publish_history_block(ps, blk, bs, b)
     for i in range(blk.block_width[b]):
         if bs.lane_shift_mode[lanes + i] == SHIFT_RESET:
             snap_lane_block(m, ps, blk, bs, b, i)

@@ -44,6 +44,14 @@ from magica_py.solver.center import (
 )
 from magica_py.solver.colliders import collider_frame_team
 
+# The per-team end-of-frame stages read position, rotation, old_position, old_rotation and
+# disp_pos from the team rows: the begin stores them there too (skin_block's second stores,
+# publish_history_block; no scatter after the steps, which do not change them). Once the
+# end-of-frame stages read them from the block rows (block form of E.1-E.4), set False: the
+# skinning then stores the block rows only and the history is not published (hot loop, crowd:
+# ~75 us per frame less). A compile-time constant (numba freezes module globals).
+TEAM_ROWS = True
+
 SHIFT_KEEP = 0    # C.5: the history stays as it is
 SHIFT_MOVE = 1    # C.5: inertia shift of the history
 SHIFT_RESET = 2   # C.5: Reset, every history value at the skinned pose
@@ -106,9 +114,9 @@ def skin_block(m, ps, local_to_world, blk, bs, b):
     """C.1 of every lane of block b into the block rows (``center.skin_team``'s maths, its
     constant half ``bind_point`` read from ``bs.skin_bound_*``).
 
-    The pose is also stored in the lanes' team rows (where the per-team begin leaves it: the
-    per-team end-of-frame stages read it there; no scatter after the steps, which do not
-    change it).
+    With ``TEAM_ROWS`` the pose is also stored in the lanes' team rows (where the per-team
+    begin leaves it: the per-team end-of-frame stages read it there; no scatter after the
+    steps, which do not change it).
 
     Streams (``kernels/streams``): block position 1-3, rotation 4-7 (row k of the loop's
     particle), team-row position 8-10, rotation 11-14 (row r of each lane's team: distinct
@@ -134,6 +142,8 @@ def skin_block(m, ps, local_to_world, blk, bs, b):
                                          sload4(bound_normal, k, READ), sload4(bound_tangent, k, READ))
             sstore3(position, k, pos, 1)
             sstore4(rotation, k, rot, 4)
+            if not TEAM_ROWS:
+                continue
             v = np.uint64(3) * r
             q = np.uint64(4) * r
             sstore(team_position, v, pos[0], 8)
@@ -272,7 +282,8 @@ def gather_shift_block(m, ps, blk, bs, b):
     b_old_pos, b_old_position, b_disp_pos = bs.old_pos, bs.old_position, bs.disp_pos
     b_old_rotation, b_velocity = bs.old_rotation, bs.velocity
     b_normal, b_friction, b_static_friction = bs.collision_normal, bs.friction, bs.static_friction
-    modes, pivots, vectors, rotations = bs.lane_shift_mode, bs.lane_shift_pivot, bs.lane_shift_vector, bs.lane_shift_rotation
+    modes, pivots = bs.lane_shift_mode, bs.lane_shift_pivot
+    vectors, rotations = bs.lane_shift_vector, bs.lane_shift_rotation
     starts = bs.lane_particle_start
     width = blk.block_width[b]
     lanes = np.uint64(blk.block_lane_base[b])
