@@ -210,18 +210,22 @@ def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t):
 @kernel
 def begin_frame_block(m, ps, prm, ts, cs, tt, h, fi, blk, bs, b):
     """``begin_frame_team`` for every lane of running block b and the gather, with the particle
-    work on the block rows, lanes innermost (``batched/frame_begin``): C.1 skinning into the
-    block, C.2 sums, then per lane the team-level stages (prelude, center, C.4, G.2), then the
-    history gathered through the C.5 shift (with the plain copies of ``gather_block``), and a
-    Reset lane snapped. The same bits."""
+    work on the block rows, lanes innermost (``batched/frame_begin``): per lane the prelude,
+    C.1 skinning into the block, C.2 sums, then per lane the team-level stages (center, C.4,
+    G.2), then the history gathered through the C.5 shift (with the plain copies of
+    ``gather_block``), and a Reset lane snapped. The same bits."""
     lanes = blk.block_lane_base[b]
+    # the prelude first, as in begin_frame_team (a build reset skins and snaps the team rows
+    # with the build pose before this frame's skinning)
+    for i in range(blk.block_width[b]):
+        t = blk.lane_team[lanes + i]
+        bs.lane_since_last_step[lanes + i] = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t)
     lane_starts_block(m, blk, bs, b)
     skin_block(m, ps, h.local_to_world, blk, bs, b)
     center_sums_block(m, blk, bs, b)
     for i in range(blk.block_width[b]):
-        t = blk.lane_team[lanes + i]
-        since_last_step = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t)
-        begin_lane_team(m, prm, ts, cs, tt, h, fi, bs, lanes + i, t, since_last_step)
+        begin_lane_team(m, prm, ts, cs, tt, h, fi, bs, lanes + i, blk.lane_team[lanes + i],
+                        bs.lane_since_last_step[lanes + i])
     gather_shift_block(m, ps, blk, bs, b)   # with gather_block's copies
     if TEAM_ROWS:   # the per-team end-of-frame stages read the history from the team rows
         publish_history_block(ps, blk, bs, b)

@@ -3,6 +3,8 @@
 ``frame.begin_frame_team`` for every lane of block b, with the per-particle work on the
 block's rows instead of the team rows:
 
+0. per lane, scalar, ``frame.begin_frame_prelude_team`` (running flag, first-frame build
+   reset; first, as in the per-team order);
 1. ``skin_block`` (C.1): every lane's skinned pose straight into ``bs.position`` /
    ``bs.rotation`` (``center.skin_bound_vertex``; each lane reads its own bone matrices, a
    gather per lane, and the constant half of C.1, ``center.bind_point`` of its vertex, from
@@ -10,9 +12,9 @@ block's rows instead of the team rows:
 2. ``center_sums_block`` (C.2): the sums of ``center.center_fixed_terms`` over the
    center-fixed vertices into the lane arrays (in the fixed list's order, from 0: the per-team
    sums' bits);
-3. per lane, scalar, the team-level part: ``frame.begin_frame_prelude_team`` (running flag,
-   first-frame build reset) and ``begin_lane_team`` (C.2 component pose and center from the
-   sums, C.4 ``center.inertia_team``, G.2 ``collider_frame_team``, the lane's C.5 values);
+3. per lane, scalar, the rest of the team-level part, ``begin_lane_team`` (C.2 component pose
+   and center from the sums, C.4 ``center.inertia_team``, G.2 ``collider_frame_team``, the
+   lane's C.5 values);
 4. ``gather_shift_block`` (C.5 and the gather): the history (old_pos, old_position, disp_pos,
    old_rotation, velocity) read from the team rows, shifted (``center.shift_history``) in the
    lanes that shift, stored in the block rows, with ``transfer.gather_block``'s plain copies
@@ -35,13 +37,14 @@ from __future__ import annotations
 import numpy as np
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import load3, load4, store3, store4
+from magica_py.kernels.math3d import load3, load4
 from magica_py.kernels.rows import flat
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
 from magica_py.solver.center import (
     bind_point, center_fixed_terms, center_from_sums, component_pose_team, inertia_team, shift_history,
     skin_bound_vertex, snap_particles_to_base_pose,
 )
+from magica_py.solver.batched.transfer import bload3
 from magica_py.solver.colliders import collider_frame_team
 
 # The per-team end-of-frame stages read position, rotation, old_position, old_rotation and
@@ -203,9 +206,9 @@ def begin_lane_team(m, prm, ts, cs, tt, h, fi, bs, L, t, since_last_step):
     center_pos, center_rot = cpos, crot
     count = m.team_center_count[t]
     if count > 0:
-        center_pos, center_rot = center_from_sums(load3T(bs.lane_center_position_sum, L),
-                                                  load3T(bs.lane_center_normal_sum, L),
-                                                  load3T(bs.lane_center_tangent_sum, L), count)
+        center_pos, center_rot = center_from_sums(bload3(bs.lane_center_position_sum, L),
+                                                  bload3(bs.lane_center_normal_sum, L),
+                                                  bload3(bs.lane_center_tangent_sum, L), count)
     inertia_team(prm, ts, t, cpos, crot, cscl, ratio, center_pos, center_rot, h.world_position, h.world_rotation,
                  tt.frame_delta_time[t], tt.now_time_scale[t], tt.skip_count[t], tt.running[t], fi.dt,
                  since_last_step)
@@ -225,12 +228,6 @@ def begin_lane_team(m, prm, ts, cs, tt, h, fi, bs, L, t, since_last_step):
         bs.lane_shift_vector[c, L] = vec[c]
     for c in range(4):
         bs.lane_shift_rotation[c, L] = rot[c]
-
-
-@kernel
-def load3T(a, L):
-    """Column L of a (3, lanes) lane array."""
-    return (a[0, L], a[1, L], a[2, L])
 
 
 @kernel

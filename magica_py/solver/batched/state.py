@@ -122,6 +122,8 @@ LANE_FIELDS = [
     # begin of frame in block form (``batched/frame_begin``), written once per frame:
     # first model row of the lane's team (team_particle_start), by ``lane_starts_block``
     ("particle_start", 0, I64),
+    # s; team time from the last step to the frame's start (``frame.begin_frame_prelude_team``)
+    ("since_last_step", 0, F64),
     # C.2 sums over the center-fixed vertices (m; unit axes summed), by ``center_sums_block``
     ("center_position_sum", 3, F64), ("center_normal_sum", 3, F64), ("center_tangent_sum", 3, F64),
     # C.5 of the lane (``begin_lane_team``): SHIFT_KEEP / SHIFT_MOVE / SHIFT_RESET, and the
