@@ -6,7 +6,9 @@ every block of a scene, in ns per particle (min of repeats), beside the per-team
 The scene runs ``--frames`` frames per team (``batched=False``) to reach a mid-motion state;
 its blocks are then formed, the state gathered in full (``gather_block_full``) and each block
 stage called over all blocks, repeated, from that state (stages mutate it: figures are costs
-on a realistic state, not a simulation). ``gather`` / ``scatter`` are the frame's transfers.
+on a realistic state, not a simulation). The per-frame lines are the begin of frame in block
+form (``frame.begin_frame_block``: skinning, center sums, the per-lane scalar part, the history
+gathered through the C.5 shift and stored back in the team rows) and the scatter.
 One step is every step stage (distance twice); a frame at 60 fps / 90 Hz runs 1.5 steps.
 """
 from __future__ import annotations
@@ -25,7 +27,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from magica_py.solver.batch_tables import borrow  # noqa: E402
 from magica_py.solver.batched.blocks import describe_blocks, form_blocks  # noqa: E402
 from magica_py.solver.batched.transfer import (  # noqa: E402
-    gather_block, gather_block_full, load_lanes, scatter_block,
+    gather_block_full, load_lanes, scatter_block,
 )
 from magica_py.solver.constraints.angle import angle_block  # noqa: E402,F401
 from magica_py.solver.constraints.bending import apply_accumulated_block, bending_block  # noqa: E402,F401
@@ -33,12 +35,21 @@ from magica_py.solver.constraints.collision import point_collision_block  # noqa
 from magica_py.solver.constraints.distance import distance_block  # noqa: E402,F401
 from magica_py.solver.constraints.motion import motion_block  # noqa: E402,F401
 from magica_py.solver.constraints.tether import tether_block  # noqa: E402,F401
-from magica_py.solver.frame import as_kernel_table  # noqa: E402
+from magica_py.solver.batched.frame_begin import (  # noqa: E402,F401
+    begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block, publish_history_block, skin_block,
+)
+from magica_py.solver.frame import FrameInputs, as_kernel_table, begin_frame_prelude_team  # noqa: E402
 from magica_py.solver.step import end_step_block, predict_block, step_basic_pose_block  # noqa: E402,F401
 
 DT = 1.0 / 90.0
 STAGES = [
-    ("gather (per frame)", "gather_block(m, ps, blk, bs, b)", 0),
+    # the begin of frame in block form (frame.begin_frame_block: these, the per-lane team-level
+    # stages and a Reset lane's snap; the gather is its gather_shift_block)
+    ("skin (C.1, per frame)", "lane_starts_block(m, blk, bs, b); skin_block(m, ps, h.local_to_world, blk, bs, b)", 0),
+    ("center sums (C.2, /frame)", "center_sums_block(m, blk, bs, b)", 0),
+    ("lanes C.2/C.4/G.2 (/frame)", "begin_lanes(m, ps, prm, ts, cs, tt, h, fi, blk, bs, b)", 0),
+    ("gather + C.5 (per frame)", "gather_shift_block(m, ps, blk, bs, b)", 0),
+    ("history to teams (/frame)", "publish_history_block(ps, blk, bs, b)", 0),
     ("lane values", "load_lanes(blk, bs, ts, tt, cs, b)", 1),
     ("predict (D.1)", "predict_block(m, bs, prm, blk, b, DT, 1.0, 1.0)", 1),
     ("basic pose (D.2)", "step_basic_pose_block(m, bs, prm, blk, b)", 1),
@@ -53,11 +64,21 @@ STAGES = [
 ]
 
 
+@numba.njit
+def begin_lanes(m, ps, prm, ts, cs, tt, h, fi, blk, bs, b):
+    """``frame.begin_frame_block``'s per-lane part (scalar): prelude, C.2 center, C.4, G.2."""
+    lanes = blk.block_lane_base[b]
+    for i in range(blk.block_width[b]):
+        t = blk.lane_team[lanes + i]
+        since_last_step = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t)
+        begin_lane_team(m, prm, ts, cs, tt, h, fi, bs, lanes + i, t, since_last_step)
+
+
 def _wrapper(body: str):
     source = (
-        "def f(m, ps, prm, ts, cs, tt, blk, bs):\n"
-        "    m, ps, prm, ts, cs, tt, blk, bs = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),\n"
-        "                                       borrow(tt), borrow(blk), borrow(bs))\n"
+        "def f(m, ps, prm, ts, cs, tt, h, fi, blk, bs):\n"
+        "    m, ps, prm, ts, cs, tt, h, blk, bs = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),\n"
+        "                                          borrow(tt), borrow(h), borrow(blk), borrow(bs))\n"
         "    for b in range(blk.block_width.shape[0]):\n"
         f"        {body}\n")
     namespace = dict(globals())
@@ -93,8 +114,13 @@ def main(argv=None) -> int:
     print("\n".join(describe_blocks(blk)) or "no blocks")
     if not len(blk.block_width):
         return 0
-    m, ps, prm, ts, cs, tt, _h = system.kernel_tables()
+    m, ps, prm, ts, cs, tt, h = system.kernel_tables()
     kb, kbs = as_kernel_table(blk), as_kernel_table(bs)
+    s = system.time_settings
+    power = s.simulation_power
+    fi = FrameInputs(1 / 60, 1 / 60, 0.02, 0, float(s.global_time_scale), float(s.simulation_delta_time),
+                     int(s.max_steps_per_frame), int(s.timing_code), 90.0 / s.frequency, float(power[1]),
+                     float(power[2]), float(power[3]), 1)
     _gather_all(m, ps, ts, cs, tt, kb, kbs)
     n = int(sum(int(blk.block_width[b]) * int(blk.block_particle_count[b]) for b in range(len(blk.block_width))))
     step = 0.0
@@ -102,17 +128,17 @@ def main(argv=None) -> int:
     print(f"{'stage':24s} ns/particle  (one call over {n} block particles)")
     for name, body, per_step in STAGES:
         fn = _wrapper(body)
-        fn(m, ps, prm, ts, cs, tt, kb, kbs)
+        fn(m, ps, prm, ts, cs, tt, h, fi, kb, kbs)
         best = 1e9
         for _ in range(args.repeats):
             t0 = time.perf_counter()
-            fn(m, ps, prm, ts, cs, tt, kb, kbs)
+            fn(m, ps, prm, ts, cs, tt, h, fi, kb, kbs)
             best = min(best, time.perf_counter() - t0)
         ns = best * 1e9 / n
         step += ns * per_step
         frame += ns if per_step == 0 else 0.0
         print(f"{name:24s} {ns:8.1f}")
-    print(f"{'one step':24s} {step:8.1f}\n{'transfers per frame':24s} {frame:8.1f}")
+    print(f"{'one step':24s} {step:8.1f}\n{'per-frame block stages':24s} {frame:8.1f}")
     from bench_stages import stage_profile
 
     print("per-team frame stages (ns/particle, all teams):")

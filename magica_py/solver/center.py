@@ -29,26 +29,48 @@ TELEPORT_KEEP = 2
 
 
 @kernel
+def bind_point(b0, b1, b2, b3, v, w):
+    """``B @ (v, w)`` with ``B`` the bind pose (rows b0..b3, 4-tuples): the 4-vector C.1 then
+    takes to world space with the bone's matrix (``world_point``). Constant per vertex: the
+    block form computes it once, when the blocks are formed (``batched/frame_begin``)."""
+    return (b0[0] * v[0] + b0[1] * v[1] + b0[2] * v[2] + b0[3] * w,
+            b1[0] * v[0] + b1[1] * v[1] + b1[2] * v[2] + b1[3] * w,
+            b2[0] * v[0] + b2[1] * v[1] + b2[2] * v[2] + b2[3] * w,
+            b3[0] * v[0] + b3[1] * v[1] + b3[2] * v[2] + b3[3] * w)
+
+
+@kernel
+def world_point(l0, l1, l2, x):
+    """The first three rows l0..l2 of ``L`` (4-tuples) applied to the 4-vector x."""
+    return (l0[0] * x[0] + l0[1] * x[1] + l0[2] * x[2] + l0[3] * x[3],
+            l1[0] * x[0] + l1[1] * x[1] + l1[2] * x[2] + l1[3] * x[3],
+            l2[0] * x[0] + l2[1] * x[1] + l2[2] * x[2] + l2[3] * x[3])
+
+
+@kernel
 def transform_point_rows(l0, l1, l2, b0, b1, b2, b3, v, w):
     """``(L @ B) @ (v, w)`` without forming the product: ``B`` (rows b0..b3) first, then the
     first three rows l0..l2 of ``L`` (4-tuples)."""
-    x = b0[0] * v[0] + b0[1] * v[1] + b0[2] * v[2] + b0[3] * w
-    y = b1[0] * v[0] + b1[1] * v[1] + b1[2] * v[2] + b1[3] * w
-    z = b2[0] * v[0] + b2[1] * v[1] + b2[2] * v[2] + b2[3] * w
-    h = b3[0] * v[0] + b3[1] * v[1] + b3[2] * v[2] + b3[3] * w
-    return (l0[0] * x + l0[1] * y + l0[2] * z + l0[3] * h,
-            l1[0] * x + l1[1] * y + l1[2] * z + l1[3] * h,
-            l2[0] * x + l2[1] * y + l2[2] * z + l2[3] * h)
+    return world_point(l0, l1, l2, bind_point(b0, b1, b2, b3, v, w))
+
+
+@kernel
+def skin_bound_vertex(l0, l1, l2, bound_position, bound_normal, bound_tangent):
+    """C.1 for one vertex from its ``bind_point`` 4-vectors (position w = 1, normal and tangent
+    w = 0) and its bone's local-to-world rows l0..l2. Branch-free (a loop vectorises)."""
+    pos = world_point(l0, l1, l2, bound_position)
+    nor = normalize_or_zero(world_point(l0, l1, l2, bound_normal))
+    tan = normalize_or_zero(world_point(l0, l1, l2, bound_tangent))
+    return pos, rot_from_normal_tangent_select(nor, tan)
 
 
 @kernel
 def skin_vertex(l0, l1, l2, b0, b1, b2, b3, local_position, local_normal, local_tangent):
     """C.1 for one vertex: world (position, rotation) from its bone's local-to-world rows
     l0..l2 and its bind pose rows b0..b3. Branch-free (a loop over vertices vectorises)."""
-    pos = transform_point_rows(l0, l1, l2, b0, b1, b2, b3, local_position, 1.0)
-    nor = normalize_or_zero(transform_point_rows(l0, l1, l2, b0, b1, b2, b3, local_normal, 0.0))
-    tan = normalize_or_zero(transform_point_rows(l0, l1, l2, b0, b1, b2, b3, local_tangent, 0.0))
-    return pos, rot_from_normal_tangent_select(nor, tan)
+    return skin_bound_vertex(l0, l1, l2, bind_point(b0, b1, b2, b3, local_position, 1.0),
+                             bind_point(b0, b1, b2, b3, local_normal, 0.0),
+                             bind_point(b0, b1, b2, b3, local_tangent, 0.0))
 
 
 @kernel
@@ -143,13 +165,24 @@ def mean_velocity_weight(w0, stabilization_time, span):
 
 
 @kernel
-def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation, lossy_scale,
-                            frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step=0.0):
-    """C.2 and C.4 for one team: center, anchor, teleport, smoothing, world inertia, shift.
+def center_fixed_terms(position, rotation, bind_rotation):
+    """C.2 terms of one center-fixed vertex: its position and the normal and tangent axes of
+    ``rotation * bind_rotation`` (summed over the fixed list by ``center_pose_team`` and, lanes
+    innermost, by ``batched/frame_begin.center_sums_block``). Branch-free."""
+    q = q_mul(rotation, bind_rotation)
+    return position, q_normal_axis(q), q_tangent_axis(q)
 
-    ``since_last_step``: team time (s) from the last step to the start of this frame; quality
-    mode uses it to read the stabilisation ramp, which C.3 advances per step, in continuous
-    time (the ramp at the frame's start, not at the last step before it)."""
+
+@kernel
+def center_from_sums(position_sum, normal_sum, tangent_sum, count):
+    """C.2 center pose from the sums of ``center_fixed_terms`` over ``count`` > 0 vertices."""
+    return (v_scale(position_sum, 1.0 / count),
+            rot_from_normal_tangent(v_normalize(normal_sum), v_normalize(tangent_sum)))
+
+
+@kernel
+def component_pose_team(m, ts, team, world_position, world_rotation, lossy_scale):
+    """C.2 component pose of one team (stored in ``ts``): (position, rotation, scale, scale ratio)."""
     comp = m.team_component_transform[team]
     cpos = load3(world_position, comp)
     crot = load4(world_rotation, comp)
@@ -160,24 +193,48 @@ def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation
     init_len = v_length(load3(m.team_init_scale, team))
     ratio = v_length(cscl) / init_len if init_len > 0.0 else 1.0
     ts.component_scale_ratio[team] = ratio
-    # center (C.2)
+    return cpos, crot, cscl, ratio
+
+
+@kernel
+def center_pose_team(m, ps, team, cpos, crot):
+    """C.2 center of one team from its skinned pose in the team rows (the component pose when
+    the team has no center-fixed vertex)."""
     c0 = m.team_center_start[team]
     cn = m.team_center_count[team]
-    if cn > 0:
-        sp = (0.0, 0.0, 0.0)
-        sn = (0.0, 0.0, 0.0)
-        st = (0.0, 0.0, 0.0)
-        for k in range(c0, c0 + cn):
-            f = m.center_fixed[k]
-            sp = v_add(sp, load3(ps.position, f))
-            q = q_mul(load4(ps.rotation, f), load4(m.bind_rotation, f))
-            sn = v_add(sn, q_normal_axis(q))
-            st = v_add(st, q_tangent_axis(q))
-        center_pos = v_scale(sp, 1.0 / cn)
-        center_rot = rot_from_normal_tangent(v_normalize(sn), v_normalize(st))
-    else:
-        center_pos = cpos
-        center_rot = crot
+    if cn == 0:
+        return cpos, crot
+    sp = (0.0, 0.0, 0.0)
+    sn = (0.0, 0.0, 0.0)
+    st = (0.0, 0.0, 0.0)
+    for k in range(c0, c0 + cn):
+        f = m.center_fixed[k]
+        pos, nor, tan = center_fixed_terms(load3(ps.position, f), load4(ps.rotation, f), load4(m.bind_rotation, f))
+        sp = v_add(sp, pos)
+        sn = v_add(sn, nor)
+        st = v_add(st, tan)
+    return center_from_sums(sp, sn, st, cn)
+
+
+@kernel
+def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation, lossy_scale,
+                            frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step=0.0):
+    """C.2 and C.4 for one team: center, anchor, teleport, smoothing, world inertia, shift.
+
+    ``since_last_step``: team time (s) from the last step to the start of this frame; quality
+    mode uses it to read the stabilisation ramp, which C.3 advances per step, in continuous
+    time (the ramp at the frame's start, not at the last step before it)."""
+    cpos, crot, cscl, ratio = component_pose_team(m, ts, team, world_position, world_rotation, lossy_scale)
+    center_pos, center_rot = center_pose_team(m, ps, team, cpos, crot)
+    inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot, world_position, world_rotation,
+                 frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step)
+
+
+@kernel
+def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot, world_position, world_rotation,
+                 frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step):
+    """C.4 for one team once its component pose and center (C.2) are known: anchor, teleport,
+    smoothing, world inertia, speed limits, the frame shift (see ``center_and_inertia_team``)."""
     store3(ts.frame_world_pos, team, center_pos)
     store4(ts.frame_world_rot, team, center_rot)
     store3(ts.frame_world_scale, team, cscl)
@@ -356,12 +413,18 @@ def snap_particles_to_base_pose(ps, start, end):
 
 
 @kernel
-def shift_particle(old_pos, old_position, disp_pos, old_rotation, velocity, real_velocity, pivot, vec, rot):
-    """C.5 inertia shift of one particle's history: positions moved rigidly about the pivot,
-    rotation and velocities turned (no branch: a loop over particles vectorises)."""
+def shift_history(old_pos, old_position, disp_pos, old_rotation, velocity, pivot, vec, rot):
+    """C.5 inertia shift of one particle's history but its real velocity: positions moved
+    rigidly about the pivot, rotation and velocity turned (no branch: a loop vectorises)."""
     return (shift_position(old_pos, pivot, vec, rot), shift_position(old_position, pivot, vec, rot),
-            shift_position(disp_pos, pivot, vec, rot), q_mul(rot, old_rotation), q_rotate(rot, velocity),
-            q_rotate(rot, real_velocity))
+            shift_position(disp_pos, pivot, vec, rot), q_mul(rot, old_rotation), q_rotate(rot, velocity))
+
+
+@kernel
+def shift_particle(old_pos, old_position, disp_pos, old_rotation, velocity, real_velocity, pivot, vec, rot):
+    """C.5 inertia shift of one particle's history (``shift_history``) and its real velocity."""
+    a, b, c, r, u = shift_history(old_pos, old_position, disp_pos, old_rotation, velocity, pivot, vec, rot)
+    return a, b, c, r, u, q_rotate(rot, real_velocity)
 
 
 @kernel

@@ -22,7 +22,11 @@ from magica_py.kernels.math3d import load3, load4, q_angle, v_length, v_sub
 from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.batch_tables import borrow
 from magica_py.solver.batched.run import decide_blocks, run_block_step, team_runs_alone
-from magica_py.solver.batched.transfer import gather_block, scatter_block
+from magica_py.solver.batched.frame_begin import (
+    SHIFT_RESET, TEAM_ROWS, begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block,
+    publish_history_block, skin_block, snap_lane_block,
+)
+from magica_py.solver.batched.transfer import scatter_block
 from magica_py.runtime.team_time import (
     TeamTimeState, team_time_begin_step, team_time_begin_step_team, team_time_end_frame,
     team_time_frame_update,
@@ -171,8 +175,9 @@ def first_frame_continues_build_pose(m, prm, h, t):
 
 
 @kernel
-def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t):
-    """Per-frame stages of team t before the steps (C.1, C.2/C.4, C.5, G.2)."""
+def begin_frame_prelude_team(m, ps, prm, ts, tt, h, t):
+    """The team-level start of team t's frame: running flag, quality mode's first-frame build
+    reset. Returns the team time since the last step (``center_and_inertia_team``)."""
     ts.running[t] = 1 if tt.running[t] else 0
     tracked = t < h.ramp_from_build.shape[0]
     if ts.reset[t] != 0 and tracked:
@@ -187,12 +192,46 @@ def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t):
     since_last_step = 0.0
     if tracked and h.ramp_from_build[t] != 0:
         since_last_step = tt.old_time[t] - tt.now_update_time[t]
+    return since_last_step
+
+
+@kernel
+def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t):
+    """Per-frame stages of team t before the steps (C.1, C.2/C.4, C.5, G.2)."""
+    since_last_step = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t)
     skin_team(m, ps, h.local_to_world, t)
     center_and_inertia_team(m, ps, prm, ts, t, h.world_position, h.world_rotation, h.lossy_scale,
                             tt.frame_delta_time[t], tt.now_time_scale[t], tt.skip_count[t],
                             tt.running[t], fi.dt, since_last_step)
     reset_or_shift_team(m, ps, ts, t)
     collider_frame_team(cs, ts, t, h.world_position, h.world_rotation, h.lossy_scale)
+
+
+@kernel
+def begin_frame_block(m, ps, prm, ts, cs, tt, h, fi, blk, bs, b):
+    """``begin_frame_team`` for every lane of running block b and the gather, with the particle
+    work on the block rows, lanes innermost (``batched/frame_begin``): per lane the prelude,
+    C.1 skinning into the block, C.2 sums, then per lane the team-level stages (center, C.4,
+    G.2), then the history gathered through the C.5 shift (with the plain copies of
+    ``gather_block``), and a Reset lane snapped. The same bits."""
+    lanes = blk.block_lane_base[b]
+    # the prelude first, as in begin_frame_team (a build reset skins and snaps the team rows
+    # with the build pose before this frame's skinning)
+    for i in range(blk.block_width[b]):
+        t = blk.lane_team[lanes + i]
+        bs.lane_since_last_step[lanes + i] = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t)
+    lane_starts_block(m, blk, bs, b)
+    skin_block(m, ps, h.local_to_world, blk, bs, b)
+    center_sums_block(m, blk, bs, b)
+    for i in range(blk.block_width[b]):
+        begin_lane_team(m, prm, ts, cs, tt, h, fi, bs, lanes + i, blk.lane_team[lanes + i],
+                        bs.lane_since_last_step[lanes + i])
+    gather_shift_block(m, ps, blk, bs, b)   # with gather_block's copies
+    if TEAM_ROWS:   # the per-team end-of-frame stages read the history from the team rows
+        publish_history_block(ps, blk, bs, b)
+    for i in range(blk.block_width[b]):
+        if bs.lane_shift_mode[lanes + i] == SHIFT_RESET:
+            snap_lane_block(m, ps, blk, bs, b, i)
 
 
 @kernel
@@ -389,9 +428,7 @@ def _worker_steps(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w):
             continue
         lanes = blk.block_lane_base[b]
         width = blk.block_width[b]
-        for i in range(width):
-            begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, blk.lane_team[lanes + i])
-        gather_block(m, ps, blk, bs, b)
+        begin_frame_block(m, ps, prm, ts, cs, tt, h, fi, blk, bs, b)
         for step in range(tt.update_count[blk.lane_team[lanes]]):
             for i in range(width):
                 _begin_step_team(tt, fi, step, blk.lane_team[lanes + i])

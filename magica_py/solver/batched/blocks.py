@@ -136,6 +136,9 @@ def form_blocks(system, enabled: bool = True):
                        np.zeros(max(team_total, 1), dtype=I32), np.zeros(worker_capacity(), dtype=I64))
     state = allocate_block_state(int((pcount * width).sum()), int(pcount.sum()), int(width.sum()),
                                  int((ccount * width).sum()))
+    if nb:
+        from magica_py.solver.batched.frame_begin import bind_rows_block
+        bind_rows_block(m, table, state)   # the constant half of C.1, lane-innermost
     return table, state
 
 

@@ -54,16 +54,28 @@ BLOCK_FIELDS = [
 BlockTable = make_soa("BlockTable", BLOCK_FIELDS)
 
 # (name, components (0: scalar), dtype, gathered at frame start, scattered at frame end);
-# next_pos, velocity_pos, base and step basic pose are step-internal (D.1 rewrites them)
+# next_pos, velocity_pos, base and step basic pose are step-internal (D.1 rewrites them).
+# The begin of frame in block form (``frame.begin_frame_block``) computes position and rotation
+# (C.1 skinning, not gathered) and gathers old_position, old_rotation, old_pos, velocity and
+# disp_pos through the C.5 shift (``frame_begin.gather_shift_block``); it also stores position,
+# rotation, old_position, old_rotation and disp_pos in the team rows (the per-team end-of-frame
+# stages read them there; the steps do not change them), so they are not scattered.
 PARTICLE_BLOCK_FIELDS = [
-    ("position", 3, F64, True, False),
-    ("rotation", 4, F64, True, False),
+    ("position", 3, F64, False, False),
+    ("rotation", 4, F64, False, False),
     ("old_position", 3, F64, True, False),
     ("old_rotation", 4, F64, True, False),
     ("next_pos", 3, F64, False, False),
     ("old_pos", 3, F64, True, True),
     ("velocity_pos", 3, F64, False, False),
     ("velocity", 3, F64, True, True),
+    ("disp_pos", 3, F64, True, False),
+    # model data: ``center.bind_point`` of the vertex's local position (w = 1), normal and
+    # tangent (w = 0), the constant half of C.1 (written when the blocks are formed,
+    # ``frame_begin.bind_rows_block``; read by ``frame_begin.skin_block``)
+    ("skin_bound_position", 4, F64, False, False),
+    ("skin_bound_normal", 4, F64, False, False),
+    ("skin_bound_tangent", 4, F64, False, False),
     ("real_velocity", 3, F64, False, True),
     ("base_pos", 3, F64, False, False),
     ("base_rot", 4, F64, False, False),
@@ -107,6 +119,16 @@ LANE_FIELDS = [
     ("old_frame_world_rot", 4, F64), ("frame_world_rot", 4, F64), ("old_frame_world_scale", 3, F64),
     ("frame_world_scale", 3, F64), ("distance_weight", 0, F64), ("step_move_inertia_ratio", 0, F64),
     ("step_rotation_inertia_ratio", 0, F64), ("blend_weight", 0, F64),
+    # begin of frame in block form (``batched/frame_begin``), written once per frame:
+    # first model row of the lane's team (team_particle_start), by ``lane_starts_block``
+    ("particle_start", 0, I64),
+    # s; team time from the last step to the frame's start (``frame.begin_frame_prelude_team``)
+    ("since_last_step", 0, F64),
+    # C.2 sums over the center-fixed vertices (m; unit axes summed), by ``center_sums_block``
+    ("center_position_sum", 3, F64), ("center_normal_sum", 3, F64), ("center_tangent_sum", 3, F64),
+    # C.5 of the lane (``begin_lane_team``): SHIFT_KEEP / SHIFT_MOVE / SHIFT_RESET, and the
+    # shift's pivot (m, the previous component position), vector (m) and rotation
+    ("shift_mode", 0, I32), ("shift_pivot", 3, F64), ("shift_vector", 3, F64), ("shift_rotation", 4, F64),
 ]
 # ColliderState values of each lane's collider slots at the current step
 COLLIDER_FIELDS = [

@@ -1,8 +1,9 @@
 """Moving state between the team rows (``ParticleState``, ``TeamState``, ``ColliderState``)
 and a block's lane-innermost arrays (``BlockState``).
 
-* ``gather_block``: at the start of a frame's steps, the particle fields the steps read
-  (``state.PARTICLE_BLOCK_FIELDS`` marked *gathered*) from each lane's team rows;
+* ``gather_block``: at the start of a frame's steps, the particle fields the block takes as is
+  from each lane's team rows (the begin of frame in block form, ``frame_begin``, computes the
+  skinned pose and gathers the history through the C.5 shift);
 * ``scatter_block``: after the steps, the state the rest of the frame reads back (the
   step-internal fields stay in the block; ``scatter_block_full`` copies those too, for tests);
 * ``load_lanes``: a step's team and collider values (after the per-team C.3 / G.3) from the
@@ -55,32 +56,26 @@ def _copy_out(dst, src, r, k, n):
 
 @kernel
 def gather_block(m, ps, blk, bs, b):
+    """The particle state the block takes as is from the team rows: collision normal, friction
+    and static friction. The rest of what the steps read comes from the begin of frame in
+    block form (``frame.begin_frame_block``: the skinned pose computed in the block, the
+    history gathered through the C.5 shift, ``frame_begin.gather_shift_block``, which also
+    makes these copies in its pass: the frame does not call this; ``gather_block_full``,
+    the stage tests and ``bench_blocks`` do)."""
     width = blk.block_width[b]
     base = blk.block_row_base[b]
     lanes = blk.block_lane_base[b]
     count = blk.block_particle_count[b]
     # arrays as locals and flat team rows (through the tables every pointer is reloaded after
     # each store: the copy ran 3x slower)
-    position, rotation, old_position, old_rotation = (flat(ps.position), flat(ps.rotation),
-                                                      flat(ps.old_position), flat(ps.old_rotation))
-    old_pos, velocity, normal, friction, static_friction = (flat(ps.old_pos), flat(ps.velocity),
-                                                            flat(ps.collision_normal), ps.friction,
-                                                            ps.static_friction)
-    b_position, b_rotation, b_old_position, b_old_rotation = bs.position, bs.rotation, bs.old_position, bs.old_rotation
-    b_old_pos, b_velocity, b_normal, b_friction, b_static_friction = (bs.old_pos, bs.velocity, bs.collision_normal,
-                                                                      bs.friction, bs.static_friction)
+    normal, friction, static_friction = flat(ps.collision_normal), ps.friction, ps.static_friction
+    b_normal, b_friction, b_static_friction = bs.collision_normal, bs.friction, bs.static_friction
     starts, lane_team = m.team_particle_start, blk.lane_team
     # particle outer, lane inner: the block rows are written in order
     for p in range(count):
         for i in range(width):
             r = np.uint64(starts[lane_team[lanes + i]] + p)
             k = np.uint64(base + p * width + i)
-            _copy_in(b_position, position, k, r, 3)
-            _copy_in(b_rotation, rotation, k, r, 4)
-            _copy_in(b_old_position, old_position, k, r, 3)
-            _copy_in(b_old_rotation, old_rotation, k, r, 4)
-            _copy_in(b_old_pos, old_pos, k, r, 3)
-            _copy_in(b_velocity, velocity, k, r, 3)
             _copy_in(b_normal, normal, k, r, 3)
             b_friction[k] = friction[r]
             b_static_friction[k] = static_friction[r]
@@ -100,6 +95,13 @@ def gather_block_full(m, ps, blk, bs, b):
         for p in range(count):
             r = start + p
             k = base + p * width + i
+            _in(bs.position, ps.position, k, r, 3)
+            _in(bs.rotation, ps.rotation, k, r, 4)
+            _in(bs.old_position, ps.old_position, k, r, 3)
+            _in(bs.old_rotation, ps.old_rotation, k, r, 4)
+            _in(bs.old_pos, ps.old_pos, k, r, 3)
+            _in(bs.velocity, ps.velocity, k, r, 3)
+            _in(bs.disp_pos, ps.disp_pos, k, r, 3)
             _in(bs.next_pos, ps.next_pos, k, r, 3)
             _in(bs.velocity_pos, ps.velocity_pos, k, r, 3)
             _in(bs.real_velocity, ps.real_velocity, k, r, 3)
