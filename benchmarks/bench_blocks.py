@@ -24,8 +24,12 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from magica_py.solver.batch_tables import borrow  # noqa: E402
 from magica_py.solver.batched.blocks import describe_blocks, form_blocks  # noqa: E402
-from magica_py.solver.batched.transfer import (  # noqa: E402
-    gather_block, gather_block_full, load_lanes, scatter_block,
+from magica_py.solver.batched.frame_end import (  # noqa: E402,F401
+    _lane_values, display_block, guards_trip_block, line_rotations_block, transform_data_block,
+    triangle_rotations_block, write_transforms_block,
+)
+from magica_py.solver.batched.transfer import (  # noqa: E402,F401
+    gather_block, gather_block_end, gather_block_full, load_lanes, scatter_block, scatter_block_end,
 )
 from magica_py.solver.constraints.angle import angle_block  # noqa: E402,F401
 from magica_py.solver.constraints.bending import apply_accumulated_block, bending_block  # noqa: E402,F401
@@ -50,14 +54,25 @@ STAGES = [
     ("motion (D.9)", "motion_block(m, bs, prm, blk, b, 0.95)", 1),
     ("end of step (D.10)", "end_step_block(m, bs, prm, blk, b, DT, 1.0)", 1),
     ("scatter (per frame)", "scatter_block(m, ps, blk, bs, b)", 0),
+    # the end of frame in block form (batched/frame_end), per frame
+    ("end: gather disp_pos", "gather_block_end(m, ps, blk, bs, b)", 0),
+    ("end: lane values", "_lane_values(m, ts, tt, blk, bs, b, DT)", 0),
+    ("end: guards", "guards_trip_block(blk, bs, b)", 0),
+    ("end: display (E.1)", "display_block(m, blk, bs, b, DT, True)", 0),
+    ("end: line rot. (E.2)", "line_rotations_block(m, prm, blk, bs, b, True)", 0),
+    ("end: triangle rot. (E.3)", "triangle_rotations_block(m, blk, bs, b)", 0),
+    ("end: transform (E.4)", "transform_data_block(m, blk, bs, b)", 0),
+    ("end: scatter", "scatter_block_end(m, ps, blk, bs, b)", 0),
+    ("end: write-back", "write_transforms_block(m, blk, bs, b, h.parent, h.world_rotation, h.lossy_scale, "
+     "h.local_position, h.local_rotation)", 0),
 ]
 
 
 def _wrapper(body: str):
     source = (
-        "def f(m, ps, prm, ts, cs, tt, blk, bs):\n"
-        "    m, ps, prm, ts, cs, tt, blk, bs = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),\n"
-        "                                       borrow(tt), borrow(blk), borrow(bs))\n"
+        "def f(m, ps, prm, ts, cs, tt, blk, bs, h):\n"
+        "    m, ps, prm, ts, cs, tt, blk, bs, h = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),\n"
+        "                                          borrow(tt), borrow(blk), borrow(bs), borrow(h))\n"
         "    for b in range(blk.block_width.shape[0]):\n"
         f"        {body}\n")
     namespace = dict(globals())
@@ -93,7 +108,7 @@ def main(argv=None) -> int:
     print("\n".join(describe_blocks(blk)) or "no blocks")
     if not len(blk.block_width):
         return 0
-    m, ps, prm, ts, cs, tt, _h = system.kernel_tables()
+    m, ps, prm, ts, cs, tt, h = system.kernel_tables()
     kb, kbs = as_kernel_table(blk), as_kernel_table(bs)
     _gather_all(m, ps, ts, cs, tt, kb, kbs)
     n = int(sum(int(blk.block_width[b]) * int(blk.block_particle_count[b]) for b in range(len(blk.block_width))))
@@ -102,11 +117,11 @@ def main(argv=None) -> int:
     print(f"{'stage':24s} ns/particle  (one call over {n} block particles)")
     for name, body, per_step in STAGES:
         fn = _wrapper(body)
-        fn(m, ps, prm, ts, cs, tt, kb, kbs)
+        fn(m, ps, prm, ts, cs, tt, kb, kbs, h)
         best = 1e9
         for _ in range(args.repeats):
             t0 = time.perf_counter()
-            fn(m, ps, prm, ts, cs, tt, kb, kbs)
+            fn(m, ps, prm, ts, cs, tt, kb, kbs, h)
             best = min(best, time.perf_counter() - t0)
         ns = best * 1e9 / n
         step += ns * per_step
