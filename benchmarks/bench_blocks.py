@@ -26,7 +26,7 @@ from magica_py.solver.batch_tables import borrow  # noqa: E402
 from magica_py.solver.batched.blocks import describe_blocks, form_blocks  # noqa: E402
 from magica_py.solver.batched.frame_end import (  # noqa: E402,F401
     _lane_values, display_block, guards_trip_block, line_rotations_block, transform_data_block,
-    triangle_rotations_block, write_transforms_block,
+    triangle_rotations_block, write_transforms_block, bone_local_pose_block,
 )
 from magica_py.solver.batched.transfer import (  # noqa: E402,F401
     gather_block, gather_block_end, gather_block_full, load_lanes, scatter_block, scatter_block_end,
@@ -63,8 +63,8 @@ STAGES = [
     ("end: triangle rot. (E.3)", "triangle_rotations_block(m, blk, bs, b)", 0),
     ("end: transform (E.4)", "transform_data_block(m, blk, bs, b)", 0),
     ("end: scatter", "scatter_block_end(m, ps, blk, bs, b)", 0),
-    ("end: write-back", "write_transforms_block(m, blk, bs, b, h.parent, h.world_rotation, h.lossy_scale, "
-     "h.local_position, h.local_rotation)", 0),
+    ("end: bone local pose", "bone_local_pose_block(m, blk, bs, b, h.parent, h.world_rotation, h.lossy_scale)", 0),
+    ("end: write-back", "write_transforms_block(m, blk, bs, b, h.local_position, h.local_rotation)", 0),
 ]
 
 

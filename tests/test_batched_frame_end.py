@@ -41,14 +41,13 @@ def _block_end(m, ps, prm, ts, cs, tt, h, blk, bs, fi, verdicts):
     for b in range(blk.block_width.shape[0]):
         gather_block_full(m, ps, blk, bs, b)
         gather_block_end(m, ps, blk, bs, b)
-        ok = end_frame_block(m, prm, ts, tt, blk, bs, b, fi)
+        ok = end_frame_block(m, prm, ts, tt, h, blk, bs, b, fi)
         verdicts[b] = 1 if ok else 0
         scatter_block(m, ps, blk, bs, b)
         lanes = blk.block_lane_base[b]
         if ok:
             scatter_block_end(m, ps, blk, bs, b)
-            write_transforms_block(m, blk, bs, b, h.parent, h.world_rotation, h.lossy_scale, h.local_position,
-                                   h.local_rotation)
+            write_transforms_block(m, blk, bs, b, h.local_position, h.local_rotation)
             for i in range(blk.block_width[b]):
                 end_frame_lane(m, ps, ts, cs, tt, h, bs, blk.lane_team[lanes + i], lanes + i)
         else:
@@ -171,10 +170,10 @@ def _guards_only(m, ps, prm, ts, tt, blk, bs, fi, verdicts):
 
 
 @numba.njit
-def _end_only(m, prm, ts, tt, blk, bs, fi, verdicts):
-    m, prm, ts, tt, blk, bs = borrow(m), borrow(prm), borrow(ts), borrow(tt), borrow(blk), borrow(bs)
+def _end_only(m, prm, ts, tt, h, blk, bs, fi, verdicts):
+    m, prm, ts, tt, h, blk, bs = borrow(m), borrow(prm), borrow(ts), borrow(tt), borrow(h), borrow(blk), borrow(bs)
     for b in range(blk.block_width.shape[0]):
-        verdicts[b] = 1 if end_frame_block(m, prm, ts, tt, blk, bs, b, fi) else 0
+        verdicts[b] = 1 if end_frame_block(m, prm, ts, tt, h, blk, bs, b, fi) else 0
 
 
 def test_a_guard_trip_sends_the_block_to_the_per_team_path_untouched(crowd):
@@ -183,14 +182,14 @@ def test_a_guard_trip_sends_the_block_to_the_per_team_path_untouched(crowd):
         blk, bs = block_tables(crowd)
         t = int(blk.lane_team[4])
         crowd.particles.velocity[crowd.model.team_particle_start[t] + 5, 1] = np.inf
-        m, ps, prm, ts, cs, tt, _h = crowd.kernel_tables()
+        m, ps, prm, ts, cs, tt, h = crowd.kernel_tables()
         kb, kbs = as_kernel_table(blk), as_kernel_table(bs)
         fi = _frame_inputs(crowd)
         verdicts = np.zeros(len(blk.block_width), dtype=np.int64)
         _guards_only(m, ps, prm, ts, tt, kb, kbs, fi, verdicts)
         particle_fields = [f for f in bs._fields if not f.startswith(("lane_", "col_", "shared_"))]
         gathered = {f: getattr(bs, f).copy() for f in particle_fields}
-        _end_only(m, prm, ts, tt, kb, kbs, fi, verdicts)
+        _end_only(m, prm, ts, tt, h, kb, kbs, fi, verdicts)
         b = int(blk.team_block[t])
         assert verdicts[b] == 0 and verdicts.sum() == len(blk.block_width) - 1
         for f in particle_fields:   # the tripped block's rows as gathered (the others ran)

@@ -37,8 +37,8 @@ from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4,
 from magica_py.solver.display import display_clamped, display_extrapolated, display_fraction
 from magica_py.solver.guards import particle_verdict, speed_limit_sq
 from magica_py.solver.rotations import (
-    add_flipped, line_blend, line_child_pose, line_child_rotation, line_turn, triangle_frame_from,
-    vertex_frame_rotation,
+    TRIANGLES_PER_VERTEX, add_flipped, line_blend, line_child_pose, line_child_rotation, line_turn,
+    triangle_frame_from, vertex_frame_rotation,
 )
 from magica_py.kernels.rows import flat
 from magica_py.solver.writeback import bone_rotation, finite3, finite4, fixed_bone_local, moving_bone_local
@@ -51,7 +51,7 @@ ZERO3 = (0.0, 0.0, 0.0)
 
 
 @kernel
-def end_frame_block(m, prm, ts, tt, blk, bs, b, fi):
+def end_frame_block(m, prm, ts, tt, h, blk, bs, b, fi):
     """Guards and E.1-E.4 for every lane of block b on its block rows; False (nothing changed)
     when the block takes the per-team path this frame (see the module docstring)."""
     ex = blk.block_exemplar[b]
@@ -71,6 +71,7 @@ def end_frame_block(m, prm, ts, tt, blk, bs, b, fi):
     if m.team_triangle_count[ex] > 0:
         triangle_rotations_block(m, blk, bs, b)
     transform_data_block(m, blk, bs, b)
+    bone_local_pose_block(m, blk, bs, b, h.parent, h.world_rotation, h.lossy_scale)
     return True
 
 
@@ -364,7 +365,7 @@ def triangle_rotations_block(m, blk, bs, b):
     """E.3 (``rotations.triangle_rotations_team``) for every lane: each triangle's frame once
     (block triangle rows), then each vertex's sums over its triangles in order (lane arrays)
     and its rotation where the frame is valid. Vertices with more than
-    ``TRIANGLES_PER_VERTEX`` triangles take the same sums (per team: its scalar pass)."""
+    ``TRIANGLES_PER_VERTEX`` triangles sum in the lane arrays (per team: its scalar pass)."""
     ex = blk.block_exemplar[b]
     p0 = m.team_particle_start[ex]
     t0 = m.team_triangle_start[ex]
@@ -396,13 +397,35 @@ def triangle_rotations_block(m, blk, bs, b):
         n = m.vertex_triangle_count[p0 + p]
         if n == 0:
             continue  # per team: zero sums, not valid, rotation kept
+        e0 = m.vertex_triangle_start[p0 + p]
+        kp0 = np.uint64(row_base + p * width)
+        if n <= TRIANGLES_PER_VERTEX:
+            # the sums in registers over TRIANGLES_PER_VERTEX slots, the unused ones on the
+            # first triangle and selected away (``triangle_rotations_team``'s vector pass)
+            slots = (_slot(m, e0, 0, n, t0, tri_base, width), _slot(m, e0, 1, n, t0, tri_base, width),
+                     _slot(m, e0, 2, n, t0, tri_base, width), _slot(m, e0, 3, n, t0, tri_base, width),
+                     _slot(m, e0, 4, n, t0, tri_base, width), _slot(m, e0, 5, n, t0, tri_base, width))
+            # streams: the vertex's rotation 1-4; triangle frames read only
+            open_streams()
+            for i in range(width):
+                u = np.uint64(i)
+                sn = ZERO3
+                st = ZERO3
+                for k in range(TRIANGLES_PER_VERTEX):
+                    kt, flip_normal, flip_tangent, used = slots[k]
+                    sn_k = add_flipped(sn, sload3(triangle_normal, kt + u, READ), flip_normal)
+                    st_k = add_flipped(st, sload3(triangle_tangent, kt + u, READ), flip_tangent)
+                    sn = (sn_k[0] if used else sn[0], sn_k[1] if used else sn[1], sn_k[2] if used else sn[2])
+                    st = (st_k[0] if used else st[0], st_k[1] if used else st[1], st_k[2] if used else st[2])
+                _vertex_rotation_lane(rotation, kp0 + u, sn, st)
+            continue
+        # a crowded vertex: the sums in the lane arrays, one triangle at a time
         # streams: the sums 1-3 and 4-6 (lane arrays); triangle frames read only
         open_streams()
         for i in range(width):
             L = lanes + np.uint64(i)
             sstore3(ns, L, ZERO3, 1)
             sstore3(ts_, L, ZERO3, 4)
-        e0 = m.vertex_triangle_start[p0 + p]
         for e in range(e0, e0 + n):
             kt0 = np.uint64(tri_base + (m.vertex_triangle_data[e] - t0) * width)
             flip = m.vertex_triangle_flip[e]
@@ -414,15 +437,30 @@ def triangle_rotations_block(m, blk, bs, b):
                 L = lanes + u
                 sstore3(ns, L, add_flipped(sload3(ns, L, 1), sload3(triangle_normal, kt0 + u, READ), flip_normal), 1)
                 sstore3(ts_, L, add_flipped(sload3(ts_, L, 4), sload3(triangle_tangent, kt0 + u, READ), flip_tangent), 4)
-        kp0 = np.uint64(row_base + p * width)
         # streams: the vertex's rotation 1-4; the sums read only
         open_streams()
         for i in range(width):
             u = np.uint64(i)
-            valid, q = vertex_frame_rotation(sload3(ns, lanes + u, READ), sload3(ts_, lanes + u, READ))
-            q0 = sload4(rotation, kp0 + u, 1)
-            sstore4(rotation, kp0 + u, (q[0] if valid else q0[0], q[1] if valid else q0[1],
-                                        q[2] if valid else q0[2], q[3] if valid else q0[3]), 1)
+            _vertex_rotation_lane(rotation, kp0 + u, sload3(ns, lanes + u, READ), sload3(ts_, lanes + u, READ))
+
+
+@kernel(inline="always")
+def _slot(m, e0, k, n, t0, tri_base, width):
+    """Slot k of a vertex's triangle sums: (first block triangle row, flip normal, flip
+    tangent, used); an unused slot reads the vertex's first triangle."""
+    e = e0 + (k if k < n else 0)
+    flip = m.vertex_triangle_flip[e]
+    return (np.uint64(tri_base + (m.vertex_triangle_data[e] - t0) * width), (flip & 1) != 0, (flip & 2) != 0,
+            k < n)
+
+
+@kernel(inline="always")
+def _vertex_rotation_lane(rotation, k, sn, st):
+    """E.3's rotation of the vertex at row k from its sums, where valid."""
+    valid, q = vertex_frame_rotation(sn, st)
+    q0 = sload4(rotation, k, 1)
+    sstore4(rotation, k, (q[0] if valid else q0[0], q[1] if valid else q0[1],
+                          q[2] if valid else q0[2], q[3] if valid else q0[3]), 1)
 
 
 # ----------------------------------------------------------------------------- E.4
@@ -454,89 +492,99 @@ def transform_data_block(m, blk, bs, b):
 
 # ----------------------------------------------------------------------------- write-back
 @kernel
-def write_transforms_block(m, blk, bs, b, parent_node, world_rotation, lossy_scale, local_position,
-                           local_rotation):
-    """E.4's write-back (``writeback.write_transforms_team``) of every lane whose bone values are
-    all finite (``bs.lane_transform_ok``), from the block rows (the bone position is the
-    particle's, the bone rotation ``bs.transform_rotation``) into the hierarchy's local pose
-    through each lane's transform indices. After the barrier (``frame._worker_end``): the
-    block rows are the frame's until the next gather."""
+def bone_local_pose_block(m, blk, bs, b, parent_node, world_rotation, lossy_scale):
+    """The maths of E.4's write-back (``writeback.write_transforms_team``) for every lane, before
+    the barrier: each bone's local pose under its parent particle's bone (moving) or its
+    parent node's world rotation (fixed) into ``bs.bone_local_position/rotation``. The
+    hierarchy values it reads (lossy scale, world rotation) are not written in the frame
+    kernel; the stores through the transform indices wait for ``write_transforms_block``."""
     ex = blk.block_exemplar[b]
     p0 = m.team_particle_start[ex]
     width = blk.block_width[b]
     lanes = np.uint64(blk.block_lane_base[b])
     row_base = blk.block_row_base[b]
-    all_ok = True
-    for i in range(width):
-        all_ok = all_ok and bs.lane_transform_ok[lanes + np.uint64(i)] != 0
-    h = (flat(local_position), flat(local_rotation), flat(world_rotation), flat(lossy_scale), parent_node)
-    a = (bs.position, bs.transform_rotation, bs.lane_particle_start, bs.lane_transform_ok, m.transform_index)
+    h = (flat(world_rotation), flat(lossy_scale), parent_node)
+    a = (bs.position, bs.transform_rotation, bs.lane_particle_start, m.transform_index, bs.bone_local_position,
+         bs.bone_local_rotation)
     for p in range(blk.block_particle_count[b]):
         attr = m.attribute[p0 + p]
         k0 = np.uint64(row_base + p * width)
         if (attr & MOVE) != 0:
             pp = m.parent[p0 + p]
-            if pp < 0:
-                continue
-            kp0 = np.uint64(row_base + (pp - p0) * width)
-            if all_ok:
-                # streams: the bone's local position 1-3 and rotation 4-7 (distinct nodes in
-                # every lane); everything else read only
+            if pp >= 0:
+                # streams: the local position 1-3 and rotation 4-7 of the bone; all else read only
                 open_streams()
                 for i in range(width):
-                    _moving_bone_lane(h, a, k0, kp0, p, pp - p0, lanes, i)
-            else:
-                for i in range(width):
-                    if bs.lane_transform_ok[lanes + np.uint64(i)] != 0:
-                        open_streams()
-                        _moving_bone_lane(h, a, k0, kp0, p, pp - p0, lanes, i)
+                    _moving_bone_lane(h, a, k0, np.uint64(row_base + (pp - p0) * width), pp - p0, lanes, i)
         elif (attr & FIXED) != 0:
+            open_streams()
             for i in range(width):
-                if bs.lane_transform_ok[lanes + np.uint64(i)] != 0:
-                    _fixed_bone_lane(h, a, k0, p, lanes, i)
+                _fixed_bone_lane(h, a, k0, p, lanes, i)
 
 
 @kernel(inline="always")
-def _moving_bone_lane(h, a, k0, kp0, p, pp, lanes, i):
-    out_position, out_rotation, world_rot, scale, parent_node = h
-    position, transform_rotation, particle_start, ok, node_of = a
+def _moving_bone_lane(h, a, k0, kp0, pp, lanes, i):
+    world_rot, scale, parent_node = h
+    position, transform_rotation, particle_start, node_of, local_position, local_rotation = a
     u = np.uint64(i)
     start = sload(particle_start, lanes + u, READ)
-    node = np.uint64(sload(node_of, np.uint64(start + p), READ))
     pnode = np.uint64(3) * np.uint64(sload(node_of, np.uint64(start + pp), READ))
     lp, lq = moving_bone_local(sload4(transform_rotation, kp0 + u, READ), sload3(position, kp0 + u, READ),
                                sload4(transform_rotation, k0 + u, READ), sload3(position, k0 + u, READ),
                                (sload(scale, pnode, READ), sload(scale, pnode + np.uint64(1), READ),
                                 sload(scale, pnode + np.uint64(2), READ)))
-    v = np.uint64(3) * node
-    sstore(out_position, v, lp[0], 1)
-    sstore(out_position, v + np.uint64(1), lp[1], 2)
-    sstore(out_position, v + np.uint64(2), lp[2], 3)
-    q = np.uint64(4) * node
-    sstore(out_rotation, q, lq[0], 4)
-    sstore(out_rotation, q + np.uint64(1), lq[1], 5)
-    sstore(out_rotation, q + np.uint64(2), lq[2], 6)
-    sstore(out_rotation, q + np.uint64(3), lq[3], 7)
+    sstore3(local_position, k0 + u, lp, 1)
+    sstore4(local_rotation, k0 + u, lq, 4)
 
 
 @kernel(inline="always")
 def _fixed_bone_lane(h, a, k0, p, lanes, i):
-    """A fixed bone of lane i (scalar: a few roots per team)."""
-    out_position, out_rotation, world_rot, scale, parent_node = h
-    position, transform_rotation, particle_start, ok, node_of = a
+    world_rot, scale, parent_node = h
+    position, transform_rotation, particle_start, node_of, local_position, local_rotation = a
     u = np.uint64(i)
-    node = np.uint64(node_of[particle_start[lanes + u] + p])
-    rot = (transform_rotation[0, k0 + u], transform_rotation[1, k0 + u], transform_rotation[2, k0 + u],
-           transform_rotation[3, k0 + u])
-    parent = parent_node[node]
-    q = np.uint64(4) * node
-    if parent >= 0:
-        w = np.uint64(4) * np.uint64(parent)
-        r = fixed_bone_local(rot, (world_rot[w], world_rot[w + np.uint64(1)], world_rot[w + np.uint64(2)],
-                                   world_rot[w + np.uint64(3)]), True)
-    else:
-        r = fixed_bone_local(rot, rot, False)
-    out_rotation[q] = r[0]
-    out_rotation[q + np.uint64(1)] = r[1]
-    out_rotation[q + np.uint64(2)] = r[2]
-    out_rotation[q + np.uint64(3)] = r[3]
+    start = sload(particle_start, lanes + u, READ)
+    parent = sload(parent_node, np.uint64(sload(node_of, np.uint64(start + p), READ)), READ)
+    has_parent = parent >= 0
+    w = np.uint64(4) * np.uint64(parent if has_parent else 0)   # a valid row when there is none
+    parent_rotation = (sload(world_rot, w, READ), sload(world_rot, w + np.uint64(1), READ),
+                       sload(world_rot, w + np.uint64(2), READ), sload(world_rot, w + np.uint64(3), READ))
+    sstore4(local_rotation, k0 + u, fixed_bone_local(sload4(transform_rotation, k0 + u, READ), parent_rotation,
+                                                     has_parent), 4)
+
+
+@kernel
+def write_transforms_block(m, blk, bs, b, local_position, local_rotation):
+    """E.4's write-back (``writeback.write_transforms_team``) of every lane whose bone values are
+    all finite (``bs.lane_transform_ok``): the local poses ``bone_local_pose_block`` computed,
+    stored through each lane's transform indices into the hierarchy. After the barrier
+    (``frame._worker_end``); the block rows stay the frame's until the next gather. Scalar
+    (stores through indices)."""
+    ex = blk.block_exemplar[b]
+    p0 = m.team_particle_start[ex]
+    width = blk.block_width[b]
+    lanes = blk.block_lane_base[b]
+    row_base = blk.block_row_base[b]
+    out_position, out_rotation = flat(local_position), flat(local_rotation)
+    bone_position, bone_rotation_rows = bs.bone_local_position, bs.bone_local_rotation
+    node_of, particle_start, ok = m.transform_index, bs.lane_particle_start, bs.lane_transform_ok
+    for p in range(blk.block_particle_count[b]):
+        attr = m.attribute[p0 + p]
+        moving = (attr & MOVE) != 0 and m.parent[p0 + p] >= 0
+        if not moving and (attr & FIXED) == 0:
+            continue
+        k0 = row_base + p * width
+        for i in range(width):
+            if ok[lanes + i] == 0:
+                continue
+            node = np.uint64(node_of[particle_start[lanes + i] + p])
+            k = k0 + i
+            if moving:
+                v = np.uint64(3) * node
+                out_position[v] = bone_position[0, k]
+                out_position[v + np.uint64(1)] = bone_position[1, k]
+                out_position[v + np.uint64(2)] = bone_position[2, k]
+            q = np.uint64(4) * node
+            out_rotation[q] = bone_rotation_rows[0, k]
+            out_rotation[q + np.uint64(1)] = bone_rotation_rows[1, k]
+            out_rotation[q + np.uint64(2)] = bone_rotation_rows[2, k]
+            out_rotation[q + np.uint64(3)] = bone_rotation_rows[3, k]

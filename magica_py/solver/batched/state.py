@@ -97,7 +97,11 @@ PARTICLE_BLOCK_FIELDS = [
     ("disp_pos", 3, F64, True, True),
     ("base_pos_buffer", 3, F64, False, True),
     ("base_rot_buffer", 4, F64, False, False),
-    ("transform_rotation", 4, F64, False, True),
+    ("transform_rotation", 4, F64, False, False),
+    # E.4's local pose of each bone under its parent (the write-back copies it through the
+    # transform indices after the barrier): m for the position, xyzw
+    ("bone_local_position", 3, F64, False, False),
+    ("bone_local_rotation", 4, F64, False, False),
 ]
 # E.3 scratch per triangle of each lane (row = block_triangle_base + tri * width + lane)
 TRIANGLE_BLOCK_FIELDS = [
