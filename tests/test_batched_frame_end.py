@@ -161,6 +161,32 @@ def test_a_lane_with_a_non_finite_bone_is_reset_and_not_written(crowd):
         restore(crowd, before)
 
 
+def test_an_edge_folded_back_onto_its_parent_takes_the_opposite_cases_with_the_per_team_bits(crowd):
+    """E.2's degenerate cases (a child's simulated edge opposite its rest edge: pi about a
+    fallback axis, for the child's swing and the parent's turn) are left out of the vector
+    pass and redone lane by lane."""
+    from magica_py.kernels.math3d import q_rotate
+
+    before = snapshot(crowd)
+    try:
+        def prepare(system, blk):
+            system._time.running[blk.lane_team] = True
+            m, ps = system.model, system.particles
+            t = int(blk.lane_team[2])                     # a hair lane
+            assert m.team_has_lines[t]
+            b0 = m.team_baseline_start[t]
+            x = int(m.baseline_data[m.baseline_start[b0]])    # a strand's fixed root
+            c = int(m.child_data[m.child_start[x]])
+            tv = np.array(q_rotate(tuple(ps.rotation[x]), tuple(m.baseline_local_position[c])))
+            folded = ps.position[x] - tv                   # E.1 displays the child there
+            ps.old_pos[c] = folded
+            ps.disp_pos[c] = folded
+            ps.real_velocity[c] = 0.0
+        _compare_end(crowd, prepare)
+    finally:
+        restore(crowd, before)
+
+
 @numba.njit
 def _guards_only(m, ps, prm, ts, tt, blk, bs, fi, verdicts):
     m, ps, prm, ts, tt, blk, bs = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(tt), borrow(blk), borrow(bs)

@@ -218,7 +218,34 @@ def line_rotations_block(m, prm, blk, bs, b, all_blend_one):
             kx0 = np.uint64(row_base + (x - p0) * width)
             attr = m.attribute[x]
             cn = m.child_count[x]
-            if cn > 0 and (attr & (FIXED | MOVE)) != 0:
+            t = ri if (attr & MOVE) != 0 else rr
+            single = cn == 1 and (m.attribute[m.child_data[m.child_start[x]]] & MOVE) != 0
+            if single and (attr & (FIXED | MOVE)) != 0:
+                # one moving child (a chain): the child, the sums and the turn in one loop
+                c = m.child_data[m.child_start[x]]
+                child = (kx0, np.uint64(row_base + (c - p0) * width),
+                         (rest_position[c, 0], rest_position[c, 1], rest_position[c, 2]),
+                         (rest_rotation[c, 0], rest_rotation[c, 1], rest_rotation[c, 2], rest_rotation[c, 3]),
+                         a, (m.attribute[c] & ZERO_DISTANCE) != 0)
+                if a_zero:
+                    if all_blend_one:
+                        rare = _line_chain_lanes(arrays, child, t, lanes, width, True, True)
+                    else:
+                        rare = _line_chain_lanes(arrays, child, t, lanes, width, False, True)
+                elif all_blend_one:
+                    rare = _line_chain_lanes(arrays, child, t, lanes, width, True, False)
+                else:
+                    rare = _line_chain_lanes(arrays, child, t, lanes, width, False, False)
+                lane = 0
+                while rare != 0:  # an opposite edge or turn: this lane with every case
+                    if (rare & np.uint64(1)) != 0:
+                        if a_zero:
+                            _line_chain_lane(arrays, child, t, lanes, lane, False, False, True)
+                        else:
+                            _line_chain_lane(arrays, child, t, lanes, lane, False, False, False)
+                    rare >>= np.uint64(1)
+                    lane += 1
+            elif cn > 0 and (attr & (FIXED | MOVE)) != 0:
                 _clear_sums(arrays, lanes, width)
                 c0 = m.child_start[x]
                 for kk in range(c0, c0 + cn):
@@ -246,7 +273,6 @@ def line_rotations_block(m, prm, blk, bs, b, all_blend_one):
                         _line_child_lanes(arrays, child, lanes, width, False, True)
                     else:
                         _line_child_lanes(arrays, child, lanes, width, False, False)
-                t = ri if (attr & MOVE) != 0 else rr
                 if all_blend_one:
                     rare = _line_turn_lanes(arrays, kx0, t, lanes, width, True)
                 else:
@@ -259,6 +285,49 @@ def line_rotations_block(m, prm, blk, bs, b, all_blend_one):
                     lane += 1
             elif not all_blend_one:
                 _line_blend_lanes(arrays, kx0, lanes, width)
+
+
+@kernel(inline="always")
+def _line_chain_lanes(arrays, child, t, lanes, width, blend_one, a_zero):
+    """An entry with one moving child over every lane (vector pass): returns the lanes that
+    need an opposite case, left unchanged.
+
+    Streams: the entry's rotation 1-4, the child's rotation 5-8; all else read only."""
+    rare_lanes = np.uint64(0)
+    open_streams()
+    for i in range(width):
+        rare = _line_chain_lane(arrays, child, t, lanes, i, True, blend_one, a_zero)
+        rare_lanes |= np.uint64(1 if rare else 0) << np.uint64(i)
+    return rare_lanes
+
+
+@kernel(inline="always")
+def _line_chain_lane(arrays, child, t, lanes, i, vector, blend_one, a_zero):
+    """``line_rotations_team``'s entry body for an entry with one moving child, lane i: the
+    child's rotation, the sums (0 + the one term, as per team) and the entry's turn and blend.
+    ``vector`` True: without the opposite cases; a lane that needs one is left unchanged
+    (True returned) and redone with ``vector`` False."""
+    position, rotation, base_pos_buffer, base_rot_buffer, _ctv, _cv, blend = arrays
+    kx0, kc0, rest_position, rest_rotation, a, zero = child
+    kx = kx0 + np.uint64(i)
+    kc = kc0 + np.uint64(i)
+    pos = sload3(position, kx, READ)
+    q = sload4(rotation, kx, 1)
+    bp = sload3(base_pos_buffer, kx, READ)
+    bq = sload4(base_rot_buffer, kx, READ)
+    lp, lq = line_child_pose(q_inverse(bq), bp, rest_position, rest_rotation, sload3(base_pos_buffer, kc, READ),
+                             sload4(base_rot_buffer, kc, READ), a, a_zero)
+    tv = ZERO3 if zero else q_rotate(q, lp)
+    cur = v_sub(sload3(position, kc, READ), pos)
+    qc, rare_child = line_child_rotation(q, lq, tv, cur, zero, vector)
+    turned, rare_turn = line_turn(q, v_add(ZERO3, tv), v_add(ZERO3, cur), t, vector)
+    if not blend_one:
+        turned = line_blend(bq, turned, sload(blend, lanes + np.uint64(i), READ))
+    rare = rare_child | rare_turn
+    keep = vector & rare
+    sstore4(rotation, kc, sload4(rotation, kc, 5) if keep else qc, 5)
+    sstore4(rotation, kx, q if keep else turned, 1)
+    return rare
 
 
 @kernel(inline="always")
