@@ -58,7 +58,7 @@ STAGES = [
     ("end: gather disp_pos", "gather_block_end(m, ps, blk, bs, b)", 0),
     ("end: lane values", "_lane_values(m, ts, tt, blk, bs, b, DT)", 0),
     ("end: guards", "guards_trip_block(blk, bs, b)", 0),
-    ("end: display (E.1)", "display_block(m, blk, bs, b, DT, True)", 0),
+    ("end: display (E.1)", "display_block(m, ps, blk, bs, b, DT, True)", 0),
     ("end: line rot. (E.2)", "line_rotations_block(m, prm, blk, bs, b, True)", 0),
     ("end: triangle rot. (E.3)", "triangle_rotations_block(m, blk, bs, b)", 0),
     ("end: transform (E.4)", "transform_data_block(m, blk, bs, b)", 0),

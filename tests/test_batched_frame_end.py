@@ -41,7 +41,7 @@ def _block_end(m, ps, prm, ts, cs, tt, h, blk, bs, fi, verdicts):
     for b in range(blk.block_width.shape[0]):
         gather_block_full(m, ps, blk, bs, b)
         gather_block_end(m, ps, blk, bs, b)
-        ok = end_frame_block(m, prm, ts, tt, h, blk, bs, b, fi)
+        ok = end_frame_block(m, ps, prm, ts, tt, h, blk, bs, b, fi)
         verdicts[b] = 1 if ok else 0
         scatter_block(m, ps, blk, bs, b)
         lanes = blk.block_lane_base[b]
@@ -196,10 +196,11 @@ def _guards_only(m, ps, prm, ts, tt, blk, bs, fi, verdicts):
 
 
 @numba.njit
-def _end_only(m, prm, ts, tt, h, blk, bs, fi, verdicts):
-    m, prm, ts, tt, h, blk, bs = borrow(m), borrow(prm), borrow(ts), borrow(tt), borrow(h), borrow(blk), borrow(bs)
+def _end_only(m, ps, prm, ts, tt, h, blk, bs, fi, verdicts):
+    m, ps, prm, ts, tt, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(tt), borrow(h)
+    blk, bs = borrow(blk), borrow(bs)
     for b in range(blk.block_width.shape[0]):
-        verdicts[b] = 1 if end_frame_block(m, prm, ts, tt, h, blk, bs, b, fi) else 0
+        verdicts[b] = 1 if end_frame_block(m, ps, prm, ts, tt, h, blk, bs, b, fi) else 0
 
 
 def test_a_guard_trip_sends_the_block_to_the_per_team_path_untouched(crowd):
@@ -215,7 +216,7 @@ def test_a_guard_trip_sends_the_block_to_the_per_team_path_untouched(crowd):
         _guards_only(m, ps, prm, ts, tt, kb, kbs, fi, verdicts)
         particle_fields = [f for f in bs._fields if not f.startswith(("lane_", "col_", "shared_"))]
         gathered = {f: getattr(bs, f).copy() for f in particle_fields}
-        _end_only(m, prm, ts, tt, h, kb, kbs, fi, verdicts)
+        _end_only(m, ps, prm, ts, tt, h, kb, kbs, fi, verdicts)
         b = int(blk.team_block[t])
         assert verdicts[b] == 0 and verdicts.sum() == len(blk.block_width) - 1
         for f in particle_fields:   # the tripped block's rows as gathered (the others ran)

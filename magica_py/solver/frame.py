@@ -415,7 +415,7 @@ def _worker_steps(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w):
             run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi)
         # guards and E.1-E.4 in block form (the write-back waits for the barrier), unless
         # the block's end of frame takes the per-team path this frame
-        end_in_block = end_frame_block(m, prm, ts, tt, h, blk, bs, b, fi)
+        end_in_block = end_frame_block(m, ps, prm, ts, tt, h, blk, bs, b, fi)
         blk.block_end[b] = 1 if end_in_block else 0
         scatter_block(m, ps, blk, bs, b)
         if end_in_block:

@@ -51,7 +51,7 @@ ZERO3 = (0.0, 0.0, 0.0)
 
 
 @kernel
-def end_frame_block(m, prm, ts, tt, h, blk, bs, b, fi):
+def end_frame_block(m, ps, prm, ts, tt, h, blk, bs, b, fi):
     """Guards and E.1-E.4 for every lane of block b on its block rows; False (nothing changed)
     when the block takes the per-team path this frame (see the module docstring)."""
     ex = blk.block_exemplar[b]
@@ -65,7 +65,7 @@ def end_frame_block(m, prm, ts, tt, h, blk, bs, b, fi):
     all_running, all_blend_one = _lane_values(m, ts, tt, blk, bs, b, fi.dt)
     if guards_trip_block(blk, bs, b):
         return False
-    display_block(m, blk, bs, b, fi.dt, all_running)
+    display_block(m, ps, blk, bs, b, fi.dt, all_running)
     if m.team_has_lines[ex] != 0:
         line_rotations_block(m, prm, blk, bs, b, all_blend_one)
     if m.team_triangle_count[ex] > 0:
@@ -119,16 +119,21 @@ def guards_trip_block(blk, bs, b):
 
 # ----------------------------------------------------------------------------- E.1
 @kernel
-def display_block(m, blk, bs, b, dt, all_running):
+def display_block(m, ps, blk, bs, b, dt, all_running):
     """E.1 (``display.display_team`` without time-based smoothing) for every lane, in particle
-    order (a moving root reads its already updated display, as per team)."""
+    order (a moving root reads its already updated display, as per team).
+
+    The next frame's history (disp_pos, old_position, old_rotation) goes straight to the team
+    rows (the block stages do not read it again; the next gather does): stores through each
+    lane's first particle row, instead of block stores and a scatter pass."""
     ex = blk.block_exemplar[b]
     p0 = m.team_particle_start[ex]
     width = blk.block_width[b]
     lanes = np.uint64(blk.block_lane_base[b])
     row_base = blk.block_row_base[b]
-    a = (bs.position, bs.rotation, bs.disp_pos, bs.old_pos, bs.real_velocity, bs.old_position, bs.old_rotation,
-         bs.base_pos_buffer, bs.base_rot_buffer, bs.lane_display_t, bs.lane_end_blend_weight, bs.lane_end_running)
+    a = (bs.position, bs.rotation, bs.disp_pos, bs.old_pos, bs.real_velocity, flat(ps.disp_pos),
+         flat(ps.old_position), flat(ps.old_rotation), bs.base_pos_buffer, bs.base_rot_buffer, bs.lane_display_t,
+         bs.lane_end_blend_weight, bs.lane_end_running, bs.lane_particle_start)
     for p in range(blk.block_particle_count[b]):
         k0 = np.uint64(row_base + p * width)
         r = m.root_index[p0 + p]
@@ -137,55 +142,68 @@ def display_block(m, blk, bs, b, dt, all_running):
         # literal flags: each variant is its own loop without the others' maths
         if all_running:
             if not move:
-                _display_lanes(a, k0, kr0, lanes, width, dt, False, False, True)
+                _display_lanes(a, k0, kr0, p, lanes, width, dt, False, False, True)
             elif r >= 0:
-                _display_lanes(a, k0, kr0, lanes, width, dt, True, True, True)
+                _display_lanes(a, k0, kr0, p, lanes, width, dt, True, True, True)
             else:
-                _display_lanes(a, k0, kr0, lanes, width, dt, True, False, True)
+                _display_lanes(a, k0, kr0, p, lanes, width, dt, True, False, True)
         else:
             if not move:
-                _display_lanes(a, k0, kr0, lanes, width, dt, False, False, False)
+                _display_lanes(a, k0, kr0, p, lanes, width, dt, False, False, False)
             elif r >= 0:
-                _display_lanes(a, k0, kr0, lanes, width, dt, True, True, False)
+                _display_lanes(a, k0, kr0, p, lanes, width, dt, True, True, False)
             else:
-                _display_lanes(a, k0, kr0, lanes, width, dt, True, False, False)
+                _display_lanes(a, k0, kr0, p, lanes, width, dt, True, False, False)
 
 
 @kernel(inline="always")
-def _display_lanes(a, k0, kr0, lanes, width, dt, move, rooted, all_running):
-    """One particle (rows k0 + lane; its root's rows kr0 + lane) over every lane.
+def _display_lanes(a, k0, kr0, p, lanes, width, dt, move, rooted, all_running):
+    """One particle (rows k0 + lane; its root's rows kr0 + lane; team row p of each lane)
+    over every lane.
 
-    Streams: disp_pos 1-3, position 4-6, old_position 7-9, old_rotation 10-13, base_pos_buffer
-    14-16, base_rot_buffer 17-20 (the particle's rows); the root's position (another particle)
-    and everything else read only."""
-    (position, rotation, disp_pos, old_pos, real_velocity, old_position, old_rotation, base_pos_buffer,
-     base_rot_buffer, display_t, blend, running) = a
+    Streams: position 4-6, base_pos_buffer 14-16, base_rot_buffer 17-20 (the particle's block
+    rows); the team rows' disp_pos 21-23, old_position 24-26, old_rotation 27-30 (one row per
+    lane, of distinct teams); the root's position (another particle) and everything else read
+    only."""
+    (position, rotation, disp_pos, old_pos, real_velocity, team_disp_pos, team_old_position, team_old_rotation,
+     base_pos_buffer, base_rot_buffer, display_t, blend, running, particle_start) = a
     open_streams()
     for i in range(width):
         k = k0 + np.uint64(i)
         L = lanes + np.uint64(i)
+        r = np.uint64(sload(particle_start, L, READ) + p)
+        v = np.uint64(3) * r
+        q = np.uint64(4) * r
         pos0 = sload3(position, k, 4)
         rot0 = sload4(rotation, k, READ)
+        f = pos0
         if move:
             f = display_extrapolated(sload3(old_pos, k, READ), sload3(real_velocity, k, READ),
-                                     sload3(disp_pos, k, 1), dt, sload(display_t, L, READ))
+                                     sload3(disp_pos, k, READ), dt, sload(display_t, L, READ))
             if rooted:
                 f = display_clamped(f, sload3(position, kr0 + np.uint64(i), READ), pos0)
-            sstore3(disp_pos, k, f, 1)
             sstore3(position, k, v_lerp(pos0, f, sload(blend, L, READ)), 4)
-        else:
-            sstore3(disp_pos, k, pos0, 1)
-        if all_running:
-            sstore3(old_position, k, pos0, 7)
-            sstore4(old_rotation, k, rot0, 10)
-        else:
+        sstore(team_disp_pos, v, f[0], 21)
+        sstore(team_disp_pos, v + np.uint64(1), f[1], 22)
+        sstore(team_disp_pos, v + np.uint64(2), f[2], 23)
+        old_p = pos0
+        old_r = rot0
+        if not all_running:
             run = sload(running, L, READ) != 0
-            old_p = sload3(old_position, k, 7)
-            old_r = sload4(old_rotation, k, 10)
-            sstore3(old_position, k, (pos0[0] if run else old_p[0], pos0[1] if run else old_p[1],
-                                      pos0[2] if run else old_p[2]), 7)
-            sstore4(old_rotation, k, (rot0[0] if run else old_r[0], rot0[1] if run else old_r[1],
-                                      rot0[2] if run else old_r[2], rot0[3] if run else old_r[3]), 10)
+            kept_p = (sload(team_old_position, v, 24), sload(team_old_position, v + np.uint64(1), 25),
+                      sload(team_old_position, v + np.uint64(2), 26))
+            kept_r = (sload(team_old_rotation, q, 27), sload(team_old_rotation, q + np.uint64(1), 28),
+                      sload(team_old_rotation, q + np.uint64(2), 29), sload(team_old_rotation, q + np.uint64(3), 30))
+            old_p = (pos0[0] if run else kept_p[0], pos0[1] if run else kept_p[1], pos0[2] if run else kept_p[2])
+            old_r = (rot0[0] if run else kept_r[0], rot0[1] if run else kept_r[1], rot0[2] if run else kept_r[2],
+                     rot0[3] if run else kept_r[3])
+        sstore(team_old_position, v, old_p[0], 24)
+        sstore(team_old_position, v + np.uint64(1), old_p[1], 25)
+        sstore(team_old_position, v + np.uint64(2), old_p[2], 26)
+        sstore(team_old_rotation, q, old_r[0], 27)
+        sstore(team_old_rotation, q + np.uint64(1), old_r[1], 28)
+        sstore(team_old_rotation, q + np.uint64(2), old_r[2], 29)
+        sstore(team_old_rotation, q + np.uint64(3), old_r[3], 30)
         sstore3(base_pos_buffer, k, pos0, 14)
         sstore4(base_rot_buffer, k, rot0, 17)
 

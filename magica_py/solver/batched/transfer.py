@@ -197,21 +197,18 @@ def gather_block_end(m, ps, blk, bs, b):
 
 @kernel
 def scatter_block_end(m, ps, blk, bs, b):
-    """The results of the end stages in block form (``frame_end.end_frame_block``), after
-    ``scatter_block``: the displayed position (the sinks read it) and rotation, the next
-    frame's history (old_position, old_rotation, disp_pos) and the animated pose the sinks show
-    (base_pos_buffer). The bone pose (E.4) stays in the block: the write-back reads it there
-    (``frame_end.write_transforms_block``); E.2's base_rot_buffer and E.3's triangle frames are
-    read within the block only. Their team rows are not written."""
+    """The results of the end stages in block form (``frame_end.end_frame_block``) that stay in
+    the block rows, after ``scatter_block``: the displayed pose (position: the sinks read it;
+    rotation) and the animated pose the sinks show (base_pos_buffer). E.1 writes the next
+    frame's history (disp_pos, old_position, old_rotation) to the team rows itself; the bone
+    pose (E.4) stays in the block (the write-back reads it there); E.2's base_rot_buffer and
+    E.3's triangle frames are read within the block only: their team rows are not written."""
     width = blk.block_width[b]
     base = blk.block_row_base[b]
     lanes = blk.block_lane_base[b]
     count = blk.block_particle_count[b]
-    position, rotation, old_position, old_rotation = (flat(ps.position), flat(ps.rotation),
-                                                      flat(ps.old_position), flat(ps.old_rotation))
-    disp_pos, base_pos_buffer = flat(ps.disp_pos), flat(ps.base_pos_buffer)
-    b_position, b_rotation, b_old_position, b_old_rotation = bs.position, bs.rotation, bs.old_position, bs.old_rotation
-    b_disp_pos, b_base_pos_buffer = bs.disp_pos, bs.base_pos_buffer
+    position, rotation, base_pos_buffer = flat(ps.position), flat(ps.rotation), flat(ps.base_pos_buffer)
+    b_position, b_rotation, b_base_pos_buffer = bs.position, bs.rotation, bs.base_pos_buffer
     starts, lane_team = m.team_particle_start, blk.lane_team
     for p in range(count):
         for i in range(width):
@@ -219,9 +216,6 @@ def scatter_block_end(m, ps, blk, bs, b):
             k = np.uint64(base + p * width + i)
             _copy_out(position, b_position, r, k, 3)
             _copy_out(rotation, b_rotation, r, k, 4)
-            _copy_out(old_position, b_old_position, r, k, 3)
-            _copy_out(old_rotation, b_old_rotation, r, k, 4)
-            _copy_out(disp_pos, b_disp_pos, r, k, 3)
             _copy_out(base_pos_buffer, b_base_pos_buffer, r, k, 3)
 
 
