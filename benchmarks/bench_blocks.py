@@ -26,8 +26,12 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from magica_py.solver.batch_tables import borrow  # noqa: E402
 from magica_py.solver.batched.blocks import describe_blocks, form_blocks  # noqa: E402
-from magica_py.solver.batched.transfer import (  # noqa: E402
-    gather_block_full, load_lanes, scatter_block,
+from magica_py.solver.batched.frame_end import (  # noqa: E402,F401
+    _lane_values, display_block, guards_trip_block, line_rotations_block, transform_data_block,
+    triangle_rotations_block, write_transforms_block, bone_local_pose_block,
+)
+from magica_py.solver.batched.transfer import (  # noqa: E402,F401
+    gather_block_full, load_lanes, scatter_block, scatter_block_end,
 )
 from magica_py.solver.constraints.angle import angle_block  # noqa: E402,F401
 from magica_py.solver.constraints.bending import apply_accumulated_block, bending_block  # noqa: E402,F401
@@ -61,6 +65,16 @@ STAGES = [
     ("motion (D.9)", "motion_block(m, bs, prm, blk, b, 0.95)", 1),
     ("end of step (D.10)", "end_step_block(m, bs, prm, blk, b, DT, 1.0)", 1),
     ("scatter (per frame)", "scatter_block(m, ps, blk, bs, b)", 0),
+    # the end of frame in block form (batched/frame_end), per frame
+    ("end: lane values", "_lane_values(m, ts, tt, blk, bs, b, DT)", 0),
+    ("end: guards", "guards_trip_block(blk, bs, b)", 0),
+    ("end: display (E.1)", "display_block(m, ps, blk, bs, b, DT, True)", 0),
+    ("end: line rot. (E.2)", "line_rotations_block(m, prm, blk, bs, b, True)", 0),
+    ("end: triangle rot. (E.3)", "triangle_rotations_block(m, blk, bs, b)", 0),
+    ("end: transform (E.4)", "transform_data_block(m, blk, bs, b)", 0),
+    ("end: scatter", "scatter_block_end(m, ps, blk, bs, b)", 0),
+    ("end: bone local pose", "bone_local_pose_block(m, blk, bs, b, h.parent, h.world_rotation, h.lossy_scale)", 0),
+    ("end: write-back", "write_transforms_block(m, blk, bs, b, h.local_position, h.local_rotation)", 0),
 ]
 
 

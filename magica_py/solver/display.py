@@ -22,10 +22,29 @@ MAX_DISTANCE_RATIO = 1.3   # MaxDistanceRatioFutuerPrediction
 
 
 @kernel
+def display_fraction(dt, time, old_time, now_update_time):
+    """E.1 frame interpolation: where the frame time lies between the last step's start and end."""
+    interval = (now_update_time + dt) - old_time
+    return (time - old_time) / interval if interval > 0.0 else 0.0
+
+
+@kernel(inline="always")
+def display_extrapolated(old_pos, real_velocity, disp_pos, dt, t):
+    """E.1: the last step extrapolated by its real velocity, lerped from the last display."""
+    return v_lerp(disp_pos, v_add(old_pos, v_scale(real_velocity, dt)), t)
+
+
+@kernel(inline="always")
+def display_clamped(f, root_position, position):
+    """E.1: ``f`` kept within 1.3x the root distance of the animated pose ``position``."""
+    return v_add(root_position, clamp_length(v_sub(f, root_position),
+                                             MAX_DISTANCE_RATIO * v_length(v_sub(root_position, position))))
+
+
+@kernel
 def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, running):
     blend = ts.blend_weight[team]
-    interval = (now_update_time + dt) - old_time
-    t = (time - old_time) / interval if interval > 0.0 else 0.0
+    t = display_fraction(dt, time, old_time, now_update_time)
     time_based = prm.time_based_smoothing[team] != 0
     # quality mode: the state extrapolated by the time since the last step (in [0, dt) with
     # exact timing), a function of time only; E.1's lerp from the last display is a
@@ -49,12 +68,10 @@ def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, runn
             if time_based:
                 f = v_add(row3(old_pos, v), v_scale(row3(real_velocity, v), ahead))
             else:
-                f = v_add(row3(old_pos, v), v_scale(row3(real_velocity, v), dt))
-                f = v_lerp(row3(disp_pos, v), f, t)
+                f = display_extrapolated(row3(old_pos, v), row3(real_velocity, v), row3(disp_pos, v), dt, t)
             r = root_index[p]
             if r >= 0:
-                rp = row3(position, np.uint64(3) * np.uint64(r))
-                f = v_add(rp, clamp_length(v_sub(f, rp), MAX_DISTANCE_RATIO * v_length(v_sub(rp, pos0))))
+                f = display_clamped(f, row3(position, np.uint64(3) * np.uint64(r)), pos0)
             set_row3(disp_pos, v, f)
             set_row3(position, v, v_lerp(pos0, f, blend))
         else:

@@ -26,7 +26,8 @@ from magica_py.solver.batched.frame_begin import (
     SHIFT_RESET, TEAM_ROWS, begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block,
     publish_history_block, skin_block, snap_lane_block,
 )
-from magica_py.solver.batched.transfer import scatter_block
+from magica_py.solver.batched.frame_end import end_frame_block, write_transforms_block
+from magica_py.solver.batched.transfer import scatter_block, scatter_block_end, scatter_block_end_inputs
 from magica_py.runtime.team_time import (
     TeamTimeState, team_time_begin_step, team_time_begin_step_team, team_time_end_frame,
     team_time_frame_update,
@@ -260,6 +261,19 @@ def end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t):
 
 
 @kernel
+def end_frame_lane(m, ps, ts, cs, tt, h, bs, t, lane):
+    """``end_frame_stages_team`` of a lane's team after its block ran the guards and E.1-E.4
+    (``batched/frame_end``, results scattered) and the write-back of its finite lanes
+    (``frame_end.write_transforms_block``): the guard's reset when a bone value is not
+    finite, then A.7."""
+    if bs.lane_transform_ok[lane] == 0:
+        reset_team_to_base(m, ps, ts, t)
+        ts.guard_code[t] = 1
+    end_frame_team(ts, t, tt.running[t])
+    collider_end_frame_team(cs, ts, t, tt.running[t])
+
+
+@kernel
 def _time_frame_update(tt, fi):
     team_time_frame_update(
         tt.active, tt.suspended, tt.update_mode, tt.team_time_scale, tt.time, tt.old_time,
@@ -341,7 +355,7 @@ def simulate_frame_blocks(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
     decide_blocks(m, ts, tt, blk)
     assign_workers(m, ts, tt, blk, 1)
     _worker_steps(m, ps, prm, ts, cs, tt, h, blk, bs, fi, 0)
-    _worker_end(m, ps, prm, ts, cs, tt, h, blk, fi, 0)
+    _worker_end(m, ps, prm, ts, cs, tt, h, blk, bs, fi, 0)
     _frame_close(tt, h, fi)
 
 
@@ -368,7 +382,7 @@ def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
     for w in prange(workers):
         _worker_steps(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w)
     for w in prange(workers):
-        _worker_end(m, ps, prm, ts, cs, tt, h, blk, fi, w)
+        _worker_end(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w)
     _frame_close(tt, h, fi)
 
 
@@ -428,12 +442,21 @@ def _worker_steps(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w):
             continue
         lanes = blk.block_lane_base[b]
         width = blk.block_width[b]
+        # the begin of frame and the gather (disp_pos included: the end stages read it)
         begin_frame_block(m, ps, prm, ts, cs, tt, h, fi, blk, bs, b)
         for step in range(tt.update_count[blk.lane_team[lanes]]):
             for i in range(width):
                 _begin_step_team(tt, fi, step, blk.lane_team[lanes + i])
             run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi)
+        # guards and E.1-E.4 in block form (the write-back waits for the barrier), unless
+        # the block's end of frame takes the per-team path this frame
+        end_in_block = end_frame_block(m, ps, prm, ts, tt, h, blk, bs, b, fi)
+        blk.block_end[b] = 1 if end_in_block else 0
         scatter_block(m, ps, blk, bs, b)
+        if end_in_block:
+            scatter_block_end(m, ps, blk, bs, b)
+        else:
+            scatter_block_end_inputs(m, ps, blk, bs, b)
     for i in range(m.live_teams.shape[0]):
         t = m.live_teams[i]
         if blk.team_worker[t] != w:
@@ -448,14 +471,20 @@ def _worker_steps(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w):
 
 
 @kernel
-def _worker_end(m, ps, prm, ts, cs, tt, h, blk, fi, w):
-    """Thread w's end-of-frame stages (guards, E.1-E.4, A.7) of the teams of its units."""
+def _worker_end(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w):
+    """Thread w's end-of-frame stages (guards, E.1-E.4, A.7) of the teams of its units: for
+    a block whose guards and E.1-E.4 ran in block form, the rest (``end_frame_lane``)."""
     for b in range(blk.block_width.shape[0]):
         if blk.block_worker[b] != w:
             continue
         lanes = blk.block_lane_base[b]
+        if blk.block_end[b] != 0:
+            write_transforms_block(m, blk, bs, b, h.local_position, h.local_rotation)
         for i in range(blk.block_width[b]):
-            end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, blk.lane_team[lanes + i])
+            if blk.block_end[b] != 0:
+                end_frame_lane(m, ps, ts, cs, tt, h, bs, blk.lane_team[lanes + i], lanes + i)
+            else:
+                end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, blk.lane_team[lanes + i])
     for i in range(m.live_teams.shape[0]):
         t = m.live_teams[i]
         if blk.team_worker[t] == w and ts.active[t] != 0:

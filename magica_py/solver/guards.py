@@ -10,7 +10,7 @@ import numpy as np
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, store3, store4
 from magica_py.solver.center import snap_particles_to_base_pose
-from magica_py.kernels.rows import flat
+from magica_py.kernels.rows import flat, row3
 
 GUARD_OK = 0
 GUARD_NON_FINITE = 1
@@ -19,26 +19,47 @@ GUARD_SPEED_LIMIT = 100.0   # m/s (scaled by the team scale ratio): far above an
 
 
 @kernel
+def speed_limit_sq(scale_ratio):
+    """Squared speed bound (m/s)^2 of a team with scale ratio ``scale_ratio``."""
+    return (GUARD_SPEED_LIMIT * max(scale_ratio, 1e-6)) ** 2
+
+
+@kernel(inline="always")
+def particle_verdict(old_pos, real_velocity, velocity, disp_pos, limit_sq):
+    """(non-finite, too fast) of one particle after the steps (branch-free: the per-team and
+    the lane loops vectorise)."""
+    finite = True
+    s = 0.0
+    for c in range(3):
+        v = real_velocity[c]
+        finite = finite & math.isfinite(old_pos[c]) & math.isfinite(v) & math.isfinite(velocity[c]) \
+            & math.isfinite(disp_pos[c])
+        s += v * v
+    return (not finite), s > limit_sq
+
+
+@kernel
 def check_team(m, ps, ts, team):
     """Return the guard code of one team after its steps (0 when healthy).
 
     One read-only pass with the verdicts OR-ed (no early exit: the loop vectorises); any
     non-finite value wins over a speed excess, as with the early return it replaces."""
-    limit_sq = (GUARD_SPEED_LIMIT * max(ts.scale_ratio[team], 1e-6)) ** 2
+    limit_sq = speed_limit_sq(ts.scale_ratio[team])
     old_pos, real_velocity, velocity, disp_pos = flat(ps.old_pos), flat(ps.real_velocity), flat(ps.velocity), flat(ps.disp_pos)
     first = np.uint64(3) * np.uint64(m.team_particle_start[team])
     non_finite = False
     too_fast = False
     for j in range(m.team_particle_count[team]):
         i = first + np.uint64(3) * np.uint64(j)
-        s = 0.0
-        for c in range(3):
-            k = i + np.uint64(c)
-            v = real_velocity[k]
-            finite = math.isfinite(old_pos[k]) & math.isfinite(v) & math.isfinite(velocity[k]) & math.isfinite(disp_pos[k])
-            non_finite = non_finite | (not finite)
-            s += v * v
-        too_fast = too_fast | (s > limit_sq)
+        bad, fast = particle_verdict(row3(old_pos, i), row3(real_velocity, i), row3(velocity, i),
+                                     row3(disp_pos, i), limit_sq)
+        non_finite = non_finite | bad
+        too_fast = too_fast | fast
+    return guard_code(non_finite, too_fast)
+
+
+@kernel
+def guard_code(non_finite, too_fast):
     if non_finite:
         return GUARD_NON_FINITE
     return GUARD_SPEED if too_fast else GUARD_OK

@@ -21,6 +21,7 @@ from magica_py.kernels.math3d import (
     q_rotate, q_slerp, store3, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp,
     v_normalize, v_scale, v_sub,
 )
+from magica_py.solver.constraints.angle import from_to_rotation_fraction, swing_rotation
 
 FIXED = 0x01
 MOVE = 0x02
@@ -98,6 +99,58 @@ def full_swing(a, b):
     return (x[0] * inv, x[1] * inv, x[2] * inv, w * inv)
 
 
+@kernel(inline="always")
+def line_child_pose(ibq, bp, rest_position, rest_rotation, base_pos_c, base_rot_c, a, a_zero):
+    """E.2: the rest pose (position, rotation) of child c relative to its parent x, moved
+    towards the animated one by ``animation_pose_ratio`` a (``a_zero``: a == 0, where the slerp
+    is its first argument). ``ibq``: inverse animated rotation of x; ``bp``: animated position of x."""
+    lp = v_lerp(rest_position, q_rotate(ibq, v_sub(base_pos_c, bp)), a)
+    if a_zero:
+        lq = rest_rotation
+    else:
+        lq = q_slerp(rest_rotation, q_mul(ibq, base_rot_c), a)
+    return lp, lq
+
+
+@kernel(inline="always")
+def line_child_rotation(q, lq, tv, cur, zero, vector):
+    """E.2: rotation of a moving child: its rest rotation carried by x's rotation q, swung so
+    the rest edge ``tv`` matches the simulated edge ``cur`` (not for a zero-distance child).
+
+    Returns (rotation, rare). ``vector`` (a literal) True: branch-free (``angle.swing_rotation``
+    without its opposite case), ``rare`` True where that case was left out; False: ``full_swing``
+    (the same bits on every path, rare always False)."""
+    qc = q_mul(q, lq)
+    if vector:
+        swing, opposite = swing_rotation(v_normalize(tv), v_normalize(cur), False)
+        return (qc if zero else q_mul(swing, qc)), opposite & (not zero)
+    if not zero:
+        qc = q_mul(full_swing(v_normalize(tv), v_normalize(cur)), qc)
+    return qc, False
+
+
+@kernel(inline="always")
+def line_turn(q, ctv, cv, t, vector):
+    """E.2: x's rotation q turned by fraction t from its children's rest directions ``ctv``
+    towards their simulated ones ``cv`` (left as is when either sum is (near) zero).
+
+    Returns (rotation, rare); ``vector`` as in ``line_child_rotation`` (``from_to_rotation``
+    with its opposite case left out; rare where it was needed)."""
+    turn = (v_length(ctv) >= 1e-8) & (v_length(cv) >= 1e-8)
+    if vector:
+        r, opposite = from_to_rotation_fraction(v_normalize(ctv), v_normalize(cv), t, False)
+        return (q_mul(r, q) if turn else q), turn & opposite
+    if turn:
+        q = q_mul(from_to_rotation(ctv, cv, t), q)
+    return q, False
+
+
+@kernel(inline="always")
+def line_blend(bq, q, bw):
+    """E.2: the bone rotation blended from the animated one by ``blend_weight`` bw."""
+    return q if bw == 1.0 else q_slerp(bq, q, bw)
+
+
 @kernel
 def line_rotations_team(m, ps, prm, ts, team):
     """E.2 over the IncludeLine baselines of one team."""
@@ -106,6 +159,7 @@ def line_rotations_team(m, ps, prm, ts, team):
     ri = prm.rotational_interpolation[team]
     rr = prm.root_rotation[team]
     a = prm.animation_pose_ratio[team]
+    a_zero = a == 0.0
     bw = ts.blend_weight[team]
     # arrays as locals, flat rows, unsigned indices (through the tables the array pointers
     # are reloaded after every store); the walk and the maths are unchanged
@@ -135,27 +189,25 @@ def line_rotations_team(m, ps, prm, ts, team):
                     c = np.uint64(child_data[k])
                     c3 = np.uint64(3) * c
                     c4 = np.uint64(4) * c
-                    lp = v_lerp(row3(rest_position, c3), q_rotate(ibq, v_sub(row3(base_pos_buffer, c3), bp)), a)
-                    if a == 0.0:  # slerp at 0 is its first argument
-                        lq = row4(rest_rotation, c4)
+                    if a_zero:
+                        lp, lq = line_child_pose(ibq, bp, row3(rest_position, c3), row4(rest_rotation, c4),
+                                                 row3(base_pos_buffer, c3), row4(base_rot_buffer, c4), a, True)
                     else:
-                        lq = q_slerp(row4(rest_rotation, c4), q_mul(ibq, row4(base_rot_buffer, c4)), a)
+                        lp, lq = line_child_pose(ibq, bp, row3(rest_position, c3), row4(rest_rotation, c4),
+                                                 row3(base_pos_buffer, c3), row4(base_rot_buffer, c4), a, False)
                     zero = (attribute[c] & ZERO_DISTANCE) != 0
                     tv = (0.0, 0.0, 0.0) if zero else q_rotate(q, lp)
                     ctv = v_add(ctv, tv)
                     if (attribute[c] & MOVE) != 0:
                         cur = v_sub(row3(position, c3), pos)
                         cv = v_add(cv, cur)
-                        qc = q_mul(q, lq)
-                        if not zero:
-                            qc = q_mul(full_swing(v_normalize(tv), v_normalize(cur)), qc)
+                        qc, _rare = line_child_rotation(q, lq, tv, cur, zero, False)
                         set_row4(rotation, c4, qc)
                     else:
                         cv = v_add(cv, tv)
                 t = ri if (attr & MOVE) != 0 else rr
-                if v_length(ctv) >= 1e-8 and v_length(cv) >= 1e-8:
-                    q = q_mul(from_to_rotation(ctv, cv, t), q)
-            set_row4(rotation, np.uint64(4) * x, q if bw == 1.0 else q_slerp(bq, q, bw))
+                q, _rare = line_turn(q, ctv, cv, t, False)
+            set_row4(rotation, np.uint64(4) * x, line_blend(bq, q, bw))
 
 
 TRIANGLES_PER_VERTEX = 6   # E.3's vectorised pass sums up to this many triangles per vertex
@@ -181,6 +233,13 @@ def triangle_frame_from(p0, p1, p2, uv0, uv1, uv2):
     # standard uv tangent, negated for Unity's left-handed convention (B.4)
     tangent = v_scale(v_sub(v_scale(e1, dv2), v_scale(e2, dv1)), -r)
     return normal, normalize_or_zero(tangent)
+
+
+@kernel(inline="always")
+def add_flipped(acc, v, flip):
+    """E.3 sum of a vertex's triangle normals (tangents): ``acc + v``, v negated where the
+    triangle's winding is flipped for this vertex."""
+    return v_add(acc, v_scale(v, -1.0 if flip else 1.0))
 
 
 @kernel
@@ -249,10 +308,8 @@ def triangle_rotations_team(m, ps, team):
             e = np.uint64(k0 + k) if used else np.uint64(0)
             tri = np.uint64(3) * np.uint64(load_input(vt_data, e, "triangle_rotation"))
             flip = load_input(vt_flip, e, "triangle_rotation")
-            ns_k = v_add(ns, v_scale(load_input3(triangle_normal, tri, "triangle_rotation"),
-                                     -1.0 if (flip & 1) != 0 else 1.0))
-            ts_k = v_add(ts_, v_scale(load_input3(triangle_tangent, tri, "triangle_rotation"),
-                                      -1.0 if (flip & 2) != 0 else 1.0))
+            ns_k = add_flipped(ns, load_input3(triangle_normal, tri, "triangle_rotation"), (flip & 1) != 0)
+            ts_k = add_flipped(ts_, load_input3(triangle_tangent, tri, "triangle_rotation"), (flip & 2) != 0)
             ns = (ns_k[0] if used else ns[0], ns_k[1] if used else ns[1], ns_k[2] if used else ns[2])
             ts_ = (ts_k[0] if used else ts_[0], ts_k[1] if used else ts_[1], ts_k[2] if used else ts_[2])
         valid, q = vertex_frame_rotation(ns, ts_)
@@ -275,8 +332,8 @@ def crowded_vertex_rotation(m, ps, p):
     for k in range(k0, k0 + m.vertex_triangle_count[p]):
         tri = m.vertex_triangle_data[k]
         flip = m.vertex_triangle_flip[k]
-        ns = v_add(ns, v_scale(load3(ps.triangle_normal, tri), -1.0 if (flip & 1) != 0 else 1.0))
-        ts_ = v_add(ts_, v_scale(load3(ps.triangle_tangent, tri), -1.0 if (flip & 2) != 0 else 1.0))
+        ns = add_flipped(ns, load3(ps.triangle_normal, tri), (flip & 1) != 0)
+        ts_ = add_flipped(ts_, load3(ps.triangle_tangent, tri), (flip & 2) != 0)
     valid, q = vertex_frame_rotation(ns, ts_)
     if valid:
         store4(ps.rotation, p, q)

@@ -31,6 +31,12 @@ def finite4(q):
     return math.isfinite(q[0]) & math.isfinite(q[1]) & math.isfinite(q[2]) & math.isfinite(q[3])
 
 
+@kernel(inline="always")
+def bone_rotation(rotation, v2t):
+    """E.4: the bone's world rotation from the particle's rotation and its v2t."""
+    return q_normalize_or_identity(q_mul(rotation, v2t))
+
+
 @kernel
 def transform_data_team(m, ps, team):
     """World transform data of every bone of one team; returns False if any value is non-finite.
@@ -45,11 +51,30 @@ def transform_data_team(m, ps, team):
         v = np.uint64(3) * p
         q = np.uint64(4) * p
         pos = row3(position, v)
-        rot = q_normalize_or_identity(q_mul(row4(rotation, q), row4(v2t, q)))
+        rot = bone_rotation(row4(rotation, q), row4(v2t, q))
         set_row3(transform_position, v, pos)
         set_row4(transform_rotation, q, rot)
         ok = ok & finite3(pos) & finite4(rot)
     return ok
+
+
+@kernel(inline="always")
+def moving_bone_local(parent_rotation, parent_position, rotation, position, parent_scale):
+    """E.4: local (position, rotation) of a moving bone under its parent particle's bone pose,
+    the position divided by the parent's lossy scale (0 where a scale component is 0)."""
+    iq = q_inverse(parent_rotation)
+    lp = q_rotate(iq, v_sub(position, parent_position))
+    s0, s1, s2 = parent_scale
+    local = (lp[0] / s0 if s0 != 0.0 else 0.0, lp[1] / s1 if s1 != 0.0 else 0.0, lp[2] / s2 if s2 != 0.0 else 0.0)
+    return local, q_normalize(q_mul(iq, rotation))
+
+
+@kernel(inline="always")
+def fixed_bone_local(rotation, parent_world_rotation, has_parent):
+    """E.4: local rotation of a fixed bone under its parent node's current world rotation."""
+    if has_parent:
+        rotation = q_mul(q_inverse(parent_world_rotation), rotation)
+    return q_normalize(rotation)
 
 
 @kernel
@@ -76,18 +101,18 @@ def write_transforms_team(m, ps, team, parent_node, world_rotation, lossy_scale,
             if pp < 0:
                 continue
             ppu = np.uint64(pp)
-            iq = q_inverse(row4(transform_rotation, np.uint64(4) * ppu))
-            lp = q_rotate(iq, v_sub(row3(transform_position, np.uint64(3) * p),
-                                    row3(transform_position, np.uint64(3) * ppu)))
             pnode = np.uint64(3) * np.uint64(node_of[ppu])
-            for c in range(3):
-                s = scale[pnode + np.uint64(c)]
-                out_position[np.uint64(3) * node + np.uint64(c)] = lp[c] / s if s != 0.0 else 0.0
-            set_row4(out_rotation, np.uint64(4) * node,
-                     q_normalize(q_mul(iq, row4(transform_rotation, np.uint64(4) * p))))
+            lp, lq = moving_bone_local(row4(transform_rotation, np.uint64(4) * ppu),
+                                       row3(transform_position, np.uint64(3) * ppu),
+                                       row4(transform_rotation, np.uint64(4) * p),
+                                       row3(transform_position, np.uint64(3) * p), row3(scale, pnode))
+            set_row3(out_position, np.uint64(3) * node, lp)
+            set_row4(out_rotation, np.uint64(4) * node, lq)
         elif (attr & FIXED) != 0:
             parent = parent_node[node]
             rot = row4(transform_rotation, np.uint64(4) * p)
             if parent >= 0:
-                rot = q_mul(q_inverse(row4(world_rot, np.uint64(4) * np.uint64(parent))), rot)
-            set_row4(out_rotation, np.uint64(4) * node, q_normalize(rot))
+                set_row4(out_rotation, np.uint64(4) * node,
+                         fixed_bone_local(rot, row4(world_rot, np.uint64(4) * np.uint64(parent)), True))
+            else:
+                set_row4(out_rotation, np.uint64(4) * node, fixed_bone_local(rot, rot, False))

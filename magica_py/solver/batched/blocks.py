@@ -29,6 +29,8 @@ from magica_py.solver.fields import I32, U8
 # model fields (per particle and link pools) the step stages read, compared bit for bit
 STEP_MODEL_FIELDS = ("depth", "baseline_local_position", "baseline_local_rotation", "distance_rest",
                      "bend_rest_angle", "bend_sign", "volume_rest", "root_length")
+# model fields the end-of-frame stages in block form read from the exemplar (E.3, E.4)
+END_MODEL_FIELDS = ("triangle_uv", "vertex_to_transform_rotation")
 # parameters that name hierarchy nodes (per instance; read by the per-team frame stages only)
 PER_TEAM_PARAMETERS = ("anchor_transform", "culling_reference")
 MIN_LANES = 2
@@ -55,7 +57,7 @@ def _team_signature(system, t: int) -> str | None:
         return None
     h = hashlib.blake2b(digest_size=16)
     h.update(model.topology_key.encode())
-    for name in STEP_MODEL_FIELDS:
+    for name in STEP_MODEL_FIELDS + END_MODEL_FIELDS:
         a = getattr(model, name, None)
         if a is not None:
             h.update(name.encode())
@@ -116,15 +118,18 @@ def form_blocks(system, enabled: bool = True):
     exemplar = np.array([b[0] for b in blocks], dtype=I32)
     pcount = np.array([int(m.team_particle_count[b[0]]) for b in blocks], dtype=I32)
     ccount = np.array([int(system.teams.collider_count[b[0]]) for b in blocks], dtype=I32)
+    tcount = np.array([int(m.team_triangle_count[b[0]]) for b in blocks], dtype=I32)
     row_base = np.zeros(nb, dtype=I32)
     lane_base = np.zeros(nb, dtype=I32)
     shared_base = np.zeros(nb, dtype=I32)
     collider_base = np.zeros(nb, dtype=I32)
+    triangle_base = np.zeros(nb, dtype=I32)
     if nb:
         row_base[1:] = np.cumsum(pcount * width)[:-1]
         lane_base[1:] = np.cumsum(width)[:-1]
         shared_base[1:] = np.cumsum(pcount)[:-1]
         collider_base[1:] = np.cumsum(ccount * width)[:-1]
+        triangle_base[1:] = np.cumsum(tcount * width)[:-1]
     lane_team = np.array([t for b in blocks for t in b], dtype=I32)
     team_block = np.full(max(team_total, 1), -1, dtype=I32)
     for k, b in enumerate(blocks):
@@ -133,9 +138,10 @@ def form_blocks(system, enabled: bool = True):
     order = np.argsort(-(pcount.astype(np.int64) * width), kind="stable").astype(I32)
     table = BlockTable(width, exemplar, pcount, row_base, lane_base, shared_base, ccount, collider_base,
                        np.zeros(nb, dtype=U8), lane_team, team_block, order, np.full(nb, -1, dtype=I32),
-                       np.zeros(max(team_total, 1), dtype=I32), np.zeros(worker_capacity(), dtype=I64))
+                       np.zeros(max(team_total, 1), dtype=I32), np.zeros(worker_capacity(), dtype=I64),
+                       triangle_base, np.zeros(nb, dtype=U8))
     state = allocate_block_state(int((pcount * width).sum()), int(pcount.sum()), int(width.sum()),
-                                 int((ccount * width).sum()))
+                                 int((ccount * width).sum()), int((tcount * width).sum()))
     if nb:
         from magica_py.solver.batched.frame_begin import bind_rows_block
         bind_rows_block(m, table, state)   # the constant half of C.1, lane-innermost

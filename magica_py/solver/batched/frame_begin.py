@@ -53,7 +53,7 @@ from magica_py.solver.colliders import collider_frame_team
 # end-of-frame stages read them from the block rows (block form of E.1-E.4), set False: the
 # skinning then stores the block rows only and the history is not published (hot loop, crowd:
 # ~75 us per frame less). A compile-time constant (numba freezes module globals).
-TEAM_ROWS = True
+TEAM_ROWS = False
 
 SHIFT_KEEP = 0    # C.5: the history stays as it is
 SHIFT_MOVE = 1    # C.5: inertia shift of the history

@@ -50,6 +50,9 @@ BLOCK_FIELDS = [
     ("block_worker", "block", (), I32, "thread running the block's frame, -1: the block does not run"),
     ("team_worker", "team", (), I32, "thread running the team's frame, -1: its running block does"),
     ("worker_load", "worker", (), I64, "particle-steps assigned to each thread this frame"),
+    # end of frame in block form (``batched/frame_end``)
+    ("block_triangle_base", "block", (), I32, "first block triangle row; row = base + tri * width + lane"),
+    ("block_end", "block", (), U8, "1: this frame's guards and E.1-E.4 ran in block form (frame kernel)"),
 ]
 BlockTable = make_soa("BlockTable", BLOCK_FIELDS)
 
@@ -99,6 +102,22 @@ PARTICLE_BLOCK_FIELDS = [
     ("distance_inverse_mass", 0, F64, False, False),
     ("accum_friction", 0, F64, False, False),
     ("accum_normal", 3, F64, False, False),
+    # end of frame (``batched/frame_end``): E.1 reads and writes disp_pos (gathered above, with
+    # the C.5 shift); base_pos/rot_buffer: this frame's animated pose kept by
+    # E.1 for E.2 (base_rot_buffer is E.2's only: not scattered); transform_rotation: E.4's
+    # bone rotation (transform_position is position, scattered from it)
+    ("base_pos_buffer", 3, F64, False, True),
+    ("base_rot_buffer", 4, F64, False, False),
+    ("transform_rotation", 4, F64, False, False),
+    # E.4's local pose of each bone under its parent (the write-back copies it through the
+    # transform indices after the barrier): m for the position, xyzw
+    ("bone_local_position", 3, F64, False, False),
+    ("bone_local_rotation", 4, F64, False, False),
+]
+# E.3 scratch per triangle of each lane (row = block_triangle_base + tri * width + lane)
+TRIANGLE_BLOCK_FIELDS = [
+    ("triangle_normal", 3, F64, "unit or 0; display normal of the triangle (E.3, per frame)"),
+    ("triangle_tangent", 3, F64, "unit or 0; display uv tangent of the triangle (E.3, per frame)"),
 ]
 # per-particle values that are the same in every lane (parameters x depth): one row per particle
 SHARED_PARTICLE_FIELDS = [
@@ -120,7 +139,8 @@ LANE_FIELDS = [
     ("frame_world_scale", 3, F64), ("distance_weight", 0, F64), ("step_move_inertia_ratio", 0, F64),
     ("step_rotation_inertia_ratio", 0, F64), ("blend_weight", 0, F64),
     # begin of frame in block form (``batched/frame_begin``), written once per frame:
-    # first model row of the lane's team (team_particle_start), by ``lane_starts_block``
+    # first model row of the lane's team (team_particle_start), by ``lane_starts_block`` (and
+    # the end's lane prelude: the write-back's transform indices)
     ("particle_start", 0, I64),
     # s; team time from the last step to the frame's start (``frame.begin_frame_prelude_team``)
     ("since_last_step", 0, F64),
@@ -129,6 +149,17 @@ LANE_FIELDS = [
     # C.5 of the lane (``begin_lane_team``): SHIFT_KEEP / SHIFT_MOVE / SHIFT_RESET, and the
     # shift's pivot (m, the previous component position), vector (m) and rotation
     ("shift_mode", 0, I32), ("shift_pivot", 3, F64), ("shift_vector", 3, F64), ("shift_rotation", 4, F64),
+    # end of frame in block form (``batched/frame_end``), written by its lane prelude from the
+    # team rows (blend_weight above is the last step's; a frame may have no step of its own)
+    ("guard_limit_sq", 0, F64),     # (m/s)^2; guards' speed bound
+    ("display_t", 0, F64),          # E.1 frame interpolation fraction
+    ("end_blend_weight", 0, F64),   # TeamState.blend_weight at the end of the frame
+    ("end_running", 0, U8),         # 1: the team ran this frame (E.1 keeps the old pose)
+    ("transform_ok", 0, U8),        # E.4: 1 when every bone value of the lane is finite
+    ("line_ctv", 3, F64),           # E.2 sum of the children's rest vectors of the current entry (m)
+    ("line_cv", 3, F64),            # E.2 sum of the children's simulated vectors (m)
+    ("vertex_ns", 3, F64),          # E.3 sum of the current vertex's triangle normals
+    ("vertex_ts", 3, F64),          # E.3 sum of its triangle tangents
 ]
 # ColliderState values of each lane's collider slots at the current step
 COLLIDER_FIELDS = [
@@ -144,7 +175,8 @@ COLLIDER_FIELDS = [
 
 BlockState = namedtuple("BlockState",
                         [f[0] for f in PARTICLE_BLOCK_FIELDS] + [f[0] for f in SHARED_PARTICLE_FIELDS]
-                        + ["lane_" + f[0] for f in LANE_FIELDS] + ["col_" + f[0] for f in COLLIDER_FIELDS],
+                        + ["lane_" + f[0] for f in LANE_FIELDS] + ["col_" + f[0] for f in COLLIDER_FIELDS]
+                        + [f[0] for f in TRIANGLE_BLOCK_FIELDS],
                         module=__name__)
 
 
@@ -155,13 +187,16 @@ def _array(components: int, n: int, dtype, name: str) -> np.ndarray:
     return a
 
 
-def allocate_block_state(rows: int, shared_rows: int, lanes: int, collider_rows: int) -> BlockState:
+def allocate_block_state(rows: int, shared_rows: int, lanes: int, collider_rows: int,
+                         triangle_rows: int = 0) -> BlockState:
     """Zeroed block arrays (identity quaternions); at least one row each so that types are stable."""
-    rows, shared_rows, lanes, collider_rows = (max(1, x) for x in (rows, shared_rows, lanes, collider_rows))
+    rows, shared_rows, lanes, collider_rows, triangle_rows = (
+        max(1, x) for x in (rows, shared_rows, lanes, collider_rows, triangle_rows))
     arrays = [_array(c, rows, dt, n) for n, c, dt, _g, _s in PARTICLE_BLOCK_FIELDS]
     arrays += [_array(c, shared_rows, dt, n) for n, c, dt, _doc in SHARED_PARTICLE_FIELDS]
     arrays += [_array(c, lanes, dt, n) for n, c, dt in LANE_FIELDS]
     arrays += [_array(c, collider_rows, dt, n) for n, c, dt in COLLIDER_FIELDS]
+    arrays += [_array(c, triangle_rows, dt, n) for n, c, dt, _doc in TRIANGLE_BLOCK_FIELDS]
     return BlockState(*arrays)
 
 
@@ -170,7 +205,8 @@ def empty_block_table(team_count: int) -> BlockTable:
     z = np.zeros(0, dtype=I32)
     return BlockTable(z, z, z, z, z, z, z, z, np.zeros(0, dtype=U8), z,
                       np.full(max(team_count, 1), -1, dtype=I32), z, z.copy(),
-                      np.zeros(max(team_count, 1), dtype=I32), np.zeros(worker_capacity(), dtype=I64))
+                      np.zeros(max(team_count, 1), dtype=I32), np.zeros(worker_capacity(), dtype=I64),
+                      z.copy(), np.zeros(0, dtype=U8))
 
 
 def worker_capacity() -> int:

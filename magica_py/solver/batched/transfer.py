@@ -6,6 +6,9 @@ and a block's lane-innermost arrays (``BlockState``).
   skinned pose and gathers the history through the C.5 shift);
 * ``scatter_block``: after the steps, the state the rest of the frame reads back (the
   step-internal fields stay in the block; ``scatter_block_full`` copies those too, for tests);
+* ``gather_block_end`` / ``scatter_block_end``: what the end stages in block form
+  (``frame_end``) read besides the gathered state, and their results
+  (``scatter_block_end_inputs``: their inputs, when the block's end of frame runs per team);
 * ``load_lanes``: a step's team and collider values (after the per-team C.3 / G.3) from the
   team rows into the ``lane_*`` / ``col_*`` arrays, for the stage tests and ``bench_blocks``
   (the block step's lane-form C.3 / G.3 fill them as they compute them);
@@ -176,6 +179,67 @@ def scatter_block(m, ps, blk, bs, b):
             _copy_out(normal, b_normal, r, k, 3)
             friction[r] = b_friction[k]
             static_friction[r] = b_static_friction[k]
+
+
+@kernel
+def gather_block_end(m, ps, blk, bs, b):
+    """What the end stages in block form (``batched/frame_end``) read that ``gather_block``
+    does not copy: the display position (E.1; C.5 shifts it at the begin of the frame)."""
+    width = blk.block_width[b]
+    base = blk.block_row_base[b]
+    lanes = blk.block_lane_base[b]
+    disp_pos, b_disp_pos = flat(ps.disp_pos), bs.disp_pos
+    starts, lane_team = m.team_particle_start, blk.lane_team
+    for p in range(blk.block_particle_count[b]):
+        for i in range(width):
+            r = np.uint64(starts[lane_team[lanes + i]] + p)
+            k = np.uint64(base + p * width + i)
+            _copy_in(b_disp_pos, disp_pos, k, r, 3)
+
+
+@kernel
+def scatter_block_end(m, ps, blk, bs, b):
+    """The results of the end stages in block form (``frame_end.end_frame_block``) that stay in
+    the block rows, after ``scatter_block``: the displayed pose (position: the sinks read it;
+    rotation) and the animated pose the sinks show (base_pos_buffer). E.1 writes the next
+    frame's history (disp_pos, old_position, old_rotation) to the team rows itself; the bone
+    pose (E.4) stays in the block (the write-back reads it there); E.2's base_rot_buffer and
+    E.3's triangle frames are read within the block only: their team rows are not written."""
+    width = blk.block_width[b]
+    base = blk.block_row_base[b]
+    lanes = blk.block_lane_base[b]
+    count = blk.block_particle_count[b]
+    position, rotation, base_pos_buffer = flat(ps.position), flat(ps.rotation), flat(ps.base_pos_buffer)
+    b_position, b_rotation, b_base_pos_buffer = bs.position, bs.rotation, bs.base_pos_buffer
+    starts, lane_team = m.team_particle_start, blk.lane_team
+    for p in range(count):
+        for i in range(width):
+            r = np.uint64(starts[lane_team[lanes + i]] + p)
+            k = np.uint64(base + p * width + i)
+            _copy_out(position, b_position, r, k, 3)
+            _copy_out(rotation, b_rotation, r, k, 4)
+            _copy_out(base_pos_buffer, b_base_pos_buffer, r, k, 3)
+
+
+@kernel
+def scatter_block_end_inputs(m, ps, blk, bs, b):
+    """A block whose end of frame takes the per-team path (``frame_end.end_frame_block``
+    False): the block rows the per-team end stages read (position, rotation, old_position,
+    old_rotation, disp_pos) to the team rows. Today these rows equal the team rows already
+    (only the end stages write them); copied so that a begin of frame in block form can
+    keep them in the block."""
+    width = blk.block_width[b]
+    base = blk.block_row_base[b]
+    lanes = blk.block_lane_base[b]
+    for p in range(blk.block_particle_count[b]):
+        for i in range(width):
+            r = m.team_particle_start[blk.lane_team[lanes + i]] + p
+            k = base + p * width + i
+            _out(ps.position, bs.position, r, k, 3)
+            _out(ps.rotation, bs.rotation, r, k, 4)
+            _out(ps.old_position, bs.old_position, r, k, 3)
+            _out(ps.old_rotation, bs.old_rotation, r, k, 4)
+            _out(ps.disp_pos, bs.disp_pos, r, k, 3)
 
 
 @kernel
