@@ -17,16 +17,43 @@ from magica_py.kernels.rows import (
     flat, load_input, load_input3, row3, row4, set_row4, store_output3, store_output4,
 )
 from magica_py.kernels.math3d import (
-    from_to_rotation, from_to_rotation_unit, load3, load4, q_inverse, q_look_rotation, q_mul,
+    from_to_rotation, from_to_rotation_unit, load3, load4, orthogonal_axis, q_axis_angle, q_inverse,
+    q_look_rotation, q_mul,
     q_rotate, q_slerp, store3, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp,
     v_normalize, v_scale, v_sub,
 )
-from magica_py.solver.constraints.angle import from_to_rotation_fraction, swing_rotation
+from magica_py.kernels import trig
+from magica_py.solver.constraints.angle import swing_rotation
 
 FIXED = 0x01
 MOVE = 0x02
 ZERO_DISTANCE = 0x20
 INCLUDE_LINE = 0x01
+IDENTITY = (0.0, 0.0, 0.0, 1.0)
+
+
+@kernel(inline="always")
+def from_to_rotation_fraction(a, b, t, full):
+    """``from_to_rotation_unit(a, b, t)`` (unit a, b), the same bits on every path, with one
+    sincos for both the opposite and the general case (the axis and angle are selected
+    first): a lane loop computes every branch, so two q_axis_angle would cost two sincos.
+    (E.2's turn towards the children; it was the angle restoration's until that stage
+    stopped building a quaternion, docs/angle_maths.md.)
+
+    Returns (rotation, opposite); ``full`` False (a literal) leaves the opposite case out."""
+    c = v_dot(a, b)
+    c = 1.0 if c > 1.0 else c
+    c = -1.0 if c < -1.0 else c
+    opposite = abs(1.0 + c) < 1e-6
+    parallel = abs(1.0 - c) < 1e-6
+    axis = v_normalize(v_cross(a, b))
+    angle = trig.acos(c) * t
+    if full:
+        fallback_axis = orthogonal_axis(a)
+        axis = fallback_axis if opposite else axis
+        angle = math.pi * t if opposite else angle
+    q = q_axis_angle(axis, angle)
+    return (IDENTITY if (not opposite) & parallel else q), opposite
 
 
 @kernel
