@@ -13,7 +13,10 @@ import pytest
 
 from batched_harness import block_tables, crowd_system, restore, snapshot
 from magica_py.solver.batch_tables import borrow
-from magica_py.solver.batched.frame_end import end_frame_block, write_transforms_block
+from magica_py.solver.batched.frame_end import (
+    _lane_values, bone_local_pose_block, display_block, end_frame_block, guards_trip_block, line_rotations_block,
+    transform_data_block, triangle_rotations_block, write_transforms_block,
+)
 from magica_py.solver.batched.transfer import (
     gather_block_end, gather_block_full, scatter_block, scatter_block_end,
 )
@@ -33,7 +36,24 @@ def _team_end(m, ps, prm, ts, cs, tt, h, fi, teams):
 
 
 @numba.njit
-def _block_end(m, ps, prm, ts, cs, tt, h, blk, bs, fi, verdicts):
+def _end_frame_block_general(m, ps, prm, ts, tt, h, blk, bs, b, fi):
+    """``end_frame_block`` with E.2's chain entries through the general child / turn loops."""
+    all_running, all_blend_one = _lane_values(m, ts, tt, blk, bs, b, fi.dt)
+    if guards_trip_block(blk, bs, b):
+        return False
+    display_block(m, ps, blk, bs, b, fi.dt, all_running)
+    ex = blk.block_exemplar[b]
+    if m.team_has_lines[ex] != 0:
+        line_rotations_block(m, prm, blk, bs, b, all_blend_one, False)
+    if m.team_triangle_count[ex] > 0:
+        triangle_rotations_block(m, blk, bs, b)
+    transform_data_block(m, blk, bs, b)
+    bone_local_pose_block(m, blk, bs, b, h.parent, h.world_rotation, h.lossy_scale)
+    return True
+
+
+@numba.njit
+def _block_end(m, ps, prm, ts, cs, tt, h, blk, bs, fi, verdicts, general=False):
     """The frame kernel's end of frame for every block (``_worker_steps`` after the steps,
     ``_worker_end``), the verdict of ``end_frame_block`` of each block into ``verdicts``."""
     m, ps, prm, ts, cs, tt, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(tt), borrow(h)
@@ -41,7 +61,10 @@ def _block_end(m, ps, prm, ts, cs, tt, h, blk, bs, fi, verdicts):
     for b in range(blk.block_width.shape[0]):
         gather_block_full(m, ps, blk, bs, b)
         gather_block_end(m, ps, blk, bs, b)
-        ok = end_frame_block(m, ps, prm, ts, tt, h, blk, bs, b, fi)
+        if general:
+            ok = _end_frame_block_general(m, ps, prm, ts, tt, h, blk, bs, b, fi)
+        else:
+            ok = end_frame_block(m, ps, prm, ts, tt, h, blk, bs, b, fi)
         verdicts[b] = 1 if ok else 0
         scatter_block(m, ps, blk, bs, b)
         lanes = blk.block_lane_base[b]
@@ -68,7 +91,7 @@ def _hierarchy_pose(system):
     return h.local_position.copy(), h.local_rotation.copy()
 
 
-def _compare_end(system, prepare=None):
+def _compare_end(system, prepare=None, general=False):
     """Per-team and block end of frame from the same state: particle rows of every block
     team, team rows and the written local poses equal bit for bit. Returns the block verdicts."""
     blk, bs = block_tables(system)
@@ -78,6 +101,8 @@ def _compare_end(system, prepare=None):
     fi = _frame_inputs(system)
     h = system.hierarchy
     before = snapshot(system)
+    h.local_position[...] = 0.0    # what the end of frame writes, on a pose it cannot leave as is
+    h.local_rotation[...] = 0.0
     pose_before = _hierarchy_pose(system)
     _team_end(*tables, fi, blk.lane_team.copy())
     expected = snapshot(system)
@@ -85,7 +110,7 @@ def _compare_end(system, prepare=None):
     restore(system, before)
     h.local_position[...], h.local_rotation[...] = pose_before
     verdicts = np.zeros(len(blk.block_width), dtype=np.int64)
-    _block_end(*tables, as_kernel_table(blk), as_kernel_table(bs), fi, verdicts)
+    _block_end(*tables, as_kernel_table(blk), as_kernel_table(bs), fi, verdicts, general)
     m = system.model
     rows = np.concatenate([np.arange(m.team_particle_start[t], m.team_particle_start[t] + m.team_particle_count[t])
                            for t in blk.lane_team])
@@ -118,7 +143,8 @@ def test_the_crowd_blocks_end_their_frame_in_block_form_with_the_per_team_bits(c
         restore(crowd, before)
 
 
-def test_lanes_that_differ_in_running_and_blend_weight_keep_their_own_bits(crowd):
+@pytest.mark.parametrize("general", [False, True], ids=["chain loop", "general loops"])
+def test_lanes_that_differ_in_running_and_blend_weight_keep_their_own_bits(crowd, general):
     def prepare(system, blk):
         lanes = blk.lane_team
         system._time.running[lanes] = True
@@ -127,7 +153,7 @@ def test_lanes_that_differ_in_running_and_blend_weight_keep_their_own_bits(crowd
         system.teams.blend_weight[lanes[-1]] = 0.0
     before = snapshot(crowd)
     try:
-        blk, verdicts = _compare_end(crowd, prepare)
+        blk, verdicts = _compare_end(crowd, prepare, general)
         assert verdicts.min() == 1
     finally:
         restore(crowd, before)
@@ -161,7 +187,8 @@ def test_a_lane_with_a_non_finite_bone_is_reset_and_not_written(crowd):
         restore(crowd, before)
 
 
-def test_an_edge_folded_back_onto_its_parent_takes_the_opposite_cases_with_the_per_team_bits(crowd):
+@pytest.mark.parametrize("general", [False, True], ids=["chain loop", "general loops"])
+def test_an_edge_folded_back_onto_its_parent_takes_the_opposite_cases_with_the_per_team_bits(crowd, general):
     """E.2's degenerate cases (a child's simulated edge opposite its rest edge: pi about a
     fallback axis, for the child's swing and the parent's turn) are left out of the vector
     pass and redone lane by lane."""
@@ -182,7 +209,7 @@ def test_an_edge_folded_back_onto_its_parent_takes_the_opposite_cases_with_the_p
             ps.old_pos[c] = folded
             ps.disp_pos[c] = folded
             ps.real_velocity[c] = 0.0
-        _compare_end(crowd, prepare)
+        _compare_end(crowd, prepare, general)
     finally:
         restore(crowd, before)
 

@@ -436,7 +436,9 @@ def _begin_step_team(tt, fi, step, t):
 @kernel
 def _worker_steps(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w):
     """Thread w's units up to the write-back: begin of frame, the steps (each team advancing
-    its own clock, A.6), and for a block the gather and the scatter around them."""
+    its own clock, A.6), and for a block the gather before them, then the guards and E.1-E.4 in
+    block form (``batched/frame_end``; the write-back itself waits for the barrier) and the
+    scatter."""
     for b in range(blk.block_width.shape[0]):
         if blk.block_worker[b] != w:
             continue

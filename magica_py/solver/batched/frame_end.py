@@ -210,7 +210,7 @@ def _display_lanes(a, k0, kr0, p, lanes, width, dt, move, rooted, all_running):
 
 # ----------------------------------------------------------------------------- E.2
 @kernel
-def line_rotations_block(m, prm, blk, bs, b, all_blend_one):
+def line_rotations_block(m, prm, blk, bs, b, all_blend_one, chains=True):
     """E.2 (``rotations.line_rotations_team``) for every lane: the same walk (IncludeLine
     baselines, entries parent-first, children in order), each step a loop over the lanes.
     An entry's sums over its children (``ctv``, ``cv``) live in the lane arrays."""
@@ -237,7 +237,8 @@ def line_rotations_block(m, prm, blk, bs, b, all_blend_one):
             attr = m.attribute[x]
             cn = m.child_count[x]
             t = ri if (attr & MOVE) != 0 else rr
-            single = cn == 1 and (m.attribute[m.child_data[m.child_start[x]]] & MOVE) != 0
+            # ``chains`` False (tests): every entry through the general child / turn loops
+            single = chains and cn == 1 and (m.attribute[m.child_data[m.child_start[x]]] & MOVE) != 0
             if single and (attr & (FIXED | MOVE)) != 0:
                 # one moving child (a chain): the child, the sums and the turn in one loop
                 c = m.child_data[m.child_start[x]]
