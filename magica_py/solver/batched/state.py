@@ -144,6 +144,8 @@ LANE_FIELDS = [
     ("particle_start", 0, I64),
     # s; team time from the last step to the frame's start (``frame.begin_frame_prelude_team``)
     ("since_last_step", 0, F64),
+    # sink of the cache warm-up reads of ``frame_begin.touch_*_block`` (never read)
+    ("touch", 0, F64),
     # C.2 sums over the center-fixed vertices (m; unit axes summed), by ``center_sums_block``
     ("center_position_sum", 3, F64), ("center_normal_sum", 3, F64), ("center_tangent_sum", 3, F64),
     # C.5 of the lane (``begin_lane_team``): SHIFT_KEEP / SHIFT_MOVE / SHIFT_RESET, and the
