@@ -30,11 +30,12 @@ ZERO3 = (0.0, 0.0, 0.0)
 def distance_link(p_pos, q_pos, rest, w_p, w_q, stiffness):
     """One link's correction of p, ``(L - L0) k (v/L) w_p/(w_p + w_q)``, and whether it counts
     (False, with a zero correction, when the link is degenerate: L < 1e-8). Branch-free: the
-    correction is computed either way and selected, so a lane loop over it vectorises."""
+    correction is computed either way and selected, so a lane loop over it vectorises.
+    One division, by ``L (w_p + w_q)``, for the reference's two (docs/distance_bending_maths.md)."""
     v = v_sub(q_pos, p_pos)
     length = v_length(v)
     ok = not (length < 1e-8)
-    corr = v_scale(v, (length - rest) * stiffness / length * w_p / (w_p + w_q))
+    corr = v_scale(v, (length - rest) * stiffness * w_p / (length * (w_p + w_q)))
     return (corr if ok else ZERO3), ok
 
 
