@@ -94,16 +94,17 @@ def _compare_begin(system, edit=None):
             same = (got == want) | (np.isnan(got) & np.isnan(want))
             assert same.all(), f"{key} differs"
     assert np.array_equal(h.ramp_from_build, ramp_expected)
-    # team rows: what the per-team begin leaves there and the steps do not change is there too
-    # (the per-team end-of-frame stages read it); a Reset lane's rows are all snapped; the rest
-    # stays in the block until the scatter
+    # team rows: with TEAM_ROWS, what the per-team begin leaves there and the steps do not
+    # change is there too and a Reset lane's rows are all snapped; without it (the end stages
+    # run on the block rows) the begin leaves the team rows as they were: the block holds the
+    # frame until the scatters
     for name in system.particles._fields:
         want = before[f"ps.{name}"].copy()
         if want.shape[:1] != system.particles.position.shape[:1]:
             continue   # not a per-particle field
         if name in TEAM_ROW_FIELDS and TEAM_ROWS:
             want[rows] = expected[f"ps.{name}"][rows]
-        for t in resets:
+        for t in resets if TEAM_ROWS else ():   # without TEAM_ROWS a Reset stays in the block
             r = np.arange(m.team_particle_start[t], m.team_particle_start[t] + m.team_particle_count[t])
             want[r] = expected[f"ps.{name}"][r]
         got = getattr(system.particles, name)

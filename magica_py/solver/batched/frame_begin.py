@@ -273,11 +273,14 @@ def begin_lane_team(m, prm, ts, cs, tt, h, fi, bs, L, t, since_last_step):
 @kernel
 def snap_lane_block(m, ps, blk, bs, b, i):
     """C.5 Reset of lane i of block b (``center.snap_particles_to_base_pose``): every position
-    history at the skinned pose, velocities, friction and normals zero, on the block rows and
-    on the team's rows (as the per-team begin leaves them)."""
-    t = blk.lane_team[blk.block_lane_base[b] + i]
-    start = m.team_particle_start[t]
-    snap_particles_to_base_pose(ps, start, start + m.team_particle_count[t])
+    history at the skinned pose, velocities, friction and normals zero, on the block rows and,
+    with ``TEAM_ROWS``, on the team's rows (as the per-team begin leaves them; without it the
+    team rows do not hold this frame's skinned pose, and the scatters after the steps write
+    what the rest of the frame reads)."""
+    if TEAM_ROWS:
+        t = blk.lane_team[blk.block_lane_base[b] + i]
+        start = m.team_particle_start[t]
+        snap_particles_to_base_pose(ps, start, start + m.team_particle_count[t])
     width = blk.block_width[b]
     for p in range(blk.block_particle_count[b]):
         k = blk.block_row_base[b] + p * width + i
