@@ -40,7 +40,8 @@ from magica_py.solver.constraints.distance import distance_block  # noqa: E402,F
 from magica_py.solver.constraints.motion import motion_block  # noqa: E402,F401
 from magica_py.solver.constraints.tether import tether_block  # noqa: E402,F401
 from magica_py.solver.batched.frame_begin import (  # noqa: E402,F401
-    begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block, publish_history_block, skin_block,
+    TEAM_ROWS, begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block, publish_history_block,
+    skin_block,
     touch_bones_block, touch_history_block,
 )
 from magica_py.solver.frame import FrameInputs, as_kernel_table, begin_frame_prelude_team  # noqa: E402
@@ -78,6 +79,8 @@ STAGES = [
     ("end: bone local pose", "bone_local_pose_block(m, blk, bs, b, h.parent, h.world_rotation, h.lossy_scale)", 0),
     ("end: write-back", "write_transforms_block(m, blk, bs, b, h.local_position, h.local_rotation)", 0),
 ]
+# the history goes to the team rows only while the end stages run per team (frame_begin.TEAM_ROWS)
+STAGES = [s for s in STAGES if TEAM_ROWS or not s[0].startswith("history to teams")]
 
 
 @numba.njit

@@ -16,16 +16,21 @@ fastmath. A block therefore produces exactly the bits the per-team path produces
 compare the two on whole runs (``tests/test_batched_steps.py``).
 
 Frame flow (``solver/frame.py``, ``simulate_frame_blocks``: a scene without blocks runs and
-compiles the plain per-team kernel): the per-frame stages stay per team; after them the
-*running* blocks (every lane active, the same number of steps this frame) gather their
-lanes' particle state into the block arrays, run every step (per-team C.3/G.3, then the block
-stages), and scatter the state back before the end-of-frame stages. A block that cannot run
-this frame (a lane culled, suspended or on another step count) leaves its teams to the
-per-team path: nothing is lost, only speed.
+compiles the plain per-team kernel). A *running* block (every lane active, the same number of
+steps this frame) runs its whole frame in block form: the begin of frame
+(``frame.begin_frame_block``, ``frame_begin``: per lane the scalar team-level stages, C.1
+skinning into the block rows, C.2 sums, the history gathered through the C.5 shift), every
+step (lane-form C.3/G.3, then the block stages), the end of frame (``frame_end``: guards,
+E.1 display, E.2/E.3 rotations, E.4 bone poses, on the block rows), the scatters to the team
+rows and, after the barrier, the write-back through the transform indices and A.7 per lane.
+A guard trip or an option the block form leaves out sends that block's end of frame to the
+per-team stages (``transfer.scatter_block_end_inputs`` first). A block that cannot run this
+frame (a lane culled, suspended or on another step count) leaves its teams to the per-team
+path: nothing is lost, only speed.
 
 Modules: ``blocks`` (formation, tables, Python), ``state`` (block and lane arrays),
 ``transfer`` (gather/scatter, per-step lane values), ``run`` (block decision per frame and
-the block step). The block stages live next to their per-team stages (``step.predict_block``,
+the block step), ``frame_begin`` / ``frame_end`` (the per-frame stages in block form). The block stages live next to their per-team stages (``step.predict_block``,
 ``constraints.angle.angle_block``, ...), calling the same per-element functions.
 
 What a lane loop needs to vectorise (measured while writing the block stages):
