@@ -40,8 +40,7 @@ from magica_py.solver.constraints.distance import distance_block  # noqa: E402,F
 from magica_py.solver.constraints.motion import motion_block  # noqa: E402,F401
 from magica_py.solver.constraints.tether import tether_block  # noqa: E402,F401
 from magica_py.solver.batched.frame_begin import (  # noqa: E402,F401
-    TEAM_ROWS, begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block, publish_history_block,
-    skin_block,
+    begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block, skin_block,
     touch_bones_block, touch_history_block,
 )
 from magica_py.solver.frame import FrameInputs, as_kernel_table, begin_frame_prelude_team  # noqa: E402
@@ -52,11 +51,10 @@ STAGES = [
     # the begin of frame in block form (frame.begin_frame_block: these, the per-lane team-level
     # stages and a Reset lane's snap; the gather is its gather_shift_block)
     ("skin (C.1, per frame)", "lane_starts_block(m, blk, bs, b); touch_bones_block(m, h.local_to_world, blk, bs, b); "
-     "skin_block(m, ps, h.local_to_world, blk, bs, b)", 0),
+     "skin_block(m, h.local_to_world, blk, bs, b)", 0),
     ("center sums (C.2, /frame)", "center_sums_block(m, blk, bs, b)", 0),
     ("lanes C.2/C.4/G.2 (/frame)", "begin_lanes(m, ps, prm, ts, cs, tt, h, fi, blk, bs, b)", 0),
     ("gather + C.5 (per frame)", "touch_history_block(ps, blk, bs, b); gather_shift_block(m, ps, blk, bs, b)", 0),
-    ("history to teams (/frame)", "publish_history_block(ps, blk, bs, b)", 0),
     ("lane values", "load_lanes(blk, bs, ts, tt, cs, b)", 1),
     ("predict (D.1)", "predict_block(m, bs, prm, blk, b, DT, 1.0, 1.0)", 1),
     ("basic pose (D.2)", "step_basic_pose_block(m, bs, prm, blk, b)", 1),
@@ -79,8 +77,6 @@ STAGES = [
     ("end: bone local pose", "bone_local_pose_block(m, blk, bs, b, h.parent, h.world_rotation, h.lossy_scale)", 0),
     ("end: write-back", "write_transforms_block(m, blk, bs, b, h.local_position, h.local_rotation)", 0),
 ]
-# the history goes to the team rows only while the end stages run per team (frame_begin.TEAM_ROWS)
-STAGES = [s for s in STAGES if TEAM_ROWS or not s[0].startswith("history to teams")]
 
 
 @numba.njit

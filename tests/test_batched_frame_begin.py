@@ -12,7 +12,7 @@ import pytest
 
 from batched_harness import block_rows, block_tables, crowd_system, restore, snapshot
 from magica_py.solver.batch_tables import borrow
-from magica_py.solver.batched.frame_begin import SHIFT_KEEP, SHIFT_MOVE, SHIFT_RESET, TEAM_ROWS
+from magica_py.solver.batched.frame_begin import SHIFT_KEEP, SHIFT_MOVE, SHIFT_RESET
 from magica_py.solver.frame import (
     FrameInputs, _time_frame_update, as_kernel_table, begin_frame_block, begin_frame_team, prepare_teams,
 )
@@ -21,9 +21,6 @@ from magica_py.solver.frame import (
 # the team rows (position / rotation: C.1; the history: C.5; the rest: the plain gather)
 BEGIN_FIELDS = ("position", "rotation", "old_position", "old_rotation", "old_pos", "velocity", "disp_pos",
                 "collision_normal", "friction", "static_friction")
-# written to the team rows too (the per-team end-of-frame stages read them; the steps do not
-# change them)
-TEAM_ROW_FIELDS = ("position", "rotation", "old_position", "old_rotation", "disp_pos")
 # what a Reset also writes (C.5 snap), compared for lanes that reset
 SNAP_FIELDS = ("next_pos", "base_pos", "base_rot", "velocity_pos", "real_velocity")
 
@@ -94,19 +91,12 @@ def _compare_begin(system, edit=None):
             same = (got == want) | (np.isnan(got) & np.isnan(want))
             assert same.all(), f"{key} differs"
     assert np.array_equal(h.ramp_from_build, ramp_expected)
-    # team rows: with TEAM_ROWS, what the per-team begin leaves there and the steps do not
-    # change is there too and a Reset lane's rows are all snapped; without it (the end stages
-    # run on the block rows) the begin leaves the team rows as they were: the block holds the
-    # frame until the scatters
+    # team rows: the begin leaves them as they were (a Reset lane too): the block holds the
+    # frame until the scatters after the steps
     for name in system.particles._fields:
-        want = before[f"ps.{name}"].copy()
+        want = before[f"ps.{name}"]
         if want.shape[:1] != system.particles.position.shape[:1]:
             continue   # not a per-particle field
-        if name in TEAM_ROW_FIELDS and TEAM_ROWS:
-            want[rows] = expected[f"ps.{name}"][rows]
-        for t in resets if TEAM_ROWS else ():   # without TEAM_ROWS a Reset stays in the block
-            r = np.arange(m.team_particle_start[t], m.team_particle_start[t] + m.team_particle_count[t])
-            want[r] = expected[f"ps.{name}"][r]
         got = getattr(system.particles, name)
         assert np.array_equal(got, want), f"team rows of {name}: {int((got != want).sum())} values differ"
     return blk, bs, expected

@@ -23,8 +23,8 @@ from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.batch_tables import borrow
 from magica_py.solver.batched.run import decide_blocks, run_block_step, team_runs_alone
 from magica_py.solver.batched.frame_begin import (
-    SHIFT_RESET, TEAM_ROWS, begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block,
-    publish_history_block, skin_block, snap_lane_block, touch_bones_block, touch_history_block,
+    SHIFT_RESET, begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block, skin_block,
+    snap_lane_block, touch_bones_block, touch_history_block,
 )
 from magica_py.solver.batched.frame_end import end_frame_block, write_transforms_block
 from magica_py.solver.batched.transfer import scatter_block, scatter_block_end, scatter_block_end_inputs
@@ -223,18 +223,16 @@ def begin_frame_block(m, ps, prm, ts, cs, tt, h, fi, blk, bs, b):
         bs.lane_since_last_step[lanes + i] = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t)
     lane_starts_block(m, blk, bs, b)
     touch_bones_block(m, h.local_to_world, blk, bs, b)   # cold bone matrices, in lane order
-    skin_block(m, ps, h.local_to_world, blk, bs, b)
+    skin_block(m, h.local_to_world, blk, bs, b)
     center_sums_block(m, blk, bs, b)
     for i in range(blk.block_width[b]):
         begin_lane_team(m, prm, ts, cs, tt, h, fi, bs, lanes + i, blk.lane_team[lanes + i],
                         bs.lane_since_last_step[lanes + i])
     touch_history_block(ps, blk, bs, b)   # cold team rows, in lane order
     gather_shift_block(m, ps, blk, bs, b)   # with gather_block's copies
-    if TEAM_ROWS:   # the per-team end-of-frame stages read the history from the team rows
-        publish_history_block(ps, blk, bs, b)
     for i in range(blk.block_width[b]):
         if bs.lane_shift_mode[lanes + i] == SHIFT_RESET:
-            snap_lane_block(m, ps, blk, bs, b, i)
+            snap_lane_block(blk, bs, b, i)
 
 
 @kernel

@@ -21,10 +21,9 @@ block's rows instead of the team rows:
    (collision normal, friction, static friction) in the same pass;
 5. ``snap_lane_block`` (C.5 Reset) for a lane that resets (rare: a per-lane loop).
 
-What the per-team begin leaves in the team rows and the steps do not change (position,
-rotation, old_position, old_rotation, disp_pos) is stored there too (``skin_block``, and
-``publish_history_block`` after the gather): the per-team end-of-frame stages read it, and no
-scatter is needed for it.
+The begin leaves the team rows alone: the block holds the frame until the scatters after
+the steps and the end of frame in block form (``frame_end``; its per-team fallback copies the
+rows it reads first, ``transfer.scatter_block_end_inputs``).
 
 The whole sequence is ``frame.begin_frame_block`` (frame.py: the prelude lives there).
 
@@ -42,18 +41,10 @@ from magica_py.kernels.rows import flat
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
 from magica_py.solver.center import (
     bind_point, center_fixed_terms, center_from_sums, component_pose_team, inertia_team, shift_history,
-    skin_bound_vertex, snap_particles_to_base_pose,
+    skin_bound_vertex,
 )
 from magica_py.solver.batched.transfer import bload3
 from magica_py.solver.colliders import collider_frame_team
-
-# The per-team end-of-frame stages read position, rotation, old_position, old_rotation and
-# disp_pos from the team rows: the begin stores them there too (skin_block's second stores,
-# publish_history_block; no scatter after the steps, which do not change them). Once the
-# end-of-frame stages read them from the block rows (block form of E.1-E.4), set False: the
-# skinning then stores the block rows only and the history is not published (hot loop, crowd:
-# ~75 us per frame less). A compile-time constant (numba freezes module globals).
-TEAM_ROWS = False
 
 SHIFT_KEEP = 0    # C.5: the history stays as it is
 SHIFT_MOVE = 1    # C.5: inertia shift of the history
@@ -153,21 +144,15 @@ def touch_history_block(ps, blk, bs, b):
 
 
 @kernel
-def skin_block(m, ps, local_to_world, blk, bs, b):
+def skin_block(m, local_to_world, blk, bs, b):
     """C.1 of every lane of block b into the block rows (``center.skin_team``'s maths, its
     constant half ``bind_point`` read from ``bs.skin_bound_*``).
 
-    With ``TEAM_ROWS`` the pose is also stored in the lanes' team rows (where the per-team
-    begin leaves it: the per-team end-of-frame stages read it there; no scatter after the
-    steps, which do not change it).
-
     Streams (``kernels/streams``): block position 1-3, rotation 4-7 (row k of the loop's
-    particle), team-row position 8-10, rotation 11-14 (row r of each lane's team: distinct
-    teams, distinct rows); every load is READ (bound rows, bone matrices, model and lane rows:
-    arrays the loop does not write)."""
+    particle); every load is READ (bound rows, bone matrices, model and lane rows: arrays the
+    loop does not write)."""
     l2w = flat(local_to_world)          # (nodes * 16,) bone matrices, gathered per lane
     node_of = m.transform_index
-    team_position, team_rotation = flat(ps.position), flat(ps.rotation)
     bound_position, bound_normal, bound_tangent = bs.skin_bound_position, bs.skin_bound_normal, bs.skin_bound_tangent
     position, rotation = bs.position, bs.rotation
     starts = bs.lane_particle_start
@@ -185,17 +170,6 @@ def skin_block(m, ps, local_to_world, blk, bs, b):
                                          sload4(bound_normal, k, READ), sload4(bound_tangent, k, READ))
             sstore3(position, k, pos, 1)
             sstore4(rotation, k, rot, 4)
-            if not TEAM_ROWS:
-                continue
-            v = np.uint64(3) * r
-            q = np.uint64(4) * r
-            sstore(team_position, v, pos[0], 8)
-            sstore(team_position, v + np.uint64(1), pos[1], 9)
-            sstore(team_position, v + np.uint64(2), pos[2], 10)
-            sstore(team_rotation, q, rot[0], 11)
-            sstore(team_rotation, q + np.uint64(1), rot[1], 12)
-            sstore(team_rotation, q + np.uint64(2), rot[2], 13)
-            sstore(team_rotation, q + np.uint64(3), rot[3], 14)
 
 
 @kernel
@@ -271,16 +245,11 @@ def begin_lane_team(m, prm, ts, cs, tt, h, fi, bs, L, t, since_last_step):
 
 
 @kernel
-def snap_lane_block(m, ps, blk, bs, b, i):
-    """C.5 Reset of lane i of block b (``center.snap_particles_to_base_pose``): every position
-    history at the skinned pose, velocities, friction and normals zero, on the block rows and,
-    with ``TEAM_ROWS``, on the team's rows (as the per-team begin leaves them; without it the
-    team rows do not hold this frame's skinned pose, and the scatters after the steps write
-    what the rest of the frame reads)."""
-    if TEAM_ROWS:
-        t = blk.lane_team[blk.block_lane_base[b] + i]
-        start = m.team_particle_start[t]
-        snap_particles_to_base_pose(ps, start, start + m.team_particle_count[t])
+def snap_lane_block(blk, bs, b, i):
+    """C.5 Reset of lane i of block b (``center.snap_particles_to_base_pose`` on the block
+    rows): every position history at the skinned pose, velocities, friction and normals zero.
+    The team rows are left alone (the scatters after the steps write what the rest of the
+    frame reads)."""
     width = blk.block_width[b]
     for p in range(blk.block_particle_count[b]):
         k = blk.block_row_base[b] + p * width + i
@@ -315,7 +284,7 @@ def gather_shift_block(m, ps, blk, bs, b):
     Streams: old_pos 1-3, old_position 4-6, disp_pos 7-9, old_rotation 10-13, velocity 14-16,
     collision normal 17-19, friction 20, static friction 21 (block row k); the team rows and
     lane values are READ (the loop does not write them: storing the shifted history back in
-    place, in the same loop, stops its vectorisation, ``publish_history_block`` does that)."""
+    place would stop its vectorisation; the scatters after the steps write the team rows)."""
     old_pos, old_position, disp_pos = flat(ps.old_pos), flat(ps.old_position), flat(ps.disp_pos)
     old_rotation, velocity = flat(ps.old_rotation), flat(ps.velocity)
     normal, friction, static_friction = flat(ps.collision_normal), ps.friction, ps.static_friction
@@ -349,39 +318,3 @@ def gather_shift_block(m, ps, blk, bs, b):
             sstore3(b_normal, k, _read3(normal, v), 17)
             sstore(b_friction, k, sload(friction, r, READ), 20)
             sstore(b_static_friction, k, sload(static_friction, r, READ), 21)
-
-
-@kernel
-def publish_history_block(ps, blk, bs, b):
-    """The shifted old_position, old_rotation and disp_pos of every lane back in its team rows
-    (as the per-team C.5 leaves them: the per-team end-of-frame stages read them there, and
-    the steps do not change them); old_pos and velocity change in the steps and are scattered.
-
-    Streams: team-row old_position 1-3, disp_pos 4-6, old_rotation 7-10 (row r of each lane's
-    team: distinct teams, distinct rows); the block rows and lane starts are READ."""
-    old_position, disp_pos, old_rotation = flat(ps.old_position), flat(ps.disp_pos), flat(ps.old_rotation)
-    b_old_position, b_disp_pos, b_old_rotation = bs.old_position, bs.disp_pos, bs.old_rotation
-    starts = bs.lane_particle_start
-    width = blk.block_width[b]
-    lanes = np.uint64(blk.block_lane_base[b])
-    for p in range(blk.block_particle_count[b]):
-        k0 = np.uint64(blk.block_row_base[b] + p * width)
-        open_streams()
-        for i in range(width):
-            r = np.uint64(sload(starts, lanes + np.uint64(i), READ)) + np.uint64(p)
-            k = k0 + np.uint64(i)
-            v = np.uint64(3) * r
-            q = np.uint64(4) * r
-            b1 = sload3(b_old_position, k, READ)
-            c1 = sload3(b_disp_pos, k, READ)
-            r1 = sload4(b_old_rotation, k, READ)
-            sstore(old_position, v, b1[0], 1)
-            sstore(old_position, v + np.uint64(1), b1[1], 2)
-            sstore(old_position, v + np.uint64(2), b1[2], 3)
-            sstore(disp_pos, v, c1[0], 4)
-            sstore(disp_pos, v + np.uint64(1), c1[1], 5)
-            sstore(disp_pos, v + np.uint64(2), c1[2], 6)
-            sstore(old_rotation, q, r1[0], 7)
-            sstore(old_rotation, q + np.uint64(1), r1[1], 8)
-            sstore(old_rotation, q + np.uint64(2), r1[2], 9)
-            sstore(old_rotation, q + np.uint64(3), r1[3], 10)
