@@ -44,6 +44,7 @@ from magica_py.solver.parameters import allocate_parameters, write_row
 from magica_py.solver.state import (
     allocate_state, free_collider_rows, free_particle_rows, free_team_row, grow_state,
 )
+from magica_py.kernels import portable
 
 FORCE_MODES = {"velocity_add": 1, "velocity_add_without_depth": 2, "velocity_change": 3,
                "velocity_change_without_depth": 4}
@@ -281,7 +282,7 @@ class ClothSystem:
                                                    "reason": GUARD_REASONS.get(int(codes[team]), "guard")}))
             codes[:] = 0
         if metrics is not None:
-            steps = int(np.dot(self.time_state.update_count, self.model.team_particle_count))
+            steps = int((self.time_state.update_count.astype(np.int64) * self.model.team_particle_count).sum())
             metrics["cloth.steps"] = float(steps)
             metrics["cloth.simulation_steps"] = float(self.time_state.update_count.max(initial=0))
             metrics["cloth.kernel"] = t1 - t0
@@ -339,7 +340,7 @@ class ClothSystem:
     def add_force(self, cloth, direction, speed: float, mode: str = "velocity_add") -> None:
         """MagicaCloth.AddForce: an acceleration on every step of the next frame that runs."""
         d = np.asarray(direction, dtype=F64)
-        n = float(np.linalg.norm(d))
+        n = portable.norm(d)
         if mode not in FORCE_MODES:
             raise ValueError(f"add_force mode {mode!r}: expected one of {sorted(FORCE_MODES)}")
         for t in self.teams_of(cloth):
