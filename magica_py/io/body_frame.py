@@ -11,6 +11,9 @@ Axes are the project's (Unity: left-handed, X right, Y up, Z forward), so for a 
 * **forward**: ``across × up``, checked against the direction the feet point (foot → toes,
   horizontal part): ``feet`` says whether they agree.
 
+A detected up or forward within 20° of a coordinate axis is snapped to it (files face an
+axis; a slouch or a head held forward must not tilt the whole motion).
+
 A frame given by the user (``forward`` and/or ``up``) replaces the detected axis; the
 missing one is detected and made perpendicular. No numpy transcendental functions or BLAS
 here: the results feed the simulation (square roots and cross products only).
@@ -72,6 +75,17 @@ class BodyFrame:
         return np.stack([self.across, self.up, self.forward], axis=1)
 
 
+SNAP_DEG = 20.0     # a detected axis this close to a coordinate axis is that axis
+
+
+def snap(v: np.ndarray) -> np.ndarray:
+    """The coordinate axis nearest to unit ``v`` if within ``SNAP_DEG``, else ``v``: files are
+    authored facing an axis, and a slouch or a head held forward must not tilt the motion."""
+    best = max(AXIS_NAMES.values(), key=lambda a: float(np.sum(v * np.asarray(a))))
+    cos_limit = 0.9396926207859083      # cos(20 deg), a constant: no transcendental call
+    return np.asarray(best, dtype=np.float64) if float(np.sum(v * np.asarray(best))) >= cos_limit else v
+
+
 def _position(mapping, index_of, positions, human):
     bone = mapping.get(human)
     return None if bone is None or bone not in index_of else positions[index_of[bone]]
@@ -89,7 +103,7 @@ def detect_frame(mapping: dict[str, str], index_of: dict[str, int], positions: n
         for human in _UP_CHAIN:
             top = _position(mapping, index_of, positions, human)
             if top is not None and float(norm(top - hips)) > 1e-6:
-                detected_up = unit(top - hips)
+                detected_up = snap(unit(top - hips))
                 break
     across = np.zeros(3)
     for part in _PAIRS:
@@ -117,7 +131,9 @@ def detect_frame(mapping: dict[str, str], index_of: dict[str, int], positions: n
     if a is None:
         return BodyFrame(None, None, None, "detected", "not checked",
                          "no left/right pair of upper legs, upper arms or shoulders is mapped, so across is unknown")
-    f = np.cross(a, up_axis)
+    f = snap(np.cross(a, up_axis))
+    f = unit(f - up_axis * float(np.sum(f * up_axis)))
+    a = np.cross(up_axis, f)
     how = "detected" if given_up is None else "given up, detected forward"
     return BodyFrame(f, up_axis, a, how, _feet(mapping, index_of, positions, f, up_axis))
 
