@@ -115,8 +115,8 @@ _LABEL_SIDED = {
     "UpperArm": ("upperarm", "arm", "uparm", "humerus", "shoulder"),
     "LowerArm": ("lowerarm", "forearm", "elbow", "radius", "ulna", "lowarm"),
     "Hand": ("hand", "wrist"),
+    "LowerLeg": ("lowerleg", "shin", "calf", "knee", "tibia", "leg", "lowleg"),   # before UpperLeg: Mixamo's Leg
     "UpperLeg": ("upperleg", "thigh", "upleg", "femur", "hip", "leg"),
-    "LowerLeg": ("lowerleg", "shin", "calf", "knee", "tibia", "leg", "lowleg"),
     "Foot": ("foot", "ankle"),
     "Toes": ("toes", "toe", "toebase", "ball"),
     "Finger": ("finger", "fingers", "fingerbase", "thumb", "index", "middle", "ring", "pinky", "little"),

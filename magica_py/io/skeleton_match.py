@@ -135,9 +135,9 @@ def _limb(tree: _Tree, side: str, parts: tuple[str, ...], notes: list[str]) -> d
             found["Toes"] = toes
     for slot, bone in found.items():
         labels = tree.parts(bone)
-        if labels and slot not in labels:
+        if labels and slot != labels[0]:
             notes.append(f"{tree.names[bone]!r} mapped as {side}{slot} by its place in the chain "
-                         f"(its name reads as {' or '.join(side + p for p in labels)})")
+                         f"(by its name alone it would be {side}{labels[0]})")
     return found
 
 
