@@ -151,7 +151,7 @@ def _retarget_options(c: Checker, value, path: tuple) -> dict | None:
     m = c.mapping(value, where, RETARGET_KEYS, what="a mapping of retarget options")
     if m is None:
         return None
-    ok = True
+    ok = all(k in RETARGET_KEYS for k in m)       # an unknown key was reported by c.mapping
     rest = m.get("source_rest", "bind")
     if not (rest == "bind" or (isinstance(rest, int) and not isinstance(rest, bool) and rest >= 0)):
         c.error(where + ("source_rest",), f"expected 'bind' or a frame number >= 0 (the source's rest pose), got {rest!r}")
