@@ -140,43 +140,22 @@ class Skeleton:
         for prev, role in zip(["hips"] + trunk, trunk):
             add(role, None, (prev, None))
         top = "upperChest" if "upperChest" in names else "chest"
+
+        def chain(side, parent_key, roles):     # each role the family has, under the previous one
+            below = parent_key
+            for role in roles:
+                if role in names:
+                    add(role, side, below)
+                    below = (role, side)
+
         for side in ("left", "right"):
-            arm_parent = (spec.get("shoulder_parent", top), None)
-            if "Shoulder" in names:
-                add("Shoulder", side, arm_parent)
-                arm_parent = ("Shoulder", side)
-            add("UpperArm", side, arm_parent)
-            below = ("UpperArm", side)
+            chain(side, (spec.get("shoulder_parent", top), None),
+                  ("Shoulder", "UpperArm", "UpperArmTwist", "LowerArm", "LowerArmTwist", "Hand", "Finger"))
             if "UpperArmTwistLeaf" in names:
-                add("UpperArmTwistLeaf", side, below)
-            if "UpperArmTwist" in names:
-                add("UpperArmTwist", side, below)
-                below = ("UpperArmTwist", side)
-            add("LowerArm", side, below)
-            below = ("LowerArm", side)
-            if "LowerArmTwist" in names:
-                add("LowerArmTwist", side, below)
-                below = ("LowerArmTwist", side)
-            add("Hand", side, below)
-            if "Finger" in names:
-                add("Finger", side, ("Hand", side))
+                add("UpperArmTwistLeaf", side, ("UpperArm", side))
         for side in ("left", "right"):
-            leg_parent = (spec.get("thigh_parent", "hips"), None)
-            if "HipJoint" in names:
-                add("HipJoint", side, leg_parent)
-                leg_parent = ("HipJoint", side)
-            add("UpperLeg", side, leg_parent)
-            below = ("UpperLeg", side)
-            if "UpperLegTwist" in names:
-                add("UpperLegTwist", side, below)
-                below = ("UpperLegTwist", side)
-            add("LowerLeg", side, below)
-            below = ("LowerLeg", side)
-            if "LowerLegTwist" in names:
-                add("LowerLegTwist", side, below)
-                below = ("LowerLegTwist", side)
-            add("Foot", side, below)
-            add("Toes", side, ("Foot", side))
+            chain(side, (spec.get("thigh_parent", "hips"), None),
+                  ("HipJoint", "UpperLeg", "UpperLegTwist", "LowerLeg", "LowerLegTwist", "Foot", "Toes"))
         self.a_pose = spec.get("a_pose", False)
         self.rest = {name: self._rest_position(role, side) for name, _, role, side in self.joints}
         self.index = {name: k for k, (name, *_) in enumerate(self.joints)}
