@@ -146,3 +146,39 @@ def test_the_character_rig_maps_its_thigh_as_the_thigh():
     assert match.mapping == CHARACTER_TRUTH
     assert "'leg_l' mapped as leftUpperLeg by its place in the chain (by its name alone it would be leftLowerLeg)" \
         in match.notes
+
+
+def test_real_skeletons_are_matched_like_their_own_maps():
+    """Godette's hand-made names give her file's VRM humanoid; CMU's give the CMU table."""
+    from magica_py.io.humanoid import CMU, HUMANOID_BONES
+    bones, humanoid = godette()
+    h = TransformHierarchy(bones)
+    match = match_humanoid(list(h.names), list(h.parent))
+    assert match.mapping == {k: v for k, v in humanoid.items() if k in HUMANOID_BONES}
+    cmu = load_bvh(DATA / "bvh" / "cmu_01_01.bvh")
+    h = TransformHierarchy(cmu.bones)
+    match = match_humanoid(list(h.names), list(h.parent))
+    assert match.mapping == CMU and match.family == "cmu-cgspeed" and match.notes == []
+
+
+@pytest.mark.parametrize("name, label", [
+    ("J_Bip_L_UpperArm", ("left", ("UpperArm",))), ("J_Bip_C_Hips", (None, ("hips",))),
+    ("Bip01_R_Toe0", ("right", ("Toes",))), ("rhumerus", ("right", ("UpperArm",))),
+    ("LeftShoulder", ("left", ("Shoulder", "UpperArm"))), ("leg_l", ("left", ("LowerLeg", "UpperLeg"))),
+    ("DEF-upper_arm.L.001", ("left", ("UpperArm",))), ("mixamorig:LeftHandIndex1", ("left", ("Finger",))),
+    ("Ab", (None, ("spine",))), ("clavicle_r", ("right", ("Shoulder",))), ("ball_l", ("left", ("Toes",))),
+])
+def test_names_are_labelled_with_their_side_and_possible_parts(name, label):
+    from magica_py.io.humanoid import name_label
+    assert name_label(name)[:2] == label
+
+
+def test_twist_and_split_bones_are_not_taken_for_joints():
+    # Rigify: DEF-forearm.L.001 splits the forearm; an arm roll bone sits in the chain
+    names = ["Hips", "Chest", "LeftArm", "LeftArmRoll", "LeftForeArm", "LeftForeArm.001", "LeftHand",
+             "RightArm", "RightForeArm", "RightHand", "LeftUpLeg", "LeftLeg", "LeftFoot", "RightUpLeg", "RightLeg",
+             "RightFoot", "Head"]
+    parents = [-1, 0, 1, 2, 3, 4, 5, 1, 7, 8, 0, 10, 11, 0, 13, 14, 1]
+    m = match_humanoid(names, parents).mapping
+    assert (m["leftUpperArm"], m["leftLowerArm"], m["leftHand"]) == ("LeftArm", "LeftForeArm", "LeftHand")
+    assert "leftShoulder" not in m and m["hips"] == "Hips" and m["head"] == "Head"
