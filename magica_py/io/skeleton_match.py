@@ -102,16 +102,10 @@ def _limb(tree: _Tree, side: str, parts: tuple[str, ...], notes: list[str]) -> d
     sided = [i for i in range(len(tree.names)) if tree.side(i) == side and tree.is_core(i)]
     ends = [i for i in sided if end in tree.parts(i)]
     found: dict[str, int] = {}
-    chain: list[int] = []
     if ends:
         e = min(ends, key=lambda i: tree.depth[i])
         found[end] = e
-        chain = [a for a in tree.ancestors(e) if tree.side(a) == side and tree.is_core(a)]
-        # stop at the first unsided ancestor: bones above it belong to the trunk
-        trunk = next((k for k, a in enumerate(tree.ancestors(e)) if tree.side(a) != side), None)
-        if trunk is not None:
-            allowed = set(tree.ancestors(e)[:trunk])
-            chain = [a for a in chain if a in allowed]
+        chain = _sided_ancestors(tree, e, side)
     else:
         lowers = [i for i in sided if lower in tree.parts(i)]
         if not lowers:
@@ -120,12 +114,7 @@ def _limb(tree: _Tree, side: str, parts: tuple[str, ...], notes: list[str]) -> d
                 found[upper] = min(uppers, key=lambda i: tree.depth[i])
             return found
         low = max(lowers, key=lambda i: tree.depth[i])
-        chain = [low] + [a for a in tree.ancestors(low) if tree.side(a) == side and tree.is_core(a)]
-        ancestors = tree.ancestors(low)
-        trunk = next((k for k, a in enumerate(ancestors) if tree.side(a) != side), None)
-        if trunk is not None:
-            allowed = set(ancestors[:trunk]) | {low}
-            chain = [a for a in chain if a in allowed]
+        chain = [low] + _sided_ancestors(tree, low, side)
     slots = [lower, upper] + (["Shoulder"] if parts is ARM else [])
     for slot, bone in zip(slots, chain):
         found[slot] = bone
@@ -139,6 +128,17 @@ def _limb(tree: _Tree, side: str, parts: tuple[str, ...], notes: list[str]) -> d
             notes.append(f"{tree.names[bone]!r} mapped as {side}{slot} by its place in the chain "
                          f"(by its name alone it would be {side}{labels[0]})")
     return found
+
+
+def _sided_ancestors(tree: _Tree, i: int, side: str) -> list[int]:
+    """Core ancestors of bone i up to the first one not on ``side`` (the trunk), nearest first."""
+    out = []
+    for a in tree.ancestors(i):
+        if tree.side(a) != side:
+            break
+        if tree.is_core(a):
+            out.append(a)
+    return out
 
 
 def _toes(tree: _Tree, foot: int, side: str) -> int | None:
