@@ -49,6 +49,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
               "speed against error: frequency sweep vs a converged reference, Pareto plot (reports/)"),
     "stability": ("magica_py.bench.cli", "main_stability",
                   "hard-case stability suite (configs/hard): finiteness, speed, stretch, penetration, rest"),
+    "retarget-check": ("magica_py.io.retarget_check", "main_retarget_check",
+                       "each retargeted clip: bone map, facing, hips height, limb rest alignment, lost bones"),
 }
 
 # Per-frame metrics: simulation steps this frame (first one present wins) and particle-steps.

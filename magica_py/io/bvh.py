@@ -18,6 +18,7 @@ Semantics (Biovision BVH as CMU / cgspeed, Mixamo and Blender write it):
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -213,7 +214,13 @@ def parse_bvh(path) -> BvhFile:
             raise AssetError(path, f"line {n + 1}", f"frame {len(rows)} has {len(values)} values but the hierarchy declares {column} channels")
         rows.append(values)
     if len(rows) != frame_count:
-        raise AssetError(path, f"line {motion_line + 2}", f"header declares {frame_count} frames but the file has {len(rows)}")
+        if abs(len(rows) - frame_count) != 1 or not rows:
+            raise AssetError(path, f"line {motion_line + 2}",
+                             f"header declares {frame_count} frames but the file has {len(rows)}")
+        # exporters commonly count the T-pose frame or not: one frame off is read as written
+        warnings.warn(f"{path}: line {motion_line + 2}: header declares {frame_count} frames but the file has "
+                      f"{len(rows)}; all {len(rows)} frames are read", UserWarning, stacklevel=2)
+        frame_count = len(rows)
     try:
         motion = np.array(rows, dtype=np.float64).reshape(frame_count, column)
     except ValueError:

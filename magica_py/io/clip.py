@@ -151,6 +151,22 @@ class Clip:
             tracks.append(Track(tr.node, tr.path, times - start, values, tr.interpolation))
         return replace(self, tracks=tracks, notes=self.notes + [f"trimmed to [{start:g}, {end:g}] s"])
 
+    def frame_times(self) -> np.ndarray:
+        """Times (s) of the source's frames: multiples of ``frame_time`` (BVH) up to the
+        duration, else every distinct key time of the tracks (glTF has no frame rate)."""
+        if self.frame_time:
+            return np.arange(int(round(self.duration / self.frame_time)) + 1) * self.frame_time
+        return np.unique(np.concatenate([tr.times for tr in self.tracks])) if self.tracks else np.zeros(1)
+
+    def frame_span(self, first: int, last: int | None = None) -> tuple[float, float | None]:
+        """Seconds [start, end] of frames ``first`` .. ``last`` (inclusive; None: to the end)."""
+        times = self.frame_times()
+        n = len(times)
+        if not 0 <= first < n or (last is not None and not first < last < n):
+            raise ValueError(f"clip {self.name!r}: frames [{first}, {last}] outside its {n} frames "
+                             f"(expected 0 <= first < last <= {n - 1})")
+        return float(times[first]), None if last is None else float(times[last])
+
     def resampled(self, rate: float) -> "Clip":
         """Linear tracks sampled at ``rate`` Hz (fewer keys for YAML entries; exact at the ends)."""
         duration = self.duration
