@@ -1,4 +1,4 @@
-"""BoneCloth build path (ref §B): root bones -> RenderSetupData -> VirtualMesh -> proxy mesh ->
+"""BoneCloth build path (docs/solver.md §B): root bones -> RenderSetupData -> VirtualMesh -> proxy mesh ->
 constraint data -> read-only ``ClothModel``; ``TeamRegistry`` concatenates models into teams.
 
 ``build_cloth(hierarchy, spec)`` duck-types ``spec`` (a ``ClothSpec``): it reads ``name``,
@@ -6,7 +6,7 @@ constraint data -> read-only ``ClothModel``; ``TeamRegistry`` concatenates model
 curves carry ``.samples``), ``colliders``, ``collision_mode`` and ``bone_attributes``.
 
 Zero-length and coincident bones: a bone whose position equals its parent's gets the
-ZeroDistance attribute and a distance link of rest 0 (ref §B.7, §B.9); no NaN is produced
+ZeroDistance attribute and a distance link of rest 0 (§B.7, §B.9); no NaN is produced
 (vertex frames come from the bone axes, depth uses arc length, degenerate triangles are
 dropped by the 1e-6 squared-length test of §B.3 and skipped in bending).
 
@@ -47,7 +47,7 @@ from magica_py.build.teams import TeamRegistry
 
 __all__ = ["BuildError", "ClothModel", "ModelCache", "TeamRegistry", "build_cloth", "describe"]
 
-MAX_PROXY_COUNT = 32767  # MaxProxyMeshVertexCount / Edge / Triangle (ref §0.4)
+MAX_PROXY_COUNT = 32767  # MaxProxyMeshVertexCount / Edge / Triangle (§0.4)
 EXPANDED_COLLIDER_COUNT = 8
 
 
@@ -247,7 +247,7 @@ def _build(setup, spec, name, mode, root_names) -> ClothModel:
     g = np.asarray(constraints.parameter(params, "gravity_direction"), dtype=np.float64)
     g_len = float(np.linalg.norm(g))
     if not len(center_fixed):
-        gravity_dir = np.array([0.0, -1.0, 0.0])  # ref §C.2: constant without a center
+        gravity_dir = np.array([0.0, -1.0, 0.0])  # §C.2: constant without a center
     else:  # the world gravity direction taken as a center-local vector (zero if too short)
         gravity_dir = g / g_len if g_len > 1e-8 else np.zeros(3)
 

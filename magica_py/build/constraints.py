@@ -1,4 +1,4 @@
-"""Constraint build data (ref §B.9, §D.7, §0.3) and the parameter switches of §F.
+"""Constraint build data (docs/solver.md §B.9, §D.7, §0.3) and the parameter switches of §F.
 
 "Model only what a scene needs": every builder here is called only when the cloth's
 parameters switch its feature on; ``plan_features`` says which and why not.
@@ -45,12 +45,12 @@ def parameter(params: Mapping | None, key: str):
 
 
 def curve_samples(value) -> np.ndarray:
-    """16-sample depth table of a curve parameter (ref §0.3, ``ConvertFloatArray``).
+    """16-sample depth table of a curve parameter (§0.3, ``ConvertFloatArray``).
 
     Accepts a ``params.Curve`` (anything with ``.samples``), a plain number (flat curve) or
     a tuple ``(value, start, end, use_curve)`` (the linear ``CurveSerializeData`` constructor).
     The samples are the raw parameter curve: conversions such as damping ×0.2 or restoration
-    ×0.2 belong to the solver (ref §F.1 "conversion" column)."""
+    ×0.2 belong to the solver (§F.1 "conversion" column)."""
     samples = getattr(value, "samples", None)
     if samples is not None:
         out = np.asarray(samples, dtype=np.float64).reshape(-1)
@@ -79,7 +79,7 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------- distance
 def distance_links(attribute, parent, pos, neighbor_start, neighbor_count, neighbor_data,
                    triangles, tri_normals, edges):
-    """Vertical and horizontal distance links per vertex, CSR with signed rest (ref §B.9).
+    """Vertical and horizontal distance links per vertex, CSR with signed rest (§B.9).
 
     Returns (distance_start, distance_count, distance_target, distance_rest): per vertex the
     vertical links (parent/child, rest > 0) first, then horizontal and shear links (rest < 0),
@@ -116,7 +116,7 @@ def distance_links(attribute, parent, pos, neighbor_start, neighbor_count, neigh
 
 # ----------------------------------------------------------------------------- bending
 def bending_and_volume(attribute, triangles, pos_local, local_to_world, want_volume=True):
-    """Triangle-pair bending and volume data (ref §D.7 "Build").
+    """Triangle-pair bending and volume data (§D.7 "Build").
 
     Returns (bend_vertices (Kb,4), bend_rest_angle (Kb,) rad, bend_sign (Kb,) ±1,
     volume_vertices (Kv,4), volume_rest (Kv,) = 1000·signed tetra volume in world m³)."""
@@ -136,7 +136,7 @@ def bending_and_volume(attribute, triangles, pos_local, local_to_world, want_vol
 
 
 def rest_volumes(pos_local, volume_vertices, local_to_world) -> np.ndarray:
-    """1000 x signed tetrahedron volume of each volume pair in world space (ref §D.7); the same
+    """1000 x signed tetrahedron volume of each volume pair in world space (§D.7); the same
     formula as ``bending_pairs`` (used when a cached model is re-targeted to another instance)."""
     world = pos_local @ local_to_world[:3, :3].T + local_to_world[:3, 3]
     v = volume_vertices

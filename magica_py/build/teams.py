@@ -1,5 +1,5 @@
 """Teams: every cloth's model copied into global structure-of-arrays, one contiguous chunk per
-team per pool (ref §B.10; MagicaCloth2's TeamManager with chunked native arrays).
+team per pool (docs/solver.md §B.10; MagicaCloth2's TeamManager with chunked native arrays).
 
 One kernel call can then process every team: per-team ``team_<pool>_start`` / ``_count``
 arrays (``team_table()``) say where each team's chunk lies, and every index stored inside a

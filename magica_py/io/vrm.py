@@ -42,7 +42,7 @@ from magica_py.io.quat import qfrom_to
 from magica_py.scene.hierarchy import BoneSpec, TransformHierarchy
 
 VRM0_TAIL_LENGTH = 0.07          # UniVRM's virtual tail beyond a childless joint (m)
-MAX_COLLIDER_RADIUS = 0.5        # MagicaCloth2 inspector slider maximum (ref §G.1)
+MAX_COLLIDER_RADIUS = 0.5        # MagicaCloth2 inspector slider maximum (docs/solver.md §G.1)
 _AXES = "xyz"
 
 

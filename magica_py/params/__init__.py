@@ -1,4 +1,4 @@
-"""BoneCloth parameters: the table (ref §F.1), the 11 presets (§F.2) and their resolution.
+"""BoneCloth parameters: the table (docs/solver.md §F.1), the 11 presets (§F.2) and their resolution.
 
 ``resolve_parameters(preset, overrides, where)`` returns a ``ClothParameters``: a frozen
 mapping from every dotted key of ``PARAMETERS`` to its value (floats, ``Curve`` objects,

@@ -1,4 +1,4 @@
-"""The BoneCloth parameter table (ref §F.1), one row per parameter.
+"""The BoneCloth parameter table (docs/solver.md §F.1), one row per parameter.
 
 Keys are MagicaCloth2's serialized names in snake_case, grouped as in its inspector
 (``inertia.world_inertia``). Kinds:
@@ -127,7 +127,7 @@ PARAMETER_DEFS: tuple[ParameterDef, ...] = (
        choices=("auto", "enabled", "disabled")),
 )
 
-# Defaults a limit takes when enabled without a value (ref §F.1 "check (false, v)").
+# Defaults a limit takes when enabled without a value (§F.1 "check (false, v)").
 LIMIT_ENABLED_DEFAULTS = {
     "inertia.movement_speed_limit": 5.0,
     "inertia.rotation_speed_limit": 720.0,

@@ -1,4 +1,4 @@
-"""MagicaCloth2 per-team simulation timing (ref §A.3 TimeManager.FrameUpdate, §A.4, §A.6, §A.7).
+"""MagicaCloth2 per-team simulation timing (docs/solver.md §A.3 TimeManager.FrameUpdate, §A.4, §A.6, §A.7).
 
 Every cloth component is a *team*. Each team keeps its own clock, fed by the frame delta
 of its update mode, and decides once per frame how many fixed-size simulation steps of
@@ -46,7 +46,7 @@ step_running           bool        -      the team runs step k (begin_step; clea
 
 Timing modes (``SimulationTimeSettings.timing``):
 
-* ``"exact"`` (default, a documented deviation, ref Appendix 3.1): float64 counters, and the
+* ``"exact"`` (default, a documented deviation, Appendix 3.1): float64 counters, and the
   planned step count is ``trunc((T - now_update_time)/dt + STEP_EPSILON)`` with
   ``STEP_EPSILON = 1e-6`` of a step (11 ns at 90 Hz). Frame rates commensurate with the
   frequency (30, 45, 90, 180 fps at 90 Hz) then give exact step counts (30 fps: 3 every
@@ -69,7 +69,7 @@ import numpy as np
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import saturate
 
-# update modes (ref §A.4; AnimatorLinkage resolves to one of these, NORMAL without an animator)
+# update modes (§A.4; AnimatorLinkage resolves to one of these, NORMAL without an animator)
 UPDATE_NORMAL = 0
 UPDATE_UNITY_PHYSICS = 1
 UPDATE_UNSCALED = 2
@@ -119,7 +119,7 @@ def timing_code(name) -> int:
 # ----------------------------------------------------------------------------- global settings
 @dataclass
 class SimulationTimeSettings:
-    """MagicaCloth2's global timing (``TimeManager.FrameUpdate``, ref §A.3).
+    """MagicaCloth2's global timing (``TimeManager.FrameUpdate``, §A.3).
 
     Out-of-range values are clamped as MagicaCloth2 does (the scene loader reports them as
     errors before they get here); ``timing`` is validated.
@@ -161,7 +161,7 @@ class SimulationTimeSettings:
 
     @property
     def simulation_power(self) -> tuple[float, float, float, float]:
-        """``SimulationPower`` (x, y, z, w) with ``r = 90/frequency`` (ref §A.3).
+        """``SimulationPower`` (x, y, z, w) with ``r = 90/frequency`` (§A.3).
 
         y scales distance and bending stiffness, z damping, w angle restoration; x is unused.
         All four are 1 at 90 Hz.

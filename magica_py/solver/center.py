@@ -1,4 +1,4 @@
-"""Per-frame team stages before the steps (ref §C.1, §C.2, §C.4, §C.5, §H.1).
+"""Per-frame team stages before the steps (docs/solver.md §C.1, §C.2, §C.4, §C.5, §H.1).
 
 ``skin_team`` (C.1) computes every particle's animated base pose from the bones read this
 frame; ``center_and_inertia_team`` (C.2 + C.4) the center, anchor, teleport test, movement

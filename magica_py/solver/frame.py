@@ -1,4 +1,4 @@
-"""The LATE_UPDATE frame of every team in one numba call (ref §A.3, §D.0 order).
+"""The LATE_UPDATE frame of every team in one numba call (docs/solver.md §A.3, §D.0 order).
 
 ``simulate_frame`` runs, for all teams: scale suspension and distance culling, the runtime's
 team time (§A.4), skinning / center / inertia / reset-or-shift / collider frame (§C, §G.2),
@@ -112,7 +112,7 @@ def prepare_teams(m, ts, prm, tt, h):
 
 @kernel
 def run_step(m, ps, prm, ts, cs, tt, t, fi):
-    """One simulation step of team t (ref §D.0 order) at frame interpolation fi."""
+    """One simulation step of team t (§D.0 order) at frame interpolation fi."""
     dt = fi.dt
     ratio = fi.frequency_ratio
     frac = tt.frame_interpolation[t]

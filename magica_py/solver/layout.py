@@ -1,7 +1,7 @@
 """The solver's global model: every team's ``ClothModel`` in one SoA, one chunk per team.
 
 Team-local indices are offset to global ones, so that one numba call processes every team
-(tech-notes LAYOUT). ``SolverLayout`` owns the chunks: each pool (particles, baselines,
+(docs/tech-notes.md LAYOUT). ``SolverLayout`` owns the chunks: each pool (particles, baselines,
 distance links, ...) has a first-fit ``ChunkAllocator``; adding a team takes a chunk of every
 pool (freed space first, growing the pool at its end otherwise), removing a team frees its
 chunks. Other teams' chunks never move, so their rows of the model and of the state tables
@@ -41,7 +41,7 @@ MODEL_FIELDS = [
     ("team_volume_count", "team", (), I32, ""),
     ("team_component_transform", "team", (), I32, "hierarchy node of the component"),
     ("team_init_scale", "team", V3, F64, "component lossy scale at build"),
-    ("team_init_local_gravity", "team", V3, F64, "gravity reference in the center frame (C.2)"),
+    ("team_init_local_gravity", "team", V3, F64, "gravity reference in the center frame (docs/solver.md §C.2)"),
     ("team_has_lines", "team", (), U8, "1: the proxy has lines (E.2 runs)"),
     ("live_teams", "live", (), I32, "ids of the teams in use, ascending (the frame kernel's team list)"),
     # per particle

@@ -1,4 +1,4 @@
-"""Per-team parameter table: ``params.ClothParameters`` converted to job data (ref §F.1).
+"""Per-team parameter table: ``params.ClothParameters`` converted to job data (docs/solver.md §F.1).
 
 One row per team; kernels read ``prm.<field>[team]``. Conversions of §F.1 happen here once:
 damping and restoration stiffness tables are multiplied by 0.2, limits arrive as -1 when off,

@@ -1,4 +1,4 @@
-"""Bone rotations from the display positions (ref §E.2 line mode, §E.3 triangle mode).
+"""Bone rotations from the display positions (docs/solver.md §E.2 line mode, §E.3 triangle mode).
 
 E.2 walks each baseline parent-first: a moving bone takes the rest rotation carried by its
 parent, swung so the parent->bone edge matches the simulated one, then turns by
@@ -104,7 +104,7 @@ def look_rotation_select(forward, up):
 
 @kernel
 def rot_from_normal_tangent_select(normal, tangent):
-    """``rot_from_normal_tangent`` (ref §0.2 rot_from) without branches."""
+    """``rot_from_normal_tangent`` (§0.2 rot_from) without branches."""
     return look_rotation_select(tangent, normal)
 
 

@@ -56,7 +56,7 @@ class ClothSystem:
     ``models`` may be given (prebuilt ``build.ClothModel`` in the same order); otherwise each
     spec is built with ``build.build_cloth`` from the hierarchy's current (rest) pose.
     ``parallel=True`` spreads teams over numba threads (same results bit for bit; worth it
-    for crowds on idle cores only, tech-notes §8: off by default). ``batched=True`` (default)
+    for crowds on idle cores only, docs/tech-notes.md §8: off by default). ``batched=True`` (default)
     runs the steps of teams with identical topology and parameters side by side in blocks
     (``solver/batched``: same results bit for bit, several times faster for crowds);
     ``batched=False`` runs every team alone (benchmarks, debugging).
@@ -118,7 +118,7 @@ class ClothSystem:
     # ------------------------------------------------------------------ registration
     def attach(self, player, scene=None) -> "ClothSystem":
         """Add the system to ``player``'s LATE_UPDATE and register the restored bones (every
-        non-invalid bone of every cloth, ref §A.2, §B.5)."""
+        non-invalid bone of every cloth, docs/solver.md §A.2, §B.5)."""
         from magica_py.runtime.phases import Phase, System
 
         player.schedule.add(Phase.LATE_UPDATE, System(self.name, self.run))
@@ -393,7 +393,7 @@ class ClothSystem:
         return default if value is None else value
 
     def _check_positive_scale(self, hierarchy, pairs=None) -> None:
-        """Negative scale is rejected (ref §H.7 allows a Python port to assume positive scale)."""
+        """Negative scale is rejected (§H.7 allows a Python port to assume positive scale)."""
         for spec, model in (pairs if pairs is not None else zip(self.specs, self.models)):
             nodes = list(np.asarray(model.transform_index)) + [int(model.component_transform)]
             for node in nodes:
@@ -402,7 +402,7 @@ class ClothSystem:
                     raise ValueError(
                         f"{where}: transform {hierarchy.names[node]!r} has a negative scale "
                         f"{tuple(float(x) for x in hierarchy.lossy_scale[node])}; negative scale is not "
-                        f"supported (MagicaCloth2 refuses it at build too, ref §H.7): use positive scales")
+                        f"supported (MagicaCloth2 refuses it at build too, docs/solver.md §H.7): use positive scales")
 
     def _write_parameters(self, team: int) -> None:
         def resolve(name):

@@ -29,7 +29,7 @@ from magica_py.solver.fields import I32, U8
 # model fields (per particle and link pools) the step stages read, compared bit for bit
 STEP_MODEL_FIELDS = ("depth", "baseline_local_position", "baseline_local_rotation", "distance_rest",
                      "bend_rest_angle", "bend_sign", "volume_rest", "root_length")
-# model fields the end-of-frame stages in block form read from the exemplar (E.3, E.4)
+# model fields the end-of-frame stages in block form read from the exemplar (docs/solver.md §E.3, E.4)
 END_MODEL_FIELDS = ("triangle_uv", "vertex_to_transform_rotation")
 # parameters that name hierarchy nodes (per instance; read by the per-team frame stages only)
 PER_TEAM_PARAMETERS = ("anchor_transform", "culling_reference")

@@ -16,7 +16,7 @@
 ``BlockState``: particle fields mirror ``ParticleState`` (same names, units and meaning) but
 component-major, ``(3, rows)`` / ``(4, rows)`` / ``(rows,)``, so that a loop over the lanes of
 one particle reads contiguous memory. Lane fields (``lane_*``) hold the team values of the
-current step (written at each step by the lane form of C.3, ``team_step.team_step_block``, which
+current step (written at each step by the lane form of docs/solver.md §C.3, ``team_step.team_step_block``, which
 also copies them back to ``TeamState``; ``transfer.load_lanes`` copies them from the team rows
 for the stage tests);
 collider fields (``col_*``) hold each lane's collider slots at this step (``ColliderState``).

@@ -3,7 +3,7 @@ and a block's lane-innermost arrays (``BlockState``).
 
 * ``gather_block``: at the start of a frame's steps, the particle fields the block takes as is
   from each lane's team rows (the begin of frame in block form, ``frame_begin``, computes the
-  skinned pose and gathers the history through the C.5 shift);
+  skinned pose and gathers the history through the docs/solver.md §C.5 shift);
 * ``scatter_block``: after the steps, the state the rest of the frame reads back (the
   step-internal fields stay in the block; ``scatter_block_full`` copies those too, for tests);
 * ``gather_block_end`` / ``scatter_block_end``: what the end stages in block form

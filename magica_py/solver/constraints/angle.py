@@ -1,4 +1,4 @@
-"""Angle limit (ref §D.5) and angle restoration (§D.6), one routine per baseline, 3 iterations.
+"""Angle limit (docs/solver.md §D.5) and angle restoration (§D.6), one routine per baseline, 3 iterations.
 
 Restoration pulls each edge towards its *absolute* world direction in the step basic pose
 (not parent-relative, Appendix 2.2). Masses use friction only (Appendix 2.3). Both parent and
