@@ -10,38 +10,22 @@ from collections.abc import Mapping
 import numpy as np
 
 from magica_py.build.proxy import FIXED, MOVE, _starts
+from magica_py.params import default_parameters
 from magica_py.build.topology import bending_pairs, edge_triangles, key_table, shear_links
 
 CURVE_SAMPLES = 16
 ZERO_DISTANCE = 1e-8
 
-# Reference defaults (§F.1) for every parameter the build reads, used when the cloth's
-# parameter mapping lacks the key.  Curves: (value, curve start, curve end, use_curve).
-PARAMETER_DEFAULTS: dict = {
-    "damping": (0.05, 1.0, 1.0, False),
-    "radius": (0.02, 1.0, 1.0, False),
-    "distance.stiffness": (1.0, 1.0, 0.5, False),
-    "angle_restoration.stiffness": (0.2, 1.0, 0.2, True),
-    "angle_limit.limit_angle": (60.0, 0.0, 1.0, True),
-    "motion.max_distance": (0.3, 1.0, 1.0, False),
-    "motion.backstop_distance": (0.0, 1.0, 1.0, False),
-    "angle_restoration.use": True,
-    "angle_limit.use": False,
-    "triangle_bending.stiffness": 1.0,
-    "motion.use_max_distance": False,
-    "motion.use_backstop": False,
-    "motion.backstop_radius": 10.0,
-    "gravity_direction": (0.0, -1.0, 0.0),
-}
 CURVE_PARAMETERS = ("damping", "radius", "distance.stiffness", "angle_restoration.stiffness",
                     "angle_limit.limit_angle", "motion.max_distance", "motion.backstop_distance")
 
 
 def parameter(params: Mapping | None, key: str):
-    """The cloth's value for ``key``, or the reference default."""
+    """The cloth's value for ``key``, or its default of the parameter table
+    (``params.default_parameters``)."""
     if params is not None and key in params:
         return params[key]
-    return PARAMETER_DEFAULTS[key]
+    return default_parameters()[key]
 
 
 def curve_samples(value) -> np.ndarray:

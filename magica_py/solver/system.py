@@ -30,6 +30,7 @@ import time as _time
 import numba
 import numpy as np
 
+from magica_py.params import default_parameters
 from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, update_mode_code
 from magica_py.solver.colliders import fill_slots
 from magica_py.solver.fields import F64
@@ -233,7 +234,7 @@ class ClothSystem:
             self._player.register_restored_bones(self.restored_bones(), owner=self)
 
     def _activate(self, t: int) -> None:
-        mode = self._parameter(t, "update_mode", "normal")
+        mode = self._parameter(t, "update_mode", default_parameters()["update_mode"])
         if str(mode) in ("normal", "animator_linkage") and self._scene_update_mode:
             mode = self._scene_update_mode
         self.time_state.activate(t, update_mode=update_mode_code(mode))
