@@ -1,5 +1,6 @@
 """BoneCloth build path (docs/solver.md §B): root bones -> RenderSetupData -> VirtualMesh -> proxy mesh ->
-constraint data -> read-only ``ClothModel``; ``TeamRegistry`` concatenates models into teams.
+constraint data -> read-only ``ClothModel`` (the solver's ``layout.SolverLayout`` concatenates
+the models of a scene into teams).
 
 ``build_cloth(hierarchy, spec)`` duck-types ``spec`` (a ``ClothSpec``): it reads ``name``,
 ``root_bones``, ``component``, ``connection_mode``, ``parameters`` (a mapping of dotted keys;
@@ -26,7 +27,7 @@ Deviations from the reference, deliberate and documented:
 
 Modules: ``render_setup`` (§B.1), ``virtual_mesh`` (§B.2-B.3), ``topology`` (edge-triangle
 maps and the triangle-pair kernels), ``proxy`` (§B.4-B.8), ``constraints`` (§B.9, §D.7,
-§0.3), ``model`` (``ClothModel``, ``describe``), ``teams`` (``TeamRegistry``).
+§0.3), ``model`` (``ClothModel``, ``describe``).
 """
 from __future__ import annotations
 
@@ -43,9 +44,8 @@ from magica_py.build import constraints, proxy, virtual_mesh
 from magica_py.build.errors import BuildError
 from magica_py.build.model import ClothModel, describe, topology_hash
 from magica_py.build.render_setup import collect_transforms
-from magica_py.build.teams import TeamRegistry
 
-__all__ = ["BuildError", "ClothModel", "ModelCache", "TeamRegistry", "build_cloth", "describe"]
+__all__ = ["BuildError", "ClothModel", "ModelCache", "build_cloth", "describe"]
 
 MAX_PROXY_COUNT = 32767  # MaxProxyMeshVertexCount / Edge / Triangle (§0.4)
 EXPANDED_COLLIDER_COUNT = 8

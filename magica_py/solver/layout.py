@@ -299,7 +299,7 @@ class SolverLayout:
         if self._model is None:
             arrays = {}
             for name, a in self.arrays.items():
-                a = a.copy()
+                a = a[:self._rows(_FIELD_INFO[name][0])].copy()   # the storage may hold spare rows
                 a.flags.writeable = False
                 arrays[name] = a
             live = np.asarray(self.live_teams, dtype=np.int32)
@@ -308,15 +308,24 @@ class SolverLayout:
             self._model = SolverModel(**arrays)
         return self._model
 
+    def _rows(self, per: str) -> int:
+        """Rows of ``per`` in use: the pool's capacity, the team count for ``team`` (``live``,
+        replaced by ``model()``: all)."""
+        if per == "team":
+            return self.team_count
+        return self.allocators[per].capacity if per in self.allocators else None
+
     def _fit(self, per: str, size: int) -> None:
-        """Grow every array of ``per`` to ``size`` rows (old rows kept, new rows zero)."""
+        """Make every array of ``per`` hold at least ``size`` rows (old rows kept, new rows zero,
+        ``particle_team`` -1). The storage grows geometrically so that adding n teams copies
+        O(n) rows, not O(n^2); ``model()`` publishes the rows in use only."""
         for name, (p, shape, dtype) in _FIELD_INFO.items():
             if p != per or name == "live_teams":
                 continue
             old = self.arrays[name]
             if old.shape[0] >= size:
                 continue
-            new = np.zeros((size,) + shape, dtype=dtype)
+            new = np.zeros((max(size, 2 * old.shape[0]),) + shape, dtype=dtype)
             if name == "particle_team":
                 new[:] = -1
             new[:old.shape[0]] = old
