@@ -73,19 +73,6 @@ def key_insert(table, key):
 
 
 @kernel
-def key_contains(table, key):
-    mask = table.shape[0] - 1
-    h = (key * 2654435761) & mask
-    while True:
-        k = table[h]
-        if k == key:
-            return True
-        if k < 0:
-            return False
-        h = (h + 1) & mask
-
-
-@kernel
 def opposite_vertex(triangles, t, a, b):
     for k in range(3):
         v = triangles[t, k]

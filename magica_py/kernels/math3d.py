@@ -176,9 +176,6 @@ def orthogonal_axis(a):
 
 
 # ----------------------------------------------------------------------------- quaternions
-@kernel
-def q_identity():
-    return (0.0, 0.0, 0.0, 1.0)
 
 
 @kernel
@@ -192,11 +189,6 @@ def q_mul(a, b):
         aw * bz + ax * by - ay * bx + az * bw,
         aw * bw - ax * bx - ay * by - az * bz,
     )
-
-
-@kernel
-def q_conjugate(q):
-    return (-q[0], -q[1], -q[2], q[3])
 
 
 @kernel
@@ -236,12 +228,6 @@ def q_rotate(q, v):
         v[1] + qw * ty + (qz * tx - qx * tz),
         v[2] + qw * tz + (qx * ty - qy * tx),
     )
-
-
-@kernel
-def q_inverse_rotate(q, v):
-    """Rotate v by the inverse of the unit quaternion q."""
-    return q_rotate(q_conjugate(q), v)
 
 
 @kernel

@@ -48,13 +48,6 @@ def world_point(l0, l1, l2, x):
 
 
 @kernel
-def transform_point_rows(l0, l1, l2, b0, b1, b2, b3, v, w):
-    """``(L @ B) @ (v, w)`` without forming the product: ``B`` (rows b0..b3) first, then the
-    first three rows l0..l2 of ``L`` (4-tuples)."""
-    return world_point(l0, l1, l2, bind_point(b0, b1, b2, b3, v, w))
-
-
-@kernel
 def skin_bound_vertex(l0, l1, l2, bound_position, bound_normal, bound_tangent):
     """C.1 for one vertex from its ``bind_point`` 4-vectors (position w = 1, normal and tangent
     w = 0) and its bone's local-to-world rows l0..l2. Branch-free (a loop vectorises)."""

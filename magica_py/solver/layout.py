@@ -332,9 +332,3 @@ class SolverLayout:
             self.arrays[name] = new
 
 
-def build_solver_model(models: list) -> "SolverModel":
-    """Concatenate team models (``build.ClothModel`` field names) into one ``SolverModel``."""
-    layout = SolverLayout()
-    for model in models:
-        layout.add(model)
-    return layout.model()

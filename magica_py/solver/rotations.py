@@ -17,10 +17,9 @@ from magica_py.kernels.rows import (
     flat, load_input, load_input3, row3, row4, set_row4, store_output3, store_output4,
 )
 from magica_py.kernels.math3d import (
-    from_to_rotation, from_to_rotation_unit, load3, load4, orthogonal_axis, q_axis_angle, q_inverse,
-    q_look_rotation, q_mul,
-    q_rotate, q_slerp, store3, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp,
-    v_normalize, v_scale, v_sub,
+    from_to_rotation, from_to_rotation_unit, load3, orthogonal_axis, q_axis_angle, q_inverse, q_mul,
+    q_rotate, q_slerp, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp, v_normalize, v_scale,
+    v_sub,
 )
 from magica_py.kernels import trig
 from magica_py.solver.constraints.angle import swing_rotation
@@ -366,11 +365,3 @@ def crowded_vertex_rotation(m, ps, p):
         store4(ps.rotation, p, q)
 
 
-@kernel
-def triangle_frame(m, ps, tri):
-    """Normal and uv tangent of triangle ``tri`` at the display positions (0 when degenerate)."""
-    return triangle_frame_from(load3(ps.position, m.triangles[tri, 0]), load3(ps.position, m.triangles[tri, 1]),
-                               load3(ps.position, m.triangles[tri, 2]),
-                               (m.triangle_uv[tri, 0, 0], m.triangle_uv[tri, 0, 1]),
-                               (m.triangle_uv[tri, 1, 0], m.triangle_uv[tri, 1, 1]),
-                               (m.triangle_uv[tri, 2, 0], m.triangle_uv[tri, 2, 1]))

@@ -148,12 +148,5 @@ def form_blocks(system, enabled: bool = True):
     return table, state
 
 
-def describe_blocks(table) -> list[str]:
-    """One line per block (``magica-py info``, benchmarks)."""
-    return [f"block {b}: {int(table.block_width[b])} lanes x {int(table.block_particle_count[b])} particles "
-            f"(teams {table.lane_team[table.block_lane_base[b]:table.block_lane_base[b] + table.block_width[b]].tolist()})"
-            for b in range(len(table.block_width))]
-
-
-__all__ = ["form_blocks", "describe_blocks", "unsupported_reason", "BLOCK_WIDTH",
+__all__ = ["form_blocks", "unsupported_reason", "BLOCK_WIDTH",
            "PARTICLE_BLOCK_FIELDS", "SHARED_PARTICLE_FIELDS", "LANE_FIELDS", "COLLIDER_FIELDS"]

@@ -202,15 +202,6 @@ def allocate_block_state(rows: int, shared_rows: int, lanes: int, collider_rows:
     return BlockState(*arrays)
 
 
-def empty_block_table(team_count: int) -> BlockTable:
-    """No blocks: every team runs per team."""
-    z = np.zeros(0, dtype=I32)
-    return BlockTable(z, z, z, z, z, z, z, z, np.zeros(0, dtype=U8), z,
-                      np.full(max(team_count, 1), -1, dtype=I32), z, z.copy(),
-                      np.zeros(max(team_count, 1), dtype=I32), np.zeros(worker_capacity(), dtype=I64),
-                      z.copy(), np.zeros(0, dtype=U8))
-
-
 def worker_capacity() -> int:
     """Threads the parallel frame kernel can use (numba's pool size, fixed at import)."""
     import numba

@@ -49,21 +49,6 @@ ZERO3 = (0.0, 0.0, 0.0)
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
 
-@kernel
-def solve_pivot_pair(pp, cp, v, r, pivot_ratio, wp, wc):
-    """Rotate the segment p->c from ``v`` to ``r`` about the point at ``pivot_ratio`` along it.
-
-    Returns the corrections (dp, dc) weighted by the inverse masses. The reference's form, on
-    world positions; the stage's entries write it on the edge (with cp - pp = v the pivot
-    cancels: dp = (v - r) pivot_ratio wp, dc = (r - v) (1 - pivot_ratio) wc for the
-    restoration), the same result up to the world positions' round-off (docs/angle_maths.md)."""
-    pivot = v_add(pp, v_scale(v, pivot_ratio))
-    dp = v_scale(v_sub(v_sub(pivot, v_scale(r, pivot_ratio)), pp), wp)
-    dc = v_scale(v_sub(v_add(pivot, v_scale(r, 1.0 - pivot_ratio)), cp), wc)
-    return dp, dc
-
-
-
 @kernel(inline="always")
 def swing_rotation(a, b, full):
     """``rotations.full_swing(a, b)`` (unit a, b), the same bits on every path, without the
