@@ -1,4 +1,4 @@
-"""Accuracy and stability metrics over recorded particle trajectories (issue 6).
+"""Accuracy and stability metrics over recorded particle trajectories (docs/BENCHMARKS.md).
 
 Everything here is plain numpy over arrays recorded by ``bench.variants.run_variant``; no
 kernel, no scene. Conventions: world space, metres, seconds; ``positions`` is (F, N, 3)

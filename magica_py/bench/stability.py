@@ -1,4 +1,4 @@
-"""The hard-case stability suite (issue 6 part 2): cases, their stated bounds, evaluation.
+"""The hard-case stability suite (docs/STABILITY.md): cases, their stated bounds, evaluation.
 
 Each case is a scene in ``configs/hard/`` plus what the harness does that a scene file
 cannot (a timeScale pause, parameters past the validated ranges) and the bounds the run

@@ -90,7 +90,7 @@ DEFAULT_FREQUENCY = 90
 FREQUENCY_RANGE = (30, 150)
 DEFAULT_MAX_STEPS = 3
 MAX_STEPS_RANGE = (1, 5)
-# quality mode and converged references (issue 8, docs/quality-mode.md): frequencies and step
+# quality mode and converged references (docs/quality-mode.md): frequencies and step
 # counts beyond MagicaCloth2's caps, opted into with ``extended_range``
 EXTENDED_FREQUENCY_RANGE = (30, 2880)
 EXTENDED_MAX_STEPS_RANGE = (1, 64)

@@ -1,4 +1,4 @@
-"""Guards (issue 4 item 5): a team whose particles become non-finite or exceed a speed bound
+"""Guards (docs/solver.md §E.5): a team whose particles become non-finite or exceed a speed bound
 is reset to its base pose, and the reason is recorded in ``TeamState.guard_code`` (the system
 turns it into a ``("cloth_reset", {...})`` event). Nothing non-finite reaches a transform."""
 from __future__ import annotations

@@ -5,8 +5,7 @@ Team-local indices are offset to global ones, so that one numba call processes e
 distance links, ...) has a first-fit ``ChunkAllocator``; adding a team takes a chunk of every
 pool (freed space first, growing the pool at its end otherwise), removing a team frees its
 chunks. Other teams' chunks never move, so their rows of the model and of the state tables
-stay where they are, bit for bit (issue 3 item 7; MagicaCloth2's TeamManager with chunked
-native arrays). ``-1`` stays ``-1`` when offsetting. The ``SolverModel`` handed to kernels is
+stay where they are, bit for bit (MagicaCloth2's TeamManager with chunked native arrays). ``-1`` stays ``-1`` when offsetting. The ``SolverModel`` handed to kernels is
 read-only; it is rebuilt (outside the frame path) when a team is added or removed.
 
 Ragged data use ``*_start``/``*_count`` pairs: per team (``team_*``) ranges into the

@@ -63,7 +63,7 @@ TEAM_PARAMETER_FIELDS = [
     ("culling_fade_ratio", "team", (), F64, ""),
     ("culling_reference", "team", (), I32, "hierarchy node or -1"),
     ("rate_mode", "team", (), I32, "0 magica, 1 frequency_consistent"),
-    # quality mode (issue 8, docs/quality-mode.md); all zero in faithful mode
+    # quality mode (docs/quality-mode.md); all zero in faithful mode
     ("quality", "team", (), U8, "1: solver.mode quality (implies rate_mode 1)"),
     ("time_based_smoothing", "team", (), U8, "1: smoothing and display converted by the frame time"),
     ("inextensibility", "team", (), I32, "0 none, 1 tether, 2 ftl, 3 ftl_tether, 4 iterations, 5 ftl_edges"),
@@ -199,7 +199,7 @@ def _switch(g, key, quality: bool) -> str:
 
 
 def _write_quality(table, t: int, g) -> None:
-    """Quality-mode columns (issue 8). Faithful mode leaves them all at their "off" value,
+    """Quality-mode columns (docs/quality-mode.md). Faithful mode leaves them all at their "off" value,
     so its kernels take exactly the MagicaCloth2 paths."""
     quality = _enum(g("solver.mode"), SOLVER_MODES, "solver.mode") == 1
     table.quality[t] = 1 if quality else 0

@@ -1,4 +1,4 @@
-"""Quality mode passes at the end of a step (issue 8, ``docs/quality-mode.md``).
+"""Quality mode passes at the end of a step (``docs/quality-mode.md``).
 
 MagicaCloth2's constraints are soft (docs/solver.md Appendix 4): edges stretch by 5-60 % under load and
 fast particles end a step inside colliders. Quality mode adds, after the second distance pass

@@ -36,8 +36,7 @@ def from_to_rotation_fraction(a, b, t, full):
     """``from_to_rotation_unit(a, b, t)`` (unit a, b), the same bits on every path, with one
     sincos for both the opposite and the general case (the axis and angle are selected
     first): a lane loop computes every branch, so two q_axis_angle would cost two sincos.
-    (E.2's turn towards the children; it was the angle restoration's until that stage
-    stopped building a quaternion, docs/angle_maths.md.)
+    E.2's turn towards the children.
 
     Returns (rotation, opposite); ``full`` False (a literal) leaves the opposite case out."""
     c = v_dot(a, b)

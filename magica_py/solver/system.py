@@ -13,7 +13,7 @@ Runtime control (all take effect at the next frame, none resets the simulation u
   KeepTeleport when keep_pose);
 * ``set_enabled(cloth, enabled)`` (disable mode Reset: re-enabling resets), ``set_time_scale``,
   ``add_force(cloth, direction, speed, mode)``;
-* ``add_cloth(spec) -> team id`` / ``remove_cloth(team)`` — teams at runtime (issue 3 item 7):
+* ``add_cloth(spec) -> team id`` / ``remove_cloth(team)`` — teams at runtime:
   chunks of the global SoA are allocated from freed space first and freed on removal
   (``layout.SolverLayout``); other teams' rows never move or change; the frame kernel visits
   ``model.live_teams`` only; a removed cloth's bones are no longer restored nor written.
@@ -134,7 +134,7 @@ class ClothSystem:
 
     # ------------------------------------------------------------------ teams at runtime
     def add_cloth(self, spec, model=None) -> int:
-        """Add a cloth at runtime (issue 3 item 7); returns its team id (ids are not reused).
+        """Add a cloth at runtime; returns its team id (ids are not reused).
 
         The model is built (unless given) after putting the cloth's bones back to their rest
         local pose. Its chunks come from

@@ -91,9 +91,9 @@ def scatter_block_end(m, ps, blk, bs, b):
 def scatter_block_end_inputs(m, ps, blk, bs, b):
     """A block whose end of frame takes the per-team path (``frame_end.end_frame_block``
     False): the block rows the per-team end stages read (position, rotation, old_position,
-    old_rotation, disp_pos) to the team rows. Today these rows equal the team rows already
-    (only the end stages write them); copied so that a begin of frame in block form can
-    keep them in the block."""
+    old_rotation, disp_pos) to the team rows: the begin of frame in block form skins and shifts
+    the history in the block rows only (``frame_begin``), so the per-team end stages see this
+    frame's pose through this copy."""
     width = blk.block_width[b]
     base = blk.block_row_base[b]
     lanes = blk.block_lane_base[b]
