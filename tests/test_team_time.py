@@ -7,15 +7,13 @@ import numpy as np
 import pytest
 
 from magica_py.runtime.clock import FixedFrameRate, FrameTimeList, TimeManager, UnityTime
+from team_time_driver import begin_step, end_frame, frame_update
 from magica_py.runtime.team_time import (
     UPDATE_NORMAL,
     UPDATE_UNITY_PHYSICS,
     UPDATE_UNSCALED,
     SimulationTimeSettings,
     TeamTimeState,
-    begin_step,
-    end_frame,
-    frame_update,
     update_mode_code,
 )
 
