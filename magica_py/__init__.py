@@ -44,7 +44,7 @@ def _configure_numba_cache() -> None:
     """Point NUMBA_CACHE_DIR at a folder keyed by a hash of the kernel sources.
 
     numba keys its cache on the kernel's own file only, so a kernel whose helper lives in
-    another module keeps returning stale results after the helper changes (tech-notes §7).
+    another module keeps returning stale results after the helper changes (docs/tech-notes.md §7).
     Keying the cache folder on every kernel module (and what they import) makes any such
     edit start a fresh cache. A user-set NUMBA_CACHE_DIR is respected.
     """

@@ -413,7 +413,7 @@ def stability_row(r) -> dict:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    # python -m magica_py.bench.cli [bench|stability] ARGS (until the magica-py commands are registered)
+    # python -m magica_py.bench.cli [bench|stability] ARGS: the same as magica-py bench / stability
     argv = sys.argv[1:]
     if argv and argv[0] == "stability":
         raise SystemExit(main_stability(argv[1:]))

@@ -2,7 +2,7 @@
 
 A ``Variant`` is "a scene + a dict of parameter overrides + a simulation frequency + a
 render rate": everything the speed-against-error plot compares. Candidates of later modes
-(issue 8's quality mode) are variants with their own ``family`` and parameters, so they
+(quality mode, docs/quality-mode.md) are variants with their own ``family`` and parameters, so they
 land on the same plot without code changes here.
 
 ``run_variant`` loads the scene (``config.load_scene``), builds the player

@@ -1,4 +1,4 @@
-"""RenderSetupData: the transforms a BoneCloth collects at build time (ref §B.1).
+"""RenderSetupData: the transforms a BoneCloth collects at build time (docs/solver.md §B.1).
 
 Vertex order is the reference's: every root is pushed on a LIFO stack in root-list order,
 then each popped transform is appended and its children pushed in sibling order.  So the
@@ -72,7 +72,7 @@ def trs_matrix(position, rotation, scale) -> np.ndarray:
 
 
 def collect_transforms(hierarchy, cloth_name: str, root_bones, component=None) -> RenderSetup:
-    """Collect the cloth's bones from ``hierarchy`` (a ``TransformHierarchy``), ref §B.1.
+    """Collect the cloth's bones from ``hierarchy`` (a ``TransformHierarchy``), §B.1.
 
     Raises ``BuildError`` for: no roots, a root index outside the hierarchy, a duplicate root,
     a root that lies below another root (its bones would be reached from two roots), a root
@@ -106,7 +106,7 @@ def collect_transforms(hierarchy, cloth_name: str, root_bones, component=None) -
             raise BuildError(cloth_name, f"root bone {names[r]!r} has no child bones: nothing to simulate "
                                          f"(a root is fixed; give it at least one child)")
 
-    # LIFO traversal (ref §B.1); visited set kept for fidelity although roots are disjoint now
+    # LIFO traversal (§B.1); visited set kept for fidelity although roots are disjoint now
     order: list[int] = []
     visited = set()
     stack = list(roots)

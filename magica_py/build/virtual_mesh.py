@@ -1,7 +1,7 @@
-"""VirtualMesh bone import and the four connection modes (ref §B.2, §B.3).
+"""VirtualMesh bone import and the four connection modes (docs/solver.md §B.2, §B.3).
 
 One vertex per collected bone.  Everything here is in **cloth-local space**: the component
-transform's space at build time, scale included (ref §B.1).
+transform's space at build time, scale included (§B.1).
 
 Outputs of ``import_bones`` (N vertices):
 
@@ -29,7 +29,7 @@ from magica_py.kernels.math3d import load3, load4, q_rotate, q_to_matrix, store3
 from magica_py.kernels import portable
 
 CONNECTION_MODES = ("line", "automatic_mesh", "sequential_loop_mesh", "sequential_non_loop_mesh")
-MAX_LINKS_PER_VERTEX = 31      # Unity FixedList capacity (ref §B.3 step 4)
+MAX_LINKS_PER_VERTEX = 31      # Unity FixedList capacity (§B.3 step 4)
 MAX_VERTICES_PER_LEVEL = 127
 TRIANGLE_MAX_ANGLE = 120.0     # ProxyMeshBoneClothTriangleAngle, degrees
 TRIANGLE_PAIR_ANGLE = 20.0     # ProxyMeshTrianglePairAngle, degrees
@@ -39,7 +39,7 @@ TRIANGLE_PAIR_ANGLE = 20.0     # ProxyMeshTrianglePairAngle, degrees
 @kernel
 def import_bone_vertices(world_position, world_rotation, lossy_scale, w2l, l2w,
                          local_position, local_normal, local_tangent, skin_bind_pose):
-    """Per bone: cloth-local position, +Y/+Z axes and skin bind pose (ref §B.2)."""
+    """Per bone: cloth-local position, +Y/+Z axes and skin bind pose (§B.2)."""
     n = world_position.shape[0]
     for i in range(n):
         p = load3(world_position, i)
@@ -79,7 +79,7 @@ def import_bone_vertices(world_position, world_rotation, lossy_scale, w2l, l2w,
 
 
 def import_bones(setup):
-    """Bone import (ref §B.2): returns (local_position, local_normal, local_tangent, skin_bind_pose).
+    """Bone import (§B.2): returns (local_position, local_normal, local_tangent, skin_bind_pose).
 
     Positions and axes come from the bone pose chained below the component
     (``setup.component_position/rotation``): the same numbers as ``W2L · P`` up to rounding,
@@ -110,7 +110,7 @@ def connect_lines(parent_vertex: np.ndarray) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- mesh modes
 def automatic_root_chain(roots: list[int], pos: np.ndarray) -> tuple[list[int], bool]:
-    """AutomaticMesh root reordering into a nearest-neighbour chain (ref §B.3 step 2)."""
+    """AutomaticMesh root reordering into a nearest-neighbour chain (§B.3 step 2)."""
     pool = list(roots)
     chain = [pool.pop(0)]
     last_dist = 0.0
@@ -206,7 +206,7 @@ def horizontal_links(pos, members, level_start, level_count, level, root_line, r
 
 def connect_mesh(cloth_name: str, mode: str, pos: np.ndarray, parent_vertex: np.ndarray,
                  child_vertices, root_vertices, bone_names):
-    """Mesh connection modes (ref §B.3): returns (lines (Ln,2), triangles (T,3), root_line (N,))."""
+    """Mesh connection modes (§B.3): returns (lines (Ln,2), triangles (T,3), root_line (N,))."""
     n = pos.shape[0]
     roots = [int(r) for r in root_vertices]
     loop = mode == "sequential_loop_mesh"
@@ -314,7 +314,7 @@ def _unique_rows_in_order(rows: np.ndarray) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- mesh statistics
 def spherical_uv(pos: np.ndarray) -> np.ndarray:
-    """Spherical vertex uv used only to derive triangle tangents (ref §B.2, CalcUVJob)."""
+    """Spherical vertex uv used only to derive triangle tangents (§B.2, CalcUVJob)."""
     n = pos.shape[0]
     center = 0.5 * (pos.min(axis=0) + pos.max(axis=0))
     d = pos - center
@@ -326,7 +326,7 @@ def spherical_uv(pos: np.ndarray) -> np.ndarray:
 
 
 def vertex_distances(pos: np.ndarray, lines: np.ndarray, triangles: np.ndarray) -> tuple[float, float]:
-    """averageVertexDistance / maxVertexDistance from stride-sampled edges (ref §B.4)."""
+    """averageVertexDistance / maxVertexDistance from stride-sampled edges (§B.4)."""
     segs = []
     if triangles.shape[0]:
         t = triangles[::max(triangles.shape[0] // 100, 1)]

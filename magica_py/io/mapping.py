@@ -8,7 +8,7 @@ VRM (UniVRM / three-vrm, Verlet once per rendered frame, assumed 60 Hz), with
 
     x' = x + (1 - D)(x - x_prev) - k x            (+ gravityPower·dt_vrm / L, tangential)
 
-MagicaCloth2 (per 90 Hz step, ref §D.1 and §D.6), with ``δ = 0.2·damping`` (the damping table
+MagicaCloth2 (per 90 Hz step, docs/solver.md §D.1 and §D.6), with ``δ = 0.2·damping`` (the damping table
 is pre-multiplied by 0.2), ``a = angle_restoration.velocity_attenuation`` and ``F`` the
 fraction of the angle the restoration removes per step — three iterations, each turning the
 child by ``0.2·value`` of the remaining angle around a pivot at 0.1, 0.3, 0.5 of the edge,
@@ -37,7 +37,7 @@ Rule:
 * ``gravity_direction`` = ``gravityDir`` (converted to Unity axes by the caller);
   ``radius`` = ``hitRadius`` (flat over depth).
 * ``root_rotation`` = ``rotational_interpolation`` = 1: a VRM joint turns fully towards its
-  tail (ref §E.2 with t = 1 makes every bone point at its children).
+  tail (§E.2 with t = 1 makes every bone point at its children).
 * ``angle_limit.use`` = false, ``tether``/``distance`` defaults (VRM keeps bone lengths
   exactly; MagicaCloth's distance constraint at stiffness 1 does the same),
   ``inertia.world_inertia`` = ``local_inertia`` = 1 (VRM feels all of the character's motion).
@@ -58,8 +58,8 @@ import numpy as np
 from magica_py.kernels import portable
 
 VRM_FRAME_RATE = 60.0     # VRM springs step once per rendered frame; 60 Hz assumed
-MC_STEP_RATE = 90.0       # MagicaCloth2 default simulation frequency (ref §A.5)
-RESTORE_PIVOTS = (0.1, 0.3, 0.5)   # restoration pivot of the three iterations (ref §D.6)
+MC_STEP_RATE = 90.0       # MagicaCloth2 default simulation frequency (§A.3)
+RESTORE_PIVOTS = (0.1, 0.3, 0.5)   # restoration pivot of the three iterations (§D.6)
 GRAVITY_MAX = 20.0
 
 

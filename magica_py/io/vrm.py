@@ -43,7 +43,7 @@ from magica_py.scene.hierarchy import BoneSpec, TransformHierarchy
 from magica_py.kernels import portable
 
 VRM0_TAIL_LENGTH = 0.07          # UniVRM's virtual tail beyond a childless joint (m)
-MAX_COLLIDER_RADIUS = 0.5        # MagicaCloth2 inspector slider maximum (ref §G.1)
+MAX_COLLIDER_RADIUS = 0.5        # MagicaCloth2 inspector slider maximum (docs/solver.md §G.1)
 _AXES = "xyz"
 
 

@@ -1,4 +1,4 @@
-"""The player loop: one rendered frame = every phase of the schedule, in order (ref §A.2).
+"""The player loop: one rendered frame = every phase of the schedule, in order (docs/solver.md §A.2).
 
 ``Player.step()``:
 

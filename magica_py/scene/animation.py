@@ -1,4 +1,4 @@
-"""Animation drivers and timed events, applied in the UPDATE phase (ref §A.2).
+"""Animation drivers and timed events, applied in the UPDATE phase (docs/solver.md §A.2).
 
 ``Animation.from_specs(entries, hierarchy)`` builds it from the validated ``animation``
 section after instance replication. Each entry is either a **driver**::

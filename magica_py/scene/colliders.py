@@ -1,6 +1,6 @@
 """Colliders: the scene's ``ColliderSet`` (model data, read-only) and their world shapes.
 
-``ColliderSet`` is a structure-of-arrays over n colliders (ref §G.1), built once from the
+``ColliderSet`` is a structure-of-arrays over n colliders (docs/solver.md §G.1), built once from the
 validated ``colliders`` section; every array is ``writeable=False``:
 
 ==================  ===========  =====  ===================================================
@@ -33,7 +33,7 @@ sits on a static node the config package creates before the hierarchy is built:
 ``static_transforms[collider name]`` when given.
 
 ``world_shapes(hierarchy)`` evaluates every collider at the hierarchy's current world pose
-(ref §G.2 frame pose, §G.3 shape work data) with numpy: it is what the Rerun sink draws and
+(§G.2 frame pose, §G.3 shape work data) with numpy: it is what the Rerun sink draws and
 the oracle the solver's collider kernels are tested against.
 """
 from __future__ import annotations
@@ -218,7 +218,7 @@ def _rotation_matrices(q: np.ndarray) -> np.ndarray:
 
 
 def world_shapes(colliders: ColliderSet, hierarchy: TransformHierarchy) -> ColliderWorldShapes:
-    """Evaluate ``colliders`` at ``hierarchy``'s world pose (ref §G.2, §G.3); numpy, no kernel."""
+    """Evaluate ``colliders`` at ``hierarchy``'s world pose (§G.2, §G.3); numpy, no kernel."""
     t = colliders.transform
     n = colliders.count
     pos = hierarchy.world_position[t]

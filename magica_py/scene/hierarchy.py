@@ -3,7 +3,7 @@
 Unity semantics: Y up, left-handed, quaternions (x, y, z, w). A node has a local position,
 rotation and scale relative to its parent; its world matrix is ``parent_local_to_world @
 TRS(local)``, its world rotation ``parent_world_rotation * local_rotation`` and its lossy
-scale the diagonal of ``inverse(R_world) @ local_to_world[:3, :3]`` (reference §A.3), so
+scale the diagonal of ``inverse(R_world) @ local_to_world[:3, :3]`` (docs/solver.md §A.3), so
 numbers read off a Unity scene carry over unchanged.
 
 Nodes are stored parents-before-children, so one forward pass (``propagate_world``, a numba
@@ -105,7 +105,7 @@ def propagate_world(parent, local_position, local_rotation, local_scale,
 
 @kernel
 def restore_local_pose(indices, rest_position, rest_rotation, local_position, local_rotation):
-    """RESTORE phase: write the build-time local position and rotation back (reference §A.2)."""
+    """RESTORE phase: write the build-time local position and rotation back (§A.2)."""
     for k in range(indices.shape[0]):
         i = indices[k]
         for c in range(3):

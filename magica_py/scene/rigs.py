@@ -4,7 +4,7 @@ Every generator returns ``list[BoneSpec]`` (``magica_py.scene.hierarchy``) in pa
 children order, ready to be appended to a rig's explicit bones. All lengths are metres, all
 angles degrees, all vectors are given in the *parent bone's* local space.
 
-Bone axis convention (what the solver sees, ref §B.2: normal = bone +Y, tangent = bone +Z)
+Bone axis convention (what the solver sees, docs/solver.md §B.2: normal = bone +Y, tangent = bone +Z)
 ------------------------------------------------------------------------------------------
 * local **+Y** points along the strand, from a bone to its child (like Mixamo / Unity
   humanoid bones), so ``child.local_position == (0, segment, 0)``;

@@ -1,4 +1,4 @@
-"""Per-frame team stages before the steps (ref §C.1, §C.2, §C.4, §C.5, §H.1).
+"""Per-frame team stages before the steps (docs/solver.md §C.1, §C.2, §C.4, §C.5, §H.1).
 
 ``skin_team`` (C.1) computes every particle's animated base pose from the bones read this
 frame; ``center_and_inertia_team`` (C.2 + C.4) the center, anchor, teleport test, movement
@@ -46,13 +46,6 @@ def world_point(l0, l1, l2, x):
     return (l0[0] * x[0] + l0[1] * x[1] + l0[2] * x[2] + l0[3] * x[3],
             l1[0] * x[0] + l1[1] * x[1] + l1[2] * x[2] + l1[3] * x[3],
             l2[0] * x[0] + l2[1] * x[1] + l2[2] * x[2] + l2[3] * x[3])
-
-
-@kernel
-def transform_point_rows(l0, l1, l2, b0, b1, b2, b3, v, w):
-    """``(L @ B) @ (v, w)`` without forming the product: ``B`` (rows b0..b3) first, then the
-    first three rows l0..l2 of ``L`` (4-tuples)."""
-    return world_point(l0, l1, l2, bind_point(b0, b1, b2, b3, v, w))
 
 
 @kernel

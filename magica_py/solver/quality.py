@@ -1,6 +1,6 @@
-"""Quality mode passes at the end of a step (issue 8, ``docs/quality-mode.md``).
+"""Quality mode passes at the end of a step (``docs/quality-mode.md``).
 
-MagicaCloth2's constraints are soft (ref Appendix 4): edges stretch by 5-60 % under load and
+MagicaCloth2's constraints are soft (docs/solver.md Appendix 4): edges stretch by 5-60 % under load and
 fast particles end a step inside colliders. Quality mode adds, after the second distance pass
 and the motion constraint (D.9), before the end of the step (D.10):
 

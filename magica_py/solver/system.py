@@ -13,7 +13,7 @@ Runtime control (all take effect at the next frame, none resets the simulation u
   KeepTeleport when keep_pose);
 * ``set_enabled(cloth, enabled)`` (disable mode Reset: re-enabling resets), ``set_time_scale``,
   ``add_force(cloth, direction, speed, mode)``;
-* ``add_cloth(spec) -> team id`` / ``remove_cloth(team)`` — teams at runtime (issue 3 item 7):
+* ``add_cloth(spec) -> team id`` / ``remove_cloth(team)`` — teams at runtime:
   chunks of the global SoA are allocated from freed space first and freed on removal
   (``layout.SolverLayout``); other teams' rows never move or change; the frame kernel visits
   ``model.live_teams`` only; a removed cloth's bones are no longer restored nor written.
@@ -30,6 +30,7 @@ import time as _time
 import numba
 import numpy as np
 
+from magica_py.params import default_parameters
 from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, update_mode_code
 from magica_py.solver.colliders import fill_slots
 from magica_py.solver.fields import F64
@@ -60,7 +61,7 @@ class ClothSystem:
     ``models`` may be given (prebuilt ``build.ClothModel`` in the same order); otherwise each
     spec is built with ``build.build_cloth`` from the hierarchy's current (rest) pose.
     ``parallel=True`` spreads teams over numba threads (same results bit for bit; worth it
-    for crowds on idle cores only, tech-notes §8: off by default). ``batched=True`` (default)
+    for crowds on idle cores only, docs/tech-notes.md §8: off by default). ``batched=True`` (default)
     runs the steps of teams with identical topology and parameters side by side in blocks
     (``solver/batched``: same results bit for bit, several times faster for crowds);
     ``batched=False`` runs every team alone (benchmarks, debugging).
@@ -122,7 +123,7 @@ class ClothSystem:
     # ------------------------------------------------------------------ registration
     def attach(self, player, scene=None) -> "ClothSystem":
         """Add the system to ``player``'s LATE_UPDATE and register the restored bones (every
-        non-invalid bone of every cloth, ref §A.2, §B.5)."""
+        non-invalid bone of every cloth, docs/solver.md §A.2, §B.5)."""
         from magica_py.runtime.phases import Phase, System
 
         player.schedule.add(Phase.LATE_UPDATE, System(self.name, self.run))
@@ -137,7 +138,7 @@ class ClothSystem:
 
     # ------------------------------------------------------------------ teams at runtime
     def add_cloth(self, spec, model=None) -> int:
-        """Add a cloth at runtime (issue 3 item 7); returns its team id (ids are not reused).
+        """Add a cloth at runtime; returns its team id (ids are not reused).
 
         The model is built (unless given) after putting the cloth's bones back to their rest
         local pose. Its chunks come from
@@ -237,7 +238,7 @@ class ClothSystem:
             self._player.register_restored_bones(self.restored_bones(), owner=self)
 
     def _activate(self, t: int) -> None:
-        mode = self._parameter(t, "update_mode", "normal")
+        mode = self._parameter(t, "update_mode", default_parameters()["update_mode"])
         if str(mode) in ("normal", "animator_linkage") and self._scene_update_mode:
             mode = self._scene_update_mode
         self.time_state.activate(t, update_mode=update_mode_code(mode))
@@ -441,7 +442,7 @@ class ClothSystem:
         return default if value is None else value
 
     def _check_positive_scale(self, hierarchy, pairs=None) -> None:
-        """Negative scale is rejected (ref §H.7 allows a Python port to assume positive scale)."""
+        """Negative scale is rejected (§H.7 allows a Python port to assume positive scale)."""
         for spec, model in (pairs if pairs is not None else zip(self.specs, self.models)):
             nodes = list(np.asarray(model.transform_index)) + [int(model.component_transform)]
             for node in nodes:
@@ -450,7 +451,7 @@ class ClothSystem:
                     raise ValueError(
                         f"{where}: transform {hierarchy.names[node]!r} has a negative scale "
                         f"{tuple(float(x) for x in hierarchy.lossy_scale[node])}; negative scale is not "
-                        f"supported (MagicaCloth2 refuses it at build too, ref §H.7): use positive scales")
+                        f"supported (MagicaCloth2 refuses it at build too, docs/solver.md §H.7): use positive scales")
 
     def _write_parameters(self, team: int) -> None:
         def resolve(name):
