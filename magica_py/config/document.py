@@ -140,7 +140,8 @@ def parse_text(text: str, source: str | None = None) -> Document:
             raise ConfigError(source, [Issue("", f"invalid YAML: {exc}")]) from None
         doc = Document(None, source, text=text)
         issues: list[Issue] = []
-        if node is None:  # nothing, or only comments: say so rather than "rigs: is required"
+        if node is None or (isinstance(node, yaml.ScalarNode) and node.tag == "tag:yaml.org,2002:null"):
+            # nothing, only comments, or an empty document ("---"): say so rather than "rigs: is required"
             raise ConfigError(source, [Issue("", "the file is empty (no YAML document in it): expected a scene "
                                                  "mapping with at least 'rigs' (docs/scene-format.md; "
                                                  "`magica-py new NAME` writes a starter scene)")])
