@@ -34,8 +34,13 @@ Path = tuple  # tuple[str | int, ...]
 MAX_DOCUMENT_BYTES = 4 * 1024 * 1024
 
 
-class SceneLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that also reads YAML 1.2 exponent numbers (``1e-4``, ``1e4``,
+# libyaml's parser (PyYAML's C binding) when installed: the same nodes, marks and errors,
+# about ten times faster than the pure-Python parser on large documents.
+_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class SceneLoader(_SAFE_LOADER):
+    """PyYAML's safe loader that also reads YAML 1.2 exponent numbers (``1e-4``, ``1e4``,
     ``1.0e30``) as floats; YAML 1.1 needs a dot and a signed exponent (``1.0e-4``) and
     otherwise returns the text ``'1e-4'``."""
 
