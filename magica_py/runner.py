@@ -172,7 +172,8 @@ class FrameProgress:
             from tqdm.auto import tqdm
         else:
             from tqdm import tqdm
-        self.bar = tqdm(total=total, unit="frame", file=stream, delay=delay, desc=desc, leave=True,
+        self.bar = tqdm(total=total, unit="frame", file=stream if terminal or notebook else _LogLines(stream),
+                        delay=delay, desc=desc, leave=True,
                         mininterval=0.1 if terminal or notebook else log_interval,
                         ascii=None if terminal or notebook else True, dynamic_ncols=terminal,
                         ncols=None if terminal or notebook else 100, smoothing=0.1)
@@ -192,6 +193,21 @@ class FrameProgress:
 
     def close(self) -> None:
         self.bar.close()
+
+
+class _LogLines:
+    """A log file's view of the bar: each redraw as its own line (no carriage returns)."""
+
+    def __init__(self, stream):
+        self.stream = stream
+
+    def write(self, text: str) -> None:
+        text = text.replace("\r", "").strip()
+        if text:
+            self.stream.write(text + "\n")
+
+    def flush(self) -> None:
+        self.stream.flush()
 
 
 # ----------------------------------------------------------------------------- the loop

@@ -200,3 +200,33 @@ def test_the_summary_reports_the_compile_apart():
     line = summary_line(types.SimpleNamespace(name="s", cloths=[1]), stats, True, None)
     assert line == "s: 11 frames, 15 simulation steps, 100.00 ms/frame (wall 1.10 s, first frame 0.10 s; " \
                    "compile 42.0 s, first run only)"
+
+
+def test_in_a_log_file_each_redraw_is_its_own_line():
+    from magica_py.runner import FrameProgress
+
+    stream = io.StringIO()              # not a terminal
+    bar = FrameProgress(4, stream=stream, delay=0.0, log_interval=0.0)
+    for done in range(1, 5):
+        bar.update(done)
+    bar.close()
+    lines = stream.getvalue().splitlines()
+    assert "\r" not in stream.getvalue() and lines[-1].startswith("100%") and "4/4" in lines[-1]
+
+
+def test_warnings_inside_frames_are_recorded_as_events(repo_root, tmp_path, monkeypatch):
+    from magica_py.api import Session
+    from magica_py.runtime.phases import Phase, System
+    from magica_py.sinks.inspect import summarize
+
+    monkeypatch.chdir(repo_root)
+    target = tmp_path / "w.rrd"
+    with Session("configs/tail_orbit.yaml", record=target) as session:
+        def overflow(ctx):
+            if ctx.frame in (1, 3):
+                np.exp(np.float64(1000.0))
+        session.player.schedule.add(Phase.LATE_UPDATE, System("overflow", overflow))
+        session.run(5)
+    events = summarize(target)["events"]
+    assert [e["frame"] for e in events] == [1, 3]
+    assert all(e["text"].startswith("numpy_warning: ") and "overflow" in e["text"] for e in events)
