@@ -60,8 +60,8 @@ def _wait(watch, count, timeout=600.0):
     time.sleep(0.05)
 
 
-def _save(path, text):
-    path.write_text(text)
+def _save(path, content):
+    path.write_bytes(content.encode() if isinstance(content, str) else content)
     stamp = path.stat().st_mtime_ns + 10_000_000    # coarse file-system clocks: a new stamp for sure
     import os
     os.utime(path, ns=(stamp, stamp))
@@ -134,3 +134,21 @@ def test_watch_command_checks_its_arguments(tmp_path, capsys):
     scene.write_text(SCENE)
     assert W.main_watch([str(scene), "--no-viewer"]) == 2
     assert "without any output" in capsys.readouterr().err
+
+
+def test_saving_an_asset_the_scene_reads_reruns_it(tmp_path, shared_data):
+    import shutil
+
+    shutil.copy(shared_data / "gltf" / "Fox.glb", tmp_path / "Fox.glb")
+    scene = tmp_path / "fox.yaml"
+    scene.write_text("version: 1\nscene: {name: fox, frames: 2}\n"
+                     "rigs:\n  - {name: fox, file: Fox.glb, unit_scale: 0.01}\n")
+    watch = W.Watch(scene, debounce=0.05, poll=0.02, stream=io.StringIO())
+    assert watch.stamps.paths == [scene]
+    thread = _start(watch, 2)
+    _wait(watch, 1)
+    assert tmp_path / "Fox.glb" in watch.stamps.paths     # learnt from the document
+    _save(tmp_path / "Fox.glb", (tmp_path / "Fox.glb").read_bytes())    # re-exported unchanged
+    thread.join(600)
+    assert [r.description for r in watch.reports] == ["first run", "Fox.glb changed"]
+    assert all(r.ok for r in watch.reports)
