@@ -320,6 +320,32 @@ class Watch:
 
 
 # ----------------------------------------------------------------------------- command
+def viewer_listening(address: str, timeout: float = 1.0) -> bool:
+    """Whether something accepts connections at ``host:port`` (or a ``rerun+http://host:port/...``
+    URL): a run streamed to nobody would be lost, and rerun only says so when it shuts down."""
+    import socket
+    from urllib.parse import urlsplit
+
+    netloc = urlsplit(address).netloc if "://" in address else address
+    host, _, port = netloc.rpartition(":")
+    try:
+        with socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout):
+            return True
+    except (OSError, ValueError):
+        return False
+
+
+def _wait_for_viewer(address: str, seconds: float) -> bool:
+    """``viewer_listening``, retried for ``seconds`` (a spawned viewer takes a moment to start)."""
+    end = time.monotonic() + seconds
+    while True:
+        if viewer_listening(address):
+            return True
+        if time.monotonic() >= end:
+            return False
+        time.sleep(0.25)
+
+
 def main_watch(argv=None) -> int:
     parser = argparse.ArgumentParser(
         prog="magica-py watch",
@@ -364,6 +390,10 @@ def main_watch(argv=None) -> int:
         except Exception as exc:  # noqa: BLE001 - rerun raises plain errors without a display
             print(f"magica-py watch: error: cannot start the viewer: {exc}", file=sys.stderr)
             return 2
+    if connect is not None and not _wait_for_viewer(connect, 10.0 if args.spawn else 0.0):
+        print(f"magica-py watch: error: no Rerun viewer is listening at {connect}: start one (`rerun`), or use "
+              "--spawn, or --no-viewer --rrd-dir DIR to keep each run as a file", file=sys.stderr)
+        return 2
     watch = Watch(args.scene, overrides=args.overrides, frames=args.frames, connect=connect,
                   rrd_dir=args.rrd_dir, debounce=args.debounce)
     return watch.run_forever()

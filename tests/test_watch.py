@@ -152,3 +152,19 @@ def test_saving_an_asset_the_scene_reads_reruns_it(tmp_path, shared_data):
     thread.join(600)
     assert [r.description for r in watch.reports] == ["first run", "Fox.glb changed"]
     assert all(r.ok for r in watch.reports)
+
+
+def test_watch_refuses_to_stream_to_a_viewer_that_is_not_there(tmp_path, capsys):
+    import socket
+
+    with socket.socket() as free:
+        free.bind(("127.0.0.1", 0))
+        port = free.getsockname()[1]          # closed again: nothing listens there
+    scene = tmp_path / "wt.yaml"
+    scene.write_text(SCENE)
+    assert W.main_watch([str(scene), "--connect", f"127.0.0.1:{port}"]) == 2
+    assert "no Rerun viewer is listening" in capsys.readouterr().err
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        assert W.viewer_listening(f"rerun+http://127.0.0.1:{server.getsockname()[1]}/proxy")
