@@ -168,7 +168,7 @@ class Watch:
         self.poll = poll
         self.stream = stream if stream is not None else sys.stderr
         self.reports: list[RunReport] = []
-        self.last_data = None                  # the document of the last valid run
+        self.last_data = None                  # the document of the last run that passed validation
         self.stamps = FileStamps([self.scene_path])
         self.run_index = 0
 
@@ -239,8 +239,7 @@ class Watch:
         description = describe_change(self.last_data, data, changed_assets) if data is not None else "unreadable"
         report = RunReport(self.run_index, description, ok=False)
         try:
-            self._run_scene(report, save_time)
-            self.last_data = data
+            self._run_scene(report, save_time, data)
         except _Superseded:
             report.superseded = True
             self.say(f"run {report.index} ({description}): stopped after {report.frames} frames by a new save")
@@ -258,7 +257,7 @@ class Watch:
         self.reports.append(report)
         return report
 
-    def _run_scene(self, report: RunReport, save_time: float) -> None:
+    def _run_scene(self, report: RunReport, save_time: float, data) -> None:
         from magica_py.cli import _attach_solver
         from magica_py.config import load_scene
         from magica_py.runner import CompileWatch, WarningEvents, play
@@ -266,6 +265,7 @@ class Watch:
         from magica_py.sinks import SinkOptions, attach
 
         scene = load_scene(self.scene_path, self.overrides)
+        self.last_data = data   # valid: the next run's description is relative to this one
         report.recording_name = f"{scene.name} · {report.description}"
         frames = self.frames if self.frames is not None else scene.settings.frame_count()
         player = Player.for_scene(scene)

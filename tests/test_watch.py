@@ -168,3 +168,22 @@ def test_watch_refuses_to_stream_to_a_viewer_that_is_not_there(tmp_path, capsys)
         server.bind(("127.0.0.1", 0))
         server.listen()
         assert W.viewer_listening(f"rerun+http://127.0.0.1:{server.getsockname()[1]}/proxy")
+
+
+def test_a_save_during_a_run_stops_it_and_starts_the_new_one(tmp_path):
+    scene = tmp_path / "wt.yaml"
+    scene.write_text(SCENE)
+    watch = W.Watch(scene, frames=10_000_000, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02,
+                    stream=io.StringIO())
+    thread = threading.Thread(target=watch.run_forever, kwargs={"max_runs": 2}, daemon=True)
+    thread.start()
+    while not watch.reports and watch.run_index == 0:
+        time.sleep(0.02)
+    time.sleep(1.0)                              # the first run is under way (it would take hours)
+    watch.frames = 3                             # the new run is short
+    _save(scene, SCENE.replace("damping: 0.05", "damping: 0.3"))
+    thread.join(600)
+    first, second = watch.reports
+    assert first.superseded and not first.ok and 0 < first.frames < 10_000_000
+    assert second.ok and second.frames == 3 and second.description == "tail.parameters.damping 0.05→0.3"
+    assert [p.name for p in (tmp_path / "runs").glob("*.rrd")] == [pathlib.Path(second.recording).name]
