@@ -72,6 +72,13 @@ class FileStamps:
             return None
         return (st.st_mtime_ns, st.st_size)
 
+    def with_paths(self, paths) -> "FileStamps":
+        """Stamps of ``paths``: the ones taken here kept, new files stamped now."""
+        out = FileStamps([])
+        out.paths = [pathlib.Path(p) for p in paths]
+        out.stamps = {p: self.stamps[p] if p in self.stamps else self._stamp(p) for p in out.paths}
+        return out
+
     def changed(self) -> list[pathlib.Path]:
         """The files whose stamp differs from the one taken (without updating it)."""
         return [p for p in self.paths if self._stamp(p) != self.stamps[p]]
@@ -154,7 +161,7 @@ class RunReport:
 
 
 class Watch:
-    """The watch loop; ``run_forever`` is the command, ``check_and_run`` one iteration."""
+    """The watch loop: ``run_forever`` is the command, ``run`` one run of the scene."""
 
     def __init__(self, scene_path, *, overrides=(), frames: int | None = None, connect: str | None = None,
                  rrd_dir=None, debounce: float = DEBOUNCE_SECONDS, poll: float = POLL_SECONDS,
@@ -227,6 +234,7 @@ class Watch:
         from magica_py.config.errors import ConfigError
 
         self.run_index += 1
+        before = FileStamps(self.stamps.paths)   # taken before reading: a save from now on is a new change
         data = None
         try:
             data = read_document(self.scene_path).data
@@ -234,7 +242,7 @@ class Watch:
             pass  # reported below by load_scene, with every other problem
         assets = scene_assets(data, self.scene_path) if data is not None else \
             [p for p in self.stamps.paths if p != self.scene_path]
-        self.stamps = FileStamps([self.scene_path] + assets)   # a save from now on is a new change
+        self.stamps = before.with_paths([self.scene_path] + assets)
         changed_assets = [p for p in changed if p != self.scene_path]
         description = describe_change(self.last_data, data, changed_assets) if data is not None else "unreadable"
         report = RunReport(self.run_index, description, ok=False)
