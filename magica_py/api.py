@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import os
 import pathlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -89,7 +89,6 @@ class Simulation:
     compile_seconds: float = 0.0
     warnings: str = ""
     recording: str | None = None
-    extra: dict = field(default_factory=dict)
 
     def __repr__(self) -> str:
         cloths = ", ".join(f"{k} ({v.particle_count})" for k, v in list(self.cloths.items())[:6])

@@ -20,7 +20,7 @@ import sys
 import time
 import warnings
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 # Per-frame metrics: simulation steps this frame (first one present wins) and particle-steps.
 STEP_METRICS = ("cloth.simulation_steps", "solver.steps", "simulation.steps")
@@ -223,7 +223,6 @@ class RunStats:
     compile_seconds: float = 0.0   # s, numba compiles during the run (first run only)
     first_frame_seconds: float = 0.0  # s, the first frame without its compile (loads the cached kernels)
     warnings: str = ""             # the warnings' summary line, "" when none
-    extra: dict = field(default_factory=dict)
 
 
 def frame_steps(ctx, system) -> float | None:
