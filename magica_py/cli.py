@@ -372,6 +372,8 @@ def _avatar_scene(args):
     vrm = pathlib.Path(args.scene)
     if not vrm.is_file():
         raise InputError(f"{args.scene}: file not found")
+    if args.clip and not pathlib.Path(args.clip.split("#", 1)[0]).is_file():
+        raise InputError(f"--clip: {args.clip.split('#', 1)[0]}: file not found (a .bvh file, or FILE.glb#Animation)")
     if args.save_scene:
         target = pathlib.Path(args.save_scene)
         _check_scene_target(target)

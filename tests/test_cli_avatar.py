@@ -52,6 +52,12 @@ def test_a_clip_is_retargeted_onto_the_avatar(shared_data, tmp_path):
     assert set(result.cloths) and all(np.isfinite(c.positions).all() for c in result.cloths.values())
 
 
+def test_a_missing_clip_is_named(shared_data, capsys):
+    vrm = shared_data / "vrm" / "Godette_vrm_v4.vrm"
+    assert cli.main(["run", str(vrm), "--clip", "nowhere/walk.bvh#x", "--no-rrd"]) == 2
+    assert "--clip: nowhere/walk.bvh: file not found" in capsys.readouterr().err
+
+
 def test_clip_and_save_scene_need_an_avatar(repo_root, capsys):
     scene = str(repo_root / "configs" / "tail_orbit.yaml")
     assert cli.main(["run", scene, "--clip", "x.bvh"]) == 2
