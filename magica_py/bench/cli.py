@@ -38,9 +38,9 @@ class Progress:
     """Progress over a known total of frames, drawn with the CLI's progress bar."""
 
     def __init__(self, total: int, quiet: bool = False):
-        from magica_py.cli import ProgressBar
+        from magica_py.runner import FrameProgress
 
-        self.bar = None if quiet else ProgressBar(total, delay=0.5)
+        self.bar = None if quiet else FrameProgress(total, delay=0.5)
         self.done = 0
         self.base = 0
 
@@ -76,7 +76,7 @@ def main_bench(argv) -> int:
     from magica_py.bench.reference import CHECK_FREQUENCY, REFERENCE_FREQUENCY, fit_order, resolved_error
     from magica_py.bench.variants import Variant, resolve_scene_path, run_variant, time_interleaved
 
-    p = argparse.ArgumentParser(prog="magica-py bench", description=__doc__,
+    p = argparse.ArgumentParser(prog="magica-py bench", description=__doc__.replace("``", ""),
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenes", default=",".join(SCENES), help="comma-separated showcase scenes or YAML paths")
     p.add_argument("--frequencies", default=",".join(map(str, FREQUENCIES)), help="simulation Hz to sweep")
@@ -87,7 +87,7 @@ def main_bench(argv) -> int:
                         "(values parsed as YAML; repeatable)")
     p.add_argument("--repeats", type=int, default=9, help="timed runs per variant (median)")
     p.add_argument("--duration", type=float, default=None, help="seconds per run (default: the scene's)")
-    p.add_argument("--out", default=None, help="report folder (default: reports/)")
+    p.add_argument("--out", default=None, help="report folder (default: reports/ in the current folder)")
     p.add_argument("--skip", default="", help="comma-separated parts to skip: fps,numpy,features,crowd")
     p.add_argument("--quiet", "-q", action="store_true")
     args = p.parse_args(argv)
@@ -369,7 +369,7 @@ def main_stability(argv) -> int:
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="a cloth parameter applied to every case (validated; VALUE is YAML), e.g. "
                         "solver.rate_mode=frequency_consistent; repeatable")
-    p.add_argument("--out", default=None, help="report folder (default: reports/)")
+    p.add_argument("--out", default=None, help="report folder (default: reports/ in the current folder)")
     p.add_argument("--quiet", "-q", action="store_true")
     args = p.parse_args(argv)
     try:
