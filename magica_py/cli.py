@@ -49,6 +49,10 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
               "speed against error: frequency sweep vs a converged reference, Pareto plot (reports/)"),
     "stability": ("magica_py.bench.cli", "main_stability",
                   "hard-case stability suite (configs/hard): finiteness, speed, stretch, penetration, rest"),
+    "bake": ("magica_py.bake.cli", "main_bake",
+             "simulate a scene and write its bones' motion as animation (.glb / .gltf / .vrm / .bvh)"),
+    "batch": ("magica_py.batch.cli", "main_batch",
+              "run a job file's cross product of simulations on a Dask cluster; one table of metrics"),
 }
 
 # Per-frame metrics: simulation steps this frame (first one present wins) and particle-steps.
