@@ -45,7 +45,8 @@ class BakeResult:
     out: Path
     motion: CapturedMotion
     bytes: int
-    simulate_seconds: float
+    load_seconds: float                # s, scene load and build of the rigs' file info
+    simulate_seconds: float            # s, the frame loop (solver and capture)
     write_seconds: float
     notes: list[str] = field(default_factory=list)
 
@@ -202,18 +203,20 @@ def bake_scene(scene_path, out, overrides=(), bones=None, frames: int | None = N
     out = check_output(out)
     if units is not None and out.suffix.lower() != ".bvh":
         raise BakeError("--units applies to a .bvh output; a glTF copy keeps its file's unit scale")
+    start = _time.perf_counter()
     scene = load_scene(scene_path, overrides)
     count = frames if frames is not None else scene.settings.frame_count()
     if count is None:
         raise BakeError("the scene runs on the wall clock for a duration: give --frames N to bake it")
     rigs = file_rigs(scene)
     chosen, source = plan_bones(scene, out, bones, rig, rigs)
+    loaded = _time.perf_counter() - start
     motion = simulate_and_capture(scene, chosen, count, progress)
     start = _time.perf_counter()
     notes = bake_capture(scene, motion, out, source, rigs, units, animation_name)
     written = _time.perf_counter() - start
     size = out.stat().st_size + (out.with_suffix(".bin").stat().st_size if out.suffix.lower() == ".gltf" else 0)
-    return BakeResult(out, motion, size, motion.wall_time, written, notes)
+    return BakeResult(out, motion, size, loaded, motion.wall_time, written, notes)
 
 
 def pose_error(motion: CapturedMotion, position: np.ndarray, rotation: np.ndarray) -> tuple[float, float]:

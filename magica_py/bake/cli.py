@@ -73,5 +73,6 @@ def main_bake(argv) -> int:
             print(f"magica-py bake: {note}", file=sys.stderr)
         m = result.motion
         print(f"{os.path.relpath(result.out)}: {len(m.names)} bones x {m.frames} frames, {result.bytes / 1e6:.2f} MB; "
-              f"simulated in {result.simulate_seconds:.2f} s, written in {result.write_seconds:.2f} s")
+              f"loaded in {result.load_seconds:.2f} s, simulated in {result.simulate_seconds:.2f} s, "
+              f"written in {result.write_seconds:.2f} s")
     return EXIT_OK

@@ -52,9 +52,13 @@ def main_batch(argv) -> int:
         return EXIT_BAD_INPUT
     if args.list:
         done = finished_rows(out) if out.is_dir() else {}
-        for job in job_file.jobs:
-            state = done.get(job.job_id, {}).get("status", "todo")
-            print(f"{job.job_id}  {state:6}  {job.labels['scene']}: {short_label({**job.labels, 'job_id': job.job_id})}")
+        try:
+            for job in job_file.jobs:
+                state = done.get(job.job_id, {}).get("status", "todo")
+                print(f"{job.job_id}  {state:6}  {job.labels['scene']}: "
+                      f"{short_label({**job.labels, 'job_id': job.job_id})}")
+        except BrokenPipeError:   # `magica-py batch JOBS --list | head`
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
     executor = Executor(workers=args.workers, scheduler=args.scheduler)
     if not args.quiet:

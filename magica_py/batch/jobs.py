@@ -62,6 +62,7 @@ class Job:
     labels: dict = field(default_factory=dict)   # scene, clip, override, fps, seed, set.<path>
     rrd: bool = False
     bake: str | None = None              # output extension without the dot, or None
+    scene_sha256: str = ""               # the client's scene file: a worker checks it sees the same
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -239,6 +240,6 @@ def load_job_file(path) -> JobFile:
         seen.add(jid)
         labels = {"scene": scene.stem, "clip": clip, "override": oname, "fps": fps, "seed": seed}
         labels.update({f"set.{k}": _format(v) for k, v in sweep})
-        jobs.append(Job(jid, str(scene), tuple(overrides), frames, labels, rrd, bake))
+        jobs.append(Job(jid, str(scene), tuple(overrides), frames, labels, rrd, bake, digests[scene]))
     return JobFile(path, str(data.get("name") or path.stem), jobs, plot.get("metric", "max_stretch"),
                    plot.get("cost", "ms_per_frame"))

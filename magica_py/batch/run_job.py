@@ -60,6 +60,15 @@ def _prepare(job):
     from magica_py.config import load_scene
     from magica_py.runtime.player import Player
 
+    if job.scene_sha256:
+        try:
+            seen = hashlib.sha256(Path(job.scene).read_bytes()).hexdigest()
+        except OSError as exc:
+            raise FileNotFoundError(f"{job.scene}: not readable on worker {socket.gethostname()} ({exc.strerror}); "
+                                    "every worker needs the scene files at the same path (docs/batch.md)") from None
+        if seen != job.scene_sha256:
+            raise ValueError(f"{job.scene}: the file on worker {socket.gethostname()} differs from the one the "
+                             "batch was started with; keep the workers' checkouts in step (docs/batch.md)")
     scene = load_scene(job.scene, list(job.overrides))
     player = Player.for_scene(scene)
     system = attach_cloth(player, scene)
