@@ -138,3 +138,31 @@ def test_two_worker_cluster_survives_a_killed_worker_with_the_same_bits(tmp_path
     victim = next(r for jid, r in rows.items() if killed[1].startswith(jid))
     assert not victim["worker"].endswith(f":{killed[0]}")                  # it ran again on another worker
     assert rows[reference["job_id"]]["state_hash"] == reference["state_hash"]   # same bits as this process
+
+
+def test_a_worker_refuses_a_scene_file_that_changed_since_the_batch_started(tmp_path, repo_root):
+    scene = tmp_path / "tail.yaml"
+    scene.write_text((repo_root / "configs" / "tail_orbit.yaml").read_text())
+    path = tmp_path / "jobs.yaml"
+    path.write_text(f"version: 1\nscenes: [{scene}]\nframes: 3\n")
+    jobs = load_job_file(path).jobs
+    scene.write_text(scene.read_text() + "\n# edited\n")
+    row = run_batch(jobs, tmp_path / "out", Executor(workers=0)).rows[0]
+    assert row["status"] == "failed" and "differs from the one the batch was started with" in row["error"]
+
+
+def test_batch_command_writes_the_summary_and_reports_bad_job_files(tmp_path, repo_root, capsys):
+    from magica_py.cli import main
+
+    path = job_file(tmp_path, repo_root, "fps: [30, 60]\noutputs: {rrd: true, bake: bvh}\n")
+    out = tmp_path / "out"
+    assert main(["batch", str(path), "--out", str(out), "--workers", "0", "--quiet"]) == 0
+    for name in ("summary.parquet", "summary.csv", "pareto.png"):
+        assert (out / name).stat().st_size > 0
+    assert len(list((out / "rrd").glob("*.rrd"))) == 2 and len(list((out / "bake").glob("*.bvh"))) == 2
+    assert (out / "pareto.png").read_bytes()[:4] == b"\x89PNG"
+    bad = job_file(tmp_path, repo_root, "fps: [0]\n", name="bad.yaml")
+    assert main(["batch", str(bad), "--out", str(tmp_path / "bad"), "--workers", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "bad.yaml: fps[0]: expected a positive number" in err and "Traceback" not in err
+    assert not (tmp_path / "bad").exists()
