@@ -16,7 +16,7 @@ set:                                  # optional: one axis per path, its values 
 fps: [30, 60]                         # optional axis: scene.fps (default: the scene's)
 seeds: [0, 1]                         # optional axis: scene.seed (default: the scene's)
 outputs: {rrd: false, bake: null}     # per job: a recording, and/or a bake (glb|gltf|vrm|bvh)
-plot: {metric: max_stretch, cost: ms_per_frame}   # the Pareto plot's axes
+plot: {metric: max_stretch, cost: ms_per_sim_second}   # the Pareto plot's axes
 ```
 
 Jobs = scenes x clips x overrides x (every ``set`` path's values) x fps x seeds. Each job is
@@ -78,7 +78,7 @@ class JobFile:
     name: str
     jobs: list[Job]
     metric: str = "max_stretch"
-    cost: str = "ms_per_frame"
+    cost: str = "ms_per_sim_second"
 
 
 def _fail(path, where, message):
@@ -219,7 +219,7 @@ def load_job_file(path) -> JobFile:
         _fail(path, "plot", f"expected a mapping with metric and cost column names, got {plot!r}")
     from magica_py.batch.table import METRIC_COLUMNS
 
-    for key, default in (("metric", "max_stretch"), ("cost", "ms_per_frame")):
+    for key, default in (("metric", "max_stretch"), ("cost", "ms_per_sim_second")):
         if plot.get(key, default) not in METRIC_COLUMNS:
             _fail(path, f"plot.{key}", f"expected one of {', '.join(METRIC_COLUMNS)}, got {plot[key]!r}")
 
@@ -242,4 +242,4 @@ def load_job_file(path) -> JobFile:
         labels.update({f"set.{k}": _format(v) for k, v in sweep})
         jobs.append(Job(jid, str(scene), tuple(overrides), frames, labels, rrd, bake, digests[scene]))
     return JobFile(path, str(data.get("name") or path.stem), jobs, plot.get("metric", "max_stretch"),
-                   plot.get("cost", "ms_per_frame"))
+                   plot.get("cost", "ms_per_sim_second"))
