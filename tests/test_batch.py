@@ -131,6 +131,13 @@ def test_two_worker_cluster_survives_a_killed_worker_with_the_same_bits(tmp_path
             time.sleep(0.05)
         thread.join(600)
         assert killed is not None, "no job was seen running"
+        # the same cluster as an "existing cluster": magica-py batch --scheduler ADDRESS
+        from magica_py.cli import main
+
+        more = job_file(tmp_path, repo_root, "fps: [30, 45]\n", name="more.yaml")
+        assert main(["batch", str(more), "--out", str(tmp_path / "remote"), "--scheduler",
+                     cluster.scheduler_address, "--quiet"]) == 0
+        assert len(finished_rows(tmp_path / "remote")) == 2
     report = result["report"]
     rows = {r["job_id"]: r for r in report.rows}
     assert set(rows) == {j.job_id for j in jobs}
