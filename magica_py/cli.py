@@ -386,17 +386,21 @@ class ProgressBar:
         if elapsed < self.delay or (now - self.last_draw < self.interval and not force):
             return
         self.last_draw = now
-        per_frame = elapsed / max(done, 1)
-        if self.total:
-            filled = int(self.width * done / self.total)
-            bar = "#" * filled + "." * (self.width - filled)
-            eta = per_frame * (self.total - done)
-            text = f"\r[{bar}] {done}/{self.total} frames  {1000 * per_frame:.2f} ms/frame  ETA {eta:.1f} s "
-        else:
-            text = f"\r{done} frames  {1000 * per_frame:.2f} ms/frame  {elapsed:.1f} s "
-        self.stream.write(text)
+        self.stream.write(self.text(done, elapsed))
         self.stream.flush()
         self.drawn = True
+
+    def text(self, done: int, elapsed: float) -> str:
+        """The line drawn (subclasses count other things than frames)."""
+        per_frame = elapsed / max(done, 1)
+        if self.total:
+            eta = per_frame * (self.total - done)
+            return f"\r{self.bar(done)} {done}/{self.total} frames  {1000 * per_frame:.2f} ms/frame  ETA {eta:.1f} s "
+        return f"\r{done} frames  {1000 * per_frame:.2f} ms/frame  {elapsed:.1f} s "
+
+    def bar(self, done: int) -> str:
+        filled = int(self.width * done / max(self.total or 1, 1))
+        return "[" + "#" * filled + "." * (self.width - filled) + "]"
 
     def close(self) -> None:
         if self.drawn:

@@ -16,7 +16,6 @@ so an interrupted write leaves no half file that a restart would trust.
 from __future__ import annotations
 
 import json
-import sys
 import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +23,7 @@ from pathlib import Path
 from magica_py.batch.executor import Executor, WorkerLost
 from magica_py.batch.jobs import Job
 from magica_py.batch.run_job import run_job
+from magica_py.cli import ProgressBar
 
 
 @dataclass
@@ -40,45 +40,25 @@ class BatchReport:
         return [r for r in self.rows if r.get("status") != "ok"]
 
 
-class JobProgress:
+class JobProgress(ProgressBar):
     """``[#####.....] 12/200 jobs, 1 failed, 0.8 s/job, ETA 150 s`` on stderr (a terminal, or
-    ``force``), at most ``rate`` redraws per second."""
+    ``force``): the CLI's progress bar counting jobs. ``done`` jobs were finished before."""
 
-    def __init__(self, total: int, done: int = 0, stream=None, force: bool = False, rate: float = 4.0, width=30):
-        self.total, self.done, self.failed = total, done, 0
-        self.start_done = done
-        self.stream = stream if stream is not None else sys.stderr
-        self.enabled = force or bool(getattr(self.stream, "isatty", lambda: False)())
-        self.interval, self.width = 1.0 / rate, width
-        self.start = _time.perf_counter()
-        self.last = 0.0
-        self.drawn = False
+    def __init__(self, total: int, done: int = 0, stream=None, force: bool = False):
+        super().__init__(total, stream=stream, delay=0.0, rate=4.0, force=force)
+        self.done = self.start_done = done
+        self.failed = 0
 
-    def update(self, ok: bool) -> None:
+    def update(self, ok: bool) -> None:  # noqa: D102 - one more job finished
         self.done += 1
         self.failed += 0 if ok else 1
-        self.draw(self.done == self.total)
+        super().update(self.done, force=self.done == self.total)
 
-    def draw(self, force: bool = False) -> None:
-        if not self.enabled:
-            return
-        now = _time.perf_counter()
-        if not force and now - self.last < self.interval:
-            return
-        self.last = now
-        run = self.done - self.start_done
-        per_job = (now - self.start) / run if run else 0.0
-        filled = int(self.width * self.done / max(self.total, 1))
-        eta = f", ETA {per_job * (self.total - self.done):.0f} s" if run else ""
-        self.stream.write(f"\r[{'#' * filled}{'.' * (self.width - filled)}] {self.done}/{self.total} jobs, "
-                          f"{self.failed} failed, {per_job:.2f} s/job{eta} ")
-        self.stream.flush()
-        self.drawn = True
-
-    def close(self) -> None:
-        if self.drawn:
-            self.stream.write("\n")
-            self.stream.flush()
+    def text(self, done: int, elapsed: float) -> str:
+        run = done - self.start_done
+        per_job = elapsed / run if run else 0.0
+        eta = f", ETA {per_job * (self.total - done):.0f} s" if run else ""
+        return f"\r{self.bar(done)} {done}/{self.total} jobs, {self.failed} failed, {per_job:.2f} s/job{eta} "
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
