@@ -173,3 +173,21 @@ def test_batch_command_writes_the_summary_and_reports_bad_job_files(tmp_path, re
     err = capsys.readouterr().err
     assert "bad.yaml: fps[0]: expected a positive number" in err and "Traceback" not in err
     assert not (tmp_path / "bad").exists()
+
+
+def test_clips_axis_swaps_the_animation_clip(tmp_path, repo_root, shared_data):
+    fox = shared_data / "gltf" / "Fox.glb"
+    path = tmp_path / "clips.yaml"
+    path.write_text(f"""version: 1
+scenes: [{repo_root / 'configs' / 'fox_run.yaml'}]
+frames: 4
+clips:
+  path: animation[0].clip
+  files: ["{fox}#Run", "{fox}#Walk"]
+""")
+    jobs = load_job_file(path).jobs
+    assert [j.labels["clip"] for j in jobs] == [f"{fox}#Run", f"{fox}#Walk"]
+    assert jobs[1].overrides == (f"animation[0].clip={fox}#Walk",)
+    rows = run_batch(jobs, tmp_path / "out", Executor(workers=0)).rows
+    assert [r["status"] for r in rows] == ["ok", "ok"], [r.get("error") for r in rows]
+    assert rows[0]["state_hash"] != rows[1]["state_hash"]            # another clip, another motion
