@@ -18,6 +18,7 @@ the others. ``fn`` must be importable on the workers (a module-level function).
 """
 from __future__ import annotations
 
+import logging
 import os
 
 
@@ -74,7 +75,15 @@ class Executor:
             self._own_client = None
             self.client = None
         if self._cluster is not None:
-            self._cluster.close()
+            # a worker busy with the last numba call can take longer than the nanny's grace
+            # time to stop; it is then killed, which is what closing means here: not a warning
+            nanny = logging.getLogger("distributed.nanny")
+            level = nanny.level
+            nanny.setLevel(logging.ERROR)
+            try:
+                self._cluster.close()
+            finally:
+                nanny.setLevel(level)
             self._cluster = None
 
     def map(self, fn, items: list, key_prefix: str = "magica-job", keys: list[str] | None = None):

@@ -88,11 +88,13 @@ def pareto_plot(rows: list[dict], path, metric: str = "max_stretch", cost: str =
     path = Path(path)
     ok = [r for r in rows if r.get("status") == "ok" and _finite(r.get(metric)) and _finite(r.get(cost))]
     fig, ax = plt.subplots(figsize=(8, 5.5))
-    scenes = sorted({r["scene"] for r in ok})
-    for k, scene in enumerate(scenes):
-        members = [r for r in ok if r["scene"] == scene]
+    group = colour_key(ok)
+    groups = sorted({str(r.get(group)) for r in ok})
+    palette = plt.get_cmap("tab10" if len(groups) <= 10 else "tab20")
+    for k, value in enumerate(groups):
+        members = [r for r in ok if str(r.get(group)) == value]
         ax.scatter([r[cost] for r in members], [r[metric] for r in members], s=14, alpha=0.7,
-                   color=f"C{k % 10}", label=f"{scene} ({len(members)} jobs)")
+                   color=palette(k % palette.N), label=f"{group} {value} ({len(members)} jobs)")
     points = [(float(r[cost]), float(r[metric])) for r in ok]
     front = pareto_front(points)
     if front:
@@ -107,12 +109,22 @@ def pareto_plot(rows: list[dict], path, metric: str = "max_stretch", cost: str =
     if ok and min(p[0] for p in points) > 0:
         ax.set_xscale("log")
     ax.grid(True, which="both", linewidth=0.3)
-    if scenes:
-        ax.legend(fontsize=7)
+    if groups:
+        ax.legend(fontsize=6, ncol=2 if len(groups) > 8 else 1)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def colour_key(rows: list[dict]) -> str:
+    """The column whose values colour the points: the first of scene, override, clip, the
+    swept paths, fps and seed that varies over ``rows``."""
+    sets = sorted({k for r in rows for k in r if k.startswith("set.")})
+    for key in ("scene", "override", "clip", *sets, "fps", "seed"):
+        if len({str(r.get(key)) for r in rows}) > 1:
+            return key
+    return "scene"
 
 
 UNITS = {"max_stretch": "relative", "mean_stretch": "relative", "max_root_stretch": "relative",
