@@ -76,7 +76,10 @@ def _load_scene(job):
     doc = copy.deepcopy(_DOCUMENTS[key])
     if job.overrides:
         apply_overrides(doc, list(job.overrides))
-    return build_scene(validate_document(doc), Path(job.scene), doc.effective_text(), list(job.overrides))
+    # the scene text as run (YAML dumped again after overrides) is read only by the recording
+    # and the bake (which rigs came from which file)
+    text = doc.effective_text() if (job.rrd or job.bake) else None
+    return build_scene(validate_document(doc), Path(job.scene), text, list(job.overrides))
 
 
 def _prepare(job):
