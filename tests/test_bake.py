@@ -184,3 +184,29 @@ def test_bake_cli_writes_and_summarises(tmp_path, repo_root, capsys):
     captured = capsys.readouterr()
     assert "bones x 3 frames" in captured.out
     assert out.read_text().startswith("HIERARCHY") and not list(tmp_path.glob("*.partial"))
+
+
+def test_vrm1_rig_with_two_roots_round_trip(tmp_path, shared_data):
+    """A VRM 1.0 spring example (plain glTF axes, mirrored along X): both root nodes of the
+    file (the spring chain and the collider's node) are baked, the chain swings."""
+    source = shared_data / "vrm" / "three-vrm-springbone-examples" / "sphere-collider.gltf"
+    scene_file = tmp_path / "vrm1.yaml"
+    scene_file.write_text(f"""
+version: 1
+scene: {{name: vrm1, fps: 60, frames: {FRAMES}}}
+rigs:
+  - {{name: springs, file: {source}}}
+animation:
+  - {{target: Spring A, oscillate: {{property: rotation, axis: [0, 0, 1], amplitude: 40, frequency: 2}}}}
+cloths:
+  - {{from_vrm: springs}}
+""")
+    out = tmp_path / "springs.vrm"
+    m = bake_scene(scene_file, out, frames=FRAMES).motion
+    assert set(m.names) == {"Spring A", "Spring B", "Spring C", "Spring D", "Spring E", "Collider"}
+    assert_cloth_moved(m, ["Spring C", "Spring D"])
+    from magica_py.io.gltf import load_gltf
+
+    clip = load_gltf(out).clip("vrm1_baked")                       # VRM 1.0: mirrored along X
+    position, rotation = replay(scene_file, (), clip, m, m.times.astype(np.float32))
+    assert_round_trip(m, position, rotation)

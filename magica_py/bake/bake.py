@@ -37,6 +37,7 @@ class FileRig:
     unit_scale: float                  # metres per file unit, as the importer used it
     mirror_axis: str
     node_of: dict[str, int]            # bone name -> glTF node index (glTF / VRM)
+    names: frozenset = frozenset()     # the bone names the file brought (glTF nodes, BVH joints)
     instances: int = 1
 
 
@@ -76,22 +77,33 @@ def file_rigs(scene) -> dict[str, FileRig]:
             imported = load_rig(path, prefix=prefix, unit_scale=unit_scale)
         name = entry.get("name") or path.stem
         if isinstance(imported, BvhAnimation):
-            out[name] = FileRig(name, path, "bvh", prefix, imported.unit_scale, "x", {}, instances.get(name, 1))
+            out[name] = FileRig(name, path, "bvh", prefix, imported.unit_scale, "x", {},
+                                frozenset(b.name for b in imported.bones), instances.get(name, 1))
             continue
         rig = getattr(imported, "rig", imported)
         kind = "vrm" if rig is not imported else "gltf"
         node_of = {n: i for i, n in enumerate(rig.names) if n is not None}
-        out[name] = FileRig(name, path, kind, prefix, rig.unit_scale, rig.mirror_axis, node_of, instances.get(name, 1))
+        out[name] = FileRig(name, path, kind, prefix, rig.unit_scale, rig.mirror_axis, node_of,
+                            frozenset(b.name for b in imported.bones), instances.get(name, 1))
     return out
 
 
-def _rig_of_bone(scene) -> dict[int, str]:
+def _file_rig_of_bone(scene, rigs: dict[str, FileRig]) -> dict[int, str]:
+    """Hierarchy index -> name of the file rig the bone came from, or that its nearest
+    ancestor came from (bones a scene hangs under an imported bone); generated bones are
+    left out. Instance copies (``name#3``) count as their rig's."""
     h = scene.hierarchy
-    owner = {}
-    for rig in scene.rigs:
-        for root in rig.root_nodes:
-            for i in h.descendants(int(root)):
-                owner.setdefault(i, rig.name)
+    by_name = {}
+    for rig in rigs.values():
+        for n in rig.names:
+            by_name.setdefault(n, rig.name)
+    owner: dict[int, str] = {}
+    for i in range(h.count):                      # parents before children
+        rig = by_name.get(h.names[i].split("#", 1)[0])
+        if rig is None and h.parent[i] >= 0:
+            rig = owner.get(int(h.parent[i]))
+        if rig is not None:
+            owner[i] = rig
     return owner
 
 
@@ -143,7 +155,7 @@ def plan_bones(scene, out, patterns=None, rig: str | None = None, rigs: dict | N
         raise BakeError(str(exc)) from None
     if not bones:
         raise BakeError("the scene has no rig bones to bake")
-    owner = _rig_of_bone(scene)
+    owner = _file_rig_of_bone(scene, rigs)
     if out.suffix.lower() == ".bvh":
         return _with_ancestors(scene, bones, lambda i: True), None
     used = [name for name in dict.fromkeys(owner.get(i) for i in bones)
@@ -181,7 +193,7 @@ def bake_capture(scene, motion: CapturedMotion, out, source: FileRig | None = No
         rigs = file_rigs(scene) if rigs is None else rigs
         scale = resolve_units(units)
         if scale is None:
-            owner = _rig_of_bone(scene)
+            owner = _file_rig_of_bone(scene, rigs)
             bvh = [rigs[n] for n in dict.fromkeys(owner.get(int(i)) for i in motion.bones)
                    if n in rigs and rigs[n].kind == "bvh"]
             scale = bvh[0].unit_scale if len(bvh) == 1 else 1.0

@@ -48,14 +48,12 @@ class CapturedMotion:
 
 
 def rig_bones(scene) -> list[int]:
-    """Hierarchy indices of every bone of the scene's rigs (static collider nodes excluded),
-    parents before children."""
+    """Hierarchy indices of every bone of the scene's rigs, parents before children: every
+    transform but the static nodes the loader adds for colliders without a transform
+    (tagged ``collider``). A rig may have several roots (a glTF scene often has)."""
     h = scene.hierarchy
-    chosen = set()
-    for rig in scene.rigs:
-        for root in rig.root_nodes:
-            chosen.update(h.descendants(int(root)))
-    return sorted(chosen)
+    tags = getattr(h, "tags", None) or [{}] * h.count
+    return [i for i in range(h.count) if "collider" not in tags[i]]
 
 
 def select_bones(scene, patterns=None) -> list[int]:
