@@ -210,3 +210,34 @@ cloths:
     clip = load_gltf(out).clip("vrm1_baked")                       # VRM 1.0: mirrored along X
     position, rotation = replay(scene_file, (), clip, m, m.times.astype(np.float32))
     assert_round_trip(m, position, rotation)
+
+
+def test_a_node_given_by_a_matrix_is_written_as_trs_and_round_trips(tmp_path):
+    """glTF forbids ``matrix`` on an animated node: the copy carries the node's TRS instead."""
+    c, s = np.cos(np.pi / 6), np.sin(np.pi / 6)
+    matrix = [c, 0, -s, 0, 0, 1, 0, 0, s, 0, c, 0, 0.1, 1.0, 0.2, 1]     # column-major: turn about Y, then move
+    (tmp_path / "m.gltf").write_text(json.dumps({
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"name": "base", "matrix": matrix, "children": [1]},
+                  {"name": "b1", "translation": [0, -0.2, 0], "children": [2]},
+                  {"name": "b2", "translation": [0, -0.2, 0]}]}))
+    scene_file = tmp_path / "m.yaml"
+    scene_file.write_text(f"""
+version: 1
+scene: {{name: matrix_rig, fps: 60, frames: {FRAMES}}}
+rigs: [{{name: r, file: m.gltf}}]
+animation:
+  - {{target: base, oscillate: {{property: rotation, axis: [1, 0, 0], amplitude: 30, frequency: 3}}}}
+cloths:
+  - {{name: c, root_bones: [b1], connection: line}}
+""")
+    out = tmp_path / "out.gltf"
+    m = bake_scene(scene_file, out, frames=FRAMES).motion
+    written = json.loads(out.read_text())
+    assert "matrix" not in written["nodes"][0]
+    from magica_py.io.gltf import load_gltf
+
+    rig = load_gltf(out)
+    assert np.allclose(rig.bones[0].position, load_gltf(tmp_path / "m.gltf").bones[0].position)
+    position, rotation = replay(scene_file, (), rig.clip("matrix_rig_baked"), m, m.times.astype(np.float32))
+    assert_round_trip(m, position, rotation)

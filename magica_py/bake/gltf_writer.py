@@ -111,6 +111,15 @@ def write_gltf(path, motion, *, source=None, node_of: dict[str, int] | None = No
             nodes[index[p]].setdefault("children", []).append(index[j])
         else:
             scene["nodes"].append(index[j])
+    # an animated node may not carry a matrix (glTF 2.0 §3.5.3): give it its rest TRS instead
+    # (the importer decomposed the matrix into exactly this pose)
+    for j in range(len(motion.names)):
+        node = nodes[index[j]]
+        if "matrix" in node:
+            del node["matrix"]
+            node["translation"] = [float(x) for x in to_file_t(motion.rest_position[j])]
+            node["rotation"] = [float(x) for x in to_file_r(motion.rest_rotation[j])]
+            node["scale"] = [float(x) for x in motion.rest_scale[j]]
     if appended and source is not None:
         notes.append(f"{len(appended)} bones not in {source.name} appended as new nodes "
                      f"({', '.join(appended[:4])}{' ...' if len(appended) > 4 else ''})")
