@@ -173,7 +173,7 @@ def plan_bones(scene, out, patterns=None, rig: str | None = None, rigs: dict | N
         source = rigs[used[0]] if used else None
     if source is not None and source.instances > 1:
         raise BakeError(f"rig {source.name!r} has {source.instances} instances and a copy of its file holds one "
-                        "skeleton; bake one instance with --bones, or write a .bvh")
+                        "skeleton; write a .bvh (every instance as its own root)")
     if out.suffix.lower() == ".vrm" and (source is None or source.kind != "vrm"):
         raise BakeError(f"--out {str(out)!r}: a .vrm output is a copy of a VRM rig and the scene's bones to bake "
                         "come from none; write a .glb or .gltf")
