@@ -44,6 +44,7 @@ from magica_py.build.errors import BuildError
 from magica_py.build.model import ClothModel, describe, topology_hash
 from magica_py.build.render_setup import collect_transforms
 from magica_py.build.teams import TeamRegistry
+from magica_py.kernels import portable
 
 __all__ = ["BuildError", "ClothModel", "ModelCache", "TeamRegistry", "build_cloth", "describe"]
 
@@ -245,7 +246,7 @@ def _build(setup, spec, name, mode, root_names) -> ClothModel:
         colliders = np.zeros(0, dtype=np.int32)
 
     g = np.asarray(constraints.parameter(params, "gravity_direction"), dtype=np.float64)
-    g_len = float(np.linalg.norm(g))
+    g_len = portable.norm(g)
     if not len(center_fixed):
         gravity_dir = np.array([0.0, -1.0, 0.0])  # ref §C.2: constant without a center
     else:  # the world gravity direction taken as a center-local vector (zero if too short)

@@ -11,6 +11,7 @@ import numpy as np
 
 from magica_py.build.proxy import FIXED, MOVE, _starts
 from magica_py.build.topology import bending_pairs, edge_triangles, key_table, shear_links
+from magica_py.kernels import portable
 
 CURVE_SAMPLES = 16
 ZERO_DISTANCE = 1e-8
@@ -107,7 +108,7 @@ def distance_links(attribute, parent, pos, neighbor_start, neighbor_count, neigh
     vertical = np.concatenate([vertical, np.zeros(len(shear_src), dtype=bool)])
     order = np.lexsort((~vertical, src))  # by vertex, vertical first, insertion order kept
     src, dst, vertical = src[order], dst[order], vertical[order]
-    length = np.linalg.norm(pos[src] - pos[dst], axis=1)
+    length = portable.norm(pos[src] - pos[dst])
     rest = np.where(vertical, length, -length)
     rest[length < ZERO_DISTANCE] = 0.0
     count = np.bincount(src, minlength=n).astype(np.int32)
@@ -122,7 +123,7 @@ def bending_and_volume(attribute, triangles, pos_local, local_to_world, want_vol
     volume_vertices (Kv,4), volume_rest (Kv,) = 1000·signed tetra volume in world m³)."""
     valid = (attribute & (FIXED | MOVE)) != 0
     move = (attribute & MOVE) != 0
-    world = pos_local @ local_to_world[:3, :3].T + local_to_world[:3, 3]
+    world = portable.transform_points(local_to_world, pos_local)
     edge_pairs, et_start, et_count, et_data, _ = edge_triangles(triangles, pos_local.shape[0])
     worst = int((et_count * (et_count - 1) // 2).sum())
     bend = np.empty((worst, 4), dtype=np.int32)
@@ -138,9 +139,9 @@ def bending_and_volume(attribute, triangles, pos_local, local_to_world, want_vol
 def rest_volumes(pos_local, volume_vertices, local_to_world) -> np.ndarray:
     """1000 x signed tetrahedron volume of each volume pair in world space (ref §D.7); the same
     formula as ``bending_pairs`` (used when a cached model is re-targeted to another instance)."""
-    world = pos_local @ local_to_world[:3, :3].T + local_to_world[:3, 3]
+    world = portable.transform_points(local_to_world, pos_local)
     v = volume_vertices
     if v.shape[0] == 0:
         return np.zeros(0)
     w0, w1, w2, w3 = world[v[:, 0]], world[v[:, 1]], world[v[:, 2]], world[v[:, 3]]
-    return 1000.0 / 6.0 * (np.cross(w1 - w0, w2 - w0) * (w3 - w0)).sum(axis=1)
+    return 1000.0 / 6.0 * portable.dot3(np.cross(w1 - w0, w2 - w0), w3 - w0)

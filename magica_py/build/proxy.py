@@ -12,6 +12,7 @@ import numpy as np
 from magica_py.build.errors import BuildError
 from magica_py.build.topology import edge_triangles, orient_flood_fill
 from magica_py.jit import kernel
+from magica_py.kernels import portable
 from magica_py.kernels.math3d import (
     load3,
     load4,
@@ -128,7 +129,7 @@ def _triangle_normals(pos, tris):
     if tris.shape[0] == 0:
         return np.zeros((0, 3))
     n = np.cross(pos[tris[:, 1]] - pos[tris[:, 0]], pos[tris[:, 2]] - pos[tris[:, 0]])
-    length = np.linalg.norm(n, axis=1)
+    length = portable.norm(n)
     return np.where(length[:, None] > 1e-12, n / np.maximum(length, 1e-300)[:, None], 0.0)
 
 
@@ -143,7 +144,7 @@ def triangle_tangents(pos, tris, uv):
     area = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
     area = np.where(area == 0.0, 1.0, area)
     t = -(e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / area[:, None]
-    length = np.linalg.norm(t, axis=1)
+    length = portable.norm(t)
     return np.where(length[:, None] > 1e-12, t / np.maximum(length, 1e-300)[:, None], 0.0)
 
 

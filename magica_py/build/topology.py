@@ -14,6 +14,7 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import closest_segment_segment, load3, v_cross, v_dot, v_length, v_sub
+from magica_py.kernels import portable
 
 BENDING_MAX_ANGLE = 120.0     # TriangleBendingMaxAngle, degrees
 VOLUME_MIN_ANGLE = 90.0       # VolumeMinAngle
@@ -107,7 +108,7 @@ def fold_angle(pos, a, b, z, w):
     if l1 < 1e-12 or l2 < 1e-12:
         return 0.0
     c = v_dot(n1, n2) / (l1 * l2)
-    return math.acos(min(max(c, -1.0), 1.0))
+    return portable.acos(c)
 
 
 @kernel
@@ -287,7 +288,7 @@ def bending_pairs(pos, world, triangles, edge_pairs, et_start, et_count, et_data
                     continue  # degenerate triangle: no dihedral angle
                 n1 = (n1[0] / l1, n1[1] / l1, n1[2] / l1)
                 n2 = (n2[0] / l2, n2[1] / l2, n2[2] / l2)
-                phi = math.acos(min(max(v_dot(n1, n2), -1.0), 1.0))
+                phi = portable.acos(v_dot(n1, n2))
                 sign = -1.0 if v_dot(v_cross(n1, n2), v_sub(p3, p2)) < 0.0 else 1.0
                 angle = phi * deg
                 if angle < BENDING_MAX_ANGLE:

@@ -26,6 +26,7 @@ from magica_py.build.errors import BuildError
 from magica_py.build.topology import edge_triangles, key_table, remove_duplicate_quads
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_rotate, q_to_matrix, store3, v_length, v_normalize
+from magica_py.kernels import portable
 
 CONNECTION_MODES = ("line", "automatic_mesh", "sequential_loop_mesh", "sequential_non_loop_mesh")
 MAX_LINKS_PER_VERTEX = 31      # Unity FixedList capacity (ref §B.3 step 4)
@@ -115,7 +116,7 @@ def automatic_root_chain(roots: list[int], pos: np.ndarray) -> tuple[list[int], 
     last_dist = 0.0
     while pool:
         r = chain[-1]
-        d = [float(np.linalg.norm(pos[m] - pos[r])) for m in pool]
+        d = [portable.norm(pos[m] - pos[r]) for m in pool]
         k = int(np.argmin(d))
         if last_dist == 0.0 or d[k] < 1.5 * last_dist:
             chain.append(pool.pop(k))
@@ -123,7 +124,7 @@ def automatic_root_chain(roots: list[int], pos: np.ndarray) -> tuple[list[int], 
         else:
             chain.reverse()
             last_dist = 0.0
-    loop = len(chain) >= 3 and float(np.linalg.norm(pos[chain[0]] - pos[chain[-1]])) < 1.5 * last_dist
+    loop = len(chain) >= 3 and portable.norm(pos[chain[0]] - pos[chain[-1]]) < 1.5 * last_dist
     return chain, loop
 
 
@@ -266,7 +267,7 @@ def connect_mesh(cloth_name: str, mode: str, pos: np.ndarray, parent_vertex: np.
     lb = (vb * vb).sum(axis=1)
     ok = (la >= 1e-6) & (lb >= 1e-6)
     cosang = np.clip((va * vb).sum(axis=1) / np.sqrt(np.maximum(la * lb, 1e-300)), -1.0, 1.0)
-    ok &= np.degrees(np.arccos(cosang)) < TRIANGLE_MAX_ANGLE
+    ok &= portable.acos_array(cosang) * (180.0 / math.pi) < TRIANGLE_MAX_ANGLE
     # deviation: the reference keeps collinear (zero-area) triangles; their normal is undefined
     cr = np.cross(va, vb)
     ok &= (cr * cr).sum(axis=1) > 1e-12 * la * lb
@@ -317,9 +318,9 @@ def spherical_uv(pos: np.ndarray) -> np.ndarray:
     n = pos.shape[0]
     center = 0.5 * (pos.min(axis=0) + pos.max(axis=0))
     d = pos - center
-    length = np.linalg.norm(d, axis=1)
+    length = portable.norm(d)
     l = np.where(length[:, None] > 1e-12, d / np.maximum(length, 1e-300)[:, None], 0.0)
-    u = np.clip((np.arctan2(l[:, 0], l[:, 2]) + math.pi) / (2.0 * math.pi), 0.0, 1.0)
+    u = np.clip((portable.atan2_array(l[:, 0], l[:, 2]) + math.pi) / (2.0 * math.pi), 0.0, 1.0)
     v = np.clip((l[:, 1] - 1.0) / -2.0, 0.0, 1.0)
     return np.stack([v, u], axis=1) * 10.0 + np.arange(n)[:, None] * 0.0001234
 
@@ -335,5 +336,5 @@ def vertex_distances(pos: np.ndarray, lines: np.ndarray, triangles: np.ndarray) 
     if not segs:
         return 0.0, 0.0
     s = np.concatenate(segs)
-    sq = ((pos[s[:, 0]] - pos[s[:, 1]]) ** 2).sum(axis=1)
+    sq = portable.dot3(pos[s[:, 0]] - pos[s[:, 1]], pos[s[:, 0]] - pos[s[:, 1]])
     return float(math.sqrt(sq.mean())), float(math.sqrt(sq.max()))

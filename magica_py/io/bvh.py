@@ -28,6 +28,7 @@ from magica_py.io.clip import Clip, Track
 from magica_py.io.errors import AssetError
 from magica_py.io.quat import qaxis_angle, qmul
 from magica_py.scene.hierarchy import BoneSpec
+from magica_py.kernels import portable
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "cmu": 0.0254 / 0.45}
 HUMAN_HEIGHT = 1.7
@@ -252,7 +253,7 @@ def resolve_units(units, bvh: BvhFile) -> tuple[float, str]:
     height = float(ys.max() - ys.min())
     if height <= 0:
         return 1.0, "units auto: flat skeleton, metres assumed"
-    name = min(UNITS, key=lambda u: abs(math.log(height * UNITS[u] / HUMAN_HEIGHT)))
+    name = min(UNITS, key=lambda u: abs(portable.log(height * UNITS[u] / HUMAN_HEIGHT)))
     return UNITS[name], f"units auto: rest height {height:.4g} file units → {name} ({height * UNITS[name]:.3g} m)"
 
 

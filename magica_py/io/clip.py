@@ -22,6 +22,7 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import q_normalize, q_slerp
+from magica_py.kernels import portable
 
 PATHS = ("translation", "rotation", "scale")
 INTERPOLATIONS = ("linear", "step", "cubicspline")
@@ -65,7 +66,7 @@ class Track:
         else:
             v = values[k] + (values[k + 1] - values[k]) * s
         if self.path == "rotation":
-            v = v / np.linalg.norm(v)
+            v = v / np.asarray(portable.norm(v))[..., None]
         return v
 
 

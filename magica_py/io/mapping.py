@@ -55,6 +55,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from magica_py.kernels import portable
 
 VRM_FRAME_RATE = 60.0     # VRM springs step once per rendered frame; 60 Hz assumed
 MC_STEP_RATE = 90.0       # MagicaCloth2 default simulation frequency (ref §A.5)
@@ -156,13 +157,13 @@ def _match_dynamics(k, drag, dt_vrm, dt_mc):
     def cost(v, d, a):
         t_m, rel_m, step_m = _responses_magica(v, d, a, dt_mc)
         idx = np.clip(np.searchsorted(t_m, grid_t - 1e-12), 0, len(t_m) - 1)
-        err = np.mean((rel_m[..., idx] - ref_rel) ** 2, axis=-1)
+        err = np.mean(np.square(rel_m[..., idx] - ref_rel), axis=-1)
         if ref_step is not None:
-            err = err + np.mean((step_m[..., idx] - ref_step) ** 2, axis=-1)
+            err = err + np.mean(np.square(step_m[..., idx] - ref_step), axis=-1)
         return np.sqrt(np.where(np.isfinite(err), err, np.inf))
 
     if k == 0.0:   # no restoring force: only the velocity decay is matched, in closed form
-        damping = min((1.0 - (1.0 - drag) ** (dt_mc / dt_vrm)) / 0.2, 1.0)
+        damping = min((1.0 - portable.pow(1.0 - drag, dt_mc / dt_vrm)) / 0.2, 1.0)
         return 0.0, damping, 0.8, float(cost(0.0, damping, 0.8))
     lo, hi = np.zeros(3), np.ones(3)
     best = None
@@ -196,9 +197,9 @@ def map_spring_parameters(stiffness: float, gravity_power: float, gravity_dir, d
     power = max(float(gravity_power), 0.0)
     f = float(restoration_fraction(value))
     if stiffness > 0.0 and f > 0.0:
-        theta = math.atan(power / stiffness)
+        theta = portable.atan(power / stiffness)
         held = 1.0 - attenuation * (1.0 - 0.2 * damping)
-        gravity = length * theta * f * held / ((1.0 - f) * math.cos(theta) * dt_mc * dt_mc)
+        gravity = length * theta * f * held / ((1.0 - f) * portable.cos(theta) * dt_mc * dt_mc)
     else:
         gravity = power / dt_vrm
     if gravity > GRAVITY_MAX:

@@ -27,6 +27,7 @@ from magica_py.io.clip import Clip, Track, sample_track_many
 from magica_py.io.humanoid import REQUIRED_BONES, humanoid_map
 from magica_py.io.quat import qconj, qmul, qnormalize, qrotate
 from magica_py.scene.hierarchy import BoneSpec, TransformHierarchy
+from magica_py.kernels import portable
 
 
 class RetargetError(ValueError):
@@ -77,7 +78,7 @@ def leg_length(names: dict[str, str], hierarchy: TransformHierarchy, world_pos: 
         if None in chain:
             continue
         idx = [hierarchy.index(b) for b in chain]
-        lengths.append(sum(float(np.linalg.norm(world_pos[idx[k + 1]] - world_pos[idx[k]])) for k in range(2)))
+        lengths.append(sum(portable.norm(world_pos[idx[k + 1]] - world_pos[idx[k]]) for k in range(2)))
     return float(np.mean(lengths)) if lengths else 0.0
 
 
@@ -183,7 +184,7 @@ def retarget(clip: Clip, source_bones: list[BoneSpec], target_bones: list[BoneSp
         p = tgt_h.parent[t_hips]
         if p >= 0:  # into the parent's space (its rest pose: ancestors of the hips are not animated)
             m = tgt_h.local_to_world[p]
-            local = np.linalg.solve(m[:3, :3], (hips_world - m[:3, 3]).T).T
+            local = portable.rotate_vectors(portable.inverse3(m[:3, :3]), hips_world - m[:3, 3])
         else:
             local = hips_world
         tracks.append(Track(tgt_h.names[t_hips], "translation", times, local))

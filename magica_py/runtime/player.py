@@ -107,6 +107,19 @@ class Player:
         return cls(scene, schedule if schedule is not None else default_schedule(scene),
                    source, manager)
 
+    # -- state capture (runtime/snapshot.py)
+    def capture(self):
+        """A ``Snapshot`` of the whole simulation state (clock, poses, animation, systems)."""
+        from magica_py.runtime.snapshot import capture
+
+        return capture(self)
+
+    def restore(self, snapshot) -> None:
+        """Back to ``snapshot``: the frames that follow give the same bits as after the capture."""
+        from magica_py.runtime.snapshot import restore
+
+        restore(self, snapshot)
+
     # -- restore registry (kept on the schedule so systems built before the player see it)
     def register_restored_bones(self, indices, owner: object = None) -> None:
         """Bones (hierarchy indices) put back to their build-time local pose each RESTORE."""

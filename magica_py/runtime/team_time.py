@@ -68,6 +68,7 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import saturate
+from magica_py.kernels import portable
 
 # update modes (ref §A.4; AnimatorLinkage resolves to one of these, NORMAL without an animator)
 UPDATE_NORMAL = 0
@@ -167,7 +168,8 @@ class SimulationTimeSettings:
         All four are 1 at 90 Hz.
         """
         r = 90.0 / self.frequency
-        return (r, r ** 0.5 if r > 1.0 else r, r ** 0.3 if r > 1.0 else r, r ** 1.8)
+        return (r, math.sqrt(r) if r > 1.0 else r, portable.pow(r, 0.3) if r > 1.0 else r,
+                portable.pow(r, 1.8))
 
     @classmethod
     def from_scene_settings(cls, settings) -> "SimulationTimeSettings":

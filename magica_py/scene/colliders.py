@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from magica_py.scene.hierarchy import BoneSpec, TransformHierarchy
+from magica_py.kernels import portable
 
 SPHERE, CAPSULE, PLANE = 0, 1, 2
 SHAPE_NAMES = ("sphere", "capsule", "plane")
@@ -228,7 +229,7 @@ def world_shapes(colliders: ColliderSet, hierarchy: TransformHierarchy) -> Colli
     scale[tiny] = SCALE_EPSILON
     sign = np.where(scale < 0.0, -1.0, 1.0)
     rmat = _rotation_matrices(rot)
-    frame_pos = pos + np.einsum("nij,nj->ni", rmat, colliders.center * sign) * np.abs(scale)
+    frame_pos = pos + portable.rotate_vectors(rmat, colliders.center * sign) * np.abs(scale)
 
     shape = colliders.shape
     radius = np.zeros(n)
@@ -258,7 +259,7 @@ def world_shapes(colliders: ColliderSet, hierarchy: TransformHierarchy) -> Colli
         b = np.where(aligned, 0.5 * length, length - rs)
         a = np.maximum(a - rs, 0.0)
         b = np.maximum(b - re, 0.0)
-        world_axis = np.einsum("nij,nj->ni", rmat[cap], axis)
+        world_axis = portable.rotate_vectors(rmat[cap], axis)
         start[cap] = frame_pos[cap] + world_axis * a[:, None]
         end[cap] = frame_pos[cap] - world_axis * b[:, None]
         radius[cap] = rs

@@ -28,6 +28,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import math
+
 import numpy as np
 
 from magica_py.jit import kernel
@@ -42,6 +44,7 @@ from magica_py.kernels.math3d import (
     store3,
     store4,
 )
+from magica_py.kernels import portable
 
 
 # ----------------------------------------------------------------------------- kernels
@@ -174,7 +177,7 @@ class TransformHierarchy:
             self.parent[new] = -1 if b.parent is None else self.index_of[b.parent]
             self.local_position[new] = b.position
             q = np.asarray(b.rotation, dtype=np.float64)
-            norm = float(np.linalg.norm(q))
+            norm = portable.norm(q) if np.isfinite(q).all() else math.nan
             if not np.isfinite(q).all() or norm < 1e-12:
                 raise HierarchyError(f"transform {b.name!r}: rotation {tuple(b.rotation)} is not a valid quaternion (zero length or non-finite)")
             self.local_rotation[new] = q / norm
@@ -237,10 +240,11 @@ class TransformHierarchy:
     # -- Unity Transform helpers (after propagate)
     def transform_point(self, i: int, p) -> np.ndarray:
         m = self.local_to_world[i]
-        return m[:3, :3] @ np.asarray(p, dtype=np.float64) + m[:3, 3]
+        return portable.transform_points(m, p)
 
     def inverse_transform_point(self, i: int, p) -> np.ndarray:
-        return np.linalg.solve(self.local_to_world[i][:3, :3], np.asarray(p, dtype=np.float64) - self.local_to_world[i][:3, 3])
+        m = self.local_to_world[i]
+        return portable.rotate_vectors(portable.inverse3(m[:3, :3]), np.asarray(p, dtype=np.float64) - m[:3, 3])
 
     def transform_direction(self, i: int, d) -> np.ndarray:
         """Rotate a direction by node i's world rotation (scale ignored, as Unity does)."""

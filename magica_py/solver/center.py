@@ -21,6 +21,7 @@ from magica_py.kernels.rows import (
     flat, load_input, load_input3, load_input4, row3, row4, set_row3, set_row4, store_output3, store_output4,
 )
 from magica_py.solver.rotations import normalize_or_zero, rot_from_normal_tangent_select
+from magica_py.kernels import portable
 
 MOVE = 0x02
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -111,7 +112,7 @@ def smoothing_time_constant(s):
     a = saturate((1.0 - s) ** 3 * 0.99 + 0.01)
     if a >= 1.0:
         return 0.0
-    return -1.0 / (SMOOTHING_REFERENCE_RATE * math.log(1.0 - a))
+    return -1.0 / (SMOOTHING_REFERENCE_RATE * portable.log(1.0 - a))
 
 
 @kernel
@@ -141,7 +142,7 @@ def time_based_smoothing(ts, team, delta, frame_delta_time, s, speed_limit):
     if tau <= 0.0:
         store3(ts.smoothing_velocity, team, v)
         return v_scale(v, h)
-    decay = math.exp(-h / tau)
+    decay = portable.exp(-h / tau)
     lag = v_sub(sv0, v)
     store3(ts.smoothing_velocity, team, v_add(v, v_scale(lag, decay)))
     # integral over the frame of v + (sv0 - v) exp(-t/tau)

@@ -17,6 +17,7 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.solver.fields import F64, I32, U8, allocate, make_soa
+from magica_py.kernels import portable
 
 CURVE = (16,)
 
@@ -170,7 +171,7 @@ def write_row(table, team: int, parameters, collision_mode: str | None = None,
     t = team
     table.gravity[t] = float(g("gravity"))
     d = np.asarray(g("gravity_direction"), dtype=np.float64)
-    n = float(np.linalg.norm(d))
+    n = portable.norm(d)
     table.gravity_direction[t] = d / n if n > 1e-8 else 0.0
     table.gravity_falloff[t] = float(g("gravity_falloff"))
     table.stabilization_time[t] = float(g("stabilization_time_after_reset"))
@@ -287,7 +288,7 @@ def step_rate(k, frequency_ratio, power, rate_mode):
     if frequency_ratio == 1.0:
         return k
     kk = 0.0 if k < 0.0 else (1.0 if k > 1.0 else k)
-    return 1.0 - math.pow(1.0 - kk, frequency_ratio)
+    return 1.0 - portable.pow(1.0 - kk, frequency_ratio)
 
 
 @kernel
@@ -296,4 +297,4 @@ def step_keep(keep, frequency_ratio, rate_mode):
     ``keep^(90/f)`` in frequency-consistent mode."""
     if rate_mode == 0 or frequency_ratio == 1.0:
         return keep
-    return math.pow(keep, frequency_ratio)
+    return portable.pow(keep, frequency_ratio)

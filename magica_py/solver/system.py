@@ -44,9 +44,13 @@ from magica_py.solver.parameters import allocate_parameters, write_row
 from magica_py.solver.state import (
     allocate_state, free_collider_rows, free_particle_rows, free_team_row, grow_state,
 )
+from magica_py.kernels import portable
 
 FORCE_MODES = {"velocity_add": 1, "velocity_add_without_depth": 2, "velocity_change": 3,
                "velocity_change_without_depth": 4}
+# the system's own copies in the frame kernel's hierarchy table (``frame.hierarchy_arrays``)
+_BUILD_POSE_FIELDS = ("build_world_position", "build_world_rotation", "build_lossy_scale",
+                      "build_local_to_world", "build_pose_pending", "ramp_from_build")
 GUARD_REASONS = {GUARD_NON_FINITE: "non-finite particle state", GUARD_SPEED: "particle speed above the guard bound"}
 
 
@@ -281,7 +285,7 @@ class ClothSystem:
                                                    "reason": GUARD_REASONS.get(int(codes[team]), "guard")}))
             codes[:] = 0
         if metrics is not None:
-            steps = int(np.dot(self.time_state.update_count, self.model.team_particle_count))
+            steps = int((self.time_state.update_count.astype(np.int64) * self.model.team_particle_count).sum())
             metrics["cloth.steps"] = float(steps)
             metrics["cloth.simulation_steps"] = float(self.time_state.update_count.max(initial=0))
             metrics["cloth.kernel"] = t1 - t0
@@ -339,12 +343,56 @@ class ClothSystem:
     def add_force(self, cloth, direction, speed: float, mode: str = "velocity_add") -> None:
         """MagicaCloth.AddForce: an acceleration on every step of the next frame that runs."""
         d = np.asarray(direction, dtype=F64)
-        n = float(np.linalg.norm(d))
+        n = portable.norm(d)
         if mode not in FORCE_MODES:
             raise ValueError(f"add_force mode {mode!r}: expected one of {sorted(FORCE_MODES)}")
         for t in self.teams_of(cloth):
             self.teams.external_force[t] = d / n * float(speed) if n > 1e-8 else 0.0
             self.teams.external_force_mode[t] = FORCE_MODES[mode]
+
+    # ------------------------------------------------------------------ state capture
+    def capture_state(self) -> dict:
+        """Copies of everything the next frame reads (``runtime/snapshot.py``): the particle,
+        team, collider, parameter and team-clock tables, the build pose and first-frame flags,
+        and the runtime parameter overrides. Block tables are not state: the block rows are
+        gathered from the team rows every frame, and blocks are formed again on restore."""
+        from magica_py.runtime.snapshot import table_state
+
+        h = self._hierarchy
+        return {
+            "layout": self._layout_signature(),
+            "tables": {name: table_state(table) for name, table in self._state_tables().items()},
+            "build_pose": {name: getattr(h, name).copy() for name in _BUILD_POSE_FIELDS},
+            "frame_count": self.frame_count,
+            "team_parameters": list(self.team_parameters),
+            "collision_modes": list(self.collision_modes),
+        }
+
+    def restore_state(self, state: dict) -> None:
+        """Write a ``capture_state`` result back in place (the kernel tables keep their arrays)."""
+        from magica_py.runtime.snapshot import SnapshotError, restore_arrays, table_arrays
+
+        if state["layout"] != self._layout_signature():
+            raise SnapshotError(f"cloth {self.name!r}: the snapshot was taken with teams "
+                                f"{state['layout'][0]}, this system has {self._layout_signature()[0]} "
+                                "(cloths added or removed since: a snapshot restores state, not structure)")
+        tables = self._state_tables()
+        for name, saved in state["tables"].items():
+            restore_arrays(f"{self.name}.{name}", table_arrays(tables[name]), saved)
+        restore_arrays(f"{self.name}.build_pose", {n: getattr(self._hierarchy, n) for n in _BUILD_POSE_FIELDS},
+                       state["build_pose"])
+        self.frame_count = state["frame_count"]
+        self.team_parameters = list(state["team_parameters"])
+        self.collision_modes = list(state["collision_modes"])
+        self._form_blocks()
+
+    def _state_tables(self) -> dict:
+        return {"particles": self.particles, "teams": self.teams, "colliders": self.collider_state,
+                "parameters": self.parameters, "time": self._time}
+
+    def _layout_signature(self) -> tuple:
+        return (tuple(int(t) for t in self.live_teams), self.layout.capacity("particle"),
+                self._slots.capacity, tuple(self.team_names))
 
     # ------------------------------------------------------------------ queries
     def team_particles(self, team: int) -> slice:
