@@ -57,6 +57,10 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
               "re-run a scene whenever it or an asset it reads changes, each run a recording in the viewer"),
     "new": ("magica_py.starter", "main_new",
             "write a commented starter scene (ponytail, tail, skirt or crowd) that runs as it is"),
+    "bake": ("magica_py.bake.cli", "main_bake",
+             "simulate a scene and write its bones' motion as animation (.glb / .gltf / .vrm / .bvh)"),
+    "batch": ("magica_py.batch.cli", "main_batch",
+              "run a job file's cross product of simulations on a Dask cluster; one table of metrics"),
 }
 
 def register_command(name: str, module: str, function: str, help: str) -> None:

@@ -165,19 +165,19 @@ class FrameProgress:
     rate and ETA (called after a compile)."""
 
     def __init__(self, total: int | None, stream=None, delay: float = 1.0, notebook: bool = False,
-                 log_interval: float = 10.0, desc: str | None = None):
+                 log_interval: float = 10.0, desc: str | None = None, unit: str = "frame", initial: int = 0):
         stream = stream if stream is not None else sys.stderr
         terminal = bool(getattr(stream, "isatty", lambda: False)())
         if notebook:
             from tqdm.auto import tqdm
         else:
             from tqdm import tqdm
-        self.bar = tqdm(total=total, unit="frame", file=stream if terminal or notebook else _LogLines(stream),
+        self.bar = tqdm(total=total, unit=unit, initial=initial, file=stream if terminal or notebook else _LogLines(stream),
                         delay=delay, desc=desc, leave=True,
                         mininterval=0.1 if terminal or notebook else log_interval,
                         ascii=None if terminal or notebook else True, dynamic_ncols=terminal,
                         ncols=None if terminal or notebook else 100, smoothing=0.1)
-        self.done = 0
+        self.done = initial
 
     def update(self, done: int) -> None:
         if done > self.done:
