@@ -98,8 +98,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="number of frames (default: scene.frames or scene.duration)")
     run.add_argument("--rrd", metavar="PATH", help="write the recording here (default: output.rrd of the scene)")
     run.add_argument("--no-rrd", action="store_true", help="do not write a recording file")
-    run.add_argument("--spawn", action="store_true", help="stream to a new Rerun viewer")
-    run.add_argument("--connect", metavar="ADDR", help="stream to a running Rerun viewer (host:port or URL)")
+    run.add_argument("--spawn", action="store_true",
+                     help="start the Rerun viewer and stream to it (no recording file unless --rrd is given)")
+    run.add_argument("--connect", metavar="ADDR",
+                     help="stream to a running Rerun viewer (host:port or URL; no file unless --rrd)")
     run.add_argument("--no-simulation", action="store_true",
                      help="animate only: do not attach the cloth solver (a quick preview of the motion)")
     run.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no summary")
@@ -322,9 +324,20 @@ def _attach_sink(player, scene, args, notes: list[str]):
     return attach(player, scene, options_type(**options) if options_type else options)
 
 
+def _live(args) -> bool:
+    """--spawn / --connect: a live run writes a recording file only when --rrd asks for one."""
+    return bool(args.spawn or args.connect)
+
+
 def _check_output_path(scene, args) -> None:
-    """The sink's own path check (``sinks.rerun_sink.check_output_path``), run early."""
-    if args.no_rrd:
+    """The sink's own checks, run early: the path (``sinks.rerun_sink.check_output_path``) and
+    the live output (``sinks.live.check_live_output``: a display for --spawn, a listening
+    viewer for --connect)."""
+    if _live(args):
+        from magica_py.sinks.live import check_live_output
+
+        check_live_output(bool(args.spawn), args.connect)
+    if args.no_rrd or (_live(args) and not args.rrd):
         return
     path = args.rrd or scene.output.rrd
     if path is None:
@@ -339,7 +352,7 @@ def _check_output_path(scene, args) -> None:
 def _ensure_output_folder(scene, args):
     """Create the folder of the scene's own ``output.rrd`` (e.g. replays/) when missing;
     returns it when created, so a failed run can remove it again."""
-    if args.no_rrd or args.rrd or scene.output.rrd is None:
+    if args.no_rrd or args.rrd or scene.output.rrd is None or _live(args):
         return None
     folder = scene.output.rrd.parent
     if str(folder) in ("", ".") or folder.exists():

@@ -8,12 +8,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 
 import numpy as np
 
 from magica_py.sinks import layout as L
 from magica_py.sinks.readback import Recording, RecordingError
+
+# /world/cloths/NAME/particles, or /world/<rig instance>/cloths/NAME/particles in a crowd
+_CLOTH_PARTICLES = re.compile(r"^/world/(?:(?P<group>[^/]+)/)?cloths/(?P<name>[^/]+)/particles$")
 
 
 def summarize(path) -> dict:
@@ -28,11 +32,12 @@ def summarize(path) -> dict:
         rows = np.unique(np.concatenate(logged)).size if logged else 0
         entities[entity] = {"rows": int(rows), "static": bool(rec.static.get(entity))}
     cloths = {}
-    prefix = f"/{L.CLOTHS}/"
     for entity in rec.entities:
-        if entity.startswith(prefix) and entity.endswith("/particles") and rec.temporal.get(entity):
+        match = _CLOTH_PARTICLES.match(entity)
+        if match and rec.temporal.get(entity):
             _, rows = rec.rows(entity, "Points3D:positions")
-            cloths[entity[len(prefix):-len("/particles")]] = int(rows[0].shape[0]) if rows else 0
+            name = match["name"] if not match["group"] else f"{match['group']}/{match['name']}"
+            cloths[name] = int(rows[0].shape[0]) if rows else 0
     metrics = {}
     for entity in rec.entities:
         if entity.startswith(f"/{L.METRICS}/") and rec.temporal.get(entity):
