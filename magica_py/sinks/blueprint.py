@@ -3,7 +3,8 @@ one plot per quantity, each titled with its unit.
 
 Layout: the 3D view of ``/world`` on the left (3/5 of the width); on the right, stacked:
 stretch (%), penetration (mm, only when a cloth has colliders), particle speed (m/s), a tab
-pair "phase wall time (ms)" / "steps per frame", and the event log.
+pair "phase wall time (ms)" / "steps per frame", and the event log. Plots of one series hide
+their legend (the title names it); the phase plot's legend sits top right.
 
 The 3D camera tracks ``world/focus`` (two invisible points spanning the box of every joint and
 particle, per frame): the viewer keeps the eye's offset to that box, so a walking character
@@ -64,7 +65,8 @@ def default_blueprint(title: str = "scene", *, box=None, penetration: bool = Tru
         plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=True))
     plots.append(rrb.Tabs(timing, plot(L.METRIC_STEPS, "simulation steps per frame (count)"), active_tab=0))
     plots.append(rrb.TextLogView(origin=L.reader_path(L.EVENTS), name="events"))
+    shares = [2] * (len(plots) - 2) + [3, 1.5]     # room for the phase legend's four lines
     return rrb.Blueprint(
-        rrb.Horizontal(scene, rrb.Vertical(*plots, row_shares=[2] * (len(plots) - 1) + [1.5]), column_shares=[3, 2]),
+        rrb.Horizontal(scene, rrb.Vertical(*plots, row_shares=shares), column_shares=[3, 2]),
         *([rrb.TimePanel(play_state="following")] if follow else []),
         collapse_panels=True)

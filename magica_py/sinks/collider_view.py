@@ -23,6 +23,7 @@ from magica_py.sinks.shapes import CAPSULE, PLANE, SPHERE, from_y_rotation, from
 RING_SEGMENTS = 24          # around a capsule's axis
 CAP_STEPS = 6               # latitude steps per end cap
 PLANE_GRID_STEP = 0.5       # m between the lines of a plane's patch
+SOLID = "transparentfillmajorwireframe"   # a light fill and its outline: the cloth stays visible inside
 
 
 def tapered_capsule_profile(start_radius: float, end_radius: float, length: float) -> np.ndarray:
@@ -137,7 +138,7 @@ class ColliderView:
         if kind == SPHERE:
             r = p[0]
             big = r > L.OVERSIZED_COLLIDER_RADIUS
-            return rr.Ellipsoids3D(half_sizes=[[r, r, r]], fill_mode="majorwireframe" if big else "solid",
+            return rr.Ellipsoids3D(half_sizes=[[r, r, r]], fill_mode="majorwireframe" if big else SOLID,
                                    colors=[L.COLOR_COLLIDER_OVERSIZED if big else L.COLOR_COLLIDER])
         if kind == CAPSULE:
             start_radius, end_radius, length = p
@@ -145,7 +146,7 @@ class ColliderView:
             color = L.COLOR_COLLIDER_OVERSIZED if big else L.COLOR_COLLIDER
             if abs(start_radius - end_radius) <= 1e-6 * max(start_radius, end_radius, 1e-9):
                 return rr.Capsules3D(lengths=[length], radii=[start_radius], colors=[color],
-                                     fill_mode="majorwireframe" if big else "solid")
+                                     fill_mode="majorwireframe" if big else SOLID)
             profile = tapered_capsule_profile(start_radius, end_radius, length)
             if big:
                 return rr.LineStrips3D([s.astype(np.float32) for s in wire_strips(profile)], colors=[color],

@@ -260,8 +260,9 @@ class RerunSink:
                 self.rig_parts.append((group, joints, parent[bones], bones))
         roots = child[stem_link[child]]
         self.root_link_parent, self.root_link_child = parent[roots], roots
-        # the camera frames every joint but the stems' (roots on the floor, grid spots)
-        self.focus_nodes = np.flatnonzero(~stem | (np.bincount(parent[parent >= 0], minlength=n) != 1))
+        # the camera frames every joint but the stems (roots on the floor, grid spots, the lone
+        # static nodes of static colliders); a rig that is all stem is framed whole
+        self.focus_nodes = np.flatnonzero(~stem) if (~stem).any() else np.arange(n)
         self.groups = cloth_groups(statics.cloths, node_group)
         self.particle_count = sum(c.particle_count for c in statics.cloths)
         self.collider_batch = ColliderBatch(collider_set) if collider_set is not None and len(collider_set.names) \
