@@ -409,17 +409,13 @@ class RerunSink:
 
     # ------------------------------------------------------------------ sending: whole batches
     def _send(self, entity: str, archetype: str, count: int, **components) -> None:
-        """One send_columns call: components are (n, count, ...) arrays for n frames; positions
-        (``positions``, ``vertex_positions``) are mirrored into the display frame."""
+        """One send_columns call: components are (n, count, ...) arrays for n frames, positions
+        already in the display frame (``_display``)."""
         rr, n = self.rr, self.row
-        flat = {}
-        for k, v in components.items():
-            if k != "strips":
-                v = _display(v) if k in ("positions", "vertex_positions") else v
-                v = np.ascontiguousarray(v, dtype=np.float32).reshape((n * count,) + v.shape[2:])
-            flat[k] = v
+        flat = {k: v if k == "strips" else np.ascontiguousarray(v, dtype=np.float32).reshape((n * count,) + v.shape[2:])
+                for k, v in components.items()}
         columns = getattr(rr, archetype).columns(**flat).partition([count] * n)
-        self.rec.send_columns(entity, indexes=self._index(), columns=columns)
+        self.rec.send_columns(entity, indexes=self.batch_index, columns=columns)
 
     def _index(self, rows=slice(None)):
         rr = self.rr
@@ -434,12 +430,15 @@ class RerunSink:
         a = {k: v[:n] for k, v in self.buf.arrays.items()}
         if "collider.position" in a:
             a.update(self.collider_batch.shapes(a["collider.position"], a["collider.rotation"], a["collider.scale"]))
+        self.batch_index = self._index()       # the time columns, shared by every entity of the batch
         joints, x = a.get("joints"), a.get("positions")
         focus = self._send_focus(joints, x)
+        shown_joints = _display(joints) if joints is not None else None
+        shown_x = _display(x) if x is not None else None
         if tg.skeleton and joints is not None:
             for group, nodes, bone_parent, bone_child in self.rig_parts:
                 if nodes.size:
-                    self._send(L.rig_path("joints", group), "Points3D", nodes.size, positions=joints[:, nodes])
+                    self._send(L.rig_path("joints", group), "Points3D", nodes.size, positions=shown_joints[:, nodes])
                 if bone_child.size:
                     self._send(L.rig_path("bones", group), "LineStrips3D", bone_child.size,
                                strips=_segments(joints, bone_parent, bone_child))
@@ -448,7 +447,7 @@ class RerunSink:
                            strips=_segments(joints, self.root_link_parent, self.root_link_child))
         if x is not None:
             for g in self.groups:
-                gx = g.take(x)
+                gx = g.take(shown_x)
                 if tg.particles:
                     self._send(g.path("particles"), "Points3D", g.count, positions=gx)
                 if tg.edges and len(g.edges):
@@ -460,9 +459,10 @@ class RerunSink:
                     self._send(g.path("baselines"), "LineStrips3D", len(g.baselines),
                                strips=_segments(x, g.baselines[:, 0], g.baselines[:, 1]))
                 if tg.base_pose and "base_positions" in a:
-                    self._send(g.path("base_pose"), "Points3D", g.count, positions=g.take(a["base_positions"]))
+                    self._send(g.path("base_pose"), "Points3D", g.count,
+                               positions=g.take(_display(a["base_positions"])))
         if tg.colliders:
-            self.collider_view.send(rr, rec, self._index(), self.frame_index[:n], self.frame_time[:n], a,
+            self.collider_view.send(rr, rec, self.batch_index, self.frame_index[:n], self.frame_time[:n], a,
                                     focus if focus is not None else np.zeros((n, 2, 3)))
         if tg.metrics:
             if x is not None:
@@ -483,7 +483,7 @@ class RerunSink:
                                    ("replay.local_rotation", "local_rotation"),
                                    ("replay.local_scale", "local_scale"), ("replay.time", "values")):
                 entity = L.REPLAY_TIME if key == "replay.time" else L.REPLAY_POSE
-                rec.send_columns(entity, indexes=self._index(),
+                rec.send_columns(entity, indexes=self.batch_index,
                                  columns=rr.AnyValues.columns(**{component: _float64_rows(a[key])}))
             for r, text in self.replay_event_rows:
                 self._set_time(self.frame_index[r], self.frame_time[r])
@@ -503,7 +503,7 @@ class RerunSink:
             return None
         points = np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0]
         box = np.stack([points.min(axis=1), points.max(axis=1)], axis=1)
-        self._send(L.FOCUS, "Points3D", 2, positions=box)
+        self._send(L.FOCUS, "Points3D", 2, positions=_display(box))
         return box
 
     def _new_buffers(self) -> None:
@@ -564,8 +564,11 @@ class RerunSink:
 
 
 def _display(x: np.ndarray) -> np.ndarray:
-    """Scene frame -> display frame (X negated), float64 copy."""
-    return np.asarray(x, np.float64) * np.array(L.DISPLAY_MIRROR)
+    """Scene frame -> display frame (X negated), as float32 (negation commutes with the
+    rounding: bit for bit the negated float32 of the scene value)."""
+    out = np.asarray(x, np.float32).copy()
+    out[..., 0] *= -1.0
+    return out
 
 
 @kernel
