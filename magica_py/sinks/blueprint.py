@@ -65,7 +65,7 @@ def default_blueprint(title: str = "scene", *, box=None, penetration: bool = Tru
         plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=True))
     plots.append(rrb.Tabs(timing, plot(L.METRIC_STEPS, "simulation steps per frame (count)"), active_tab=0))
     plots.append(rrb.TextLogView(origin=L.reader_path(L.EVENTS), name="events"))
-    shares = [2] * (len(plots) - 2) + [3, 1.5]     # room for the phase legend's four lines
+    shares = [2] * (len(plots) - 2) + [4, 1.2]     # room for the phase legend's four lines
     return rrb.Blueprint(
         rrb.Horizontal(scene, rrb.Vertical(*plots, row_shares=shares), column_shares=[3, 2]),
         *([rrb.TimePanel(play_state="following")] if follow else []),
