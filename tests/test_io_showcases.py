@@ -111,7 +111,7 @@ def test_vrm_end_nodes_and_collider_radii_survive_into_the_built_cloths(godette)
     assert list(cols.shape) == [0, 0, 0, 0]                          # spheres
     assert [cols.names[i] for i in hair.colliders] == ["vrm_col1_0", "vrm_col1_1"]
     assert [cols.names[i] for i in scene.cloth("vrm_Ribbon").colliders] == ["vrm_col0_0", "vrm_col0_1"]
-    team = system.team_names.index("vrm_group0")
+    team = system.team_names.index("vrm_FrontHair")
     radius = particle_radius(system.model, system.parameters)[np.asarray(system.model.particle_team) == team]
     assert radius == pytest.approx(0.02)                             # the group's hitRadius
 
