@@ -470,3 +470,34 @@ def test_a_stream_lost_during_the_run_is_an_error_at_close(tmp_path, monkeypatch
     with pytest.raises(OutputError, match="failed after 0 frames: gRPC has been unable to connect"):
         sink.close()
     assert (tmp_path / "x.rrd").exists()
+
+
+def test_live_runs_write_a_file_only_when_asked():
+    from types import SimpleNamespace
+
+    from magica_py.sinks.recorder import SinkOptions, output_rrd
+
+    scene = SimpleNamespace(output=SimpleNamespace(rrd="replays/x.rrd"))
+    assert output_rrd(SinkOptions(), scene) == "replays/x.rrd"
+    assert output_rrd(SinkOptions(spawn=True), scene) is None
+    assert output_rrd(SinkOptions(connect="h:1"), scene) is None
+    assert output_rrd(SinkOptions(spawn=True, rrd="asked.rrd"), scene) == "asked.rrd"
+    assert output_rrd(SinkOptions(no_rrd=True, rrd="asked.rrd"), scene) is None
+
+
+def test_a_crowd_file_uses_long_batches_and_a_small_scene_short_ones(tmp_path):
+    from dataclasses import replace
+
+    from magica_py.sinks import rerun_sink
+    from magica_py.sinks.base import SceneStatics
+    from magica_py.sinks.fakes import JOINT_NAMES, JOINT_PARENT, topologies
+
+    tail, _ = topologies()
+    many = [replace(tail, name=f"hair#{i}") for i in range(rerun_sink.CROWD_ENTITY_SETS + 1)]
+    crowd = SceneStatics(name="crowd", joint_names=JOINT_NAMES, joint_parent=JOINT_PARENT, cloths=many)
+    sink = RerunSink(crowd, rrd_path=tmp_path / "c.rrd")
+    assert sink.batch == rerun_sink.CROWD_BATCH_FRAMES
+    sink.close()
+    small = RerunSink(statics(), rrd_path=tmp_path / "s.rrd")
+    assert small.batch == rerun_sink.FILE_BATCH_FRAMES
+    small.close()
