@@ -502,15 +502,14 @@ class RerunSink:
 
     def _send_focus(self, joints, x):
         """The characters' box per frame, (n, 2, 3) scene frame, sent as ``world/focus``."""
-        parts = []
+        box = np.empty((self.row, 2, 3))
+        box[:, 0], box[:, 1] = np.inf, -np.inf
         if joints is not None and self.focus_nodes.size:
-            parts.append(joints[:, self.focus_nodes])
+            grow_box(np.ascontiguousarray(joints, np.float64), self.focus_nodes, box)
         if x is not None and x.shape[1]:
-            parts.append(x)
-        if not parts:
+            grow_box(np.ascontiguousarray(x, np.float64), np.arange(x.shape[1]), box)
+        if not np.isfinite(box).any():
             return None
-        points = np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0]
-        box = np.stack([points.min(axis=1), points.max(axis=1)], axis=1)
         self._send(L.FOCUS, "Points3D", 2, positions=_display(box))
         return box
 
@@ -577,6 +576,20 @@ def _display(x: np.ndarray) -> np.ndarray:
     out = np.asarray(x, np.float32).copy()
     out[..., 0] *= -1.0
     return out
+
+
+@kernel
+def grow_box(x, nodes, box):
+    """box[b] = (min, max) of box[b] and the points x[b, nodes] (non-finite points skipped)."""
+    for b in range(x.shape[0]):
+        for k in range(nodes.shape[0]):
+            p = nodes[k]
+            for c in range(3):
+                v = x[b, p, c]
+                if v < box[b, 0, c]:
+                    box[b, 0, c] = v
+                if v > box[b, 1, c]:
+                    box[b, 1, c] = v
 
 
 @kernel
