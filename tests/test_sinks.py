@@ -501,3 +501,13 @@ def test_a_crowd_file_uses_long_batches_and_a_small_scene_short_ones(tmp_path):
     small = RerunSink(statics(), rrd_path=tmp_path / "s.rrd")
     assert small.batch == rerun_sink.FILE_BATCH_FRAMES
     small.close()
+
+
+def test_the_focus_box_spans_the_characters_joints_and_particles_but_not_the_stems(recorded):
+    rec, traj = recorded
+    frames, box = rec.stacked("/world/focus", "Points3D:positions")
+    assert frames.tolist() == list(range(FRAMES))
+    for f in (0, 5, 9):
+        joints, tail, skirt = traj[f]
+        points = np.vstack([joints[1:], tail, skirt])          # joint 0 (the root) is a stem
+        np.testing.assert_array_equal(box[f], np.stack([points.min(0), points.max(0)]).astype(np.float32))
