@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import pathlib
+import signal
 import socket
 import subprocess
 import time
@@ -66,7 +67,9 @@ class GrpcServer:
         self.port = free_port()
         env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
         args = [viewer_executable(), "--port", str(self.port)] + (["--save", str(saved)] if saved else ["--serve-grpc"])
-        self.process = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        # its own process group: the venv's `rerun` is a wrapper that starts the real binary as a child
+        self.process = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                        start_new_session=True)
 
     def __enter__(self):
         deadline = time.time() + 30
@@ -80,8 +83,13 @@ class GrpcServer:
         raise RuntimeError("the rerun server did not start")
 
     def __exit__(self, *exc):
-        self.process.terminate()
-        self.process.wait(timeout=20)
+        # Ctrl-C to the wrapper and the server it started: `--save` finishes writing what it got
+        os.killpg(self.process.pid, signal.SIGINT)
+        try:
+            self.process.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.process.pid, signal.SIGKILL)
+            self.process.wait()
 
 
 @pytest.mark.skipif(viewer_executable() is None, reason="the rerun executable of rerun-sdk is not installed")

@@ -26,6 +26,7 @@ import dataclasses
 import os
 import pathlib
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -97,12 +98,20 @@ def take_screenshot(rrd: pathlib.Path, png: pathlib.Path, display: str, window: 
     env = dict(os.environ, DISPLAY=display, RERUN_APP_ONLY="true")
     env.pop("WAYLAND_DISPLAY", None)
     start = time.perf_counter()
-    done = subprocess.run([viewer_executable(), "--renderer", "vulkan", "--port", "auto", "--window-size", window,
-                           "--hide-welcome-screen", "--screenshot-to", str(png), str(rrd)],
-                          env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=timeout)
-    if done.returncode != 0 or not png.exists():
-        tail = done.stdout.decode(errors="replace")[-2000:]
-        raise RuntimeError(f"the viewer did not save {png} (exit {done.returncode}):\n{tail}")
+    # its own process group: the venv's `rerun` is a wrapper that starts the real viewer as a child,
+    # and a timeout must stop both
+    viewer = subprocess.Popen([viewer_executable(), "--renderer", "vulkan", "--port", "auto", "--window-size", window,
+                               "--hide-welcome-screen", "--screenshot-to", str(png), str(rrd)],
+                              env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        output, _ = viewer.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(viewer.pid, signal.SIGKILL)
+        viewer.communicate()
+        raise RuntimeError(f"the viewer did not save {png} within {timeout:.0f} s") from None
+    if viewer.returncode != 0 or not png.exists():
+        tail = output.decode(errors="replace")[-2000:]
+        raise RuntimeError(f"the viewer did not save {png} (exit {viewer.returncode}):\n{tail}")
     return time.perf_counter() - start
 
 
