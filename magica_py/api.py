@@ -39,7 +39,7 @@ class ClothTrack:
 
     ==================  ============  ====================================================
     positions           (F, N, 3)     display positions, world space, m (what the bones
-                                      were written from; ref §E.1)
+                                      were written from; docs/solver.md §E.1)
     rotations           (F, N, 4)     world rotation of each particle's bone after the
                                       write-back, quaternion (x, y, z, w), Unity axes
     local_rotations     (F, N, 4)     the same bones' local rotations (what an engine sets)

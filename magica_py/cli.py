@@ -115,8 +115,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--rrd", metavar="PATH", help="write the recording here (default: output.rrd of the scene); "
                                                    "a missing folder is created")
     run.add_argument("--no-rrd", action="store_true", help="do not write a recording file")
-    run.add_argument("--spawn", action="store_true", help="stream to a new Rerun viewer")
-    run.add_argument("--connect", metavar="ADDR", help="stream to a running Rerun viewer (host:port or URL)")
+    run.add_argument("--spawn", action="store_true",
+                     help="start the Rerun viewer and stream to it (no recording file unless --rrd is given)")
+    run.add_argument("--connect", metavar="ADDR",
+                     help="stream to a running Rerun viewer (host:port or URL; no file unless --rrd)")
     run.add_argument("--no-simulation", action="store_true",
                      help="animate only: do not attach the cloth solver (a quick preview of the motion)")
     run.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no notes, no summary")
@@ -452,9 +454,20 @@ def _attach_sink(player, scene, args, notes: list[str]):
     return attach(player, scene, options_type(**options) if options_type else options)
 
 
+def _live(args) -> bool:
+    """--spawn / --connect: a live run writes a recording file only when --rrd asks for one."""
+    return bool(args.spawn or args.connect)
+
+
 def _check_output_path(scene, args) -> None:
-    """The sink's own path check (``sinks.rerun_sink.check_output_path``), run early."""
-    if args.no_rrd:
+    """The sink's own checks, run early: the path (``sinks.rerun_sink.check_output_path``) and
+    the live output (``sinks.live.check_live_output``: a display for --spawn, a listening
+    viewer for --connect)."""
+    if _live(args):
+        from magica_py.sinks.live import check_live_output
+
+        check_live_output(bool(args.spawn), args.connect)
+    if args.no_rrd or (_live(args) and not args.rrd):
         return
     path = args.rrd or scene.output.rrd
     if path is None:
@@ -469,10 +482,11 @@ def _check_output_path(scene, args) -> None:
 def _ensure_output_folder(scene, args):
     """Create the folder of the recording (``--rrd`` or the scene's ``output.rrd``, e.g.
     replays/) when missing, the same way for both; returns the first folder created, so a
-    failed run can remove what it made."""
+    failed run can remove what it made. A live run (``--spawn`` / ``--connect``) writes the
+    scene's ``output.rrd`` only when ``--rrd`` asks for a file."""
     import pathlib
 
-    if args.no_rrd or (not args.rrd and scene.output.rrd is None):
+    if args.no_rrd or (not args.rrd and (scene.output.rrd is None or _live(args))):
         return None
     folder = pathlib.Path(args.rrd).expanduser().parent if args.rrd else scene.output.rrd.parent
     where = "--rrd" if args.rrd else "output.rrd"

@@ -50,9 +50,9 @@ cloths:
 """)
     with pytest.warns(UserWarning, match="radius 1 m"):
         scene = load_scene(path)
-    assert [c.name for c in scene.cloths] == ["vrm_group0", "vrm_group1", "vrm_group2"]
+    assert [c.name for c in scene.cloths] == ["vrm_FrontHair", "vrm_Ribbon", "vrm_HairBall"]
     assert len(scene.colliders) == 4 and all(int(s) == 0 for s in scene.colliders.shape)
-    group0 = scene.cloth("vrm_group0")
+    group0 = scene.cloth("vrm_FrontHair")
     assert [scene.colliders.names[i] for i in group0.colliders] == ["vrm_col1_0", "vrm_col1_1"]
 
 
@@ -200,7 +200,7 @@ cloths:
   - {{from_vrm: avatar, parameters: {{gravity: 2.5, inertia: {{world_inertia: 0.5}}}}}}
 """))
         plain = load_scene(write_scene(tmp_path, f"rigs:\n  - {{name: avatar, file: {vrm}}}\ncloths:\n  - {{from_vrm: avatar}}\n"))
-    for name in ("vrm_group0", "vrm_group1", "vrm_group2"):
+    for name in ("vrm_FrontHair", "vrm_Ribbon", "vrm_HairBall"):
         params, mapped = scene.cloth(name).parameters, plain.cloth(name).parameters
         assert params["gravity"] == 2.5 and mapped["gravity"] == 0.0
         assert params["inertia.world_inertia"] == 0.5 and mapped["inertia.world_inertia"] == 1.0

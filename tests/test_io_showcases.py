@@ -49,7 +49,7 @@ def fox():
 def test_vrm_avatar_on_retargeted_capture_runs_inside_the_solver_bounds(godette):
     run = godette
     assert run.frames == 360 and run.finite.all(), summary(run)
-    assert [c.name for c in run.scene.cloths] == ["vrm_group0", "vrm_group1", "vrm_group2"]
+    assert [c.name for c in run.scene.cloths] == ["vrm_FrontHair", "vrm_Ribbon", "vrm_HairBall"]
     assert run.edge_stretch.max() < 0.01, summary(run)
     assert run.root_stretch.max() < 0.03, summary(run)
     assert run.penetration_ratio.max() < 0.10, summary(run)
@@ -93,7 +93,7 @@ def test_vrm_end_nodes_and_collider_radii_survive_into_the_built_cloths(godette)
     scene, system = godette.scene, godette.system
     h = scene.hierarchy
     assert not any(n.endswith("_vrm_tail") for n in h.names)
-    hair = scene.cloth("vrm_group0")
+    hair = scene.cloth("vrm_FrontHair")
     model = build_cloth(h, hair)
     names = [h.names[i] for i in model.transform_index]
     assert sorted(names) == sorted([f"FrontHair_{s}" for s in ("Center_L", "Center_R", "R", "L")]
@@ -110,8 +110,8 @@ def test_vrm_end_nodes_and_collider_radii_survive_into_the_built_cloths(godette)
     assert list(cols.radius) == pytest.approx([0.1, 0.217, 0.15, 1.0])
     assert list(cols.shape) == [0, 0, 0, 0]                          # spheres
     assert [cols.names[i] for i in hair.colliders] == ["vrm_col1_0", "vrm_col1_1"]
-    assert [cols.names[i] for i in scene.cloth("vrm_group1").colliders] == ["vrm_col0_0", "vrm_col0_1"]
-    team = system.team_names.index("vrm_group0")
+    assert [cols.names[i] for i in scene.cloth("vrm_Ribbon").colliders] == ["vrm_col0_0", "vrm_col0_1"]
+    team = system.team_names.index("vrm_FrontHair")
     radius = particle_radius(system.model, system.parameters)[np.asarray(system.model.particle_team) == team]
     assert radius == pytest.approx(0.02)                             # the group's hitRadius
 

@@ -56,7 +56,7 @@ def test_godette_colliders_are_four_spheres_on_chest_and_head(godette):
     ribbon = next(c for c in godette.chains if c.name == "Ribbon")
     assert {cols[n].transform for n in hair.colliders} == {"head_Armature"}
     assert {cols[n].transform for n in ribbon.colliders} == {"chest_Armature"}
-    assert [c for c in godette.chains if c.group == "group2"][0].colliders == []
+    assert [c for c in godette.chains if c.group == "HairBall"][0].colliders == []
     assert cols["vrm_col1_1"].center == pytest.approx((0.0, 1.31, 0.07), abs=1e-6)
 
 
@@ -84,8 +84,8 @@ def test_godette_cloth_entries_validate_as_cloth_parameters(godette):
 
 def test_vrm_sections_keep_only_the_colliders_the_cloths_use():
     with pytest.warns(UserWarning):
-        sections = vrm_sections(GODETTE, chains=["group1"])
-    assert [c["name"] for c in sections["cloths"]] == ["vrm_group1"]
+        sections = vrm_sections(GODETTE, chains=["Ribbon"])
+    assert [c["name"] for c in sections["cloths"]] == ["vrm_Ribbon"]
     assert [c["transform"] for c in sections["colliders"]] == ["chest_Armature", "chest_Armature"]
     assert sections["colliders"][0]["sphere"]["radius"] == pytest.approx(0.1)
 

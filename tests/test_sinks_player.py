@@ -131,12 +131,16 @@ def test_sim_time_timeline_is_unity_scaled_time_with_hitch_clamp_and_time_scale(
 def test_collider_shapes_follow_their_transforms(original):
     path, _, positions = original
     rec = Recording(path)
-    _, centers = rec.stacked("/world/colliders/spheres", "Ellipsoids3D:centers")
+    _, centers = rec.stacked("/world/colliders/ball", "Transform3D:translation")
     head = positions[:, 4] + [0, 0.05, 0]
     np.testing.assert_array_equal(centers[:, 0], head.astype(np.float32))
-    _, lengths = rec.stacked("/world/colliders/capsules", "Capsules3D:lengths")
-    # aligned on centre: caps at +-(L/2 - r): 0.15 and 0.17 from the centre
-    np.testing.assert_allclose(lengths[:, 0], 0.32, rtol=1e-6)
+    # the tapered arm is a mesh in its own frame along +Z: aligned on centre, the caps sit at
+    # +-(L/2 - r): 0.15 and 0.17 from the centre, 0.32 apart
+    _, verts = rec.rows("/world/colliders/arm", "Mesh3D:vertex_positions")
+    assert verts[0][:, 2].max() - 0.03 == pytest.approx(0.32, rel=1e-6)
+    _, start = rec.stacked("/world/colliders/arm", "Transform3D:translation")
+    _, quat = rec.stacked("/world/colliders/arm", "Transform3D:quaternion")
+    assert np.isfinite(start).all() and np.allclose(np.linalg.norm(quat, axis=2), 1.0, atol=1e-6)
 
 
 def test_replay_pose_time_and_events_are_recorded_exactly(original):
@@ -160,7 +164,7 @@ def test_resim_round_trip_reproduces_pose_time_and_particles_bit_for_bit(origina
     a, b = Recording(path), Recording(out)
     for entity, comp in [("/world/cloths/tail/particles", "Points3D:positions"),
                          ("/world/rig/joints", "Points3D:positions"),
-                         ("/world/colliders/capsules", "Capsules3D:quaternions")]:
+                         ("/world/colliders/arm", "Transform3D:quaternion")]:
         fa, ra = a.stacked(entity, comp)
         fb, rb = b.stacked(entity, comp)
         assert fa.tolist() == fb.tolist()

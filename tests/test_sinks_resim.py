@@ -40,7 +40,7 @@ def test_the_solver_particles_are_recorded_and_move(original):
     tip_travel = np.linalg.norm(x[-1, -1] - x[0, -1])
     assert tip_travel > 0.05                     # the orbit drags the tail along
     s = summarize(path)
-    assert s["metrics"]["steps"]["max"] >= 1 and s["metrics"]["max_speed"]["max"] > 0
+    assert s["metrics"]["solver/steps_per_frame"]["max"] >= 1 and s["metrics"]["motion/max_speed_m_per_s"]["max"] > 0
 
 
 def test_resim_with_the_same_scene_reproduces_particles_bit_for_bit(original, tmp_path):

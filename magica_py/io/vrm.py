@@ -28,6 +28,7 @@ Conventions (see docs/import.md):
 """
 from __future__ import annotations
 
+import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -45,6 +46,17 @@ from magica_py.kernels import portable
 VRM0_TAIL_LENGTH = 0.07          # UniVRM's virtual tail beyond a childless joint (m)
 MAX_COLLIDER_RADIUS = 0.5        # MagicaCloth2 inspector slider maximum (docs/solver.md §G.1)
 _AXES = "xyz"
+
+
+def bones_label(names: list[str]) -> str:
+    """A bone group's name from its root bones when the file has no comment: their common
+    prefix without trailing separators (FrontHair_L, FrontHair_R -> FrontHair), else the first
+    root's name ("" when that leaves fewer than 3 characters)."""
+    if not names:
+        return ""
+    prefix = os.path.commonprefix(names).rstrip("_.-: ")
+    label = prefix if len(prefix) >= 3 else (names[0] if len(names) == 1 else f"{names[0]}_and_{len(names) - 1}_more")
+    return label if len(label) >= 3 else ""
 
 
 @dataclass
@@ -293,7 +305,8 @@ class _Builder:
             group_colliders.append(names)
         for g, group in enumerate(sec.get("boneGroups") or []):
             where = f"{base}.secondaryAnimation.boneGroups[{g}]"
-            label = self.unique_label(group.get("comment") or f"group{g}", g)
+            roots = [self.node(bone, f"{where}.bones[{b}]") for b, bone in enumerate(group.get("bones") or [])]
+            label = self.unique_label(group.get("comment") or bones_label(roots) or f"group{g}", g)
             center_index = group.get("center", -1)
             center = None if center_index in (None, -1) else self.node(center_index, f"{where}.center")
             params = {

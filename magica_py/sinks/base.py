@@ -153,6 +153,11 @@ class SceneStatics:
     replay_scene_source: str = ""
     replay_scene_overrides: list[str] = field(default_factory=list)   # `--set` overrides of the run
     time_fields: tuple[str, ...] = ()     # UnityTime field names recorded per frame
+    # drawing only (the viewer's entity tree and camera), never read back:
+    node_group: list[str] = field(default_factory=list)    # per joint: instance label ("character_17") or ""
+    collider_names: list[str] = field(default_factory=list)  # per collider of the ColliderSet
+    collider_groups: list[str] = field(default_factory=list)  # per collider: its node's instance label or ""
+    view_box: tuple | None = None         # (min (3,), max (3,)) of joints and particles at the first frame
 
 
 @dataclass

@@ -8,6 +8,7 @@ from magica_py.sinks.base import (ClothTopology, ColliderShapes, FrameData, LogT
 
 JOINT_NAMES = ["root", "a0", "a1", "a2", "b0", "b1"]
 JOINT_PARENT = np.array([-1, 0, 1, 2, 0, 4], np.int32)
+COLLIDER_NAMES = ("ball", "arm", "floor")      # one sphere, one tapered capsule, one plane (colliders_frame)
 
 
 def topologies():
@@ -28,7 +29,8 @@ def statics(toggles=None):
     return SceneStatics(name="fake", joint_names=JOINT_NAMES, joint_parent=JOINT_PARENT, cloths=topologies(),
                         toggles=toggles or LogToggles(baselines=True, base_pose=True),
                         replay_node_names=["root"], replay_scene_text="scene: {name: fake}\n",
-                        time_fields=("time", "delta_time"))
+                        time_fields=("time", "delta_time"), node_group=[""] * len(JOINT_NAMES),
+                        collider_names=list(COLLIDER_NAMES))
 
 
 def colliders_frame(f):

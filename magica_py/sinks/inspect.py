@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 
 import numpy as np
@@ -15,16 +16,27 @@ import numpy as np
 from magica_py.sinks import layout as L
 from magica_py.sinks.readback import Recording, RecordingError
 
+# /world/cloths/NAME/particles, or /world/<rig instance>/cloths/NAME/particles in a crowd
+_CLOTH_PARTICLES = re.compile(r"^/world/(?:(?P<group>[^/]+)/)?cloths/(?P<name>[^/]+)/particles$")
+
 
 # Units of the metrics a recording holds (docs/recordings.md): the sink converts ``time.*`` to
 # ms and logs everything else as the systems reported it.
-METRIC_UNITS = {"steps": "steps", "max_edge_stretch": "ratio", "max_penetration": "m", "max_speed": "m/s",
+METRIC_UNITS = {"steps": "steps", "solver/steps_per_frame": "steps", "max_edge_stretch": "ratio", "max_penetration": "m", "max_speed": "m/s",
                 "cloth/kernel": "s", "cloth/propagate": "s", "cloth/steps": "particle-steps",
                 "cloth/simulation_steps": "steps", "frame/fixed_updates": "count"}
 
 
+_SUFFIX_UNITS = (("_pct", "%"), ("_mm", "mm"), ("_m_per_s", "m/s"), ("_ms", "ms"), ("_count", "count"))
+
+
 def metric_unit(name: str) -> str:
-    """The unit of metric ``name`` (``time/late_update`` -> ``ms``); "" when unknown."""
+    """The unit of metric ``name``: from its suffix as the sink names it (``..._pct`` -> ``%``,
+    ``time/late_update_ms`` -> ``ms``, see ``layout.series_label``), else the table; "" when unknown."""
+    leaf = name.rsplit("/", 1)[-1]
+    for suffix, unit in _SUFFIX_UNITS:
+        if leaf.endswith(suffix):
+            return unit
     if name.startswith("time/"):
         return "ms"
     return METRIC_UNITS.get(name, "")
@@ -42,11 +54,12 @@ def summarize(path) -> dict:
         rows = np.unique(np.concatenate(logged)).size if logged else 0
         entities[entity] = {"rows": int(rows), "static": bool(rec.static.get(entity))}
     cloths = {}
-    prefix = f"/{L.CLOTHS}/"
     for entity in rec.entities:
-        if entity.startswith(prefix) and entity.endswith("/particles") and rec.temporal.get(entity):
+        match = _CLOTH_PARTICLES.match(entity)
+        if match and rec.temporal.get(entity):
             _, rows = rec.rows(entity, "Points3D:positions")
-            cloths[entity[len(prefix):-len("/particles")]] = int(rows[0].shape[0]) if rows else 0
+            name = match["name"] if not match["group"] else f"{match['group']}/{match['name']}"
+            cloths[name] = int(rows[0].shape[0]) if rows else 0
     metrics = {}
     for entity in rec.entities:
         if entity.startswith(f"/{L.METRICS}/") and rec.temporal.get(entity):

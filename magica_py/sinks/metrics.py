@@ -1,7 +1,7 @@
 """Cloth quality metrics computed by the sink from what it logs, for a batch of frames at once.
 
-* ``max_edge_stretch``  max over proxy edges of ``|length / rest − 1|`` (dimensionless)
-* ``max_penetration``   m, max over (Move particle, collider of its cloth) pairs of the overlap
+* ``max_edge_stretch``  max over proxy edges of ``|length / rest − 1|`` (a ratio; logged in %)
+* ``max_penetration``   m (logged in mm), max over (Move particle, collider of its cloth) pairs of the overlap
                         ``R + r − distance`` (sphere / capsule) or ``r − signed distance`` (plane),
                         clamped at 0: how far a particle's sphere is inside a collider
 * ``max_speed``         m/s, max ``|x_t − x_{t−1}| / delta_time`` of the display positions
@@ -142,6 +142,7 @@ class FrameMetrics:
         self.pairs = {k: (np.concatenate(p) if p else np.zeros(0, np.int64),
                           np.concatenate(s) if s else np.zeros(0, np.int64))
                       for k, (p, s) in pairs.items()}
+        self.has_collision = any(p.size for p, _ in self.pairs.values())   # any particle meets a collider
         self.previous = None          # (P, 3) last frame of the previous batch
 
     def compute(self, x: np.ndarray, shapes: dict, delta_time: np.ndarray) -> dict[str, np.ndarray]:

@@ -10,6 +10,13 @@
 
 Component names follow rerun's ``Archetype:field`` convention; AnyValues are stored under
 their bare name (``local_position``).
+
+Scene frame: a recording whose ``/world`` says ``display_mirror_x`` stores world-space
+geometry with X negated for the viewer (``layout.DISPLAY_MIRROR``). ``rows`` / ``stacked``
+undo it (``scene_frame=True``, the default) for positions, strips and mesh vertices in world
+space and for ``Transform3D`` translations and rotations, so read-back values are the scene's,
+bit for bit (negating a float32 is exact). Shapes logged in their own frame under a
+``Transform3D`` (collider shapes) are returned as stored.
 """
 from __future__ import annotations
 
@@ -45,6 +52,11 @@ class Recording:
             batch = chunk.to_record_batch()
             entity = batch.schema.metadata.get(b"rerun:entity_path", b"").decode()
             (self.static if chunk.is_static else self.temporal)[entity].append(batch)
+        try:
+            mirrored = self.static_value("/world", "display_mirror_x")
+        except RecordingError:
+            mirrored = None
+        self.display_mirror_x = mirrored is not None and bool(np.asarray(mirrored).reshape(-1)[:1].all())
 
     # -------------------------------------------------------------- structure
     @property
@@ -74,21 +86,38 @@ class Recording:
         tables = [pa.Table.from_batches([b]).select([timeline, component]) for b in batches]
         return pa.concat_tables(tables).sort_by(timeline)
 
-    def rows(self, entity: str, component: str, timeline: str = "frame") -> tuple[np.ndarray, list[np.ndarray]]:
-        """(timeline values (n,), one array per logged row): (k, width) for fixed-size-list items."""
+    def rows(self, entity: str, component: str, timeline: str = "frame",
+             scene_frame: bool = True) -> tuple[np.ndarray, list[np.ndarray]]:
+        """(timeline values (n,), one array per logged row): (k, width) for fixed-size-list items.
+        ``scene_frame``: undo the display mirror (see the module docstring)."""
         tbl = self.table(entity, component, timeline)
         if tbl is None:
             raise RecordingError(f"{self.path}: no {component!r} logged on {entity!r}")
         index = self._index_column(tbl.column(timeline))
         col = tbl.column(component).combine_chunks()
         out = []
+        unmirror = self._unmirror(entity, component) if scene_frame else None
         for i in range(len(col)):
-            out.append(_row_array(col[i].values))
+            row = _row_array(col[i].values)
+            out.append(row if unmirror is None else row * unmirror)
         return index, out
 
-    def stacked(self, entity: str, component: str, timeline: str = "frame") -> tuple[np.ndarray, np.ndarray]:
+    def _unmirror(self, entity: str, component: str) -> np.ndarray | None:
+        """The per-column sign that takes a stored row back to the scene frame, or None."""
+        if not self.display_mirror_x or not (entity == "/world" or entity.startswith("/world/")):
+            return None
+        if component == "Transform3D:translation":
+            return np.array([-1.0, 1.0, 1.0], np.float32)
+        if component == "Transform3D:quaternion":      # a reflection keeps the angle, flips the axis' y, z
+            return np.array([1.0, -1.0, -1.0, 1.0], np.float32)
+        if component in _WORLD_POSITIONS and "Transform3D:translation" not in self.components(entity):
+            return np.array([-1.0, 1.0, 1.0], np.float32)
+        return None
+
+    def stacked(self, entity: str, component: str, timeline: str = "frame",
+                scene_frame: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Like ``rows`` but stacked into one (n_rows, k, width) array (rows must agree in shape)."""
-        index, rows = self.rows(entity, component, timeline)
+        index, rows = self.rows(entity, component, timeline, scene_frame)
         return index, np.stack(rows) if rows else np.zeros((0,))
 
     def scalars(self, entity: str, timeline: str = "frame") -> tuple[np.ndarray, np.ndarray]:
@@ -128,6 +157,10 @@ class Recording:
         if pa.types.is_duration(column.type):
             column = column.cast(pa.int64())
         return column.to_numpy(zero_copy_only=False)
+
+
+_WORLD_POSITIONS = ("Points3D:positions", "LineStrips3D:strips", "Mesh3D:vertex_positions", "Ellipsoids3D:centers",
+                    "Capsules3D:translations", "Boxes3D:centers")
 
 
 def _row_array(values) -> np.ndarray:

@@ -70,7 +70,7 @@ def attach_solver(player, scene):
 
 
 def record_scene(scene, rrd, *, frames=None, batch_frames=None, spawn=False, connect=None, progress=None,
-                 recording_id=None) -> RecordResult:
+                 recording_id=None, open_at_end=False) -> RecordResult:
     """Run ``scene`` with solver and sink; the file appears at ``rrd`` only if the run succeeds."""
     from magica_py.runtime.player import Player
     from magica_py.sinks.recorder import SinkOptions, attach
@@ -78,7 +78,8 @@ def record_scene(scene, rrd, *, frames=None, batch_frames=None, spawn=False, con
     player = Player.for_scene(scene)
     attach_solver(player, scene)
     recorder = attach(player, scene, SinkOptions(rrd=rrd, no_rrd=rrd is None, spawn=spawn, connect=connect,
-                                                 batch_frames=batch_frames, recording_id=recording_id))
+                                                 batch_frames=batch_frames, recording_id=recording_id,
+                                                 open_at_end=open_at_end))
     n = scene_frames(scene) if frames is None else int(frames)
     ok = False
     start = time.perf_counter()

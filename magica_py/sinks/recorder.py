@@ -43,6 +43,7 @@ class SinkOptions:
     snapshots: SnapshotProvider | None = None
     toggles: Any = None            # overrides scene.output.log
     replay_nodes: Any = None       # hierarchy indices to record for resim (default: driven_nodes)
+    open_at_end: bool = False      # the viewer opens the file at its last frame (screenshots)
 
 
 def driven_nodes(scene, player) -> np.ndarray:
@@ -112,6 +113,7 @@ class Recorder:
         self.colliders = getattr(scene, "colliders", None)
         self.collider_kind, self.collider_slot = shape_slots(self.colliders)
         self.time_fields: tuple[str, ...] = ()
+        self.live_urls: list[str] | None = None     # viewers started / checked by attach()
 
     # ------------------------------------------------------------ lifecycle
     def open(self) -> None:
@@ -120,15 +122,22 @@ class Recorder:
         if self.replay_nodes is None:
             self.replay_nodes = driven_nodes(scene, self.player)
         names = list(scene.hierarchy.names)
+        parent = np.asarray(scene.hierarchy.parent, np.int32)
+        node_group = instance_labels(getattr(scene, "rigs", None) or (), parent)
+        collider_nodes = np.asarray(getattr(self.colliders, "transform", ()), np.int64).reshape(-1)
+        cloths = list(self.provider.cloth_topologies())
         statics = SceneStatics(
             name=str(getattr(scene, "name", "scene")),
-            joint_names=names, joint_parent=np.asarray(scene.hierarchy.parent, np.int32),
-            cloths=list(self.provider.cloth_topologies()), toggles=self.toggles,
+            joint_names=names, joint_parent=parent,
+            cloths=cloths, toggles=self.toggles,
             replay_node_names=[names[i] for i in self.replay_nodes],
             replay_scene_text=_scene_text(scene), replay_scene_source=str(getattr(scene, "source", "") or ""),
             replay_scene_overrides=[str(o) for o in (getattr(scene, "overrides", None) or ())],
-            time_fields=self.time_fields)
-        rrd = None if opts.no_rrd else (opts.rrd if opts.rrd is not None else _scene_rrd(scene))
+            time_fields=self.time_fields, node_group=node_group,
+            collider_names=[str(n) for n in getattr(self.colliders, "names", ())],
+            collider_groups=[node_group[c] if 0 <= c < len(node_group) else "" for c in collider_nodes],
+            view_box=self._view_box(cloths))
+        rrd = output_rrd(opts, scene)
         if rrd is None and not opts.spawn and opts.connect is None:
             self.sink = NullSink()
             return
@@ -137,7 +146,19 @@ class Recorder:
         self.sink = RerunSink(statics, rrd_path=rrd, spawn=opts.spawn, connect=opts.connect,
                               batch_frames=opts.batch_frames, recording_id=opts.recording_id,
                               collider_kind=self.collider_kind, collider_slot=self.collider_slot,
-                              collider_set=self.colliders)
+                              collider_set=self.colliders, live_urls=self.live_urls,
+                              open_at_end=opts.open_at_end)
+
+    def _view_box(self, cloths):
+        """(min, max) of every joint and particle now (the first frame): where the camera starts."""
+        points = [np.asarray(self.scene.hierarchy.world_position, np.float64).reshape(-1, 3)]
+        if cloths:
+            points.append(np.asarray(self._particles()[0], np.float64).reshape(-1, 3))
+        points = np.concatenate(points)
+        points = points[np.all(np.isfinite(points), axis=1)]
+        if not points.size:
+            return None
+        return points.min(axis=0), points.max(axis=0)
 
     def close(self, success: bool = True) -> None:
         """End the recording: a successful run of zero frames still leaves a (static-only) file."""
@@ -228,11 +249,17 @@ def attach(player, scene, options: SinkOptions | dict | None = None) -> Recorder
     elif isinstance(options, dict):
         options = SinkOptions(**options)
     recorder = Recorder(player, scene, options)
-    rrd = None if options.no_rrd else (options.rrd if options.rrd is not None else _scene_rrd(scene))
+    rrd = output_rrd(options, scene)
     if rrd is not None:
         from magica_py.sinks.rerun_sink import check_output_path
 
         check_output_path(rrd, "--rrd" if options.rrd is not None else "output.rrd")
+    if options.spawn or options.connect is not None:   # start / check the viewer before any frame
+        import rerun as rr
+
+        from magica_py.sinks.live import open_live_targets
+
+        recorder.live_urls = open_live_targets(rr, None, options.spawn, options.connect)
     schedule = player.schedule
     anchor = "animation" if any(s.name == "animation" for s in schedule.systems(Phase.UPDATE)) else None
     schedule.add(Phase.UPDATE, System(CAPTURE_SYSTEM, recorder.capture), after=anchor)
@@ -241,6 +268,37 @@ def attach(player, scene, options: SinkOptions | dict | None = None) -> Recorder
 
 
 # ------------------------------------------------------------------ helpers
+def output_rrd(options: SinkOptions, scene):
+    """The recording file of a run: ``--rrd`` when given; none with ``no_rrd``; none in live mode
+    (``spawn`` / ``connect``: a live run writes a file only when asked with ``--rrd``); else the
+    scene's ``output.rrd``."""
+    if options.no_rrd:
+        return None
+    if options.rrd is not None:
+        return options.rrd
+    if options.spawn or options.connect is not None:
+        return None
+    return _scene_rrd(scene)
+
+
+def instance_labels(rigs, parent: np.ndarray) -> list[str]:
+    """Per hierarchy node: ``<rig>_<i>`` for the nodes of instance i of an instanced rig, else
+    "" (the viewer groups a crowd's entities per character with it)."""
+    n = parent.size
+    label = [""] * n
+    for rig in rigs:
+        if int(getattr(rig, "instances", 1) or 1) <= 1:
+            continue
+        for i, root in enumerate(getattr(rig, "root_nodes", ())):
+            if 0 <= root < n:
+                label[root] = f"{rig.name}_{i}"
+    for i in range(n):             # parents come before their children in the hierarchy
+        p = parent[i]
+        if not label[i] and p >= 0 and label[p]:
+            label[i] = label[p]
+    return label
+
+
 def _scene_rrd(scene):
     output = getattr(scene, "output", None)
     return getattr(output, "rrd", None) if output is not None else None
