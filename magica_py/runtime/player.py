@@ -7,7 +7,8 @@
    ``ctx.fixed_time`` = that step's fixed clock; ``ctx.counters.fixed_update_count`` += 1 after
    each, as MagicaCloth2's TimeManager.AfterFixedUpdate does), UPDATE, LATE_UPDATE,
    RENDER_WRITE, AFTER_RENDERING. The wall time of each phase is recorded in
-   ``ctx.metrics["time.<phase>"]`` (seconds; FIXED_UPDATE summed over its runs), and with
+   ``ctx.metrics["time.<phase>"]`` (seconds; FIXED_UPDATE summed over its runs; inside UPDATE
+   ``animation.drivers`` and ``animation.propagate`` split the animation system), and with
    ``player.profile_systems = True`` each system's in ``ctx.metrics["time.system.<name>"]``.
    An exception escaping a system gets a note naming the system, phase and frame.
 3. Events raised this frame (``ctx.events``, ``(kind, payload)``) are dispatched to the
@@ -237,9 +238,14 @@ def default_schedule(scene: Any) -> Schedule:
     def animation(ctx: FrameContext) -> None:
         anim = getattr(ctx.scene, "animation", None)
         hierarchy = ctx.scene.hierarchy
+        clock = _time.perf_counter
+        t0 = clock()
         if anim is not None:
             anim.apply(hierarchy, ctx)
+        t1 = clock()
         hierarchy.propagate(moving.plan(hierarchy, anim))
+        ctx.metrics["animation.drivers"] = t1 - t0
+        ctx.metrics["animation.propagate"] = clock() - t1
 
     def reset_frame_counters(ctx: FrameContext) -> None:
         ctx.metrics["frame.fixed_updates"] = float(ctx.counters.fixed_update_count)
