@@ -134,6 +134,36 @@ def test_full_plan_gives_the_reference_bits_on_random_forests(seed, n, trees, th
     assert_same_bits(world_state(h), reference_propagate(h))
 
 
+def chain_forest(rng, chains, lengths):
+    """``chains`` roots, each with a chain of lengths[k] bones (random poses and scales)."""
+    bones = []
+    for k in range(chains):
+        bones.append(BoneSpec(f"r{k}", None, tuple(rng.normal(size=3)), tuple(rng.normal(size=4))))
+        for d in range(int(lengths[k])):
+            bones.append(BoneSpec(f"c{k}_{d}", f"r{k}" if d == 0 else f"c{k}_{d - 1}",
+                                  tuple(rng.normal(size=3) * 0.1), tuple(rng.normal(size=4)),
+                                  tuple(rng.uniform(0.5, 2.0, 3))))
+    return TransformHierarchy(bones)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("uneven", [False, True])
+def test_forest_of_chains_reads_parents_from_the_level_above_with_the_reference_bits(threads, uneven):
+    rng = np.random.default_rng(11)
+    chains = 2 * SEGMENT_WIDTH + 44                    # three segments per level
+    lengths = rng.integers(1, 9, chains) if uneven else np.full(chains, 8)
+    h = chain_forest(rng, chains, lengths)
+    h.threads = threads
+    first_bones = np.flatnonzero([n.startswith("c") and n.endswith("_0") for n in h.names])
+    for nodes in (None, first_bones):                  # every node, then the chains alone
+        plan = h.plan(nodes)
+        if not uneven:
+            assert (plan.parent_slot >= 0).sum() >= plan.parent_slot.size // 2
+        perturb(rng, h, plan.nodes)
+        h.propagate(plan)
+        assert_same_bits(world_state(h), reference_propagate(h))
+
+
 @pytest.mark.parametrize("threads", [1, 2])
 def test_subtree_plan_updates_the_moved_nodes_descendants_and_nothing_else(threads):
     rng = np.random.default_rng(5)

@@ -13,27 +13,34 @@ are the same bits; only the order of independent nodes changes:
 * inside a chunk the nodes go by **depth level** (depth counted from the plan's own top
   nodes): every parent is final before its level starts and the nodes of a level do not
   depend on each other. A level is cut into **segments** of at most ``SEGMENT_WIDTH`` nodes;
-  a segment is gathered into structure-of-arrays scratch rows (``LANE_INPUT`` rows: the local
-  pose and the parent's matrix and world rotation), computed in one loop that LLVM vectorises
-  across the lanes (``compose_lanes``) and scattered back to the hierarchy's arrays;
+  a segment's local poses are gathered into structure-of-arrays scratch rows, computed in one
+  loop that LLVM vectorises across the lanes (``compose_lanes``) and scattered back to the
+  hierarchy's arrays. The parents' matrices and rotations come either from the hierarchy
+  (gathered) or, when the segment's parents are lane for lane the nodes of the segment one
+  level up (a forest of chains: strands, tails, the light scene), straight from that
+  segment's output rows;
 * hierarchy roots (parent -1) of the plan are done first, one by one (``propagate_node``).
 
 The plan never writes the constant bottom row ``(0, 0, 0, 1)`` of ``local_to_world``: the
 hierarchy's constructor writes it with its first full pass and nothing else changes it.
 
-Arrays of a plan (k nodes in the plan, r of them hierarchy roots, s segments, c chunks):
+Arrays of a plan (k nodes in the plan, r of them hierarchy roots, s segments, c chunks, W
+lanes per segment, L output slots):
 
-====================  ===============  ==================================================
-field                 shape            meaning
-====================  ===============  ==================================================
-roots                 (r,) int32       hierarchy roots in the plan, chunk by chunk
-chunk_roots           (c + 1,) int64   chunk j's roots: roots[chunk_roots[j]:chunk_roots[j+1]]
-order                 (k - r,) int32   the other nodes, chunk by chunk, level by level
-segment_start         (s + 1,) int64   segment g: order[segment_start[g]:segment_start[g+1]]
-chunk_segments        (c + 1,) int64   chunk j's segments
-lane_input            (c, 26, W)       scratch: one row per input value, one column per lane
-lane_output           (c, 19, W)       scratch: one row per output value
-====================  ===============  ==================================================
+====================  ===================  ==============================================
+field                 shape                meaning
+====================  ===================  ==============================================
+roots                 (r,) int32           hierarchy roots in the plan, chunk by chunk
+chunk_roots           (c + 1,) int64       chunk j's roots: roots[chunk_roots[j]:chunk_roots[j+1]]
+order                 (k - r,) int32       the other nodes, chunk by chunk, level by level
+segment_start         (s + 1,) int64       segment g: order[segment_start[g]:segment_start[g+1]]
+chunk_segments        (c + 1,) int64       chunk j's segments
+segment_slot          (s,) int32           output slot segment g writes
+parent_slot           (s,) int32           slot holding g's parents lane for lane, or -1
+lane_input            (c, 10, W)           scratch: local pose rows, one column per lane
+lane_parent           (c, 16, W)           scratch: gathered parent rows (output layout)
+lane_output           (c, L, 19, W)        scratch: result rows per slot
+====================  ===================  ==============================================
 """
 from __future__ import annotations
 
@@ -47,14 +54,14 @@ from magica_py.kernels.math3d import (
 
 SEGMENT_WIDTH = 128
 # scratch rows are padded so that rows do not sit a multiple of 4 KiB apart (cache set
-# conflicts between the 26 row streams of a segment)
+# conflicts between the row streams of a segment)
 _ROW_PAD = 8
-# lane_input rows: local position 0-2, local rotation 3-6, local scale 7-9, the parent's
-# local_to_world rows 0-2 at 10-13, 14-17, 18-21, the parent's world rotation 22-25
-LANE_INPUT = 26
+# lane_input rows: local position 0-2, local rotation 3-6, local scale 7-9
+LANE_INPUT = 10
 # lane_output rows: local_to_world rows 0-2 at 0-3, 4-7, 8-11, world rotation 12-15,
-# lossy scale 16-18
+# lossy scale 16-18; lane_parent: the parents' rows 0-15 in the same layout
 LANE_OUTPUT = 19
+LANE_PARENT = 16
 
 
 # ----------------------------------------------------------------------------- per node
@@ -108,21 +115,28 @@ def propagate_node(i, parent, local_position, local_rotation, local_scale,
 
 # ----------------------------------------------------------------------------- lanes
 @kernel
-def gather_lanes(order, k0, k1, parent, local_position, local_rotation, local_scale,
-                 world_rotation, local_to_world, lane_input):
-    """Inputs of nodes order[k0:k1] (each with a parent) into the scratch rows, lane j = k0 + j."""
+def gather_local(order, k0, k1, local_position, local_rotation, local_scale, lane_input):
+    """Local poses of nodes order[k0:k1] into the scratch rows, lane j = node order[k0 + j]."""
     for j in range(k1 - k0):
         i = order[k0 + j]
-        p = parent[i]
         for c in range(3):
             lane_input[c, j] = local_position[i, c]
             lane_input[7 + c, j] = local_scale[i, c]
         for c in range(4):
             lane_input[3 + c, j] = local_rotation[i, c]
-            lane_input[22 + c, j] = world_rotation[p, c]
+
+
+@kernel
+def gather_parents(order, k0, k1, parent, world_rotation, local_to_world, lane_parent):
+    """The parents' matrix rows and world rotations of nodes order[k0:k1], in the row layout of
+    ``lane_output`` (so that an aligned segment reads its parents' output rows instead)."""
+    for j in range(k1 - k0):
+        p = parent[order[k0 + j]]
         for row in range(3):
             for c in range(4):
-                lane_input[10 + 4 * row + c, j] = local_to_world[p, row, c]
+                lane_parent[4 * row + c, j] = local_to_world[p, row, c]
+        for c in range(4):
+            lane_parent[12 + c, j] = world_rotation[p, c]
 
 
 @kernel
@@ -135,22 +149,23 @@ def _matrix_row(a0, a1, a2, a3, r0, r1, r2, ls, lp):
 
 
 @kernel
-def compose_lanes(lanes, lane_input, lane_output):
+def compose_lanes(lanes, lane_input, lane_parent, lane_output):
     """``propagate_node``'s arithmetic for a node with a parent, on ``lanes`` scratch columns.
-    Reads only ``lane_input`` and writes only ``lane_output`` (values kept in registers in
-    between), so the loop vectorises across lanes."""
+    Reads only ``lane_input`` and ``lane_parent`` and writes only ``lane_output`` (values kept
+    in registers in between), so the loop vectorises across lanes."""
     for j in range(lanes):
         lp = (lane_input[0, j], lane_input[1, j], lane_input[2, j])
         lr = q_normalize((lane_input[3, j], lane_input[4, j], lane_input[5, j], lane_input[6, j]))
         ls = (lane_input[7, j], lane_input[8, j], lane_input[9, j])
         r0, r1, r2 = q_to_matrix(lr)
-        m0 = _matrix_row(lane_input[10, j], lane_input[11, j], lane_input[12, j], lane_input[13, j],
+        m0 = _matrix_row(lane_parent[0, j], lane_parent[1, j], lane_parent[2, j], lane_parent[3, j],
                          r0, r1, r2, ls, lp)
-        m1 = _matrix_row(lane_input[14, j], lane_input[15, j], lane_input[16, j], lane_input[17, j],
+        m1 = _matrix_row(lane_parent[4, j], lane_parent[5, j], lane_parent[6, j], lane_parent[7, j],
                          r0, r1, r2, ls, lp)
-        m2 = _matrix_row(lane_input[18, j], lane_input[19, j], lane_input[20, j], lane_input[21, j],
+        m2 = _matrix_row(lane_parent[8, j], lane_parent[9, j], lane_parent[10, j], lane_parent[11, j],
                          r0, r1, r2, ls, lp)
-        wr = q_normalize(q_mul((lane_input[22, j], lane_input[23, j], lane_input[24, j], lane_input[25, j]), lr))
+        wr = q_normalize(q_mul((lane_parent[12, j], lane_parent[13, j], lane_parent[14, j],
+                                lane_parent[15, j]), lr))
         inverse = q_inverse(wr)
         s0 = q_rotate(inverse, (m0[0], m1[0], m2[0]))[0]
         s1 = q_rotate(inverse, (m0[1], m1[1], m2[1]))[1]
@@ -181,45 +196,55 @@ def scatter_lanes(order, k0, k1, world_position, world_rotation, lossy_scale, lo
 
 
 @kernel
-def propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segments,
-                    lane_input, lane_output, parent, local_position, local_rotation, local_scale,
-                    world_position, world_rotation, lossy_scale, local_to_world):
-    """One chunk of a plan: its hierarchy roots, then its segments in order."""
+def propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segments, segment_slot,
+                    parent_slot, lane_input, lane_parent, lane_output, parent, local_position,
+                    local_rotation, local_scale, world_position, world_rotation, lossy_scale,
+                    local_to_world):
+    """One chunk of a plan: its hierarchy roots, then its segments in order; a segment whose
+    parents are lane for lane the nodes of an earlier segment (``parent_slot`` >= 0) reads
+    their results from that segment's output rows."""
     for k in range(chunk_roots[chunk], chunk_roots[chunk + 1]):
         propagate_node(roots[k], parent, local_position, local_rotation, local_scale,
                        world_position, world_rotation, lossy_scale, local_to_world)
     scratch_in = lane_input[chunk]
-    scratch_out = lane_output[chunk]
+    gathered = lane_parent[chunk]
     for g in range(chunk_segments[chunk], chunk_segments[chunk + 1]):
         k0 = segment_start[g]
         k1 = segment_start[g + 1]
-        gather_lanes(order, k0, k1, parent, local_position, local_rotation, local_scale,
-                     world_rotation, local_to_world, scratch_in)
-        compose_lanes(k1 - k0, scratch_in, scratch_out)
-        scatter_lanes(order, k0, k1, world_position, world_rotation, lossy_scale, local_to_world,
-                      scratch_out)
+        gather_local(order, k0, k1, local_position, local_rotation, local_scale, scratch_in)
+        out = lane_output[chunk, segment_slot[g]]
+        if parent_slot[g] >= 0:
+            compose_lanes(k1 - k0, scratch_in, lane_output[chunk, parent_slot[g]], out)
+        else:
+            gather_parents(order, k0, k1, parent, world_rotation, local_to_world, gathered)
+            compose_lanes(k1 - k0, scratch_in, gathered, out)
+        scatter_lanes(order, k0, k1, world_position, world_rotation, lossy_scale, local_to_world, out)
 
 
 @kernel
-def propagate_plan_serial(roots, chunk_roots, order, segment_start, chunk_segments, lane_input,
-                          lane_output, parent, local_position, local_rotation, local_scale,
-                          world_position, world_rotation, lossy_scale, local_to_world):
+def propagate_plan_serial(roots, chunk_roots, order, segment_start, chunk_segments, segment_slot,
+                          parent_slot, lane_input, lane_parent, lane_output, parent,
+                          local_position, local_rotation, local_scale, world_position,
+                          world_rotation, lossy_scale, local_to_world):
     """Every chunk of a plan in turn (one thread)."""
     for chunk in range(chunk_roots.shape[0] - 1):
         propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segments,
-                        lane_input, lane_output, parent, local_position, local_rotation,
-                        local_scale, world_position, world_rotation, lossy_scale, local_to_world)
+                        segment_slot, parent_slot, lane_input, lane_parent, lane_output, parent,
+                        local_position, local_rotation, local_scale, world_position,
+                        world_rotation, lossy_scale, local_to_world)
 
 
 @kernel(parallel=True)
-def propagate_plan_parallel(roots, chunk_roots, order, segment_start, chunk_segments, lane_input,
-                            lane_output, parent, local_position, local_rotation, local_scale,
-                            world_position, world_rotation, lossy_scale, local_to_world):
+def propagate_plan_parallel(roots, chunk_roots, order, segment_start, chunk_segments,
+                            segment_slot, parent_slot, lane_input, lane_parent, lane_output,
+                            parent, local_position, local_rotation, local_scale, world_position,
+                            world_rotation, lossy_scale, local_to_world):
     """The chunks of a plan on numba's threads (chunks share no node: same bits as serial)."""
     for chunk in prange(chunk_roots.shape[0] - 1):
         propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segments,
-                        lane_input, lane_output, parent, local_position, local_rotation,
-                        local_scale, world_position, world_rotation, lossy_scale, local_to_world)
+                        segment_slot, parent_slot, lane_input, lane_parent, lane_output, parent,
+                        local_position, local_rotation, local_scale, world_position,
+                        world_rotation, lossy_scale, local_to_world)
 
 
 # ----------------------------------------------------------------------------- plans
@@ -227,18 +252,22 @@ class PropagationPlan:
     """The nodes to update and the order to update them in (module docstring); built by
     ``build_plan``, run by ``run`` against the hierarchy arrays it was built for."""
 
-    def __init__(self, roots, chunk_roots, order, segment_start, chunk_segments, nodes, threads):
+    def __init__(self, roots, chunk_roots, order, segment_start, chunk_segments, segment_slot,
+                 parent_slot, slots, nodes, threads):
         self.roots = roots
         self.chunk_roots = chunk_roots
         self.order = order
         self.segment_start = segment_start
         self.chunk_segments = chunk_segments
+        self.segment_slot = segment_slot
+        self.parent_slot = parent_slot
         self.nodes = nodes              # (k,) int32 sorted: every node the plan updates
         self.threads = threads          # threads it was built for (``chunks`` <= threads)
-        chunks = chunk_roots.shape[0] - 1
+        chunks = max(chunk_roots.shape[0] - 1, 1)
         width = SEGMENT_WIDTH + _ROW_PAD
-        self.lane_input = np.zeros((max(chunks, 1), LANE_INPUT, width))
-        self.lane_output = np.zeros((max(chunks, 1), LANE_OUTPUT, width))
+        self.lane_input = np.zeros((chunks, LANE_INPUT, width))
+        self.lane_parent = np.zeros((chunks, LANE_PARENT, width))
+        self.lane_output = np.zeros((chunks, max(slots, 1), LANE_OUTPUT, width))
 
     @property
     def chunks(self) -> int:
@@ -254,8 +283,9 @@ class PropagationPlan:
             return
         fn = propagate_plan_parallel if self.chunks > 1 else propagate_plan_serial
         fn(self.roots, self.chunk_roots, self.order, self.segment_start, self.chunk_segments,
-           self.lane_input, self.lane_output, h.parent, h.local_position, h.local_rotation,
-           h.local_scale, h.world_position, h.world_rotation, h.lossy_scale, h.local_to_world)
+           self.segment_slot, self.parent_slot, self.lane_input, self.lane_parent,
+           self.lane_output, h.parent, h.local_position, h.local_rotation, h.local_scale,
+           h.world_position, h.world_rotation, h.lossy_scale, h.local_to_world)
 
 
 def subtree_closure(parent: np.ndarray, nodes) -> np.ndarray:
@@ -318,10 +348,42 @@ def build_plan(parent: np.ndarray, nodes, threads: int = 1,
         if k == order.size or rest_chunk[k] != rest_chunk[k - 1] or rest_depth[k] != rest_depth[k - 1] \
                 or k - starts[-1] >= width:
             starts.append(k)
-    seg_chunk = rest_chunk[np.asarray(starts[:-1], dtype=np.int64)]
+    first = np.asarray(starts[:-1], dtype=np.int64)
+    seg_chunk = rest_chunk[first]
+    seg_depth = rest_depth[first]
     chunk_segments = np.searchsorted(seg_chunk, np.arange(chunks + 1)).astype(np.int64)
+    slot, parent_slot, slots = _output_slots(parent, order, np.asarray(starts, dtype=np.int64),
+                                             seg_chunk, seg_depth)
     return PropagationPlan(roots.astype(np.int32), chunk_roots, order,
-                           np.asarray(starts, dtype=np.int64), chunk_segments, members, int(threads))
+                           np.asarray(starts, dtype=np.int64), chunk_segments, slot, parent_slot,
+                           slots, members, int(threads))
+
+
+def _output_slots(parent, order, starts, seg_chunk, seg_depth):
+    """Output rows of each segment: segment s of a level (s-th of its chunk and depth) writes
+    slot ``(depth % 2) * per_level + s``, which stays untouched during the next level. A segment
+    whose parents are, lane for lane, the nodes of the same-numbered segment one level up (a
+    forest of chains) reads them from there (``parent_slot``); -1: gather from the hierarchy."""
+    count = seg_chunk.size
+    slot = np.zeros(count, dtype=np.int32)
+    parent_slot = np.full(count, -1, dtype=np.int32)
+    index_in_level = np.zeros(count, dtype=np.int64)
+    where: dict[tuple[int, int, int], int] = {}
+    for g in range(count):
+        if g > 0 and seg_chunk[g] == seg_chunk[g - 1] and seg_depth[g] == seg_depth[g - 1]:
+            index_in_level[g] = index_in_level[g - 1] + 1
+        where[(int(seg_chunk[g]), int(seg_depth[g]), int(index_in_level[g]))] = g
+    per_level = int(index_in_level.max()) + 1 if count else 1
+    for g in range(count):
+        slot[g] = (seg_depth[g] % 2) * per_level + index_in_level[g]
+        up = where.get((int(seg_chunk[g]), int(seg_depth[g]) - 1, int(index_in_level[g])))
+        if up is None:
+            continue
+        lanes = parent[order[starts[g]:starts[g + 1]]]
+        above = order[starts[up]:starts[up + 1]]
+        if lanes.size <= above.size and np.array_equal(lanes, above[:lanes.size]):
+            parent_slot[g] = (seg_depth[up] % 2) * per_level + index_in_level[up]
+    return slot, parent_slot, 2 * per_level
 
 
 @kernel
