@@ -65,7 +65,9 @@ appends ``("time_scale", value)``; ``set_parameter: {cloth, key, value}`` append
 ``("set_parameter", {...})``. ``reset()`` re-arms the events and clears teleport offsets.
 
 Cost: one numba kernel call per frame evaluates every driver of every target (crowds
-included); events are a pointer into a sorted list.
+included), writing local poses only (the player's UPDATE system then propagates the driven
+subtrees, ``scene/propagation.py``); events are a pointer into a sorted list, and a frame
+without a due event allocates nothing.
 """
 from __future__ import annotations
 
@@ -460,6 +462,8 @@ class Animation:
         order (list order at equal times). Writes local poses only: the caller propagates."""
         t = float(ctx.time.time)
         self.evaluate(hierarchy, t)
+        if self.next_event >= len(self.events) or self.events[self.next_event].at > t:
+            return  # the usual frame: no event due, nothing more to do or allocate
         moved: set[int] = set()  # nodes teleported this frame (their subtrees are stale)
         while self.next_event < len(self.events) and self.events[self.next_event].at <= t:
             event = self.events[self.next_event]

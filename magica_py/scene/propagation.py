@@ -267,6 +267,7 @@ class PropagationPlan:
         width = SEGMENT_WIDTH + _ROW_PAD
         self.lane_input = np.zeros((chunks, LANE_INPUT, width))
         self.lane_parent = np.zeros((chunks, LANE_PARENT, width))
+        # two levels of output slots: the level being computed and the one above it
         self.lane_output = np.zeros((chunks, max(slots, 1), LANE_OUTPUT, width))
 
     @property
@@ -327,7 +328,7 @@ def build_plan(parent: np.ndarray, nodes, threads: int = 1,
     chunks = max(1, min(int(threads), int(np.unique(m_tree).size) if members.size else 1))
     chunk = np.zeros(members.size, dtype=np.int64)
     if chunks > 1:
-        trees, first, counts = np.unique(m_tree, return_index=True, return_counts=True)
+        trees, counts = np.unique(m_tree, return_counts=True)
         before = np.cumsum(counts) - counts            # plan nodes in earlier trees
         tree_chunk = np.minimum((before * chunks) // members.size, chunks - 1)
         chunk = tree_chunk[np.searchsorted(trees, m_tree)]
