@@ -150,17 +150,18 @@ def chain_forest(rng, chains, lengths):
 @pytest.mark.parametrize("uneven", [False, True])
 def test_forest_of_chains_reads_parents_from_the_level_above_with_the_reference_bits(threads, uneven):
     rng = np.random.default_rng(11)
-    chains = 2 * SEGMENT_WIDTH + 44                    # three segments per level
+    width = 40
+    chains = 2 * threads * width + 11                  # three segments per level and chunk
     lengths = rng.integers(1, 9, chains) if uneven else np.full(chains, 8)
     h = chain_forest(rng, chains, lengths)
-    h.threads = threads
     first_bones = np.flatnonzero([n.startswith("c") and n.endswith("_0") for n in h.names])
     for nodes in (None, first_bones):                  # every node, then the chains alone
-        plan = h.plan(nodes)
+        plan = build_plan(h.parent, nodes, threads, width)
+        assert plan.chunks == threads
         if not uneven:
             assert (plan.parent_slot >= 0).sum() >= plan.parent_slot.size // 2
         perturb(rng, h, plan.nodes)
-        h.propagate(plan)
+        plan.run(h)
         assert_same_bits(world_state(h), reference_propagate(h))
 
 
@@ -197,11 +198,11 @@ def test_a_plan_is_reused_frame_after_frame_without_allocating_new_arrays():
     assert (plan.lane_input, plan.lane_output) == scratch
 
 
-@pytest.mark.parametrize("threads", [1, 2, 4])
-def test_plan_levels_and_chunks_are_independent(threads):
+@pytest.mark.parametrize("threads,width", [(1, 50), (2, 50), (4, 50), (2, SEGMENT_WIDTH), (1, 3000)])
+def test_plan_levels_and_chunks_are_independent(threads, width):
     rng = np.random.default_rng(3)
     h = random_forest(rng, 2000, 30)
-    plan = build_plan(h.parent, None, threads)
+    plan = build_plan(h.parent, None, threads, width)
     assert plan.chunks <= threads
     chunk_of = np.full(h.count, -1)
     for c in range(plan.chunks):
@@ -216,9 +217,12 @@ def test_plan_levels_and_chunks_are_independent(threads):
     done[plan.roots] = True
     for g in range(plan.segment_start.size - 1):
         seg = plan.order[plan.segment_start[g]:plan.segment_start[g + 1]]
-        assert 0 < seg.size <= SEGMENT_WIDTH
+        assert 0 < seg.size <= width
         assert done[h.parent[seg]].all()               # every parent final before the segment
         done[seg] = True
+    perturb(rng, h, np.arange(h.count))
+    plan.run(h)                                        # scratch rows sized for the width
+    assert_same_bits(world_state(h), reference_propagate(h))
 
 
 def test_closure_of_no_nodes_is_empty_and_a_bad_index_is_named():
@@ -233,6 +237,8 @@ def test_closure_of_no_nodes_is_empty_and_a_bad_index_is_named():
         h.plan([3, 50])
     with pytest.raises(ValueError, match="threads"):
         h.threads = 0
+    with pytest.raises(ValueError, match="width >= 1"):
+        build_plan(h.parent, None, 1, 0)
 
 
 # ----------------------------------------------------------------------------- inside the frame

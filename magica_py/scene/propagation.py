@@ -12,7 +12,7 @@ are the same bits; only the order of independent nodes changes:
   threads (``threads`` > 1, numba ``prange``);
 * inside a chunk the nodes go by **depth level** (depth counted from the plan's own top
   nodes): every parent is final before its level starts and the nodes of a level do not
-  depend on each other. A level is cut into **segments** of at most ``SEGMENT_WIDTH`` nodes;
+  depend on each other. A level is cut into **segments** of at most ``SEGMENT_WIDTH`` (512) nodes;
   a segment's local poses are gathered into structure-of-arrays scratch rows, computed in one
   loop that LLVM vectorises across the lanes (``compose_lanes``) and scattered back to the
   hierarchy's arrays. The parents' matrices and rotations come either from the hierarchy
@@ -25,7 +25,7 @@ The plan never writes the constant bottom row ``(0, 0, 0, 1)`` of ``local_to_wor
 hierarchy's constructor writes it with its first full pass and nothing else changes it.
 
 Arrays of a plan (k nodes in the plan, r of them hierarchy roots, s segments, c chunks, W
-lanes per segment, L output slots):
+lanes per segment plus padding, L output slots):
 
 ====================  ===================  ==============================================
 field                 shape                meaning
@@ -52,7 +52,9 @@ from magica_py.kernels.math3d import (
     load3, load4, q_inverse, q_mul, q_normalize, q_rotate, q_to_matrix, store4,
 )
 
-SEGMENT_WIDTH = 128
+# lanes per segment: wide enough that the per-segment work is small beside the lanes' (128: 10 %
+# slower on the light scene, 64: twice as slow), small enough for the scratch to stay in L2
+SEGMENT_WIDTH = 512
 # scratch rows are padded so that rows do not sit a multiple of 4 KiB apart (cache set
 # conflicts between the row streams of a segment)
 _ROW_PAD = 8
@@ -253,7 +255,7 @@ class PropagationPlan:
     ``build_plan``, run by ``run`` against the hierarchy arrays it was built for."""
 
     def __init__(self, roots, chunk_roots, order, segment_start, chunk_segments, segment_slot,
-                 parent_slot, slots, nodes, threads):
+                 parent_slot, slots, nodes, threads, width):
         self.roots = roots
         self.chunk_roots = chunk_roots
         self.order = order
@@ -264,7 +266,7 @@ class PropagationPlan:
         self.nodes = nodes              # (k,) int32 sorted: every node the plan updates
         self.threads = threads          # threads it was built for (``chunks`` <= threads)
         chunks = max(chunk_roots.shape[0] - 1, 1)
-        width = SEGMENT_WIDTH + _ROW_PAD
+        width = width + _ROW_PAD                # lanes per segment, padded
         self.lane_input = np.zeros((chunks, LANE_INPUT, width))
         self.lane_parent = np.zeros((chunks, LANE_PARENT, width))
         # two levels of output slots: the level being computed and the one above it
@@ -314,7 +316,10 @@ def _mark_descendants(parent, mark):
 def build_plan(parent: np.ndarray, nodes, threads: int = 1,
                width: int = SEGMENT_WIDTH) -> PropagationPlan:
     """The plan that updates ``nodes`` and their descendants (``nodes=None``: every node) of a
-    hierarchy with parents-before-children ``parent``, split into at most ``threads`` chunks."""
+    hierarchy with parents-before-children ``parent``, split into at most ``threads`` chunks
+    and segments of at most ``width`` lanes."""
+    if int(threads) < 1 or int(width) < 1:
+        raise ValueError(f"propagation plan: expected threads >= 1 and width >= 1, got {threads}, {width}")
     n = parent.shape[0]
     members = np.arange(n, dtype=np.int32) if nodes is None else subtree_closure(parent, nodes)
     in_plan = np.zeros(n, dtype=bool)
@@ -357,7 +362,7 @@ def build_plan(parent: np.ndarray, nodes, threads: int = 1,
                                              seg_chunk, seg_depth)
     return PropagationPlan(roots.astype(np.int32), chunk_roots, order,
                            np.asarray(starts, dtype=np.int64), chunk_segments, slot, parent_slot,
-                           slots, members, int(threads))
+                           slots, members, int(threads), int(width))
 
 
 def _output_slots(parent, order, starts, seg_chunk, seg_depth):
