@@ -20,7 +20,9 @@ mode's distance constraint runs twice) and ``impl_c.py --variant soa2 --K 1000 -
 --no-errors`` (SIMD across chains, 2 OpenMP threads; the ctypes line is called once per frame
 from Python like our kernel, the standalone line has no Python in the loop). Their C build and
 caches go to a temporary folder (``PEERS_BUILD`` / ``PEERS_CACHE``), not into the shared
-folder. Ratios are peer time / our time: above 1 means faster than the peer.
+folder. Ratios are peer time / our time: above 1 means faster than the peer. The 1-minute
+load average is printed after each part: the peers run minutes after our frames, so on a
+shared machine the ratios are only as good as the load was steady between the two.
 """
 from __future__ import annotations
 
@@ -118,7 +120,7 @@ def main(argv=None) -> int:
     for threads in args.threads:
         r = bench_scene(args.frames, args.reps, threads)
         ours.append(r)
-        print(f"== ours, {threads} thread{'s' if threads > 1 else ''}: {r['particles']} particles, build "
+        print(f"== ours, {threads} thread{'s' if threads > 1 else ''} (load {load1():.2f} after): {r['particles']} particles, build "
               f"{r['build_s']:.2f} s, warm-up {r['warmup_s']:.2f} s, median of {r['reps']} x {r['frames']} frames")
         print(f"   whole frame {r['frame_us']:9.1f} us   (runs: "
               + ", ".join(f"{x:.0f}" for x in r["all_frame_us"]) + ")")
@@ -133,7 +135,7 @@ def main(argv=None) -> int:
         common = ["--K", "1000", "--iters", "2", "--no-errors", "--reps", str(args.reps)]
         peers = run_peer(args.peers_dir, "impl_numpy.py", common, env)
         peers += run_peer(args.peers_dir, "impl_c.py", [*common, "--variant", "soa2"], env)
-    print("== peers (same model, K = 1000, 90 Hz, 2 iterations, this interpreter)")
+    print(f"== peers (same model, K = 1000, 90 Hz, 2 iterations, this interpreter; load {load1():.2f} after)")
     for p in peers:
         print(f"   {p['impl']:32s} frame {float(p['frame_ms']) * 1e3:9.1f} us   pss {p['pss']}")
     print("== ratios (peer time / our time; above 1: we are faster)")
