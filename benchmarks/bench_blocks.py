@@ -23,16 +23,16 @@ import numpy as np
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(ROOT / "tests"))   # block_transfer: the copies into a block
 
 from magica_py.solver.batch_tables import borrow  # noqa: E402
-from magica_py.solver.batched.blocks import describe_blocks, form_blocks  # noqa: E402
+from block_transfer import gather_block_full, load_lanes  # noqa: E402
+from magica_py.solver.batched.blocks import form_blocks  # noqa: E402
 from magica_py.solver.batched.frame_end import (  # noqa: E402,F401
     _lane_values, display_block, guards_trip_block, line_rotations_block, transform_data_block,
     triangle_rotations_block, write_transforms_block, bone_local_pose_block,
 )
-from magica_py.solver.batched.transfer import (  # noqa: E402,F401
-    gather_block_full, load_lanes, scatter_block, scatter_block_end,
-)
+from magica_py.solver.batched.transfer import scatter_block, scatter_block_end  # noqa: E402,F401
 from magica_py.solver.constraints.angle import angle_block  # noqa: E402,F401
 from magica_py.solver.constraints.bending import apply_accumulated_block, bending_block  # noqa: E402,F401
 from magica_py.solver.constraints.collision import point_collision_block  # noqa: E402,F401
@@ -107,6 +107,13 @@ def _gather_all(m, ps, ts, cs, tt, blk, bs):
     for b in range(blk.block_width.shape[0]):
         gather_block_full(m, ps, blk, bs, b)
         load_lanes(blk, bs, ts, tt, cs, b)
+
+
+def describe_blocks(table) -> list[str]:
+    """One line per block: its lanes, particles and teams."""
+    return [f"block {b}: {int(table.block_width[b])} lanes x {int(table.block_particle_count[b])} particles "
+            f"(teams {table.lane_team[table.block_lane_base[b]:table.block_lane_base[b] + table.block_width[b]].tolist()})"
+            for b in range(len(table.block_width))]
 
 
 def main(argv=None) -> int:

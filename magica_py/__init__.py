@@ -3,6 +3,15 @@
 Importing the package configures numba's on-disk cache before numba is imported (see
 ``_configure_numba_cache``); everything else is imported lazily so that ``magica-py --help``
 stays fast.
+
+The public API (docs/api.md), each name imported on first use (PEP 562):
+
+* ``simulate(scene_or_path, frames=None, overrides=(), record=None)`` -> ``Simulation``:
+  per-cloth arrays of particle positions and bone rotations over time, and the metrics;
+* ``Session``: the same, frame by frame (``step()``, ``run(n)``, ``result()``, ``system``);
+* ``load_scene(path, overrides)``, ``load_scene_text(text, overrides)``, ``ConfigError``;
+* ``Player`` (``Player.for_scene(scene)``), ``attach_solver(player, scene)`` -> ``ClothSystem``
+  (``set_parameter``, ``positions``, ``reset_cloth`` ...), ``Simulation``, ``ClothTrack``.
 """
 from __future__ import annotations
 
@@ -44,7 +53,7 @@ def _configure_numba_cache() -> None:
     """Point NUMBA_CACHE_DIR at a folder keyed by a hash of the kernel sources.
 
     numba keys its cache on the kernel's own file only, so a kernel whose helper lives in
-    another module keeps returning stale results after the helper changes (tech-notes §7).
+    another module keeps returning stale results after the helper changes (docs/tech-notes.md §7).
     Keying the cache folder on every kernel module (and what they import) makes any such
     edit start a fresh cache. A user-set NUMBA_CACHE_DIR is respected.
     """
@@ -64,3 +73,34 @@ def _configure_numba_cache() -> None:
 
 
 _configure_numba_cache()
+
+
+# name -> (module, attribute): the public API, imported on first access (PEP 562)
+_PUBLIC = {
+    "simulate": ("magica_py.api", "simulate"),
+    "Session": ("magica_py.api", "Session"),
+    "Simulation": ("magica_py.api", "Simulation"),
+    "ClothTrack": ("magica_py.api", "ClothTrack"),
+    "load_scene": ("magica_py.config", "load_scene"),
+    "load_scene_text": ("magica_py.config", "load_scene_text"),
+    "ConfigError": ("magica_py.config.errors", "ConfigError"),
+    "Player": ("magica_py.runtime.player", "Player"),
+    "attach_solver": ("magica_py.solver", "attach"),
+    "ClothSystem": ("magica_py.solver.system", "ClothSystem"),
+}
+__all__ = sorted(_PUBLIC) + ["__version__"]
+
+
+def __getattr__(name: str):
+    target = _PUBLIC.get(name)
+    if target is None:
+        raise AttributeError(f"module 'magica_py' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(target[0]), target[1])
+    globals()[name] = value  # later accesses skip this function
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_PUBLIC))

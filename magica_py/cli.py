@@ -2,12 +2,15 @@
 
 Commands (``magica-py COMMAND --help`` for each):
 
-* ``run SCENE.yaml [--frames N] [--rrd PATH] [--no-rrd] [--set K=V ...] [--spawn]
-  [--connect ADDR] [--quiet]``: build the scene, the player (``default_schedule``), the
+* ``run SCENE.yaml|AVATAR.vrm [--frames N] [--rrd PATH] [--no-rrd] [--set K=V ...] [--spawn]
+  [--connect ADDR] [--quiet] [--clip CLIP] [--save-scene FILE.yaml]``: build the scene (a VRM
+  avatar gets the scene of ``magica_py.avatar``), the player (``default_schedule``), the
   cloth system (``magica_py.solver.attach(player, scene)`` when the solver provides it, else
   ``solver.system.ClothSystem(hierarchy, cloths, colliders, settings).attach(player, scene)``
   as ``magica-py record-all`` does) and
-  the sink (``magica_py.sinks.attach(player, scene, options)``), run, print a summary;
+  the sink (``magica_py.sinks.attach(player, scene, options)``), run with the loop of
+  ``magica_py.runner`` (progress bar, compile announced and timed apart, warnings as events),
+  print a summary;
 * ``validate SCENE.yaml [SCENE.yaml ...] [--set ...]``: check everything (and build the cloths when
   ``magica_py.build`` is present), print ``OK`` or every problem;
 * ``info SCENE.yaml [--set ...] [--bones]``: settings, rigs, bones, colliders, cloths and,
@@ -29,7 +32,6 @@ import argparse
 import importlib
 import os
 import sys
-import time
 import traceback
 import warnings
 
@@ -49,12 +51,17 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
               "speed against error: frequency sweep vs a converged reference, Pareto plot (reports/)"),
     "stability": ("magica_py.bench.cli", "main_stability",
                   "hard-case stability suite (configs/hard): finiteness, speed, stretch, penetration, rest"),
+    "retarget-check": ("magica_py.io.retarget_check", "main_retarget_check",
+                       "each retargeted clip: bone map, facing, hips height, limb rest alignment, lost bones"),
+    "watch": ("magica_py.watch", "main_watch",
+              "re-run a scene whenever it or an asset it reads changes, each run a recording in the viewer"),
+    "new": ("magica_py.starter", "main_new",
+            "write a commented starter scene (ponytail, tail, skirt or crowd) that runs as it is"),
+    "bake": ("magica_py.bake.cli", "main_bake",
+             "simulate a scene and write its bones' motion as animation (.glb / .gltf / .vrm / .bvh)"),
+    "batch": ("magica_py.batch.cli", "main_batch",
+              "run a job file's cross product of simulations on a Dask cluster; one table of metrics"),
 }
-
-# Per-frame metrics: simulation steps this frame (first one present wins) and particle-steps.
-STEP_METRICS = ("cloth.simulation_steps", "solver.steps", "simulation.steps")
-PARTICLE_STEP_METRIC = "cloth.steps"
-
 
 def register_command(name: str, module: str, function: str, help: str) -> None:
     """Add a lazily imported subcommand (``function(argv) -> int`` in ``module``)."""
@@ -73,7 +80,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="magica-py",
         description="MagicaCloth2-style BoneCloth secondary motion (hair, tails, skirts) in Python + numba. "
                     "Scenes are YAML files (docs/scene-format.md); recordings open in the Rerun viewer.",
-        epilog="Examples:\n  magica-py run configs/tail_orbit.yaml\n"
+        epilog="Examples:\n  magica-py new my_scene --template ponytail && magica-py watch my_scene.yaml\n"
+               "  magica-py run configs/tail_orbit.yaml\n  magica-py run avatar.vrm --save-scene avatar.yaml\n"
                "  magica-py run configs/character_walk.yaml --frames 120 --set cloths.skirt.parameters.damping=0.2\n"
                "  magica-py validate configs/*.yaml\n  magica-py info configs/character_walk.yaml",
         formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -91,18 +99,27 @@ def build_parser() -> argparse.ArgumentParser:
                             "cloths[0].parameters.damping=0.2 or cloths.tail.parameters.damping=0.2 "
                             "(VALUE is parsed as YAML; repeatable)")
 
-    run = sub.add_parser("run", help="simulate a scene and record it",
-                         description="Simulate a scene frame by frame and record it for the Rerun viewer.")
+    run = sub.add_parser("run", help="simulate a scene (or a VRM avatar) and record it",
+                         description="Simulate a scene frame by frame and record it for the Rerun viewer. "
+                                     "Given a .vrm avatar instead of a scene, its spring bones run as bone cloths "
+                                     "on a clip (--clip) or a gentle default motion.")
     scene_args(run)
+    run.add_argument("--clip", metavar="CLIP",
+                     help="with AVATAR.vrm: a BVH file or FILE.glb#Animation retargeted onto the avatar "
+                          "(default: the hips sway and turn, the head turns and nods)")
+    run.add_argument("--save-scene", metavar="FILE.yaml",
+                     help="with AVATAR.vrm: write the scene used to FILE.yaml (asset paths relative to it) "
+                          "so you can edit it and run it again")
     run.add_argument("--frames", type=_positive_int, metavar="N",
                      help="number of frames (default: scene.frames or scene.duration)")
-    run.add_argument("--rrd", metavar="PATH", help="write the recording here (default: output.rrd of the scene)")
+    run.add_argument("--rrd", metavar="PATH", help="write the recording here (default: output.rrd of the scene); "
+                                                   "a missing folder is created")
     run.add_argument("--no-rrd", action="store_true", help="do not write a recording file")
     run.add_argument("--spawn", action="store_true", help="stream to a new Rerun viewer")
     run.add_argument("--connect", metavar="ADDR", help="stream to a running Rerun viewer (host:port or URL)")
     run.add_argument("--no-simulation", action="store_true",
                      help="animate only: do not attach the cloth solver (a quick preview of the motion)")
-    run.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no summary")
+    run.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no notes, no summary")
 
     validate = sub.add_parser("validate", help="check scene files and report every problem",
                               description="Check scene files completely (and build their cloths when the build "
@@ -121,6 +138,11 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=text, add_help=False)
         p.add_argument("rest", nargs=argparse.REMAINDER)
     return parser
+
+
+def plural(count: int, noun: str) -> str:
+    """``1 collider``, ``2 colliders``, ``1,000 bones``."""
+    return f"{count:,} {noun}{'' if count == 1 else 's'}"
 
 
 def _positive_int(text: str) -> int:
@@ -226,8 +248,8 @@ def cmd_validate(args) -> int:
                 total = sum(models[spec.name].particle_count * _copies(scene, spec)
                             for spec in _representative_cloths(scene))
                 particles = f", {total} particles"
-            print(f"OK {path}: scene {scene.name!r}: {counts['bones']} bones, {counts['colliders']} colliders, "
-                  f"{counts['cloths']} cloths{particles}")
+            print(f"OK {path}: scene {scene.name!r}: {plural(counts['bones'], 'bone')}, "
+                  f"{plural(counts['colliders'], 'collider')}, {plural(counts['cloths'], 'cloth')}{particles}")
     return status
 
 
@@ -248,37 +270,145 @@ def cmd_info(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from magica_py.config import load_scene
     from magica_py.runtime.player import Player
+    from magica_py.runner import CompileWatch, WarningEvents, play, summary_line
 
     if args.no_rrd and args.rrd:
         raise InputError("--rrd and --no-rrd contradict each other; give one")
-    scene = load_scene(args.scene, args.overrides)
+    scene = load_run_scene(args)
     frames = args.frames if args.frames is not None else scene.settings.frame_count()
     player = Player.for_scene(scene)  # default_schedule(scene) + the scene's time source
     created_dir = _ensure_output_folder(scene, args)
     recorder = None
     ok = False
+    messages = _Messages(quiet=args.quiet)
+    compile_watch = CompileWatch(announce=messages.note, on_end=messages.pause_ended)
+    warning_events = WarningEvents()
     try:
         _check_output_path(scene, args)  # fail before the (slow to compile) solver is built
-        notes: list[str] = []
-        system = None if args.no_simulation else _attach_solver(player, scene, notes)
-        solver_attached = system is not None
-        recorder = _attach_sink(player, scene, args, notes)
-        if not args.quiet:
+        with compile_watch:
+            notes: list[str] = []
+            system = None if args.no_simulation else _attach_solver(player, scene, notes)
+            solver_attached = system is not None
+            warning_events.attach(player)  # before the sink: this frame's warnings reach its events
+            recorder = _attach_sink(player, scene, args, notes)
+            if recorder is None and not args.no_rrd:
+                notes.append(NO_RECORDING_NOTE.format(name=scene.name))
             for note in notes:
-                print(f"magica-py: {note}", file=sys.stderr)
-        summary = _play(player, scene, frames, quiet=args.quiet, system=system)
+                messages.note(note)
+            messages.start_progress(frames)
+            with warning_events:
+                summary = play(player, scene, frames, system=system, progress=messages.progress,
+                               compile_watch=compile_watch, warning_events=warning_events)
         ok = True
     finally:
+        messages.close()
         if recorder is not None:
             recorder.close(ok)
         if not ok and created_dir is not None:
             _remove_if_empty(created_dir)
     if not args.quiet:
         out = getattr(recorder, "output_path", None) if recorder is not None else None
-        print(_summary_line(scene, summary, solver_attached, out))
+        print(summary_line(scene, summary, solver_attached, out, compile_seconds=compile_watch.seconds))
+        if summary.warnings:
+            print(f"magica-py: {summary.warnings}", file=sys.stderr)
     return EXIT_OK
+
+
+NO_RECORDING_NOTE = ("note: this run writes no recording (the scene has no output.rrd); add --rrd replays/{name}.rrd, "
+                     "output: {{rrd: replays/{name}.rrd}} to the scene, or --spawn to watch it live")
+
+
+class _Messages:
+    """Notes on stderr, written above the progress bar once it exists (quiet: nothing)."""
+
+    def __init__(self, quiet: bool):
+        self.quiet = quiet
+        self.progress = None
+
+    def note(self, text: str) -> None:
+        if self.quiet:
+            return
+        line = f"magica-py: {text}"
+        if self.progress is not None:
+            self.progress.write(line)
+        else:
+            print(line, file=sys.stderr, flush=True)
+
+    def pause_ended(self) -> None:
+        if self.progress is not None:
+            self.progress.pause_ended()
+
+    def start_progress(self, frames) -> None:
+        if not self.quiet:
+            from magica_py.runner import FrameProgress
+
+            self.progress = FrameProgress(frames)
+
+    def close(self) -> None:
+        if self.progress is not None:
+            self.progress.close()
+            self.progress = None
+
+
+def load_run_scene(args):
+    """The scene of ``run``: a scene file, or (``AVATAR.vrm``) the avatar's generated scene,
+    written to ``--save-scene`` first when asked."""
+    from magica_py.avatar import is_vrm_file
+    from magica_py.config import load_scene
+
+    if is_vrm_file(args.scene):
+        return _avatar_scene(args)
+    for option in ("clip", "save_scene"):
+        if getattr(args, option, None):
+            flag = "--" + option.replace("_", "-")
+            raise InputError(f"{flag} applies to a VRM avatar (magica-py run AVATAR.vrm {flag} ...); "
+                             f"{args.scene} is a scene: "
+                             + ("add the clip to its animation (docs/scene-format.md)" if option == "clip"
+                                else "it is already a scene file"))
+    return load_scene(args.scene, args.overrides)
+
+
+def _avatar_scene(args):
+    import pathlib
+
+    from magica_py.avatar import avatar_scene_text
+    from magica_py.config import load_scene, load_scene_text
+
+    vrm = pathlib.Path(args.scene)
+    if not vrm.is_file():
+        raise InputError(f"{args.scene}: file not found")
+    if args.clip and not pathlib.Path(args.clip.split("#", 1)[0]).is_file():
+        raise InputError(f"--clip: {args.clip.split('#', 1)[0]}: file not found (a .bvh file, or FILE.glb#Animation)")
+    if args.save_scene:
+        target = pathlib.Path(args.save_scene)
+        _check_scene_target(target)
+        text = avatar_scene_text(vrm, args.clip, base_dir=target.parent.absolute())
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_text(text, encoding="utf-8")
+        if not args.quiet:
+            print(f"magica-py: wrote the scene to {target} (edit it, then: magica-py run {target})", file=sys.stderr)
+        return load_scene(target, args.overrides)
+    text = avatar_scene_text(vrm, args.clip, base_dir=pathlib.Path.cwd())
+    return load_scene_text(text, args.overrides, source=f"<scene of {args.scene}>")
+
+
+def _check_scene_target(target) -> None:
+    """``--save-scene`` may replace a scene it wrote before, never another file."""
+    from magica_py.avatar import SAVED_SCENE_MARK
+
+    if target.suffix.lower() not in (".yaml", ".yml"):
+        raise InputError(f"--save-scene: {str(target)!r} must end in .yaml")
+    if target.is_dir():
+        raise InputError(f"--save-scene: {str(target)!r} is a folder; expected a file name ending in .yaml")
+    if target.exists():
+        try:
+            head = target.read_text(encoding="utf-8", errors="replace")[:200]
+        except OSError as exc:
+            raise InputError(f"--save-scene: cannot read {str(target)!r}: {exc}") from None
+        if SAVED_SCENE_MARK not in head:
+            raise InputError(f"--save-scene: {str(target)!r} exists and was not written by --save-scene; "
+                             "choose another name (it is not overwritten)")
 
 
 # ----------------------------------------------------------------------------- run helpers
@@ -337,138 +467,42 @@ def _check_output_path(scene, args) -> None:
 
 
 def _ensure_output_folder(scene, args):
-    """Create the folder of the scene's own ``output.rrd`` (e.g. replays/) when missing;
-    returns it when created, so a failed run can remove it again."""
-    if args.no_rrd or args.rrd or scene.output.rrd is None:
+    """Create the folder of the recording (``--rrd`` or the scene's ``output.rrd``, e.g.
+    replays/) when missing, the same way for both; returns the first folder created, so a
+    failed run can remove what it made."""
+    import pathlib
+
+    if args.no_rrd or (not args.rrd and scene.output.rrd is None):
         return None
-    folder = scene.output.rrd.parent
+    folder = pathlib.Path(args.rrd).expanduser().parent if args.rrd else scene.output.rrd.parent
+    where = "--rrd" if args.rrd else "output.rrd"
     if str(folder) in ("", ".") or folder.exists():
         return None
+    top = folder
+    while not top.parent.exists():
+        top = top.parent
     try:
         folder.mkdir(parents=True)
     except OSError as exc:
-        raise InputError(f"output.rrd: cannot create the folder {str(folder)!r}: {exc}") from None
-    return folder
+        raise InputError(f"{where}: cannot create the folder {str(folder)!r}: {exc}") from None
+    return top
 
 
 def _remove_if_empty(folder) -> None:
+    """Remove ``folder`` and the empty folders under it (what a failed run created)."""
+    import shutil
+
     try:
-        folder.rmdir()
+        if not any(path.is_file() for path in folder.rglob("*")):
+            shutil.rmtree(folder)
     except OSError:
         pass
 
 
-class ProgressBar:
-    """A plain-text progress bar on stderr, shown only when the run lasts over ``delay`` s
-    and stderr is a terminal (or ``force``); at most ``rate`` redraws per second."""
+def _summary_line(scene, stats, solver_attached: bool, output) -> str:
+    from magica_py.runner import summary_line
 
-    def __init__(self, total: int | None, stream=None, delay: float = 1.0, rate: float = 10.0,
-                 force: bool = False, width: int = 30):
-        self.total = total
-        self.stream = stream if stream is not None else sys.stderr
-        self.delay = delay
-        self.interval = 1.0 / rate
-        self.enabled = force or bool(getattr(self.stream, "isatty", lambda: False)())
-        self.width = width
-        self.start = time.perf_counter()
-        self.last_draw = 0.0
-        self.drawn = False
-
-    def update(self, done: int, force: bool = False) -> None:
-        if not self.enabled:
-            return
-        now = time.perf_counter()
-        elapsed = now - self.start
-        if elapsed < self.delay or (now - self.last_draw < self.interval and not force):
-            return
-        self.last_draw = now
-        per_frame = elapsed / max(done, 1)
-        if self.total:
-            filled = int(self.width * done / self.total)
-            bar = "#" * filled + "." * (self.width - filled)
-            eta = per_frame * (self.total - done)
-            text = f"\r[{bar}] {done}/{self.total} frames  {1000 * per_frame:.2f} ms/frame  ETA {eta:.1f} s "
-        else:
-            text = f"\r{done} frames  {1000 * per_frame:.2f} ms/frame  {elapsed:.1f} s "
-        self.stream.write(text)
-        self.stream.flush()
-        self.drawn = True
-
-    def close(self) -> None:
-        if self.drawn:
-            self.stream.write("\n")
-            self.stream.flush()
-
-
-class RunStats:
-    """Totals of a run for the summary line."""
-
-    def __init__(self):
-        self.frames = 0
-        self.steps = 0.0            # simulation steps (the most any cloth ran in a frame, summed)
-        self.steps_known = False
-        self.particle_steps = 0.0   # particles x steps, summed over cloths and frames
-        self.wall_time = 0.0
-
-
-def _frame_steps(ctx, system) -> float | None:
-    """Simulation steps of this frame: a solver metric, else the solver's team time state."""
-    for name in STEP_METRICS:
-        if name in ctx.metrics:
-            return float(ctx.metrics[name])
-    counts = getattr(getattr(system, "time_state", None), "update_count", None)
-    if counts is not None and len(counts):
-        return float(max(counts))
-    return None
-
-
-def _play(player, scene, frames: int | None, quiet: bool, system=None) -> RunStats:
-    """Step the player ``frames`` times (or, for a realtime clock with a duration, until that
-    much unscaled time has passed), with the progress bar."""
-    stats = RunStats()
-    bar = ProgressBar(frames, force=False) if not quiet else None
-    duration = scene.settings.duration if frames is None else None
-    start = time.perf_counter()
-    try:
-        while True:
-            if frames is not None and stats.frames >= frames:
-                break
-            ctx = player.step()
-            stats.frames += 1
-            steps = _frame_steps(ctx, system)
-            if steps is not None:
-                stats.steps += steps
-                stats.steps_known = True
-            stats.particle_steps += float(ctx.metrics.get(PARTICLE_STEP_METRIC, 0.0))
-            if bar is not None:
-                bar.update(stats.frames)
-            if duration is not None and ctx.time.unscaled_time >= duration:
-                break
-    finally:
-        if bar is not None:
-            bar.close()
-    stats.wall_time = time.perf_counter() - start
-    return stats
-
-
-def _summary_line(scene, stats: RunStats, solver_attached: bool, output) -> str:
-    per_frame = 1000.0 * stats.wall_time / max(stats.frames, 1)
-    if stats.steps_known:
-        steps = f"{int(round(stats.steps))} simulation steps"
-        if stats.particle_steps:
-            steps += f" ({int(round(stats.particle_steps))} particle-steps)"
-    elif not scene.cloths:
-        steps = "no cloths"
-    elif not solver_attached:
-        steps = "no simulation steps (cloth solver not attached)"
-    else:
-        steps = "simulation steps not reported"
-    where = ""
-    if output:
-        text = os.path.relpath(output)
-        where = f" -> {text if not text.startswith('..') else os.path.abspath(output)}"
-    return (f"{scene.name}: {stats.frames} frames, {steps}, {per_frame:.2f} ms/frame "
-            f"(wall {stats.wall_time:.2f} s){where}")
+    return summary_line(scene, stats, solver_attached, output)
 
 
 # ----------------------------------------------------------------------------- info helpers
@@ -490,7 +524,7 @@ def describe_scene(scene, list_bones: bool = False) -> list[str]:
            f"  simulation: {s.simulation_frequency} Hz, at most {s.max_steps_per_frame} steps per frame; fixed "
            f"delta time {s.fixed_delta_time:g} s, maximum delta time {s.maximum_delta_time:.4g} s",
            f"  gravity direction {tuple(round(x, 4) for x in s.gravity)}, seed {s.seed}",
-           f"bones: {h.count} transforms in {len(scene.rigs)} rigs"]
+           f"bones: {plural(h.count, 'transform')} in {plural(len(scene.rigs), 'rig')}"]
     for rig in scene.rigs:
         inst = f", {rig.instances} instances" if rig.instances > 1 else ""
         roots = ", ".join(h.names[i] for i in rig.root_nodes[:3]) + (" ..." if len(rig.root_nodes) > 3 else "")

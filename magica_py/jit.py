@@ -1,7 +1,7 @@
 """The one place where JIT options are chosen (tests/test_jit_options.py checks every kernel).
 
-* ``cache=True``: compiled kernels are reused across processes (tech-notes §7).
-* no fastmath: results are reproducible bit for bit and NaN checks keep working (§9, §11).
+* ``cache=True``: compiled kernels are reused across processes (docs/tech-notes.md §7).
+* no fastmath: results are reproducible bit for bit and NaN checks keep working (docs/tech-notes.md §9, §11).
 * ``error_model="numpy"``: a division by zero yields inf instead of raising inside a
   kernel; the solver's guards catch non-finite values before they reach a transform.
 * ``MAGICA_NO_CACHE=1`` disables the cache (read-only installs without NUMBA_CACHE_DIR).

@@ -14,7 +14,7 @@ Usage (see tests/test_batched_stages.py)::
 A wrapper is an ``@njit`` function ``(m, ps, prm, ts, cs, tt, teams)`` for the per-team stage
 (``teams``: int32 array of team ids) and ``(m, ps, prm, ts, cs, tt, blk, bs, blocks)`` for the
 block stage; the harness gathers before and scatters after the block wrapper, with the
-per-step lane values loaded (``transfer.load_lanes``). The gather is the *full* one (every
+per-step lane values loaded (``block_transfer.load_lanes``). The gather is the *full* one (every
 field of the block state, scratch included), so a stage can start from a mid-step state.
 Only the fields ``scatter_block_full`` writes back are compared by ``assert_same_rows``; compare
 others with ``block_rows``.
@@ -28,7 +28,7 @@ import numpy as np
 
 from magica_py.solver.batch_tables import borrow
 from magica_py.solver.batched.blocks import form_blocks
-from magica_py.solver.batched.transfer import gather_block_full, load_lanes, scatter_block_full
+from block_transfer import gather_block_full, load_lanes, scatter_block_full
 from magica_py.solver.frame import as_kernel_table
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

@@ -1,6 +1,6 @@
 """Shared test setup.
 
-* Rerun strict mode: a bad logging argument raises instead of warning (tech-notes §1).
+* Rerun strict mode: a bad logging argument raises instead of warning (docs/tech-notes.md §1).
 * ``shared_data``: the third-party test data in ../shared/data (see its NOTICE.md).
 """
 import os

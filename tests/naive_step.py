@@ -1,4 +1,4 @@
-"""A slow, plain-numpy reference of one simulation step (ref §C.3, §G.3, §D.1-§D.10) for a
+"""A slow, plain-numpy reference of one simulation step (docs/solver.md §C.3, §G.3, §D.1-§D.10) for a
 small line-mode scene with point collision, written independently of the numba kernels
 (its own quaternion maths, Python loops over particles) to check them to float tolerance.
 

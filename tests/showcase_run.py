@@ -13,7 +13,7 @@ Measures (world space, bone positions after write-back, i.e. what is displayed):
   their root (the tether's quantity; a bent chain brings its tip closer, which is not
   stretch);
 * ``penetration`` (F,) m: deepest moving particle inside "collider surface + particle
-  radius" (the surface the solver projects onto, ref §D.8), over its cloth's colliders;
+  radius" (the surface the solver projects onto, docs/solver.md §D.8), over its cloth's colliders;
 * ``penetration_ratio`` (F,): that depth over the collider's radius (plane: the particle
   radius), the unit of the solver issue's "10 % of its radius";
 * ``start_inside`` (m): the same depth at the build pose, before any frame: a collider that

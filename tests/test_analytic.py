@@ -20,7 +20,7 @@ import pytest
 from magica_py.bench.variants import Variant, run_variant
 from solver_scenes import pendulum_yaml
 
-THETA0 = math.radians(3.0)      # small: the amplitude decays (ref Appendix 4), the correction stays tiny
+THETA0 = math.radians(3.0)      # small: the amplitude decays (docs/solver.md Appendix 4), the correction stays tiny
 LENGTH = 1.0
 G = 9.81
 
@@ -99,7 +99,7 @@ def test_hanging_chain_with_restoring_terms_off_hangs_straight_down(tmp_path):
     assert np.abs(p[:, 2] - p[0, 2]).max() < 1e-9
     assert np.all(np.diff(p[:, 1]) < 0)                   # each particle below its parent
     lengths = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    # MagicaCloth2's distance constraint is soft (ref Appendix 4: +1.8 % root distance for 5
+    # MagicaCloth2's distance constraint is soft (Appendix 4: +1.8 % root distance for 5
     # links of 0.1 m at the default gravity 5): the lengths are not exact. Measured here, root
     # to tip: +1.29, +2.10, +1.78, +1.25, +0.35 %; all longer, none beyond 2.5 %.
     assert np.all(lengths > 0.1)

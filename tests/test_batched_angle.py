@@ -19,10 +19,21 @@ from magica_py.kernels.math3d import (
 )
 from magica_py.solver.batch_tables import borrow
 from magica_py.solver.constraints.angle import (
-    ITERATIONS, LIMIT_ATTENUATION, LIMIT_PIVOT, MOVE, angle_block, angle_team, solve_pivot_pair,
+    ITERATIONS, LIMIT_ATTENUATION, LIMIT_PIVOT, MOVE, angle_block, angle_team,
 )
 from magica_py.solver.parameters import curve_at, curve_at_clamp01, step_rate
 from magica_py.solver.rotations import full_swing
+
+
+@numba.njit
+def solve_pivot_pair(pp, cp, v, r, pivot_ratio, wp, wc):
+    """Rotate the segment p->c from ``v`` to ``r`` about the point at ``pivot_ratio`` along it:
+    the corrections (dp, dc) weighted by the inverse masses, in the reference's form on world
+    positions (the stage writes it on the edge, docs/angle_maths.md)."""
+    pivot = v_add(pp, v_scale(v, pivot_ratio))
+    dp = v_scale(v_sub(v_sub(pivot, v_scale(r, pivot_ratio)), pp), wp)
+    dc = v_scale(v_sub(v_add(pivot, v_scale(r, 1.0 - pivot_ratio)), cp), wc)
+    return dp, dc
 
 FREQUENCY_RATIO = 1.0
 POWER_W = 1.0

@@ -1,4 +1,4 @@
-"""Triangle bending and volume (ref §D.7) in block form: ``bending_block`` and
+"""Triangle bending and volume (docs/solver.md §D.7) in block form: ``bending_block`` and
 ``apply_accumulated_block`` give exactly the bits of ``bending_team`` / ``apply_accumulated``
 from a mid-motion crowd (``batched_harness``), including lanes whose pairs are degenerate
 while the other lanes' are not; the branch-free per-element functions against a numpy twin

@@ -12,14 +12,13 @@ import numpy as np
 import pytest
 
 from batched_harness import block_tables, crowd_system, restore, snapshot
+from block_transfer import gather_block_end, gather_block_full
 from magica_py.solver.batch_tables import borrow
 from magica_py.solver.batched.frame_end import (
     _lane_values, bone_local_pose_block, display_block, end_frame_block, guards_trip_block, line_rotations_block,
     transform_data_block, triangle_rotations_block, write_transforms_block,
 )
-from magica_py.solver.batched.transfer import (
-    gather_block_end, gather_block_full, scatter_block, scatter_block_end,
-)
+from magica_py.solver.batched.transfer import scatter_block, scatter_block_end
 from magica_py.solver.frame import FrameInputs, as_kernel_table, end_frame_lane, end_frame_stages_team
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

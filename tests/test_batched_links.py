@@ -164,7 +164,7 @@ def test_distance_block_matches_with_collapsed_lanes_and_degenerate_links(crowd)
 
 
 def test_distance_block_matches_with_zero_rest_links(crowd):
-    """Zero-rest links (ZeroDistance pairs, Appendix 2.1: they overwrite the sum) on every
+    """Zero-rest links (ZeroDistance pairs, docs/solver.md Appendix 2.1: they overwrite the sum) on every
     third link of every team (the same links in every lane, so the blocks stay valid)."""
     rest = crowd.model.distance_rest
     saved = rest.copy()

@@ -2,7 +2,7 @@
 (``team_step.team_step_block``, ``colliders.collider_step_block``) give exactly the bits of the
 per-team functions (``step.team_step_update``, ``colliders.collider_step_team`` and, folded in,
 ``collider_end_step_team``) on every
-TeamState / ColliderState field and on the lane arrays ``transfer.load_lanes`` fills, with
+TeamState / ColliderState field and on the lane arrays ``block_transfer.load_lanes`` fills, with
 lanes on both sides of each of C.3's branches."""
 import math
 
@@ -14,7 +14,7 @@ from batched_harness import block_tables, crowd_system, restore, snapshot
 from magica_py.kernels.math3d import q_angle, q_slerp, q_to_angle_axis
 from magica_py.solver.batch_tables import borrow
 from magica_py.solver.batched.state import COLLIDER_FIELDS, LANE_FIELDS, allocate_block_state
-from magica_py.solver.batched.transfer import load_lanes
+from block_transfer import load_lanes
 from magica_py.solver.colliders import collider_end_step_team, collider_step_block, collider_step_team
 from magica_py.solver.frame import as_kernel_table
 from magica_py.solver.step import team_step_update

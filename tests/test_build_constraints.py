@@ -20,7 +20,7 @@ def edge_triangle_map(triangles):
 
 
 def bending_twin(m):
-    """ref §D.7 "Build", written out with Python loops."""
+    """docs/solver.md §D.7 "Build", written out with Python loops."""
     move = (m.attribute & 2) != 0
     valid = (m.attribute & 3) != 0
     p = m.local_position
@@ -71,7 +71,7 @@ def test_bending_and_volume_pairs_match_the_python_twin(strands, mode):
 
 def test_square_quads_get_a_shear_link_along_the_missing_diagonal():
     # flat 3 x 3 sheet with square 0.1 m quads: each quad keeps one diagonal as an edge and the
-    # other diagonal becomes a pair of horizontal shear links (ref §B.9 step 2)
+    # other diagonal becomes a pair of horizontal shear links (§B.9 step 2)
     h = strands_rig([(0.1 * k, 0.0, 0.0) for k in range(3)])
     m = build_cloth(h, Spec("sheet", tuple(h.index(f"s{s}_0") for s in range(3)), "sequential_non_loop_mesh"))
     edges = set(map(tuple, m.edges.tolist()))

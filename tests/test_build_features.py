@@ -90,7 +90,7 @@ def test_curve_tables_are_the_parameters_16_samples():
     np.testing.assert_array_equal(m.curves["radius"], np.full(16, 0.05))
     np.testing.assert_array_equal(m.curves["angle_restoration.stiffness"],
                                   params["angle_restoration.stiffness"].samples)
-    # plain mapping without the keys: reference defaults (§F.1)
+    # plain mapping without the keys: reference defaults (docs/solver.md §F.1)
     d = build_cloth(h, Spec("tail", (h.index("c0"),))).curves
     np.testing.assert_allclose(d["angle_limit.limit_angle"], 60.0 * np.arange(16) / 15)
     np.testing.assert_allclose(d["angle_restoration.stiffness"], 0.2 * (1.0 - 0.8 * np.arange(16) / 15))
@@ -167,7 +167,7 @@ def test_bone_attribute_overrides_make_invalid_and_extra_fixed_bones():
 
 
 def test_cloth_local_pose_equals_the_world_to_local_transform_of_the_reference():
-    # ref §B.2: localPos = W2L·P, localNormal = normalize(W2L·(R·up)); our chained pose must agree
+    # §B.2: localPos = W2L·P, localNormal = normalize(W2L·(R·up)); our chained pose must agree
     rng = np.random.default_rng(11)
 
     def q(v):

@@ -119,7 +119,7 @@ def test_chain_positions_are_in_the_scaled_and_rotated_component_space():
 def test_two_strand_fan_visits_the_last_root_first_and_keeps_root_order_for_baselines():
     h = strands_rig([(-0.1, 0.0, 0.0), (0.1, 0.0, 0.0)], prefix="f")
     m = build_cloth(h, Spec("hair", (h.index("f0_0"), h.index("f1_0"))))
-    # LIFO traversal (ref §B.1): the last root is collected first
+    # LIFO traversal (docs/solver.md §B.1): the last root is collected first
     assert m.bone_names == ("f1_0", "f1_1", "f1_2", "f0_0", "f0_1", "f0_2")
     assert m.root_vertices.tolist() == [3, 0]
     assert m.lines.tolist() == [[0, 1], [1, 2], [3, 4], [4, 5]]
@@ -132,7 +132,7 @@ def test_two_strand_fan_visits_the_last_root_first_and_keeps_root_order_for_base
 
 
 def test_two_strand_fan_in_non_loop_mesh_mode_never_links_first_and_last_root_lines():
-    # ref §B.3 step 4: without loop, root lines 0 and last never connect, so two strands stay lines
+    # §B.3 step 4: without loop, root lines 0 and last never connect, so two strands stay lines
     h = strands_rig([(-0.1, 0.0, 0.0), (0.1, 0.0, 0.0)], prefix="f")
     m = build_cloth(h, Spec("hair", (h.index("f0_0"), h.index("f1_0")), "sequential_non_loop_mesh"))
     assert m.triangles.shape == (0, 3)
@@ -213,7 +213,7 @@ def test_skirt_4x3_automatic_mesh_chains_the_roots_and_also_links_the_square_dia
 
 def test_automatic_root_chain_reverses_when_the_next_root_is_too_far():
     pos = np.array([[0.25 * k, 0.0, 0.0] for k in range(4)])  # exact distances: ties are real ties
-    # roots given as [2, 0, 3, 1] (hand-traced in ref §B.3 step 2): 2 -> 3 (tie with 1, 3 comes
+    # roots given as [2, 0, 3, 1] (hand-traced in §B.3 step 2): 2 -> 3 (tie with 1, 3 comes
     # first in the pool); 3 -> 1 is 0.5 >= 1.5 x 0.25 so the chain reverses to [3, 2]; then 1, 0
     chain, loop = automatic_root_chain([2, 0, 3, 1], pos)
     assert chain == [3, 2, 1, 0]

@@ -1,5 +1,4 @@
 """The magica-py command line: help, exit codes, error reports without tracebacks, no partial output."""
-import io
 import subprocess
 import sys
 import types
@@ -63,7 +62,7 @@ def test_usage_error_exits_2(capsys):
 def test_validate_ok(scene_file, capsys):
     assert cli.main(["validate", str(scene_file)]) == 0
     out = capsys.readouterr().out
-    assert out.startswith(f"OK {scene_file}: scene 'cli_test': 4 bones, 1 colliders, 1 cloths")
+    assert out.startswith(f"OK {scene_file}: scene 'cli_test': 4 bones, 1 collider, 1 cloth")
 
 
 @pytest.mark.parametrize("command", ["validate", "info", "run"])
@@ -85,12 +84,23 @@ def test_bad_override_exits_2_and_writes_nothing(scene_file, tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
-def test_unwritable_output_exits_2(scene_file, tmp_path, capsys):
-    target = tmp_path / "missing_folder" / "x.rrd"
+def test_rrd_into_a_missing_folder_creates_it_like_output_rrd(scene_file, tmp_path, capsys):
+    target = tmp_path / "missing_folder" / "deeper" / "x.rrd"
+    assert cli.main(["run", str(scene_file), "--rrd", str(target), "--frames", "2"]) == 0
+    assert target.is_file()
+
+
+def test_unwritable_output_exits_2_and_leaves_nothing(scene_file, tmp_path, capsys):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    target = blocker / "x.rrd"
     assert cli.main(["run", str(scene_file), "--rrd", str(target)]) == 2
     err = capsys.readouterr().err
-    assert "does not exist" in err and "Traceback" not in err
-    assert not target.parent.exists()
+    assert "--rrd" in err and "Traceback" not in err
+    bad_name = tmp_path / "new_folder" / "x.txt"   # not .rrd: refused, and the folder made for it removed
+    assert cli.main(["run", str(scene_file), "--rrd", str(bad_name)]) == 2
+    assert "must end in .rrd" in capsys.readouterr().err
+    assert not bad_name.parent.exists()
 
 
 def test_contradicting_output_flags(scene_file, tmp_path, capsys):
@@ -137,7 +147,7 @@ def test_failed_run_leaves_no_partial_recording(scene_file, tmp_path, monkeypatc
 def test_info_lists_bones_colliders_cloths(scene_file, capsys):
     assert cli.main(["info", str(scene_file), "--bones"]) == 0
     out = capsys.readouterr().out
-    assert "bones: 4 transforms in 1 rigs" in out
+    assert "bones: 4 transforms in 1 rig\n" in out
     assert "ball: sphere on 'root', radius 0.05" in out
     assert "'tail': line, preset tail, component 'root'" in out
     assert "\n    root\n      tail_0\n        tail_1\n          tail_2\n" in out  # --bones: indented tree
@@ -169,24 +179,10 @@ def test_unavailable_registered_command(monkeypatch, capsys):
     assert "not available" in capsys.readouterr().err
 
 
-def test_progress_bar_draws_after_delay_and_finishes_the_line():
-    stream = io.StringIO()
-    bar = cli.ProgressBar(10, stream=stream, delay=0.0, rate=1e9, force=True, width=10)
-    bar.update(5)
-    bar.update(10)
-    bar.close()
-    text = stream.getvalue()
-    assert "\r[#####.....] 5/10 frames" in text and "\r[##########] 10/10 frames" in text
-    assert text.endswith("\n")
-    quiet = io.StringIO()
-    slow = cli.ProgressBar(10, stream=quiet, delay=60.0, force=True)
-    slow.update(1)
-    slow.close()
-    assert quiet.getvalue() == ""  # runs shorter than the delay draw nothing
-
-
 def test_summary_counts_simulation_steps():
-    stats = cli.RunStats()
+    from magica_py.runner import RunStats
+
+    stats = RunStats()
     stats.frames, stats.steps, stats.steps_known, stats.wall_time = 60, 90.0, True, 0.5
     scene = types.SimpleNamespace(name="s", cloths=[1])
     line = cli._summary_line(scene, stats, True, None)
@@ -199,11 +195,13 @@ def test_summary_counts_simulation_steps():
 
 
 def test_frame_steps_come_from_a_metric_or_the_solver_time_state():
+    from magica_py.runner import frame_steps
+
     ctx = types.SimpleNamespace(metrics={"cloth.simulation_steps": 2.0})
-    assert cli._frame_steps(ctx, None) == 2.0
+    assert frame_steps(ctx, None) == 2.0
     system = types.SimpleNamespace(time_state=types.SimpleNamespace(update_count=[1, 3, 0]))
-    assert cli._frame_steps(types.SimpleNamespace(metrics={}), system) == 3.0
-    assert cli._frame_steps(types.SimpleNamespace(metrics={}), None) is None
+    assert frame_steps(types.SimpleNamespace(metrics={}), system) == 3.0
+    assert frame_steps(types.SimpleNamespace(metrics={}), None) is None
 
 
 def test_validate_checks_every_file_and_fails_if_any_is_bad(scene_file, broken_file, capsys):

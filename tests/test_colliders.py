@@ -1,4 +1,4 @@
-"""ColliderSet construction and world shapes (ref §G.2, §G.3) against hand-computed values."""
+"""ColliderSet construction and world shapes (docs/solver.md §G.2, §G.3) against hand-computed values."""
 import numpy as np
 import pytest
 
@@ -67,7 +67,7 @@ def test_capsule_reverse_swaps_the_axis():
 
 def test_capsule_start_aligned_starts_at_the_transform():
     _, w = one({"capsule": dict(CAPSULE_Y["capsule"], aligned_on_center=False)})
-    # a = 0, b = L - rs - re = 0.29 toward -axis (ref Appendix 3 item 10)
+    # a = 0, b = L - rs - re = 0.29 toward -axis (Appendix 3 item 10)
     np.testing.assert_allclose(w.start[0], (1, 2, 3), atol=1e-12)
     np.testing.assert_allclose(w.end[0], (1, 2 - 0.29, 3), atol=1e-12)
 

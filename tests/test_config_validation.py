@@ -298,12 +298,12 @@ def test_missing_file_is_a_config_error(tmp_path):
     assert "file not found" in str(info.value)
 
 
-def test_empty_document_asks_for_rigs(tmp_path):
+def test_empty_document_says_the_file_is_empty(tmp_path):
     path = tmp_path / "empty.yaml"
     path.write_text("")
     with pytest.raises(ConfigError) as info:
         validate_file(path)
-    assert info.value.paths() == ["rigs"]
+    assert info.value.paths() == [""] and "the file is empty" in str(info.value)
 
 
 # ----------------------------------------------------------------------------- robustness

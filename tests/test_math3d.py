@@ -71,7 +71,7 @@ def test_q_rotate_and_q_to_matrix_match_rodrigues():
         v = RNG.normal(size=3)
         np.testing.assert_allclose(m.q_rotate(q, tuple(v)), rodrigues(axis, angle) @ v, atol=1e-12)
         np.testing.assert_allclose(np.array(m.q_to_matrix(q)), rodrigues(axis, angle), atol=1e-12)
-        np.testing.assert_allclose(m.q_inverse_rotate(q, tuple(v)), rodrigues(axis, angle).T @ v,
+        np.testing.assert_allclose(m.q_rotate(m.q_inverse(q), tuple(v)), rodrigues(axis, angle).T @ v,
                                    atol=1e-12)
 
 

@@ -1,4 +1,4 @@
-"""Parameter table, depth curves and presets (ref §0.3, §F)."""
+"""Parameter table, depth curves and presets (docs/solver.md §0.3, §F)."""
 import math
 
 import numpy as np

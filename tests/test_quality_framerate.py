@@ -2,7 +2,7 @@
 character showcases at 30 / 60 / 144 / 240 fps agree at the times every run has a frame.
 
 Faithful mode keeps MagicaCloth2's once-per-frame smoothing and display filter: its spread is
-tens of % of the tail (ref Appendix 4), which the test also checks so that it can fail.
+tens of % of the tail (docs/solver.md Appendix 4), which the test also checks so that it can fail.
 """
 import importlib.util
 import pathlib

@@ -1,7 +1,7 @@
 """Full-velocity distance correction (issue 8, ``solver.distance_velocity: full``): a 1 m
 pendulum with damping 0 decays in quality mode exactly as plain PBD does (its projection's own
 first-order damping, 5.3 %/s at 90 Hz, 1.4 %/s at 360 Hz: the numpy twin below), where
-MagicaCloth2's 30 % velocity attenuation of D.4 loses more (7.5 %/s at 90 Hz, ref Appendix 4).
+MagicaCloth2's 30 % velocity attenuation of D.4 loses more (7.5 %/s at 90 Hz, docs/solver.md Appendix 4).
 """
 import math
 

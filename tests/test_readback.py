@@ -84,7 +84,7 @@ def test_inspect_summary_counts_frames_particles_metrics_and_events(sink_file):
     assert s["frames"] == 8 and (s["first_frame"], s["last_frame"]) == (0, 7)
     assert s["duration"] == pytest.approx(7 / 60, abs=1e-9)
     assert s["cloths"] == {"tail": 3, "skirt": 4} and s["particles"] == 7
-    assert s["metrics"]["steps"] == {"min": 2.0, "mean": 2.0, "max": 2.0, "count": 8}
+    assert s["metrics"]["steps"] == {"min": 2.0, "mean": 2.0, "max": 2.0, "count": 8, "unit": "steps"}
     assert s["metrics"]["time/late_update"]["max"] == pytest.approx(2.0)
     assert s["metrics"]["max_speed"]["min"] == 0.0
     assert s["events"] == [{"frame": 3, "text": 'teleport: {"frame": 3, "target": "root"}'}]

@@ -28,11 +28,13 @@ def test_run_records_and_inspect_and_resim_read_it(tmp_path, capsys):
     assert summarize(out)["frames"] == 12
 
 
-def test_run_into_a_missing_folder_exits_2_and_writes_nothing(tmp_path, capsys):
-    assert main(["run", SCENE, "--frames", "3", "--rrd", str(tmp_path / "no" / "x.rrd"), "--quiet"]) == 2
+def test_run_into_an_impossible_folder_exits_2_and_writes_nothing(tmp_path, capsys):
+    # a missing folder is created (as for output.rrd); one under a file cannot be
+    (tmp_path / "file").write_text("")
+    assert main(["run", SCENE, "--frames", "3", "--rrd", str(tmp_path / "file" / "no" / "x.rrd"), "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert "does not exist" in err and "Traceback" not in err
-    assert list(tmp_path.iterdir()) == []
+    assert "cannot create the folder" in err and "Traceback" not in err
+    assert [p.name for p in tmp_path.iterdir()] == ["file"]
 
 
 def test_record_all_writes_one_recording_per_config(tmp_path, capsys):

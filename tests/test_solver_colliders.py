@@ -1,4 +1,4 @@
-"""Collider collision (ref §D.8, §G): penetration bounds in point mode, edge mode catching a
+"""Collider collision (docs/solver.md §D.8, §G): penetration bounds in point mode, edge mode catching a
 thin capsule that point mode misses, and the collider work data against the numpy oracle
 ``ColliderSet.world_shapes``."""
 from __future__ import annotations
@@ -109,7 +109,7 @@ def test_edge_mode_catches_a_thin_capsule_that_point_mode_misses():
 
 
 def test_edge_mode_friction_is_quantised_to_zero_or_one_as_in_magicacloth2():
-    # The fixed-point max of ref §0.2 casts to an integer before scaling, so an edge records
+    # The fixed-point max of §0.2 casts to an integer before scaling, so an edge records
     # friction 1 when a collider pushed it and 0 otherwise (Appendix 2.5); D.10 then decays it
     # by 0.6 per step: every friction value is 0 or a power of 0.6.
     a = math.radians(40.0)

@@ -16,7 +16,7 @@ from solver_scenes import chain_nodes, chain_system, params, run
 def test_moving_bones_point_at_their_simulated_child_and_fixed_bones_keep_their_position():
     # With rotational_interpolation 1 a single-child bone is swung onto its simulated child
     # (E.2). The issue asks for 1e-5 rad; MagicaCloth2's FromToRotation returns identity when
-    # cos(angle) is within 1e-6 of 1 (ref §0.2), so swings below acos(1 - 1e-6) = 1.414e-3 rad
+    # cos(angle) is within 1e-6 of 1 (docs/solver.md §0.2), so swings below acos(1 - 1e-6) = 1.414e-3 rad
     # are dropped by the algorithm as specified: that is the worst case (measured 5.4e-5 in
     # this run); most bones are exact to 1e-7.
     s, h = chain_system(bones=5, length=0.5, direction=(0.0, 0.0, -1.0),

@@ -1,4 +1,4 @@
-"""Mesh connection modes: triangle rotations (ref §E.3), bending and volume (§D.7)."""
+"""Mesh connection modes: triangle rotations (docs/solver.md §E.3), bending and volume (§D.7)."""
 from __future__ import annotations
 
 import numpy as np

@@ -6,22 +6,33 @@ from __future__ import annotations
 import math
 import pathlib
 
+import numba
 import numpy as np
 import pytest
 
 from magica_py.config import load_scene
 from magica_py.kernels.math3d import (
-    inverse_mass_friction_depth, lerp, q_look_rotation, v_add, v_cross, v_dot, v_length,
+    inverse_mass_friction_depth, load3, lerp, q_look_rotation, v_add, v_cross, v_dot, v_length,
     v_normalize, v_scale,
 )
 from magica_py.runtime.player import Player
 from magica_py.solver.constraints.angle import angle_team
 from magica_py.solver.constraints.bending import DONT_MOVE_INVERSE_MASS, bending_team, solve_dihedral
 from magica_py.solver.parameters import curve_at_clamp01, step_rate
-from magica_py.solver.rotations import triangle_frame, triangle_rotations_team
+from magica_py.solver.rotations import triangle_frame_from, triangle_rotations_team
 from magica_py.solver.system import ClothSystem
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
+
+
+@numba.njit
+def triangle_frame(m, ps, tri):
+    """Normal and uv tangent of triangle ``tri`` at the display positions (0 when degenerate)."""
+    return triangle_frame_from(load3(ps.position, m.triangles[tri, 0]), load3(ps.position, m.triangles[tri, 1]),
+                               load3(ps.position, m.triangles[tri, 2]),
+                               (m.triangle_uv[tri, 0, 0], m.triangle_uv[tri, 0, 1]),
+                               (m.triangle_uv[tri, 1, 0], m.triangle_uv[tri, 1, 1]),
+                               (m.triangle_uv[tri, 2, 0], m.triangle_uv[tri, 2, 1]))
 
 
 @pytest.fixture(scope="module")

@@ -60,7 +60,7 @@ def test_pendulum_period_matches_small_angle_theory_at_90_hz():
 
 
 def test_pendulum_without_damping_still_loses_amplitude_through_distance_attenuation():
-    # Appendix 4: D.4 keeps 70 % of each correction as velocity, so a 1 m pendulum loses
+    # docs/solver.md Appendix 4: D.4 keeps 70 % of each correction as velocity, so a 1 m pendulum loses
     # about 7 % of its amplitude per second even with damping 0
     a = math.radians(5.0)
     prm = params(gravity=9.81, damping=0.0, angle_restoration__use=False,

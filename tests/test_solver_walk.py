@@ -55,7 +55,7 @@ def test_walking_character_hair_stays_nearly_inextensible(walk):
     edge, root = worst[hair]
     # The issue asks for edges below 1 % and root distances within the tether's 3 %. The
     # distance constraint relaxes towards the mean of its corrections and the tether ramps in
-    # over 0.3 above its 3 % limit (ref Appendix 4), so faithful MagicaCloth2 stretches more:
+    # over 0.3 above its 3 % limit (docs/solver.md Appendix 4), so faithful MagicaCloth2 stretches more:
     # measured 2.97 % (edges) and 2.10 % (root) for the short_hair fan over the walk.
     assert edge < 0.035
     assert root < 0.03

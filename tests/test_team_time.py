@@ -1,4 +1,4 @@
-"""MagicaCloth2 per-team timing (magica_py/runtime/team_time.py) against ref §A.3-§A.7."""
+"""MagicaCloth2 per-team timing (magica_py/runtime/team_time.py) against docs/solver.md §A.3-§A.7."""
 from __future__ import annotations
 
 import math
@@ -7,22 +7,20 @@ import numpy as np
 import pytest
 
 from magica_py.runtime.clock import FixedFrameRate, FrameTimeList, TimeManager, UnityTime
+from team_time_driver import begin_step, end_frame, frame_update
 from magica_py.runtime.team_time import (
     UPDATE_NORMAL,
     UPDATE_UNITY_PHYSICS,
     UPDATE_UNSCALED,
     SimulationTimeSettings,
     TeamTimeState,
-    begin_step,
-    end_frame,
-    frame_update,
     update_mode_code,
 )
 
 
 # ----------------------------------------------------------------------------- slow twin
 class NaiveTeamClock:
-    """Line-by-line transcription of ref §A.4 / §A.6 / §A.7 for one team, in plain Python.
+    """Line-by-line transcription of §A.4 / §A.6 / §A.7 for one team, in plain Python.
 
     ``f32`` rounds every operation through numpy.float32, as the C# source computes.
     """
@@ -149,14 +147,14 @@ def test_30_fps_at_90_hz_runs_3_steps_every_frame_in_exact_mode():
 def test_exact_90_fps_runs_1_step_every_frame_faithful_does_not():
     assert counts_at_fps(90, "exact", frames=600) == [(1, 0)] * 600
     faithful = [c for c, _ in counts_at_fps(90, "faithful", frames=600)]
-    assert faithful[:6] == [1, 1, 0, 2, 1, 0]  # ref Appendix 3.1
+    assert faithful[:6] == [1, 1, 0, 2, 1, 0]  # Appendix 3.1
     assert faithful.count(0) > 0 and faithful.count(2) > 0
     # no time is lost: the running step total never strays more than one step from the frames
     assert all(abs(sum(faithful[:i + 1]) - (i + 1)) <= 1 for i in range(600))
 
 
 def test_faithful_30_fps_sometimes_plans_4_and_drops_a_step():
-    # ref Appendix 3.1: exactly 30 fps plans 2 and then 4 (capped to 3): 2 steps dropped in 40 frames
+    # Appendix 3.1: exactly 30 fps plans 2 and then 4 (capped to 3): 2 steps dropped in 40 frames
     faithful = counts_at_fps(30, "faithful", frames=40)
     assert sum(s for _, s in faithful) == 2
     assert [c for c, _ in faithful].count(2) == 2

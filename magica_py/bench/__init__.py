@@ -1,4 +1,4 @@
-"""Speed against error, converged references and the hard-case stability suite (issue 6).
+"""Speed against error, converged references and the hard-case stability suite (docs/BENCHMARKS.md, docs/STABILITY.md).
 
 * ``metrics``: stretch, root distance, collider penetration, speeds, energy, settling,
   trajectory errors (numpy over recorded runs);

@@ -5,7 +5,9 @@ Both write to the git-ignored ``reports/`` folder and print a progress bar on a 
 bench, per showcase scene (``--scenes``, default tail_orbit and character_walk):
 
 1. converged reference: 1440 Hz frequency-consistent, checked against 2880 Hz (residual);
-2. sweep: every frequency (``--frequencies``) x mode (``magica``, ``frequency_consistent``):
+2. sweep: every frequency (``--frequencies``) x mode (``magica``, ``frequency_consistent``),
+   run as jobs of the batch machinery (``magica_py.batch.Executor``: in this process, or on
+   Dask workers with ``--workers N`` / ``--scheduler ADDRESS``):
    time per frame (median of ``--repeats`` runs after JIT warm-up), particle-steps/s,
    RMS / max position error over the frames the reference resolves, stretch, penetration,
    speed and settling;
@@ -38,9 +40,9 @@ class Progress:
     """Progress over a known total of frames, drawn with the CLI's progress bar."""
 
     def __init__(self, total: int, quiet: bool = False):
-        from magica_py.cli import ProgressBar
+        from magica_py.runner import FrameProgress
 
-        self.bar = None if quiet else ProgressBar(total, delay=0.5)
+        self.bar = None if quiet else FrameProgress(total, delay=0.5)
         self.done = 0
         self.base = 0
 
@@ -71,12 +73,7 @@ def _variant_frames(variant) -> int:
 
 # ----------------------------------------------------------------------------- bench
 def main_bench(argv) -> int:
-    from magica_py.bench import metrics as M
-    from magica_py.bench import report as R
-    from magica_py.bench.reference import CHECK_FREQUENCY, REFERENCE_FREQUENCY, fit_order, resolved_error
-    from magica_py.bench.variants import Variant, resolve_scene_path, run_variant, time_interleaved
-
-    p = argparse.ArgumentParser(prog="magica-py bench", description=__doc__,
+    p = argparse.ArgumentParser(prog="magica-py bench", description=__doc__.replace("``", ""),
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenes", default=",".join(SCENES), help="comma-separated showcase scenes or YAML paths")
     p.add_argument("--frequencies", default=",".join(map(str, FREQUENCIES)), help="simulation Hz to sweep")
@@ -87,10 +84,43 @@ def main_bench(argv) -> int:
                         "(values parsed as YAML; repeatable)")
     p.add_argument("--repeats", type=int, default=9, help="timed runs per variant (median)")
     p.add_argument("--duration", type=float, default=None, help="seconds per run (default: the scene's)")
-    p.add_argument("--out", default=None, help="report folder (default: reports/)")
+    p.add_argument("--out", default=None, help="report folder (default: reports/ in the current folder)")
     p.add_argument("--skip", default="", help="comma-separated parts to skip: fps,numpy,features,crowd")
+    p.add_argument("--workers", type=int, default=0, metavar="N",
+                   help="run the sweep's runs on a local Dask cluster of N workers (default 0: in this process; "
+                        "the timings always run here, one at a time)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="run the sweep's runs on an existing Dask cluster")
     p.add_argument("--quiet", "-q", action="store_true")
     args = p.parse_args(argv)
+    from magica_py.batch.executor import Executor
+
+    executor = Executor(workers=None if args.scheduler else args.workers, scheduler=args.scheduler)
+    with executor:
+        return _bench(args, executor)
+
+
+def sweep_job(item):
+    """One run of the frequency sweep (a batch job): the variant's trajectory against the
+    reference's; returns (run without positions, RMS error per frame, max error per frame,
+    kinetic-energy envelope error)."""
+    from magica_py.bench import metrics as M
+    from magica_py.bench.variants import run_variant
+
+    variant, ref_positions, length_scale, moving, team, ref_energy = item
+    run = run_variant(variant)
+    err_rms, err_max = M.frame_errors(run.positions, ref_positions, length_scale, moving)
+    energy = M.kinetic_envelope(run.positions, run.times, moving, team, ENVELOPE_WINDOW)
+    run.positions = None                  # keep memory flat over the sweep (and the result small)
+    envelope = float(np.sqrt(np.mean((energy - ref_energy) ** 2))) / max(float(ref_energy.max()), 1e-12)
+    return run, err_rms, err_max, envelope
+
+
+def _bench(args, executor) -> int:
+    from magica_py.bench import metrics as M
+    from magica_py.bench import report as R
+    from magica_py.bench.reference import CHECK_FREQUENCY, REFERENCE_FREQUENCY, fit_order, resolved_error
+    from magica_py.bench.variants import Variant, resolve_scene_path, run_variant, time_interleaved
+
     out = R.default_report_dir() if args.out is None else __import__("pathlib").Path(args.out)
     scenes = [s for s in args.scenes.split(",") if s]
     freqs = [int(f) for f in args.frequencies.split(",") if f]
@@ -137,14 +167,13 @@ def main_bench(argv) -> int:
                           "residual_max": float(res_max.max()) * 100, "chain_length": g.chain_length,
                           "frames": ref.frames, "ref_stretch": float(ref.edge_stretch.max()) * 100,
                           "energy_residual": 100 * energy_residual})
-        runs = []
-        for v in sweep:
-            run = run_variant(v, progress=progress.run_callback())
-            err_rms, err_max = M.frame_errors(run.positions, ref.positions, g.length_scale, moving)
-            energy = M.kinetic_envelope(run.positions, run.times, moving, g.team, ENVELOPE_WINDOW)
-            run.positions = None                  # keep memory flat over the sweep
-            envelope = float(np.sqrt(np.mean((energy - ref_energy) ** 2))) / max(float(ref_energy.max()), 1e-12)
-            runs.append((v, run, err_rms, err_max, envelope))
+        # the sweep's runs are jobs of the batch machinery (magica_py.batch.Executor): in this
+        # process by default, on a LocalCluster with --workers N or a cluster with --scheduler
+        runs = [None] * len(sweep)
+        items = [(v, ref.positions, g.length_scale, moving, g.team, ref_energy) for v in sweep]
+        for i, (run, err_rms, err_max, envelope) in executor.map(sweep_job, items, key_prefix="bench-sweep"):
+            runs[i] = (sweep[i], run, err_rms, err_max, envelope)
+            progress.add(frames)
         timings = time_interleaved(sweep, repeats=args.repeats, progress=lambda v: progress.add(frames))
         for (v, run, err_rms, err_max, envelope), (sec, rate, fastest) in zip(runs, timings):
             window = resolved_error(err_rms, err_max, res_rms)
@@ -369,7 +398,7 @@ def main_stability(argv) -> int:
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="a cloth parameter applied to every case (validated; VALUE is YAML), e.g. "
                         "solver.rate_mode=frequency_consistent; repeatable")
-    p.add_argument("--out", default=None, help="report folder (default: reports/)")
+    p.add_argument("--out", default=None, help="report folder (default: reports/ in the current folder)")
     p.add_argument("--quiet", "-q", action="store_true")
     args = p.parse_args(argv)
     try:
@@ -413,7 +442,7 @@ def stability_row(r) -> dict:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    # python -m magica_py.bench.cli [bench|stability] ARGS (until the magica-py commands are registered)
+    # python -m magica_py.bench.cli [bench|stability] ARGS: the same as magica-py bench / stability
     argv = sys.argv[1:]
     if argv and argv[0] == "stability":
         raise SystemExit(main_stability(argv[1:]))

@@ -1,4 +1,4 @@
-"""Accuracy and stability metrics over recorded particle trajectories (issue 6).
+"""Accuracy and stability metrics over recorded particle trajectories (docs/BENCHMARKS.md).
 
 Everything here is plain numpy over arrays recorded by ``bench.variants.run_variant``; no
 kernel, no scene. Conventions: world space, metres, seconds; ``positions`` is (F, N, 3)
@@ -120,9 +120,9 @@ def particle_collider_pairs(particle_team: np.ndarray, team_colliders: list) -> 
 
 def penetration_depth(positions: np.ndarray, particle_radius: np.ndarray, pairs, shapes) -> np.ndarray:
     """Depth (m, >= 0) of each particle inside the shell "collider surface + particle radius"
-    (the surface the solver projects onto, ref §D.8), max over its colliders; (N,).
+    (the surface the solver projects onto, docs/solver.md §D.8), max over its colliders; (N,).
 
-    ``shapes`` is ``ColliderSet.world_shapes(hierarchy)`` (ref §G.2); capsules use the radius
+    ``shapes`` is ``ColliderSet.world_shapes(hierarchy)`` (§G.2); capsules use the radius
     interpolated along the axis at the closest point; planes are one-sided (+normal is out);
     suspended colliders are skipped.
     """

@@ -39,7 +39,7 @@ class NumpyChain:
     velocity: np.ndarray           # (N,3) m/s
     gravity: float = 2.0           # m/s^2 (the tail_orbit scene's value)
     gravity_direction: tuple = (0.0, -1.0, 0.0)
-    damping: float = 0.01          # per step at 90 Hz (0.05 x 0.2 as in ref §F.1)
+    damping: float = 0.01          # per step at 90 Hz (0.05 x 0.2 as in docs/solver.md §F.1)
     restoration: float = 0.02      # per step, pull towards the base pose (0.1 x 0.2)
     tether_limit: float = 1.03     # max root distance / rest
     speed_limit: float = 4.0       # m/s

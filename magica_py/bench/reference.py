@@ -1,4 +1,4 @@
-"""Converged references and the windows where they are good enough (issue 6).
+"""Converged references and the windows where they are good enough (docs/BENCHMARKS.md).
 
 The reference of a scene is the same scene at ``REFERENCE_FREQUENCY`` (1440 Hz) in the
 frequency-consistent mode; its own error is estimated by the *residual* against the same

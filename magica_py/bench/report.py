@@ -42,7 +42,8 @@ STABILITY_COLUMNS = (
 
 
 def default_report_dir() -> pathlib.Path:
-    return pathlib.Path(__file__).resolve().parents[2] / "reports"
+    """``reports/`` in the current folder (where the user ran the command, not beside the package)."""
+    return pathlib.Path.cwd() / "reports"
 
 
 def format_cell(value, fmt: str) -> str:

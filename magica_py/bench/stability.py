@@ -1,4 +1,4 @@
-"""The hard-case stability suite (issue 6 part 2): cases, their stated bounds, evaluation.
+"""The hard-case stability suite (docs/STABILITY.md): cases, their stated bounds, evaluation.
 
 Each case is a scene in ``configs/hard/`` plus what the harness does that a scene file
 cannot (a timeScale pause, parameters past the validated ranges) and the bounds the run
@@ -74,7 +74,7 @@ CASES: tuple[HardCase, ...] = (
     HardCase("chain_200", "chain_200.yaml", 0.5, 32.0, max_stretch=1.4, short_duration=2.0,
              note="finding: edges near the tip stretch by up to 110 % while the 4 m chain swings, and the "
                   "chain still stretches 5 % on average (11 % max) when hanging; MagicaCloth2's soft "
-                  "distance constraint (ref Appendix 4)"),
+                  "distance constraint (docs/solver.md Appendix 4)"),
     HardCase("chains_1000", "chains_1000.yaml", 0.5, 6.0, short_duration=1.0),
     HardCase("zero_length_bones", "zero_length_bones.yaml", 0.5, 3.5),
     HardCase("scale_0_01", "scale_0_01.yaml", 0.5, 1.0, scale=0.01),
@@ -82,11 +82,11 @@ CASES: tuple[HardCase, ...] = (
     HardCase("engulfing_collider", "engulfing_collider.yaml", 1.0, 6.0),
     HardCase("extreme_parameters", "extreme_parameters.yaml", 0.5, 6.5, max_speed=50.0, max_stretch=0.8,
              note="20 links of 5 cm. Finding: edges stretch up to 62 % while the chain whips under gravity 20 "
-                  "(ref Appendix 4 measured +60 % for a gravity-20 whip); damping 0: only the constraints' "
+                  "(docs/solver.md Appendix 4 measured +60 % for a gravity-20 whip); damping 0: only the constraints' "
                   "velocity attenuation and restoration take energy out"),
     HardCase("extreme_gravity_100", "extreme_parameters.yaml", 0.5, 3.0, max_speed=100.0, max_stretch=2.0,
              raw_parameters={"gravity": 100.0},
-             note="gravity 100 m/s^2 is past MagicaCloth2's validated range [0, 20] (ref F.1): written "
+             note="gravity 100 m/s^2 is past MagicaCloth2's validated range [0, 20] (docs/solver.md §F.1): written "
                   "into the solver's parameter table after validation"),
     HardCase("speed_limit_off", "speed_limit_off.yaml", 2.0, 6.0, max_speed=50.0),
     HardCase("violent_50rad", "violent_50rad.yaml", 2.0, 7.0, max_stretch=2.0),

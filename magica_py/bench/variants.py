@@ -2,7 +2,7 @@
 
 A ``Variant`` is "a scene + a dict of parameter overrides + a simulation frequency + a
 render rate": everything the speed-against-error plot compares. Candidates of later modes
-(issue 8's quality mode) are variants with their own ``family`` and parameters, so they
+(quality mode, docs/quality-mode.md) are variants with their own ``family`` and parameters, so they
 land on the same plot without code changes here.
 
 ``run_variant`` loads the scene (``config.load_scene``), builds the player
@@ -85,6 +85,7 @@ class RunResult:
     geometry: M.ChainGeometry
     particle_count: int
     events: list = field(default_factory=list)
+    edge_stretch_mean: np.ndarray | None = None   # (F,) mean |relative edge stretch| over the edges
 
     @property
     def wall_per_frame(self) -> float:
@@ -230,6 +231,7 @@ def run_variant(variant: Variant, record_positions: bool = True, progress=None,
     positions = np.zeros((f, n, 3)) if record_positions else None
     tip_track = np.zeros((f, tips.shape[0], 3))
     stretch = np.zeros(f)
+    stretch_mean = np.zeros(f)
     compression = np.zeros(f)
     root_stretch = np.zeros(f)
     penetration = np.zeros(f)
@@ -264,6 +266,7 @@ def run_variant(variant: Variant, record_positions: bool = True, progress=None,
         es = M.edge_stretch(now, geometry)
         if es.size:
             stretch[i] = es.max()
+            stretch_mean[i] = np.abs(es).mean()
             compression[i] = es.min()
         rs = M.root_distance_stretch(now, geometry)
         root_stretch[i] = rs.max() if rs.size else 0.0
@@ -288,7 +291,7 @@ def run_variant(variant: Variant, record_positions: bool = True, progress=None,
             progress(i + 1, f)
     return RunResult(variant, f, p.frequency, times, scaled, positions, tip_track, stretch, compression,
                      root_stretch, penetration, display_speed, display_step, state_speed, non_finite, resets, wall, steps,
-                     geometry, n, events)
+                     geometry, n, events, edge_stretch_mean=stretch_mean)
 
 
 def time_once(variant: Variant, frames: int | None = None) -> tuple[float, float]:

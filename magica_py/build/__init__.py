@@ -1,12 +1,13 @@
-"""BoneCloth build path (ref §B): root bones -> RenderSetupData -> VirtualMesh -> proxy mesh ->
-constraint data -> read-only ``ClothModel``; ``TeamRegistry`` concatenates models into teams.
+"""BoneCloth build path (docs/solver.md §B): root bones -> RenderSetupData -> VirtualMesh -> proxy mesh ->
+constraint data -> read-only ``ClothModel`` (the solver's ``layout.SolverLayout`` concatenates
+the models of a scene into teams).
 
 ``build_cloth(hierarchy, spec)`` duck-types ``spec`` (a ``ClothSpec``): it reads ``name``,
 ``root_bones``, ``component``, ``connection_mode``, ``parameters`` (a mapping of dotted keys;
 curves carry ``.samples``), ``colliders``, ``collision_mode`` and ``bone_attributes``.
 
 Zero-length and coincident bones: a bone whose position equals its parent's gets the
-ZeroDistance attribute and a distance link of rest 0 (ref §B.7, §B.9); no NaN is produced
+ZeroDistance attribute and a distance link of rest 0 (§B.7, §B.9); no NaN is produced
 (vertex frames come from the bone axes, depth uses arc length, degenerate triangles are
 dropped by the 1e-6 squared-length test of §B.3 and skipped in bending).
 
@@ -26,7 +27,7 @@ Deviations from the reference, deliberate and documented:
 
 Modules: ``render_setup`` (§B.1), ``virtual_mesh`` (§B.2-B.3), ``topology`` (edge-triangle
 maps and the triangle-pair kernels), ``proxy`` (§B.4-B.8), ``constraints`` (§B.9, §D.7,
-§0.3), ``model`` (``ClothModel``, ``describe``), ``teams`` (``TeamRegistry``).
+§0.3), ``model`` (``ClothModel``, ``describe``).
 """
 from __future__ import annotations
 
@@ -43,11 +44,11 @@ from magica_py.build import constraints, proxy, virtual_mesh
 from magica_py.build.errors import BuildError
 from magica_py.build.model import ClothModel, describe, topology_hash
 from magica_py.build.render_setup import collect_transforms
-from magica_py.build.teams import TeamRegistry
+from magica_py.kernels import portable
 
-__all__ = ["BuildError", "ClothModel", "ModelCache", "TeamRegistry", "build_cloth", "describe"]
+__all__ = ["BuildError", "ClothModel", "ModelCache", "build_cloth", "describe"]
 
-MAX_PROXY_COUNT = 32767  # MaxProxyMeshVertexCount / Edge / Triangle (ref §0.4)
+MAX_PROXY_COUNT = 32767  # MaxProxyMeshVertexCount / Edge / Triangle (§0.4)
 EXPANDED_COLLIDER_COUNT = 8
 
 
@@ -245,9 +246,9 @@ def _build(setup, spec, name, mode, root_names) -> ClothModel:
         colliders = np.zeros(0, dtype=np.int32)
 
     g = np.asarray(constraints.parameter(params, "gravity_direction"), dtype=np.float64)
-    g_len = float(np.linalg.norm(g))
+    g_len = portable.norm(g)
     if not len(center_fixed):
-        gravity_dir = np.array([0.0, -1.0, 0.0])  # ref §C.2: constant without a center
+        gravity_dir = np.array([0.0, -1.0, 0.0])  # §C.2: constant without a center
     else:  # the world gravity direction taken as a center-local vector (zero if too short)
         gravity_dir = g / g_len if g_len > 1e-8 else np.zeros(3)
 

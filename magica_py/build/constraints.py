@@ -1,4 +1,4 @@
-"""Constraint build data (ref §B.9, §D.7, §0.3) and the parameter switches of §F.
+"""Constraint build data (docs/solver.md §B.9, §D.7, §0.3) and the parameter switches of §F.
 
 "Model only what a scene needs": every builder here is called only when the cloth's
 parameters switch its feature on; ``plan_features`` says which and why not.
@@ -10,47 +10,32 @@ from collections.abc import Mapping
 import numpy as np
 
 from magica_py.build.proxy import FIXED, MOVE, _starts
+from magica_py.params import default_parameters
 from magica_py.build.topology import bending_pairs, edge_triangles, key_table, shear_links
+from magica_py.kernels import portable
 
 CURVE_SAMPLES = 16
 ZERO_DISTANCE = 1e-8
 
-# Reference defaults (§F.1) for every parameter the build reads, used when the cloth's
-# parameter mapping lacks the key.  Curves: (value, curve start, curve end, use_curve).
-PARAMETER_DEFAULTS: dict = {
-    "damping": (0.05, 1.0, 1.0, False),
-    "radius": (0.02, 1.0, 1.0, False),
-    "distance.stiffness": (1.0, 1.0, 0.5, False),
-    "angle_restoration.stiffness": (0.2, 1.0, 0.2, True),
-    "angle_limit.limit_angle": (60.0, 0.0, 1.0, True),
-    "motion.max_distance": (0.3, 1.0, 1.0, False),
-    "motion.backstop_distance": (0.0, 1.0, 1.0, False),
-    "angle_restoration.use": True,
-    "angle_limit.use": False,
-    "triangle_bending.stiffness": 1.0,
-    "motion.use_max_distance": False,
-    "motion.use_backstop": False,
-    "motion.backstop_radius": 10.0,
-    "gravity_direction": (0.0, -1.0, 0.0),
-}
 CURVE_PARAMETERS = ("damping", "radius", "distance.stiffness", "angle_restoration.stiffness",
                     "angle_limit.limit_angle", "motion.max_distance", "motion.backstop_distance")
 
 
 def parameter(params: Mapping | None, key: str):
-    """The cloth's value for ``key``, or the reference default."""
+    """The cloth's value for ``key``, or its default of the parameter table
+    (``params.default_parameters``)."""
     if params is not None and key in params:
         return params[key]
-    return PARAMETER_DEFAULTS[key]
+    return default_parameters()[key]
 
 
 def curve_samples(value) -> np.ndarray:
-    """16-sample depth table of a curve parameter (ref §0.3, ``ConvertFloatArray``).
+    """16-sample depth table of a curve parameter (§0.3, ``ConvertFloatArray``).
 
     Accepts a ``params.Curve`` (anything with ``.samples``), a plain number (flat curve) or
     a tuple ``(value, start, end, use_curve)`` (the linear ``CurveSerializeData`` constructor).
     The samples are the raw parameter curve: conversions such as damping ×0.2 or restoration
-    ×0.2 belong to the solver (ref §F.1 "conversion" column)."""
+    ×0.2 belong to the solver (§F.1 "conversion" column)."""
     samples = getattr(value, "samples", None)
     if samples is not None:
         out = np.asarray(samples, dtype=np.float64).reshape(-1)
@@ -79,7 +64,7 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------- distance
 def distance_links(attribute, parent, pos, neighbor_start, neighbor_count, neighbor_data,
                    triangles, tri_normals, edges):
-    """Vertical and horizontal distance links per vertex, CSR with signed rest (ref §B.9).
+    """Vertical and horizontal distance links per vertex, CSR with signed rest (§B.9).
 
     Returns (distance_start, distance_count, distance_target, distance_rest): per vertex the
     vertical links (parent/child, rest > 0) first, then horizontal and shear links (rest < 0),
@@ -107,7 +92,7 @@ def distance_links(attribute, parent, pos, neighbor_start, neighbor_count, neigh
     vertical = np.concatenate([vertical, np.zeros(len(shear_src), dtype=bool)])
     order = np.lexsort((~vertical, src))  # by vertex, vertical first, insertion order kept
     src, dst, vertical = src[order], dst[order], vertical[order]
-    length = np.linalg.norm(pos[src] - pos[dst], axis=1)
+    length = portable.norm(pos[src] - pos[dst])
     rest = np.where(vertical, length, -length)
     rest[length < ZERO_DISTANCE] = 0.0
     count = np.bincount(src, minlength=n).astype(np.int32)
@@ -116,13 +101,13 @@ def distance_links(attribute, parent, pos, neighbor_start, neighbor_count, neigh
 
 # ----------------------------------------------------------------------------- bending
 def bending_and_volume(attribute, triangles, pos_local, local_to_world, want_volume=True):
-    """Triangle-pair bending and volume data (ref §D.7 "Build").
+    """Triangle-pair bending and volume data (§D.7 "Build").
 
     Returns (bend_vertices (Kb,4), bend_rest_angle (Kb,) rad, bend_sign (Kb,) ±1,
     volume_vertices (Kv,4), volume_rest (Kv,) = 1000·signed tetra volume in world m³)."""
     valid = (attribute & (FIXED | MOVE)) != 0
     move = (attribute & MOVE) != 0
-    world = pos_local @ local_to_world[:3, :3].T + local_to_world[:3, 3]
+    world = portable.transform_points(local_to_world, pos_local)
     edge_pairs, et_start, et_count, et_data, _ = edge_triangles(triangles, pos_local.shape[0])
     worst = int((et_count * (et_count - 1) // 2).sum())
     bend = np.empty((worst, 4), dtype=np.int32)
@@ -136,11 +121,11 @@ def bending_and_volume(attribute, triangles, pos_local, local_to_world, want_vol
 
 
 def rest_volumes(pos_local, volume_vertices, local_to_world) -> np.ndarray:
-    """1000 x signed tetrahedron volume of each volume pair in world space (ref §D.7); the same
+    """1000 x signed tetrahedron volume of each volume pair in world space (§D.7); the same
     formula as ``bending_pairs`` (used when a cached model is re-targeted to another instance)."""
-    world = pos_local @ local_to_world[:3, :3].T + local_to_world[:3, 3]
+    world = portable.transform_points(local_to_world, pos_local)
     v = volume_vertices
     if v.shape[0] == 0:
         return np.zeros(0)
     w0, w1, w2, w3 = world[v[:, 0]], world[v[:, 1]], world[v[:, 2]], world[v[:, 3]]
-    return 1000.0 / 6.0 * (np.cross(w1 - w0, w2 - w0) * (w3 - w0)).sum(axis=1)
+    return 1000.0 / 6.0 * portable.dot3(np.cross(w1 - w0, w2 - w0), w3 - w0)

@@ -1,4 +1,4 @@
-"""Build errors name the cloth and the offending bones (issue 3, "bad rigs")."""
+"""Build errors name the cloth and the offending bones."""
 from __future__ import annotations
 
 

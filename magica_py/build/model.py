@@ -1,6 +1,6 @@
 """``ClothModel``: the read-only build output of one cloth (docs/architecture.md "Cloth model").
 
-Team-local indices; vertex i = bone i in RenderSetupData order (ref §B.1).  Every array is
+Team-local indices; vertex i = bone i in RenderSetupData order (docs/solver.md §B.1).  Every array is
 ``writeable=False`` and written once by ``build_cloth``; the simulation state lives elsewhere.
 Positions are cloth-local (the component's space at build, scale included), in metres.
 """
@@ -106,7 +106,7 @@ TOPOLOGY_FIELDS = ("attribute", "parent", "root_index", "child_start", "child_co
 
 def topology_hash(arrays: dict, features: dict) -> str:
     """Hash of the index arrays, built features and collider count: equal keys mean teams
-    that one batched kernel can process side by side (tech-notes LAYOUT)."""
+    that one batched kernel can process side by side (docs/tech-notes.md LAYOUT)."""
     h = hashlib.blake2b(digest_size=16)
     for name in TOPOLOGY_FIELDS:
         a = np.ascontiguousarray(arrays[name])

@@ -1,7 +1,7 @@
-"""Proxy mesh conversion (ref §B.4-§B.8): attributes, adjacency, triangle orientation,
+"""Proxy mesh conversion (docs/solver.md §B.4-§B.8): attributes, adjacency, triangle orientation,
 vertex frames, baselines, baseline rest pose, root index and depth.
 
-All positions are cloth-local (ref §B.1).  Orders follow the reference: insertion-ordered
+All positions are cloth-local (§B.1).  Orders follow the reference: insertion-ordered
 unions (triangles first, then lines), triangles in build order, baselines in root-list order.
 """
 from __future__ import annotations
@@ -12,6 +12,7 @@ import numpy as np
 from magica_py.build.errors import BuildError
 from magica_py.build.topology import edge_triangles, orient_flood_fill
 from magica_py.jit import kernel
+from magica_py.kernels import portable
 from magica_py.kernels.math3d import (
     load3,
     load4,
@@ -27,7 +28,7 @@ from magica_py.kernels.math3d import (
     v_sub,
 )
 
-# vertex attribute bits (ref §B.5, VertexAttribute.cs)
+# vertex attribute bits (§B.5, VertexAttribute.cs)
 FIXED = 0x01
 MOVE = 0x02
 INVALID_MOTION = 0x08
@@ -74,7 +75,7 @@ def _unique_pairs_in_order(pairs: np.ndarray, n: int) -> np.ndarray:
 
 
 def adjacency(n: int, lines: np.ndarray, triangles: np.ndarray):
-    """Vertex adjacency CSR and the unique edge list (ref §B.4 step 2).
+    """Vertex adjacency CSR and the unique edge list (§B.4 step 2).
 
     Returns (neighbor_start, neighbor_count, neighbor_data, edges): neighbours of each vertex in
     insertion order (triangles first, each vertex linked to the other two, then lines both
@@ -109,7 +110,7 @@ def _starts(counts: np.ndarray) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- triangles
 def orient_triangles(pos: np.ndarray, triangles: np.ndarray):
-    """Orientation flood fill (``OptimizeTriangleDirection``, ref §B.4 step 3).
+    """Orientation flood fill (``OptimizeTriangleDirection``, §B.4 step 3).
 
     Returns oriented triangles (T,3) int32 and their unit normals (T,3)."""
     tris = triangles.astype(np.int32).copy()
@@ -128,7 +129,7 @@ def _triangle_normals(pos, tris):
     if tris.shape[0] == 0:
         return np.zeros((0, 3))
     n = np.cross(pos[tris[:, 1]] - pos[tris[:, 0]], pos[tris[:, 2]] - pos[tris[:, 0]])
-    length = np.linalg.norm(n, axis=1)
+    length = portable.norm(n)
     return np.where(length[:, None] > 1e-12, n / np.maximum(length, 1e-300)[:, None], 0.0)
 
 
@@ -143,7 +144,7 @@ def triangle_tangents(pos, tris, uv):
     area = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
     area = np.where(area == 0.0, 1.0, area)
     t = -(e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / area[:, None]
-    length = np.linalg.norm(t, axis=1)
+    length = portable.norm(t)
     return np.where(length[:, None] > 1e-12, t / np.maximum(length, 1e-300)[:, None], 0.0)
 
 
@@ -164,7 +165,7 @@ def vertex_triangles(n: int, tris: np.ndarray):
 @kernel
 def _aligned_sum(vectors, vt_data, s, c, flip, flip_bit):
     """Sum of the vertex's triangle vectors; if shorter than 0.5, the sign-aligned sum around
-    the triangle that maximises it, recording negated triangles in ``flip`` (ref §B.4 step 3)."""
+    the triangle that maximises it, recording negated triangles in ``flip`` (§B.4 step 3)."""
     sx = 0.0
     sy = 0.0
     sz = 0.0
@@ -225,7 +226,7 @@ def vertex_frames_kernel(tri_normals, tri_tangents, vt_start, vt_count, vt_data,
 
 
 def vertex_frames(tri_normals, tri_tangents, vt_start, vt_count, vt_data, local_normal, local_tangent):
-    """Vertex normal/tangent from adjacent triangles (ref §B.4 step 3); bone axes elsewhere.
+    """Vertex normal/tangent from adjacent triangles (§B.4 step 3); bone axes elsewhere.
 
     Returns (local_normal, local_tangent, vertex_triangle_flip (S,) uint8)."""
     normal = local_normal.copy()
@@ -238,7 +239,7 @@ def vertex_frames(tri_normals, tri_tangents, vt_start, vt_count, vt_data, local_
 
 # ----------------------------------------------------------------------------- center
 def center_fixed_list(attribute, neighbor_start, neighbor_count, neighbor_data) -> np.ndarray:
-    """Non-Move vertices with a Move neighbour or with no neighbour at all (ref §B.4 step 4)."""
+    """Non-Move vertices with a Move neighbour or with no neighbour at all (§B.4 step 4)."""
     move = (attribute & MOVE) != 0
     src = np.repeat(np.arange(attribute.shape[0]), neighbor_count)
     has_move_nb = np.bincount(src, weights=move[neighbor_data], minlength=attribute.shape[0]) > 0
@@ -247,7 +248,7 @@ def center_fixed_list(attribute, neighbor_start, neighbor_count, neighbor_data) 
 
 # ----------------------------------------------------------------------------- baselines
 def children_csr(parent: np.ndarray):
-    """Children of each vertex in increasing vertex index (ref §B.6)."""
+    """Children of each vertex in increasing vertex index (§B.6)."""
     n = parent.shape[0]
     child = np.nonzero(parent >= 0)[0]
     order = np.argsort(parent[child], kind="stable")
@@ -302,7 +303,7 @@ def baselines_kernel(root_vertices, move, child_start, child_count, child_data,
 
 
 def baselines(root_vertices, attribute, child_start, child_count, child_data):
-    """``CreateTransformBaseLine`` (ref §B.6): returns (flags, start, count, data).
+    """``CreateTransformBaseLine`` (§B.6): returns (flags, start, count, data).
 
     Per root (root-list order) a depth-first walk over DontMove vertices; a DontMove vertex with
     a Move child starts a baseline holding it and its Move subtree in LIFO pop order."""
@@ -323,7 +324,7 @@ def baselines(root_vertices, attribute, child_start, child_count, child_data):
 @kernel
 def vertex_rotations(local_normal, local_tangent, bone_world_rotation, init_render_rotation,
                      bind_rotation, vertex_to_transform_rotation):
-    """bind = qinv(rot_from(n, t)); v2t = bind · qinv(R_render) · R_bone (ref §B.4 steps 7-8)."""
+    """bind = qinv(rot_from(n, t)); v2t = bind · qinv(R_render) · R_bone (§B.4 steps 7-8)."""
     render_inv = q_inverse((init_render_rotation[0], init_render_rotation[1],
                             init_render_rotation[2], init_render_rotation[3]))
     for i in range(local_normal.shape[0]):
@@ -335,7 +336,7 @@ def vertex_rotations(local_normal, local_tangent, bone_world_rotation, init_rend
 @kernel
 def baseline_pose(baseline_data, parent, local_position, local_normal, local_tangent,
                   baseline_local_position, baseline_local_rotation, attribute, zero_distance_bit):
-    """Rest pose of each baseline vertex relative to its parent (ref §B.7); flags ZeroDistance."""
+    """Rest pose of each baseline vertex relative to its parent (§B.7); flags ZeroDistance."""
     for k in range(baseline_data.shape[0]):
         v = baseline_data[k]
         p = parent[v]
@@ -353,7 +354,7 @@ def baseline_pose(baseline_data, parent, local_position, local_normal, local_tan
 
 @kernel
 def root_index_and_length(parent, attribute, local_position, move_bit, root_index, root_length):
-    """Root (first non-Move ancestor) and arc length to it for every Move vertex (ref §B.8).
+    """Root (first non-Move ancestor) and arc length to it for every Move vertex (§B.8).
 
     Vertices are parents-first, so one forward pass suffices.  A Move vertex whose chain has no
     DontMove ancestor gets the top-most ancestor (a parentless Move vertex gets -1)."""

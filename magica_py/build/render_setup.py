@@ -1,4 +1,4 @@
-"""RenderSetupData: the transforms a BoneCloth collects at build time (ref §B.1).
+"""RenderSetupData: the transforms a BoneCloth collects at build time (docs/solver.md §B.1).
 
 Vertex order is the reference's: every root is pushed on a LIFO stack in root-list order,
 then each popped transform is appended and its children pushed in sibling order.  So the
@@ -25,6 +25,7 @@ import numpy as np
 
 from magica_py.build.errors import BuildError
 from magica_py.scene.hierarchy import propagate_world
+from magica_py.kernels import portable
 
 
 @dataclass(frozen=True)
@@ -71,7 +72,7 @@ def trs_matrix(position, rotation, scale) -> np.ndarray:
 
 
 def collect_transforms(hierarchy, cloth_name: str, root_bones, component=None) -> RenderSetup:
-    """Collect the cloth's bones from ``hierarchy`` (a ``TransformHierarchy``), ref §B.1.
+    """Collect the cloth's bones from ``hierarchy`` (a ``TransformHierarchy``), §B.1.
 
     Raises ``BuildError`` for: no roots, a root index outside the hierarchy, a duplicate root,
     a root that lies below another root (its bones would be reached from two roots), a root
@@ -105,7 +106,7 @@ def collect_transforms(hierarchy, cloth_name: str, root_bones, component=None) -
             raise BuildError(cloth_name, f"root bone {names[r]!r} has no child bones: nothing to simulate "
                                          f"(a root is fixed; give it at least one child)")
 
-    # LIFO traversal (ref §B.1); visited set kept for fidelity although roots are disjoint now
+    # LIFO traversal (§B.1); visited set kept for fidelity although roots are disjoint now
     order: list[int] = []
     visited = set()
     stack = list(roots)
@@ -142,8 +143,8 @@ def collect_transforms(hierarchy, cloth_name: str, root_bones, component=None) -
     l2w = trs_matrix(hierarchy.world_position[component], hierarchy.world_rotation[component], c_scale)
     rel_position, rel_rotation = _component_relative_pose(hierarchy, transform_index, roots, component)
     if rel_position is None:  # component not above the roots (or sheared): go through world space
-        w2l = np.linalg.inv(l2w)
-        rel_position = hierarchy.world_position[transform_index] @ w2l[:3, :3].T + w2l[:3, 3]
+        w2l = portable.inverse4(l2w)
+        rel_position = portable.transform_points(w2l, hierarchy.world_position[transform_index])
         rel_rotation = _q_mul_many(_q_conj(hierarchy.world_rotation[component]),
                                    hierarchy.world_rotation[transform_index])
     return RenderSetup(
@@ -160,7 +161,7 @@ def collect_transforms(hierarchy, cloth_name: str, root_bones, component=None) -
         bone_names=tuple(names[t] for t in order),
         component_transform=component,
         init_render_local_to_world=l2w,
-        init_render_world_to_local=np.linalg.inv(l2w),
+        init_render_world_to_local=portable.inverse4(l2w),
         init_render_rotation=hierarchy.world_rotation[component].copy(),
         init_scale=c_scale,
         component_position=rel_position,

@@ -1,5 +1,5 @@
 """Edge-to-triangle structure and the numba kernels that walk triangle pairs at build time:
-duplicate-quad removal (ref §B.3 step 7), orientation flood fill (§B.4 step 3), shear links
+duplicate-quad removal (docs/solver.md §B.3 step 7), orientation flood fill (§B.4 step 3), shear links
 (§B.9) and bending / volume pairs (§D.7).
 
 ``edge_triangles(triangles, n)`` keys every triangle edge (rows of a triangle sorted, edges
@@ -14,6 +14,7 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import closest_segment_segment, load3, v_cross, v_dot, v_length, v_sub
+from magica_py.kernels import portable
 
 BENDING_MAX_ANGLE = 120.0     # TriangleBendingMaxAngle, degrees
 VOLUME_MIN_ANGLE = 90.0       # VolumeMinAngle
@@ -73,19 +74,6 @@ def key_insert(table, key):
 
 
 @kernel
-def key_contains(table, key):
-    mask = table.shape[0] - 1
-    h = (key * 2654435761) & mask
-    while True:
-        k = table[h]
-        if k == key:
-            return True
-        if k < 0:
-            return False
-        h = (h + 1) & mask
-
-
-@kernel
 def opposite_vertex(triangles, t, a, b):
     for k in range(3):
         v = triangles[t, k]
@@ -107,7 +95,7 @@ def fold_angle(pos, a, b, z, w):
     if l1 < 1e-12 or l2 < 1e-12:
         return 0.0
     c = v_dot(n1, n2) / (l1 * l2)
-    return math.acos(min(max(c, -1.0), 1.0))
+    return portable.acos(c)
 
 
 @kernel
@@ -150,7 +138,7 @@ def remove_duplicate_quads(pos, triangles, edge_pairs, et_start, et_count, et_da
 @kernel
 def orient_flood_fill(pos, triangles, normals, tri_edges, edge_pairs, et_start, et_count, et_data,
                       max_angle, visited, queue):
-    """OptimizeTriangleDirection (ref §B.4 step 3), in place on ``triangles`` and ``normals``.
+    """OptimizeTriangleDirection (§B.4 step 3), in place on ``triangles`` and ``normals``.
 
     Breadth-first layers across edges whose fold angle is <= max_angle; a neighbour facing the
     other way is flipped; a layer with more "closed" than "open" pairs is flipped as a whole."""
@@ -212,7 +200,7 @@ def orient_flood_fill(pos, triangles, normals, tri_edges, edge_pairs, et_start, 
 @kernel
 def shear_links(pos, triangles, normals, edge_pairs, et_start, et_count, et_data, valid, move,
                 link_src, link_dst, out_src, out_dst, connected):
-    """Shear links p3<->p4 across near-flat, near-square quads (ref §B.9 step 2).
+    """Shear links p3<->p4 across near-flat, near-square quads (§B.9 step 2).
 
     ``link_src/link_dst`` are the existing links; returns how many entries of out_src/out_dst
     (sized for the worst case) were written; ``connected`` is a ``key_table`` for all links."""
@@ -257,7 +245,7 @@ def shear_links(pos, triangles, normals, edge_pairs, et_start, et_count, et_data
 @kernel
 def bending_pairs(pos, world, triangles, edge_pairs, et_start, et_count, et_data, valid, move,
                   want_volume, bend_vertices, bend_angle, bend_sign, volume_vertices, volume_rest, seen):
-    """Bending and volume pairs per edge and triangle pair (ref §D.7 "Build").
+    """Bending and volume pairs per edge and triangle pair (§D.7 "Build").
 
     Returns (bending count, volume count) written into the worst-case sized outputs; ``seen``
     is a ``key_table`` for the registered volume vertex sets."""
@@ -287,7 +275,7 @@ def bending_pairs(pos, world, triangles, edge_pairs, et_start, et_count, et_data
                     continue  # degenerate triangle: no dihedral angle
                 n1 = (n1[0] / l1, n1[1] / l1, n1[2] / l1)
                 n2 = (n2[0] / l2, n2[1] / l2, n2[2] / l2)
-                phi = math.acos(min(max(v_dot(n1, n2), -1.0), 1.0))
+                phi = portable.acos(v_dot(n1, n2))
                 sign = -1.0 if v_dot(v_cross(n1, n2), v_sub(p3, p2)) < 0.0 else 1.0
                 angle = phi * deg
                 if angle < BENDING_MAX_ANGLE:

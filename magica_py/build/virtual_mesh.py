@@ -1,7 +1,7 @@
-"""VirtualMesh bone import and the four connection modes (ref §B.2, §B.3).
+"""VirtualMesh bone import and the four connection modes (docs/solver.md §B.2, §B.3).
 
 One vertex per collected bone.  Everything here is in **cloth-local space**: the component
-transform's space at build time, scale included (ref §B.1).
+transform's space at build time, scale included (§B.1).
 
 Outputs of ``import_bones`` (N vertices):
 
@@ -26,9 +26,10 @@ from magica_py.build.errors import BuildError
 from magica_py.build.topology import edge_triangles, key_table, remove_duplicate_quads
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_rotate, q_to_matrix, store3, v_length, v_normalize
+from magica_py.kernels import portable
 
 CONNECTION_MODES = ("line", "automatic_mesh", "sequential_loop_mesh", "sequential_non_loop_mesh")
-MAX_LINKS_PER_VERTEX = 31      # Unity FixedList capacity (ref §B.3 step 4)
+MAX_LINKS_PER_VERTEX = 31      # Unity FixedList capacity (§B.3 step 4)
 MAX_VERTICES_PER_LEVEL = 127
 TRIANGLE_MAX_ANGLE = 120.0     # ProxyMeshBoneClothTriangleAngle, degrees
 TRIANGLE_PAIR_ANGLE = 20.0     # ProxyMeshTrianglePairAngle, degrees
@@ -38,7 +39,7 @@ TRIANGLE_PAIR_ANGLE = 20.0     # ProxyMeshTrianglePairAngle, degrees
 @kernel
 def import_bone_vertices(world_position, world_rotation, lossy_scale, w2l, l2w,
                          local_position, local_normal, local_tangent, skin_bind_pose):
-    """Per bone: cloth-local position, +Y/+Z axes and skin bind pose (ref §B.2)."""
+    """Per bone: cloth-local position, +Y/+Z axes and skin bind pose (§B.2)."""
     n = world_position.shape[0]
     for i in range(n):
         p = load3(world_position, i)
@@ -78,7 +79,7 @@ def import_bone_vertices(world_position, world_rotation, lossy_scale, w2l, l2w,
 
 
 def import_bones(setup):
-    """Bone import (ref §B.2): returns (local_position, local_normal, local_tangent, skin_bind_pose).
+    """Bone import (§B.2): returns (local_position, local_normal, local_tangent, skin_bind_pose).
 
     Positions and axes come from the bone pose chained below the component
     (``setup.component_position/rotation``): the same numbers as ``W2L · P`` up to rounding,
@@ -109,13 +110,13 @@ def connect_lines(parent_vertex: np.ndarray) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- mesh modes
 def automatic_root_chain(roots: list[int], pos: np.ndarray) -> tuple[list[int], bool]:
-    """AutomaticMesh root reordering into a nearest-neighbour chain (ref §B.3 step 2)."""
+    """AutomaticMesh root reordering into a nearest-neighbour chain (§B.3 step 2)."""
     pool = list(roots)
     chain = [pool.pop(0)]
     last_dist = 0.0
     while pool:
         r = chain[-1]
-        d = [float(np.linalg.norm(pos[m] - pos[r])) for m in pool]
+        d = [portable.norm(pos[m] - pos[r]) for m in pool]
         k = int(np.argmin(d))
         if last_dist == 0.0 or d[k] < 1.5 * last_dist:
             chain.append(pool.pop(k))
@@ -123,7 +124,7 @@ def automatic_root_chain(roots: list[int], pos: np.ndarray) -> tuple[list[int], 
         else:
             chain.reverse()
             last_dist = 0.0
-    loop = len(chain) >= 3 and float(np.linalg.norm(pos[chain[0]] - pos[chain[-1]])) < 1.5 * last_dist
+    loop = len(chain) >= 3 and portable.norm(pos[chain[0]] - pos[chain[-1]]) < 1.5 * last_dist
     return chain, loop
 
 
@@ -205,7 +206,7 @@ def horizontal_links(pos, members, level_start, level_count, level, root_line, r
 
 def connect_mesh(cloth_name: str, mode: str, pos: np.ndarray, parent_vertex: np.ndarray,
                  child_vertices, root_vertices, bone_names):
-    """Mesh connection modes (ref §B.3): returns (lines (Ln,2), triangles (T,3), root_line (N,))."""
+    """Mesh connection modes (§B.3): returns (lines (Ln,2), triangles (T,3), root_line (N,))."""
     n = pos.shape[0]
     roots = [int(r) for r in root_vertices]
     loop = mode == "sequential_loop_mesh"
@@ -266,7 +267,7 @@ def connect_mesh(cloth_name: str, mode: str, pos: np.ndarray, parent_vertex: np.
     lb = (vb * vb).sum(axis=1)
     ok = (la >= 1e-6) & (lb >= 1e-6)
     cosang = np.clip((va * vb).sum(axis=1) / np.sqrt(np.maximum(la * lb, 1e-300)), -1.0, 1.0)
-    ok &= np.degrees(np.arccos(cosang)) < TRIANGLE_MAX_ANGLE
+    ok &= portable.acos_array(cosang) * (180.0 / math.pi) < TRIANGLE_MAX_ANGLE
     # deviation: the reference keeps collinear (zero-area) triangles; their normal is undefined
     cr = np.cross(va, vb)
     ok &= (cr * cr).sum(axis=1) > 1e-12 * la * lb
@@ -313,19 +314,19 @@ def _unique_rows_in_order(rows: np.ndarray) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- mesh statistics
 def spherical_uv(pos: np.ndarray) -> np.ndarray:
-    """Spherical vertex uv used only to derive triangle tangents (ref §B.2, CalcUVJob)."""
+    """Spherical vertex uv used only to derive triangle tangents (§B.2, CalcUVJob)."""
     n = pos.shape[0]
     center = 0.5 * (pos.min(axis=0) + pos.max(axis=0))
     d = pos - center
-    length = np.linalg.norm(d, axis=1)
+    length = portable.norm(d)
     l = np.where(length[:, None] > 1e-12, d / np.maximum(length, 1e-300)[:, None], 0.0)
-    u = np.clip((np.arctan2(l[:, 0], l[:, 2]) + math.pi) / (2.0 * math.pi), 0.0, 1.0)
+    u = np.clip((portable.atan2_array(l[:, 0], l[:, 2]) + math.pi) / (2.0 * math.pi), 0.0, 1.0)
     v = np.clip((l[:, 1] - 1.0) / -2.0, 0.0, 1.0)
     return np.stack([v, u], axis=1) * 10.0 + np.arange(n)[:, None] * 0.0001234
 
 
 def vertex_distances(pos: np.ndarray, lines: np.ndarray, triangles: np.ndarray) -> tuple[float, float]:
-    """averageVertexDistance / maxVertexDistance from stride-sampled edges (ref §B.4)."""
+    """averageVertexDistance / maxVertexDistance from stride-sampled edges (§B.4)."""
     segs = []
     if triangles.shape[0]:
         t = triangles[::max(triangles.shape[0] // 100, 1)]
@@ -335,5 +336,5 @@ def vertex_distances(pos: np.ndarray, lines: np.ndarray, triangles: np.ndarray) 
     if not segs:
         return 0.0, 0.0
     s = np.concatenate(segs)
-    sq = ((pos[s[:, 0]] - pos[s[:, 1]]) ** 2).sum(axis=1)
+    sq = portable.dot3(pos[s[:, 0]] - pos[s[:, 1]], pos[s[:, 0]] - pos[s[:, 1]])
     return float(math.sqrt(sq.mean())), float(math.sqrt(sq.max()))

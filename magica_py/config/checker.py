@@ -231,17 +231,20 @@ class Checker:
             self.error(where, f"expected {what or shape} (a list of {size} numbers), got {_show(raw)}")
             return None if default is REQUIRED else default
         out = []
+        bad = False  # every bad element is reported, not only the first
         for i, x in enumerate(raw):
             if isinstance(x, bool) or not isinstance(x, (int, float)):
                 self.error(where + (i,), f"expected a number, got {_type_name(x)} {_show(x)}")
-                return None if default is REQUIRED else default
-            if not math.isfinite(x):
+            elif not math.isfinite(x):
                 self.error(where + (i,), f"expected a finite number, got {x}")
-                return None if default is REQUIRED else default
-            if not rng.contains(x):
+            elif not rng.contains(x):
                 self.error(where + (i,), f"expected a number {rng.describe()}, got {x:g}")
-                return None if default is REQUIRED else default
-            out.append(float(x))
+            else:
+                out.append(float(x))
+                continue
+            bad = True
+        if bad:
+            return None if default is REQUIRED else default
         if nonzero and math.sqrt(sum(x * x for x in out)) < 1e-9:
             self.error(where, f"expected a non-zero {what or 'vector'}, got {raw}")
             return None if default is REQUIRED else default

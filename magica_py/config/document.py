@@ -7,12 +7,20 @@ reader composes the node tree (``yaml.compose``) and converts it itself so that
   list indices, e.g. ``("cloths", 1, "parameters", "damping")``), used in error messages;
 * a duplicate key in a mapping is an error (it is nearly always a copy-paste mistake);
   YAML merge keys (``<<: *defaults``) work, the mapping's own keys overriding merged ones;
-* scalars are resolved exactly as ``yaml.safe_load`` does (``.nan``, ``.inf``, ``null``,
-  ``yes``/``no`` stay YAML 1.1), so the schema sees ordinary ints, floats, bools and strings.
+* scalars are resolved as ``yaml.safe_load`` does (``.nan``, ``.inf``, ``null``,
+  ``yes``/``no`` stay YAML 1.1), plus the YAML 1.2 number forms that YAML 1.1 reads as text:
+  ``1e-4``, ``1e4``, ``1.0e30``, ``2E5`` are floats (``SceneLoader``), so the schema sees
+  ordinary ints, floats, bools and strings;
+* absurd inputs fail fast: a document over ``MAX_DOCUMENT_BYTES`` is refused before it is
+  parsed (a 50 MB file would take minutes and gigabytes to judge), an empty file says so, and
+  a binary asset or recording given where a scene is expected is named with the command that
+  fits it (``asset_kind``).
 """
 from __future__ import annotations
 
+import os
 import pathlib
+import re
 from dataclasses import dataclass, field
 
 import yaml
@@ -20,6 +28,62 @@ import yaml
 from magica_py.config.errors import ConfigError, Issue, format_path
 
 Path = tuple  # tuple[str | int, ...]
+
+# A scene document is short: rigs are generated (parts, instances) or imported (file:), clips
+# are read from their files. 4 MiB is over a hundred times the largest showcase.
+MAX_DOCUMENT_BYTES = 4 * 1024 * 1024
+
+
+# libyaml's parser (PyYAML's C binding) when installed: the same nodes, marks and errors,
+# about ten times faster than the pure-Python parser on large documents.
+_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class SceneLoader(_SAFE_LOADER):
+    """PyYAML's safe loader that also reads YAML 1.2 exponent numbers (``1e-4``, ``1e4``,
+    ``1.0e30``) as floats; YAML 1.1 needs a dot and a signed exponent (``1.0e-4``) and
+    otherwise returns the text ``'1e-4'``."""
+
+
+for _first in "0123456789-+.":
+    SceneLoader.add_implicit_resolver(
+        "tag:yaml.org,2002:float",
+        re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)[eE][-+]?[0-9]+$"), [_first])
+
+
+def load_yaml_value(text: str):
+    """One YAML value (a ``--set`` value) with the scene's number rules."""
+    return yaml.load(text, Loader=SceneLoader)  # noqa: S506 - SceneLoader is a SafeLoader
+
+
+# (magic bytes or suffix) -> what the file is and the command that fits it
+_ASSET_KINDS = {
+    ".vrm": ("a VRM avatar", "run it directly: magica-py run {path}  (add --save-scene scene.yaml to keep "
+                             "the scene it builds)"),
+    ".glb": ("a glTF binary (GLB) model", "load it in a scene's rigs (rigs: - {{name: model, file: {path}}}), "
+                                          "see configs/fox_run.yaml and docs/scene-format.md"),
+    ".gltf": ("a glTF model", "load it in a scene's rigs (rigs: - {{name: model, file: {path}}}), "
+                              "see configs/fox_run.yaml and docs/scene-format.md"),
+    ".bvh": ("a BVH motion capture clip", "play it on an avatar: magica-py run AVATAR.vrm --clip {path}, "
+                                          "or in a scene's animation (- {{clip: {path}, rig: ...}})"),
+    ".rrd": ("a Rerun recording", "open it with: rerun {path}   or summarize it with: magica-py inspect {path}"),
+}
+
+
+def asset_kind(path, head: bytes) -> tuple[str, str] | None:
+    """(what the file is, the command that fits) for a model, clip or recording; None for text
+    that may be a scene. ``head``: the file's first bytes."""
+    suffix = pathlib.Path(path).suffix.lower()
+    if head[:4] == b"glTF":  # GLB container: a .vrm is a GLB with a VRM extension
+        suffix = ".vrm" if suffix == ".vrm" or b'"VRM' in head else ".glb"
+    elif head[:3] == b"RRF":  # Rerun's file header
+        suffix = ".rrd"
+    elif head.lstrip()[:9] == b"HIERARCHY":
+        suffix = ".bvh"
+    if suffix not in _ASSET_KINDS:
+        return None
+    what, command = _ASSET_KINDS[suffix]
+    return what, command.format(path=path)
 
 
 @dataclass
@@ -68,7 +132,7 @@ class Document:
 
 def parse_text(text: str, source: str | None = None) -> Document:
     """Parse YAML text; raise ConfigError (with the line) on a syntax error."""
-    loader = yaml.SafeLoader(text)
+    loader = SceneLoader(text)
     try:
         try:
             node = loader.get_single_node()
@@ -81,8 +145,12 @@ def parse_text(text: str, source: str | None = None) -> Document:
             raise ConfigError(source, [Issue("", f"invalid YAML: {exc}")]) from None
         doc = Document(None, source, text=text)
         issues: list[Issue] = []
-        if node is not None:
-            doc.data = _convert(loader, node, (), doc.lines, issues)
+        if node is None or (isinstance(node, yaml.ScalarNode) and node.tag == "tag:yaml.org,2002:null"):
+            # nothing, only comments, or an empty document ("---"): say so rather than "rigs: is required"
+            raise ConfigError(source, [Issue("", "the file is empty (no YAML document in it): expected a scene "
+                                                 "mapping with at least 'rigs' (docs/scene-format.md; "
+                                                 "`magica-py new NAME` writes a starter scene)")])
+        doc.data = _convert(loader, node, (), doc.lines, issues)
         if issues:
             raise ConfigError(source, issues)
         return doc
@@ -94,13 +162,31 @@ def read_document(path: str | pathlib.Path) -> Document:
     """Read and parse a scene file; a missing or unreadable file is a ConfigError."""
     source = str(path)
     try:
-        text = pathlib.Path(path).read_text(encoding="utf-8")
+        with open(path, "rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            head = fh.read(4096)
+            kind = asset_kind(path, head)
+            if kind is not None:
+                what, command = kind
+                raise ConfigError(source, [Issue("", f"this is {what}, not a scene: {command}")])
+            if size > MAX_DOCUMENT_BYTES:  # judged from its size: nothing parsed
+                raise ConfigError(source, [Issue("", f"the scene document is {size / 1e6:.1f} MB; scene files are "
+                                                     f"limited to {MAX_DOCUMENT_BYTES / 1e6:.1f} MB. Generate bones "
+                                                     "with rig parts and instances, and read rigs and clips from their "
+                                                     "asset files (file:, clip:) instead of writing them out "
+                                                     "(docs/scene-format.md)")])
+            data = head + fh.read()
     except FileNotFoundError:
         raise ConfigError(source, [Issue("", "file not found")]) from None
     except IsADirectoryError:
         raise ConfigError(source, [Issue("", "is a directory, expected a YAML scene file")]) from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except OSError as exc:
         raise ConfigError(source, [Issue("", f"cannot read the file: {exc}")]) from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(source, [Issue("", f"not a YAML scene: the file is not UTF-8 text (byte {exc.start}); "
+                                             "expected a scene file (docs/scene-format.md)")]) from None
     return parse_text(text, source)
 
 

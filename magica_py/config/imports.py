@@ -32,6 +32,9 @@ issue at that entry's ``file`` / ``clip`` / ``from_vrm`` key.
 """
 from __future__ import annotations
 
+import math
+
+import contextvars
 import os
 import pathlib
 import warnings
@@ -39,9 +42,14 @@ import warnings
 from magica_py.config.checker import NON_NEGATIVE, POSITIVE, Checker, Range
 
 RIG_FILE_KEYS = ("file", "prefix", "unit_scale")
-CLIP_KEYS = ("clip", "rig", "loop", "drop", "retarget", "trim", "rate", "start", "end", "phase_offset", "fade")
+CLIP_KEYS = ("clip", "rig", "loop", "drop", "retarget", "trim", "trim_frames", "rate", "start", "end",
+             "phase_offset", "fade")
+RETARGET_KEYS = ("source_map", "target_map", "source_overrides", "target_overrides", "source_rest",
+                 "source_forward", "source_up", "root_translation", "same_names", "align_rest", "rate")
 VRM_KEYS = ("from_vrm", "group_by", "chains", "prefix", "oversized_colliders", "parameters")
 CLIP_RATE = Range(1.0, 1000.0)  # keys per second after resampling
+# ``magica-py retarget-check`` sets a list here: each retargeted clip appends (path, RetargetReport)
+RETARGET_REPORTS: contextvars.ContextVar[list | None] = contextvars.ContextVar("retarget_reports", default=None)
 
 
 def base_dir(c: Checker) -> pathlib.Path:
@@ -109,6 +117,84 @@ def _trim(c: Checker, m: dict, path: tuple):
     return (start, end)
 
 
+def _trim_frames(c: Checker, m: dict, path: tuple):
+    """``trim_frames: [first, last]``: frames of the source clip (last inclusive, may be null)."""
+    if m.get("trim_frames") is None:
+        return None
+    value = m["trim_frames"]
+    where = path + ("trim_frames",)
+    if m.get("trim") is not None:
+        c.error(where, "give trim (seconds) or trim_frames (frames), not both")
+        return None
+    ok = isinstance(value, list) and len(value) == 2 and all(
+        v is None or (isinstance(v, int) and not isinstance(v, bool) and v >= 0) for v in value) and value[0] is not None
+    if not ok:
+        c.error(where, f"expected [first, last] frame numbers of the source clip (integers >= 0, last may be "
+                       f"null: to the end), got {value!r}")
+        return None
+    if value[1] is not None and value[1] <= value[0]:
+        c.error(where + (1,), f"expected last > first ({value[0]}), got {value[1]}")
+        return None
+    return (value[0], value[1])
+
+
+def _axis_option(value) -> bool:
+    if isinstance(value, str):
+        key = value.strip().upper()
+        return (key if key[:1] in "+-" else "+" + key) in ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
+    return (isinstance(value, list) and len(value) == 3
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value)
+            and sum(float(x) * float(x) for x in value) > 1e-12)
+
+
+def _retarget_options(c: Checker, value, path: tuple) -> dict | None:
+    """The ``retarget:`` mapping checked key by key (None after reporting a problem)."""
+    where = path + ("retarget",)
+    m = c.mapping(value, where, RETARGET_KEYS, what="a mapping of retarget options")
+    if m is None:
+        return None
+    ok = all(k in RETARGET_KEYS for k in m)       # an unknown key was reported by c.mapping
+    rest = m.get("source_rest", "bind")
+    if not (rest == "bind" or (isinstance(rest, int) and not isinstance(rest, bool) and rest >= 0)):
+        c.error(where + ("source_rest",), f"expected 'bind' or a frame number >= 0 (the source's rest pose), got {rest!r}")
+        ok = False
+    for key in ("source_forward", "source_up"):
+        if m.get(key) is not None and not _axis_option(m[key]):
+            c.error(where + (key,), f"expected an axis of the source file (+X, -X, +Y, -Y, +Z, -Z) or a non-zero "
+                                    f"vector [x, y, z], got {m[key]!r}")
+            ok = False
+    if m.get("source_forward") is not None and m.get("source_up") is not None and _axis_option(m["source_forward"]) \
+            and _axis_option(m["source_up"]):
+        from magica_py.io.sections import file_axis_to_project
+
+        f, u = file_axis_to_project(m["source_forward"]), file_axis_to_project(m["source_up"])
+        if abs(float(sum(a * b for a, b in zip(f, u)))) > 0.99 * math.sqrt(float(sum(a * a for a in f) * sum(b * b for b in u))):
+            c.error(where + ("source_up",), f"source_up {m['source_up']!r} is parallel to source_forward {m['source_forward']!r}")
+            ok = False
+    for key in ("root_translation", "same_names", "align_rest"):
+        if key in m and not isinstance(m[key], bool):
+            c.error(where + (key,), f"expected true or false, got {m[key]!r}")
+            ok = False
+    if m.get("rate") is not None and c.number(m, "rate", where, None, CLIP_RATE, units="Hz") is None:
+        ok = False
+    for key in ("source_map", "target_map"):
+        v = m.get(key)
+        if v is not None and not isinstance(v, (str, dict)):
+            c.error(where + (key,), f"expected auto, a scheme name (cmu, mixamo, vrm) or a mapping humanoid: bone, got {v!r}")
+            ok = False
+    options = dict(m)
+    for key in ("source_overrides", "target_overrides"):
+        v = m.get(key)
+        if v is None:
+            continue
+        if isinstance(v, str):
+            options[key] = str(asset_path(c, v))       # a YAML file next to the scene
+        elif not isinstance(v, dict):
+            c.error(where + (key,), f"expected a mapping humanoid: bone (null unmaps) or a YAML file path, got {v!r}")
+            ok = False
+    return options if ok else None
+
+
 def import_clip_entries(c: Checker, m: dict, path: tuple, rigs: list[dict]) -> list[dict]:
     """Raw (YAML-shaped) keyframe driver entries of an ``animation[i].clip`` entry."""
     m = c.mapping(m, path, CLIP_KEYS)
@@ -118,11 +204,13 @@ def import_clip_entries(c: Checker, m: dict, path: tuple, rigs: list[dict]) -> l
     loop = c.boolean(m, "loop", path, True)
     drop = c.names(m, "drop", path)
     trim = _trim(c, m, path)
+    trim_frames = _trim_frames(c, m, path)
     rate = c.number(m, "rate", path, None, CLIP_RATE, units="keys/s")
     retarget = m.get("retarget")
-    if retarget is not None and not isinstance(retarget, dict):
-        c.error(path + ("retarget",), f"expected a mapping of retarget options, got {retarget!r}")
-        retarget = None
+    if retarget is not None:
+        retarget = _retarget_options(c, retarget, path)
+        if retarget is None:
+            return []
     rig = None
     if m.get("rig") is not None:
         name = c.text(m, "rig", path, what="a rig name")
@@ -139,17 +227,33 @@ def import_clip_entries(c: Checker, m: dict, path: tuple, rigs: list[dict]) -> l
         return []
     common = {k: m[k] for k in ("start", "end", "phase_offset", "fade") if m.get(k) is not None}
     try:
-        clip = _load_clip(c, ref, rig, retarget, trim, rate, drop)
-        entries = clip.to_animation_entries(loop=loop, resample_rate=rate or 30.0)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", UserWarning)
+            clip = _load_clip(c, ref, rig, retarget, trim, trim_frames, rate, drop, path)
+            entries = clip.to_animation_entries(loop=loop, resample_rate=rate or 30.0)
     except (ImportError, ValueError, OSError, KeyError) as exc:
         _asset_error(c, path + ("clip",), exc)
         return []
+    _rewarn(c, path, caught)
     if rig is not None:
         entries = _placed(entries, rig)
     return [dict(e, **common) for e in entries]
 
 
-def _load_clip(c: Checker, ref: str, rig: dict | None, retarget: dict | None, trim, rate, drop):
+def _rewarn(c: Checker, path: tuple, caught) -> None:
+    """Importer warnings again, prefixed with the scene file and the entry that caused them."""
+    from magica_py.config.errors import format_path
+
+    where = f"{c.doc.source}: {format_path(path)}"
+    for w in caught:
+        if issubclass(w.category, UserWarning):
+            warnings.warn(f"{where}: {w.message}", UserWarning, stacklevel=2)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+
+
+def _load_clip(c: Checker, ref: str, rig: dict | None, retarget: dict | None, trim, trim_frames, rate, drop,
+               path: tuple = ()):
     from magica_py.io.sections import load_clip
     from magica_py.scene.hierarchy import BoneSpec
 
@@ -158,13 +262,19 @@ def _load_clip(c: Checker, ref: str, rig: dict | None, retarget: dict | None, tr
         options = dict(retarget)
         target_map = options.pop("target_map", None) or rig.get("humanoid") or "auto"
         target = [BoneSpec(b["name"], b["parent"], b["position"], b["rotation"], b["scale"]) for b in rig["bones"]]
-        return load_clip(ref, base_dir=base_dir(c), retarget_to=target, target_map=target_map,
-                         retarget_options=options, drop=tuple(drop), trim=trim, rate=rate)
+        reports = RETARGET_REPORTS.get()
+        found: list = []
+        clip = load_clip(ref, base_dir=base_dir(c), retarget_to=target, target_map=target_map,
+                         retarget_options=options, drop=tuple(drop), trim=trim, trim_frames=trim_frames, rate=rate,
+                         report=found)
+        if reports is not None:
+            reports.extend((path, rig.get("name"), r) for r in found)
+        return clip
     unit_scale = rig.get("unit_scale")
     if unit_scale == 1.0 and str(ref).split("#", 1)[0].lower().endswith(".bvh"):
         unit_scale = None  # a BVH rig loaded with unit_scale 1 has automatic units: so has its clip
     return load_clip(ref, base_dir=base_dir(c), drop=tuple(drop), prefix=rig.get("prefix") or "",
-                     unit_scale=unit_scale, trim=trim, rate=rate)
+                     unit_scale=unit_scale, trim=trim, trim_frames=trim_frames, rate=rate)
 
 
 def _placed(entries: list[dict], rig: dict) -> list[dict]:

@@ -23,7 +23,7 @@ import re
 
 import yaml
 
-from magica_py.config.document import Document
+from magica_py.config.document import Document, load_yaml_value
 from magica_py.config.errors import ConfigError, Issue, format_path
 
 _TOKEN = re.compile(r"([^.\[\]]+)|\[(-?\d+)\]")
@@ -48,7 +48,7 @@ def parse_override(text: str) -> tuple[list[str | int], object]:
         tokens.append(m.group(1) if m.group(1) is not None else int(m.group(2)))
         pos = m.end()
     try:
-        value = yaml.safe_load(raw_value) if raw_value.strip() else None
+        value = load_yaml_value(raw_value) if raw_value.strip() else None
     except yaml.YAMLError as exc:
         raise ValueError(f"override {text!r}: the value is not valid YAML ({exc})") from None
     return tokens, value

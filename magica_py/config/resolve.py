@@ -26,6 +26,11 @@ from magica_py.config.schema import DRIVER_FIELDS, PART_FIELDS, NormalizedScene
 from magica_py.scene.hierarchy import BoneSpec
 
 
+# More bones than this is a mistake (a count with extra zeros), not a scene: the crowd
+# showcase has 5,000; half a million already takes gigabytes to build and minutes per frame.
+MAX_BONES = 500_000
+
+
 def instance_name(name: str, i: int) -> str:
     from magica_py.scene.rigs import instance_name as rig_instance_name
 
@@ -152,6 +157,11 @@ def _expand_rigs(c: Checker, rigs: list[dict], table: NameTable):
             if any(part["params"][k] is None for k in required):
                 continue  # already reported by the schema
             params = {k: v for k, v in part["params"].items() if v is not None}
+            planned = len(final_bones) + len(base) + int(params.get("strands", 1)) * int(params["bones"])
+            if planned > MAX_BONES:  # refused before a single bone is generated
+                c.error(part["path"], f"this {part['kind']} would bring the scene to {planned:,} bones; a scene "
+                                      f"is limited to {MAX_BONES:,} bones")
+                continue
             try:
                 generated = rig_module.part_bones({part["kind"]: params})
             except (ValueError, TypeError) as exc:
@@ -178,6 +188,12 @@ def _expand_rigs(c: Checker, rigs: list[dict], table: NameTable):
         rig_module.place_roots(base, rig["position"], rig["rotation"])
         inst = rig["instances"]
         count = inst["count"] if inst else 1
+        if inst and len(final_bones) + len(base) * count > MAX_BONES:
+            c.error(path + ("instances", "count"), f"{count:,} instances of {len(base):,} bones would make "
+                                                   f"{len(final_bones) + len(base) * count:,} bones; a scene is "
+                                                   f"limited to {MAX_BONES:,} bones")
+            inst, count = None, 1  # keep checking the rest of the scene on one copy
+            rig["instances"] = None  # (the phase table below must not build a row per instance)
         for b in base:
             table.base_bones.append(b)
             table.base_rig.setdefault(b.name, r if inst else None)

@@ -18,6 +18,7 @@ Semantics (Biovision BVH as CMU / cgspeed, Mixamo and Blender write it):
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,6 +29,7 @@ from magica_py.io.clip import Clip, Track
 from magica_py.io.errors import AssetError
 from magica_py.io.quat import qaxis_angle, qmul
 from magica_py.scene.hierarchy import BoneSpec
+from magica_py.kernels import portable
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "cmu": 0.0254 / 0.45}
 HUMAN_HEIGHT = 1.7
@@ -212,7 +214,13 @@ def parse_bvh(path) -> BvhFile:
             raise AssetError(path, f"line {n + 1}", f"frame {len(rows)} has {len(values)} values but the hierarchy declares {column} channels")
         rows.append(values)
     if len(rows) != frame_count:
-        raise AssetError(path, f"line {motion_line + 2}", f"header declares {frame_count} frames but the file has {len(rows)}")
+        if abs(len(rows) - frame_count) != 1 or not rows:
+            raise AssetError(path, f"line {motion_line + 2}",
+                             f"header declares {frame_count} frames but the file has {len(rows)}")
+        # exporters commonly count the T-pose frame or not: one frame off is read as written
+        warnings.warn(f"{path}: line {motion_line + 2}: header declares {frame_count} frames but the file has "
+                      f"{len(rows)}; all {len(rows)} frames are read", UserWarning, stacklevel=2)
+        frame_count = len(rows)
     try:
         motion = np.array(rows, dtype=np.float64).reshape(frame_count, column)
     except ValueError:
@@ -252,7 +260,7 @@ def resolve_units(units, bvh: BvhFile) -> tuple[float, str]:
     height = float(ys.max() - ys.min())
     if height <= 0:
         return 1.0, "units auto: flat skeleton, metres assumed"
-    name = min(UNITS, key=lambda u: abs(math.log(height * UNITS[u] / HUMAN_HEIGHT)))
+    name = min(UNITS, key=lambda u: abs(portable.log(height * UNITS[u] / HUMAN_HEIGHT)))
     return UNITS[name], f"units auto: rest height {height:.4g} file units → {name} ({height * UNITS[name]:.3g} m)"
 
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import q_normalize, q_slerp
+from magica_py.kernels import portable
 
 PATHS = ("translation", "rotation", "scale")
 INTERPOLATIONS = ("linear", "step", "cubicspline")
@@ -65,7 +66,7 @@ class Track:
         else:
             v = values[k] + (values[k + 1] - values[k]) * s
         if self.path == "rotation":
-            v = v / np.linalg.norm(v)
+            v = v / np.asarray(portable.norm(v))[..., None]
         return v
 
 
@@ -149,6 +150,22 @@ class Clip:
                 values[0] = sample_track_many(tr, [start])[0]
             tracks.append(Track(tr.node, tr.path, times - start, values, tr.interpolation))
         return replace(self, tracks=tracks, notes=self.notes + [f"trimmed to [{start:g}, {end:g}] s"])
+
+    def frame_times(self) -> np.ndarray:
+        """Times (s) of the source's frames: multiples of ``frame_time`` (BVH) up to the
+        duration, else every distinct key time of the tracks (glTF has no frame rate)."""
+        if self.frame_time:
+            return np.arange(int(round(self.duration / self.frame_time)) + 1) * self.frame_time
+        return np.unique(np.concatenate([tr.times for tr in self.tracks])) if self.tracks else np.zeros(1)
+
+    def frame_span(self, first: int, last: int | None = None) -> tuple[float, float | None]:
+        """Seconds [start, end] of frames ``first`` .. ``last`` (inclusive; None: to the end)."""
+        times = self.frame_times()
+        n = len(times)
+        if not 0 <= first < n or (last is not None and not first < last < n):
+            raise ValueError(f"clip {self.name!r}: frames [{first}, {last}] outside its {n} frames "
+                             f"(expected 0 <= first < last <= {n - 1})")
+        return float(times[first]), None if last is None else float(times[last])
 
     def resampled(self, rate: float) -> "Clip":
         """Linear tracks sampled at ``rate`` Hz (fewer keys for YAML entries; exact at the ends)."""

@@ -25,6 +25,7 @@ from magica_py.io.clip import Clip, Track
 from magica_py.io.errors import AssetError
 from magica_py.io.quat import qfrom_matrix, qnormalize
 from magica_py.scene.hierarchy import BoneSpec
+from magica_py.kernels import portable
 
 _COMPONENT_DTYPE = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16,
                     5125: np.uint32, 5126: np.float32}
@@ -303,8 +304,8 @@ def _node_trs(path: Path, node, i: int):
         m = m.reshape(4, 4).T  # glTF stores matrices column-major
         t = m[:3, 3].copy()
         basis = m[:3, :3]
-        s = np.linalg.norm(basis, axis=0)
-        if np.linalg.det(basis) < 0:
+        s = portable.norm(basis.T)
+        if portable.determinant3(basis) < 0:
             s[0] = -s[0]
         if np.any(np.abs(s) < 1e-12):
             raise AssetError(path, f"nodes[{i}].matrix", "has a zero scale (not decomposable into TRS)")
@@ -316,7 +317,7 @@ def _node_trs(path: Path, node, i: int):
     for key, v, size in (("translation", t, 3), ("rotation", r, 4), ("scale", s, 3)):
         if v.shape != (size,) or not np.all(np.isfinite(v)):
             raise AssetError(path, f"nodes[{i}].{key}", f"expected {size} finite numbers, got {v.tolist()}")
-    if np.linalg.norm(r) < 1e-9:
+    if portable.norm(r) < 1e-9:
         raise AssetError(path, f"nodes[{i}].rotation", "is a zero quaternion")
     return t, qnormalize(r), s
 

@@ -98,6 +98,102 @@ def generic_map(bone_names) -> dict[str, str]:
     return out
 
 
+# ---------------------------------------------------------------- labels for the structural matcher
+# A name gives a side and the parts the bone could be; ``io.skeleton_match`` decides by the
+# skeleton's structure. Words that are two parts at once (``shoulder``: the clavicle in
+# Mixamo / HumanIK, the upper arm in the Biovision family; ``leg``: the shin in Mixamo,
+# the thigh on ``leg_l``; ``hip``: the thigh in ``LeftHip``) carry both.
+_LABEL_CENTRE = {
+    "hips": ("hips", "hip", "pelvis"),
+    "spine": ("spine", "tummy", "abdomen", "ab", "waist", "lowerback", "torso", "upperback"),
+    "chest": ("chest", "thorax", "ribcage", "upperchest"),
+    "neck": ("neck", "lowerneck", "upperneck"),
+    "head": ("head",),
+}
+_LABEL_SIDED = {
+    "Shoulder": ("shoulder", "clavicle", "clav", "collar", "collarbone"),
+    "UpperArm": ("upperarm", "arm", "uparm", "humerus", "shoulder"),
+    "LowerArm": ("lowerarm", "forearm", "elbow", "radius", "ulna", "lowarm"),
+    "Hand": ("hand", "wrist"),
+    "LowerLeg": ("lowerleg", "shin", "calf", "knee", "tibia", "leg", "lowleg"),   # before UpperLeg: Mixamo's Leg
+    "UpperLeg": ("upperleg", "thigh", "upleg", "femur", "hip", "leg"),
+    "Foot": ("foot", "ankle"),
+    "Toes": ("toes", "toe", "toebase", "ball"),
+    "Finger": ("finger", "fingers", "fingerbase", "thumb", "index", "middle", "ring", "pinky", "little"),
+}
+_LABEL_FILLER = re.compile(r"^(armature|mixamorig\d*|bip\d*|character\d*|def|mch|org|jnt|joint|bone|j|b|c|"
+                           r"end|top|nub|site|\d+)$")
+_SIDE_WORDS = {"l": "left", "left": "left", "r": "right", "right": "right"}
+_SIDED_WORDS = {w for syns in _LABEL_SIDED.values() for w in syns}
+
+
+def name_label(name: str) -> tuple[str | None, tuple[str, ...], tuple[str, ...]]:
+    """(side, parts, words) read from a bone name: side ``"left"``/``"right"``/None; parts
+    the humanoid parts the name could be (``"hips"``, ``"spine"``, ``"chest"``, ``"neck"``,
+    ``"head"`` unsided; ``"Shoulder"``, ``"UpperArm"``, ..., ``"Toes"``, ``"Finger"``
+    sided); words the lower-case words of the name (for twist / end-site detection).
+
+    ``mixamorig:LeftForeArm`` → (left, (LowerArm,)); ``Bip01_L_Calf`` → (left, (LowerLeg,));
+    ``lfemur`` (CMU ASF) → (left, (UpperLeg,)); ``LeftShoulder`` → (left, (Shoulder, UpperArm)).
+    """
+    words = _words(name)
+    side = None
+    rest = []
+    for w in words:
+        if side is None and w in _SIDE_WORDS:
+            side = _SIDE_WORDS[w]
+            continue
+        if _LABEL_FILLER.match(w):
+            continue
+        rest.append(w)
+    if side is None and rest and rest[0][:1] in ("l", "r") and re.sub(r"\d+$", "", rest[0][1:]) in _SIDED_WORDS:
+        side = _SIDE_WORDS[rest[0][0]]          # CMU ASF: lfemur, rhand, LHipJoint
+        rest[0] = rest[0][1:]
+    key = re.sub(r"\d+$", "", "".join(rest))
+    if side is None:
+        parts = tuple(h for h, syns in _LABEL_CENTRE.items() if key in syns)
+    else:
+        parts = tuple(p for p, syns in _LABEL_SIDED.items() if key in syns)
+        if not parts and any(re.sub(r"\d+$", "", w) in _LABEL_SIDED["Finger"] for w in rest[1:]):
+            parts = ("Finger",)
+    return side, parts, tuple(words)
+
+
+# Naming families, for the report (the matcher itself works from labels and structure).
+FAMILIES = ("mixamo", "cmu-cgspeed", "3dsmax-biped", "humanik", "unreal", "rigify", "vrm", "vroid",
+            "cmu-asf", "biovision", "generic")
+
+
+def detect_family(bone_names) -> str:
+    """The naming family a skeleton's names come from (one of ``FAMILIES``)."""
+    names = list(bone_names)
+    keys = {normalize(n) for n in names}
+    lower = [n.lower() for n in names]
+    if any(n.startswith("mixamorig") for n in lower):
+        return "mixamo"
+    if any(re.match(r"bip0*1", n) for n in lower):
+        return "3dsmax-biped"
+    if any(n.startswith("def-") for n in lower) or {"spine001", "spine002"} <= keys:
+        return "rigify"
+    if any(n.startswith("j_bip_") for n in lower):
+        return "vroid"
+    if {"lfemur", "ltibia"} <= keys or {"lhumerus", "lradius"} <= keys:
+        return "cmu-asf"
+    if "lowerback" in keys and "leftupleg" in keys:
+        return "cmu-cgspeed"
+    if any(re.match(r"character\d*_", n) for n in lower) or "reference" in keys and "leftupleg" in keys:
+        return "humanik"
+    if "pelvis" in keys and ("thighl" in keys or "calfl" in keys or "clavicle_l" in lower):
+        return "unreal"
+    if "leftupperleg" in keys and "hips" in keys:
+        return "vrm"
+    if "leftknee" in keys or "leftcollar" in keys or ("lefthip" in keys and "leftelbow" in keys):
+        return "biovision"
+    if "leftupleg" in keys:
+        return "mixamo"
+    return "generic"
+
+
 def normalize(name: str) -> str:
     return re.sub(r"[\s_.\-]", "", name.rsplit(":", 1)[-1]).lower()
 

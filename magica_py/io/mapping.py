@@ -8,7 +8,7 @@ VRM (UniVRM / three-vrm, Verlet once per rendered frame, assumed 60 Hz), with
 
     x' = x + (1 - D)(x - x_prev) - k x            (+ gravityPower·dt_vrm / L, tangential)
 
-MagicaCloth2 (per 90 Hz step, ref §D.1 and §D.6), with ``δ = 0.2·damping`` (the damping table
+MagicaCloth2 (per 90 Hz step, docs/solver.md §D.1 and §D.6), with ``δ = 0.2·damping`` (the damping table
 is pre-multiplied by 0.2), ``a = angle_restoration.velocity_attenuation`` and ``F`` the
 fraction of the angle the restoration removes per step — three iterations, each turning the
 child by ``0.2·value`` of the remaining angle around a pivot at 0.1, 0.3, 0.5 of the edge,
@@ -37,7 +37,7 @@ Rule:
 * ``gravity_direction`` = ``gravityDir`` (converted to Unity axes by the caller);
   ``radius`` = ``hitRadius`` (flat over depth).
 * ``root_rotation`` = ``rotational_interpolation`` = 1: a VRM joint turns fully towards its
-  tail (ref §E.2 with t = 1 makes every bone point at its children).
+  tail (§E.2 with t = 1 makes every bone point at its children).
 * ``angle_limit.use`` = false, ``tether``/``distance`` defaults (VRM keeps bone lengths
   exactly; MagicaCloth's distance constraint at stiffness 1 does the same),
   ``inertia.world_inertia`` = ``local_inertia`` = 1 (VRM feels all of the character's motion).
@@ -55,10 +55,11 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from magica_py.kernels import portable
 
 VRM_FRAME_RATE = 60.0     # VRM springs step once per rendered frame; 60 Hz assumed
-MC_STEP_RATE = 90.0       # MagicaCloth2 default simulation frequency (ref §A.5)
-RESTORE_PIVOTS = (0.1, 0.3, 0.5)   # restoration pivot of the three iterations (ref §D.6)
+MC_STEP_RATE = 90.0       # MagicaCloth2 default simulation frequency (§A.3)
+RESTORE_PIVOTS = (0.1, 0.3, 0.5)   # restoration pivot of the three iterations (§D.6)
 GRAVITY_MAX = 20.0
 
 
@@ -156,13 +157,13 @@ def _match_dynamics(k, drag, dt_vrm, dt_mc):
     def cost(v, d, a):
         t_m, rel_m, step_m = _responses_magica(v, d, a, dt_mc)
         idx = np.clip(np.searchsorted(t_m, grid_t - 1e-12), 0, len(t_m) - 1)
-        err = np.mean((rel_m[..., idx] - ref_rel) ** 2, axis=-1)
+        err = np.mean(np.square(rel_m[..., idx] - ref_rel), axis=-1)
         if ref_step is not None:
-            err = err + np.mean((step_m[..., idx] - ref_step) ** 2, axis=-1)
+            err = err + np.mean(np.square(step_m[..., idx] - ref_step), axis=-1)
         return np.sqrt(np.where(np.isfinite(err), err, np.inf))
 
     if k == 0.0:   # no restoring force: only the velocity decay is matched, in closed form
-        damping = min((1.0 - (1.0 - drag) ** (dt_mc / dt_vrm)) / 0.2, 1.0)
+        damping = min((1.0 - portable.pow(1.0 - drag, dt_mc / dt_vrm)) / 0.2, 1.0)
         return 0.0, damping, 0.8, float(cost(0.0, damping, 0.8))
     lo, hi = np.zeros(3), np.ones(3)
     best = None
@@ -196,9 +197,9 @@ def map_spring_parameters(stiffness: float, gravity_power: float, gravity_dir, d
     power = max(float(gravity_power), 0.0)
     f = float(restoration_fraction(value))
     if stiffness > 0.0 and f > 0.0:
-        theta = math.atan(power / stiffness)
+        theta = portable.atan(power / stiffness)
         held = 1.0 - attenuation * (1.0 - 0.2 * damping)
-        gravity = length * theta * f * held / ((1.0 - f) * math.cos(theta) * dt_mc * dt_mc)
+        gravity = length * theta * f * held / ((1.0 - f) * portable.cos(theta) * dt_mc * dt_mc)
     else:
         gravity = power / dt_vrm
     if gravity > GRAVITY_MAX:

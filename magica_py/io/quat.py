@@ -2,11 +2,14 @@
 
 Same conventions as ``magica_py.kernels.math3d`` (``(x, y, z, w)``, ``qmul(a, b)`` applies
 ``b`` first), but over arrays of shape (..., 4) so a whole clip converts in one call. The
-numba helpers of math3d work on single tuples; these are their batched twins.
+numba helpers of math3d work on single tuples; these are their batched twins. Their
+transcendental maths and sums go through ``kernels/portable`` so an imported clip has the
+same bits on every CPU (docs/determinism.md).
 """
 from __future__ import annotations
 
 import numpy as np
+from magica_py.kernels import portable
 
 
 def qmul(a, b):
@@ -30,7 +33,7 @@ def qconj(q):
 
 def qnormalize(q):
     q = np.asarray(q, dtype=np.float64)
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    n = np.asarray(portable.norm(q))[..., None]
     return np.where(n > 1e-12, q / np.where(n > 1e-12, n, 1.0), np.array([0.0, 0.0, 0.0, 1.0]))
 
 
@@ -48,7 +51,7 @@ def qaxis_angle(axis, angle):
     """Quaternion for a rotation of ``angle`` radians about the unit ``axis`` (broadcasts)."""
     axis = np.asarray(axis, dtype=np.float64)
     half = 0.5 * np.asarray(angle, dtype=np.float64)[..., None]
-    return np.concatenate([axis * np.sin(half), np.cos(half)], axis=-1)
+    return np.concatenate([axis * portable.sin_array(half), portable.cos_array(half)], axis=-1)
 
 
 def qcanonical(q):
@@ -59,8 +62,8 @@ def qcanonical(q):
 
 def qangle(a, b):
     """Angle in radians between the rotations a and b (..., 4)."""
-    d = np.abs(np.sum(qnormalize(a) * qnormalize(b), axis=-1))
-    return 2.0 * np.arccos(np.clip(d, -1.0, 1.0))
+    d = np.abs(portable.dot3(qnormalize(a), qnormalize(b)))
+    return 2.0 * portable.acos_array(d)
 
 
 def qfrom_matrix(m):
@@ -97,20 +100,20 @@ def qfrom_to(a, b):
     """Shortest rotation taking direction a to direction b (3,) (identity if either is ~0)."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
-    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    na, nb = portable.norm(a), portable.norm(b)
     if na < 1e-12 or nb < 1e-12:
         return np.array([0.0, 0.0, 0.0, 1.0])
     a, b = a / na, b / nb
-    d = float(np.dot(a, b))
+    d = portable.dot3(a, b)
     if d < -1.0 + 1e-12:  # opposite: turn half a turn about any axis orthogonal to a
         axis = np.cross(a, [1.0, 0.0, 0.0])
-        if np.linalg.norm(axis) < 1e-6:
+        if portable.norm(axis) < 1e-6:
             axis = np.cross(a, [0.0, 1.0, 0.0])
-        axis /= np.linalg.norm(axis)
+        axis /= portable.norm(axis)
         return np.array([axis[0], axis[1], axis[2], 0.0])
     c = np.cross(a, b)
     q = np.array([c[0], c[1], c[2], 1.0 + d])
-    return q / np.linalg.norm(q)
+    return q / portable.norm(q)
 
 
 def slerp(a, b, t):
@@ -118,13 +121,13 @@ def slerp(a, b, t):
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     t = np.asarray(t, dtype=np.float64)[..., None]
-    d = np.sum(a * b, axis=-1, keepdims=True)
+    d = np.asarray(portable.dot3(a, b))[..., None]
     b = np.where(d < 0.0, -b, b)
     d = np.abs(d)
-    angle = np.arccos(np.clip(d, -1.0, 1.0))
-    s = np.sin(angle)
+    angle = portable.acos_array(d)
+    s = portable.sin_array(angle)
     near = s < 1e-6
     safe = np.where(near, 1.0, s)
-    w1 = np.where(near, 1.0 - t, np.sin((1.0 - t) * angle) / safe)
-    w2 = np.where(near, t, np.sin(t * angle) / safe)
+    w1 = np.where(near, 1.0 - t, portable.sin_array((1.0 - t) * angle) / safe)
+    w2 = np.where(near, t, portable.sin_array(t * angle) / safe)
     return qnormalize(w1 * a + w2 * b)

@@ -21,7 +21,7 @@ from magica_py.io.bvh import load_bvh
 from magica_py.io.clip import Clip
 from magica_py.io.errors import AssetError
 from magica_py.io.gltf import load_gltf, read_document
-from magica_py.io.retarget import retarget
+from magica_py.io.retarget import retarget_with_report
 from magica_py.io.vrm import load_vrm
 from magica_py.scene.hierarchy import BoneSpec
 
@@ -104,7 +104,8 @@ def split_clip_reference(ref: str) -> tuple[str, str | None]:
 
 def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, target_map="auto",
               retarget_options: dict | None = None, drop=(), prefix: str = "", unit_scale=None,
-              units="auto", target_bones: list[BoneSpec] | None = None, trim=None, rate: float | None = None) -> Clip:
+              units="auto", target_bones: list[BoneSpec] | None = None, trim=None, trim_frames=None,
+              rate: float | None = None, report: list | None = None) -> Clip:
     """``animation: - clip: ...`` → a ``Clip`` targeting the scene's bone names.
 
     * ``file.glb#Name`` (also .gltf / .vrm): that glTF animation (the only one if ``#Name``
@@ -114,14 +115,20 @@ def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, t
       ``prefix`` (the rig's prefix: the clip plays on the rig loaded from the same file).
     * With ``retarget_to`` (the target rig's BoneSpecs) it is retargeted by humanoid names:
       ``target_map`` (a scheme or the rig's humanoid dict) and ``retarget_options``
-      (source_map, source_overrides, target_overrides, source_rest, root_translation,
-      same_names, rate); the result targets ``retarget_to``'s names.
+      (source_map, source_overrides, target_overrides, source_rest, source_forward,
+      source_up, root_translation, same_names, align_rest, rate); the result targets
+      ``retarget_to``'s names. ``source_forward`` / ``source_up`` are axes of the source
+      *file* (``"+X"``, ``"-Z"``, ... or a vector, right-handed as written in the BVH /
+      glTF), converted like the file's own coordinates. A rest frame named by
+      ``source_rest`` (and the frames before it: a T-pose lead-in) is not played.
+      ``report``: a list the ``RetargetReport`` is appended to.
     * ``drop``: globs of bones whose channels are removed (bones the cloth simulates),
       matched against the final names.
-    * ``trim``: ``[start, end]`` seconds of the source clip to keep (re-timed from 0; applied
-      after retargeting, so ``source_rest`` frames count from the source's first frame);
-      ``rate``: resample every track linearly at that rate (Hz), e.g. 30 to shrink a 120 Hz
-      capture before turning it into YAML keyframe entries.
+    * ``trim``: ``[start, end]`` seconds of the source clip to keep, or ``trim_frames``:
+      ``[first, last]`` frames of the source (inclusive; BVH frames, glTF key times); both
+      re-timed from 0 and applied after retargeting, so ``source_rest`` frames count from
+      the source's first frame; ``rate``: resample every track linearly at that rate (Hz),
+      e.g. 30 to shrink a 120 Hz capture before turning it into YAML keyframe entries.
     * ``target_bones`` is the former name of ``retarget_to`` (kept for callers).
     """
     if retarget_to is None:
@@ -129,12 +136,13 @@ def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, t
     file, clip_name = split_clip_reference(ref)
     path = Path(base_dir) / file
     options = dict(retarget_options or {})
+    mirror = "x"
     if path.suffix.lower() == ".bvh":
         anim = load_bvh(path, units=units if unit_scale is None else unit_scale)
         source_bones, clip = anim.bones, anim.clip
     else:
-        rig = load_gltf(path, unit_scale=1.0 if unit_scale is None else unit_scale,
-                        mirror_axis="z" if _is_vrm0(path) else "x")
+        mirror = "z" if _is_vrm0(path) else "x"
+        rig = load_gltf(path, unit_scale=1.0 if unit_scale is None else unit_scale, mirror_axis=mirror)
         if clip_name is None:
             if len(rig.clips) != 1:
                 raise AssetError(path, "animations", f"name the clip with {file}#<name>; the file has {sorted(rig.clips) or 'none'}")
@@ -142,14 +150,35 @@ def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, t
         else:
             clip = rig.clip(clip_name)
         source_bones = rig.bones
+    if trim is not None and trim_frames is not None:
+        raise ValueError(f"{ref}: give trim (seconds) or trim_frames, not both")
     if trim is not None and not (isinstance(trim, (list, tuple)) and len(trim) == 2):
         raise ValueError(f"{ref}: trim must be [start, end] in seconds, got {trim!r}")
+    if trim_frames is not None:
+        if not (isinstance(trim_frames, (list, tuple)) and len(trim_frames) == 2):
+            raise ValueError(f"{ref}: trim_frames must be [first, last] frames, got {trim_frames!r}")
+        trim = clip.frame_span(int(trim_frames[0]), None if trim_frames[1] is None else int(trim_frames[1]))
     # retarget the whole clip first: ``source_rest: <frame>`` names a frame of the source
     # (CMU captures start with a T-pose at frame 0, outside most trims)
+    rest_frame = options.get("source_rest")
     if retarget_to is not None:
-        clip = retarget(clip, source_bones, retarget_to, target_map=target_map, **options)
+        for key in ("source_forward", "source_up"):
+            if options.get(key) is not None:
+                options[key] = file_axis_to_project(options[key], mirror)
+        clip, found = retarget_with_report(clip, source_bones, retarget_to, target_map=target_map, **options)
+        if report is not None:
+            report.append(found)
     elif prefix:
         clip = clip.renamed({n: prefix + n for n in clip.nodes()})
+    if isinstance(rest_frame, int) and not isinstance(rest_frame, bool) and retarget_to is not None:
+        # the rest frame (a T-pose lead-in) is not played: the clip starts after it
+        after = float(clip.frame_times()[min(rest_frame + 1, len(clip.frame_times()) - 1)])
+        start, end = (0.0, None) if trim is None else (float(trim[0]), None if trim[1] is None else float(trim[1]))
+        if start < after:
+            if end is not None and end <= after:
+                raise ValueError(f"{ref}: the trim [{start:g}, {end:g}] s ends before the first frame after the "
+                                 f"rest frame {rest_frame} ({after:g} s)")
+            trim = (after, end)
     if trim is not None:
         clip = clip.trimmed(float(trim[0]), None if trim[1] is None else float(trim[1]))
     if rate is not None:
@@ -157,6 +186,28 @@ def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, t
     if drop:
         clip = clip.without(drop)
     return clip
+
+
+def file_axis_to_project(value, mirror: str = "x"):
+    """A direction written in a source file's own axes (``"+X"``, ``"-z"``, ``"Y"`` or three
+    numbers; right-handed, as the BVH / glTF stores it) in project (Unity) axes."""
+    from magica_py.io import coords
+    from magica_py.io.body_frame import AXIS_NAMES
+
+    if isinstance(value, str):
+        key = value.strip().upper()
+        key = key if key[:1] in "+-" else "+" + key
+        if key not in AXIS_NAMES:
+            raise ValueError(f"expected an axis +X, -X, +Y, -Y, +Z, -Z or a vector [x, y, z], got {value!r}")
+        vector = AXIS_NAMES[key]
+    else:
+        try:
+            vector = [float(x) for x in value]
+        except (TypeError, ValueError):
+            vector = []
+        if len(vector) != 3 or sum(x * x for x in vector) < 1e-12:
+            raise ValueError(f"expected an axis +X, -X, +Y, -Y, +Z, -Z or a non-zero vector [x, y, z], got {value!r}")
+    return coords.position_to_unity(vector, mirror)
 
 
 def _is_vrm0(path: Path) -> bool:

@@ -40,9 +40,10 @@ from magica_py.io.gltf import GltfRig, load_gltf, read_document
 from magica_py.io.mapping import map_spring_parameters
 from magica_py.io.quat import qfrom_to
 from magica_py.scene.hierarchy import BoneSpec, TransformHierarchy
+from magica_py.kernels import portable
 
 VRM0_TAIL_LENGTH = 0.07          # UniVRM's virtual tail beyond a childless joint (m)
-MAX_COLLIDER_RADIUS = 0.5        # MagicaCloth2 inspector slider maximum (ref §G.1)
+MAX_COLLIDER_RADIUS = 0.5        # MagicaCloth2 inspector slider maximum (docs/solver.md §G.1)
 _AXES = "xyz"
 
 
@@ -218,9 +219,9 @@ class _Builder:
             i = h.index(name) if name in h.index_of else None
             if i is None:
                 continue
-            lengths.append(float(np.linalg.norm(h.world_position[i] - h.world_position[h.parent[i]])))
+            lengths.append(portable.norm(h.world_position[i] - h.world_position[h.parent[i]]))
         extra = [b for b in self.extra_bones if b.name in joints]
-        lengths += [float(np.linalg.norm(b.position)) for b in extra]
+        lengths += [portable.norm(b.position) for b in extra]
         return float(np.mean(lengths)) if lengths else VRM0_TAIL_LENGTH
 
     def add_tail(self, name: str) -> str:
@@ -229,7 +230,7 @@ class _Builder:
         i = h.index(name)
         p = h.parent[i]
         direction = h.world_position[i] - h.world_position[p] if p >= 0 else np.array([0.0, -1.0, 0.0])
-        n = np.linalg.norm(direction)
+        n = portable.norm(direction)
         direction = direction / n if n > 1e-9 else np.array([0.0, -1.0, 0.0])
         world = h.world_position[i] + direction * VRM0_TAIL_LENGTH * self.unit_scale * abs(h.lossy_scale[i, 0])
         local = h.inverse_transform_point(i, world)
@@ -403,7 +404,7 @@ class _Builder:
             r = self.number(spec.get("radius"), f"{sw}.capsule.radius", 0.0) * s / world_scale
             tail = coords.position_to_unity(self.vector(spec.get("tail"), f"{sw}.capsule.tail", (0, 0, 0)), "x") * s
             d = tail - offset
-            length = float(np.linalg.norm(d))
+            length = portable.norm(d)
             mid = 0.5 * (offset + tail)
             if length < 1e-9:
                 self.add_collider(VrmCollider(name, node, "sphere", tuple(offset), r, r, source=sw))
@@ -416,9 +417,9 @@ class _Builder:
             self.add_collider(VrmCollider(name, transform, "capsule", center, r, r, length + 2.0 * r, direction, source=sw))
         elif kind == "plane":
             normal = coords.position_to_unity(self.vector(spec.get("normal"), f"{sw}.plane.normal", (0, 0, 1)), "x")
-            if np.linalg.norm(normal) < 1e-9:
+            if portable.norm(normal) < 1e-9:
                 raise AssetError(self.path, f"{sw}.plane.normal", "is a zero vector")
-            normal = normal / np.linalg.norm(normal)
+            normal = normal / portable.norm(normal)
             if normal[1] > 1.0 - 1e-9:
                 transform, center = node, tuple(offset)
             else:

@@ -1,8 +1,8 @@
-"""Vector and quaternion helpers for numba kernels (reference §0.2, Unity.Mathematics semantics).
+"""Vector and quaternion helpers for numba kernels (docs/solver.md §0.2, Unity.Mathematics semantics).
 
 Conventions: Y up, left-handed (Unity). Vectors are 3-tuples, quaternions are 4-tuples
 ``(x, y, z, w)``; ``q_mul(a, b)`` applies ``b`` first. Helpers take and return tuples so that
-values stay in registers (tech-notes §10): never allocate inside these functions.
+values stay in registers (docs/tech-notes.md §10): never allocate inside these functions.
 ``load3``/``store3`` move tuples in and out of ``(n, 3)`` arrays.
 
 Every function here is also callable from plain Python (numba dispatches), which the tests
@@ -162,7 +162,7 @@ def orthogonal_axis(a):
     """A unit vector orthogonal to the unit vector a (fallback axis for opposite vectors).
 
     Follows MathUtility.FromToRotation's choice and falls back to another basis axis when
-    that choice is degenerate (reference Appendix 3.11: a documented guard, never NaN).
+    that choice is degenerate (Appendix 3.11: a documented guard, never NaN).
     """
     if a[0] > a[1] and a[0] > a[2]:
         axis = v_cross(a, (0.0, 1.0, 0.0))
@@ -176,9 +176,6 @@ def orthogonal_axis(a):
 
 
 # ----------------------------------------------------------------------------- quaternions
-@kernel
-def q_identity():
-    return (0.0, 0.0, 0.0, 1.0)
 
 
 @kernel
@@ -192,11 +189,6 @@ def q_mul(a, b):
         aw * bz + ax * by - ay * bx + az * bw,
         aw * bw - ax * bx - ay * by - az * bz,
     )
-
-
-@kernel
-def q_conjugate(q):
-    return (-q[0], -q[1], -q[2], q[3])
 
 
 @kernel
@@ -236,12 +228,6 @@ def q_rotate(q, v):
         v[1] + qw * ty + (qz * tx - qx * tz),
         v[2] + qw * tz + (qx * ty - qy * tx),
     )
-
-
-@kernel
-def q_inverse_rotate(q, v):
-    """Rotate v by the inverse of the unit quaternion q."""
-    return q_rotate(q_conjugate(q), v)
 
 
 @kernel
@@ -311,7 +297,7 @@ def q_from_matrix(m00, m01, m02, m10, m11, m12, m20, m21, m22):
     """Quaternion of a rotation matrix (row r, column c = m{rc}), as Unity.Mathematics does.
 
     The branch depends on the sign of m00 and of m11 +/- m22, and the branch's major
-    component is positive (reference Appendix 3.12); the sign matters for ToAngleAxis.
+    component is positive (Appendix 3.12); the sign matters for ToAngleAxis.
     """
     if math.copysign(1.0, m00) >= 0.0:
         t = m11 + m22

@@ -23,7 +23,7 @@ from magica_py.jit import kernel
 # through an index array (``local_to_world[transform_index[p]]``) cannot ("cannot identify
 # array bounds"), and one such access makes every access of its alias set unanalysable. A loop
 # whose loads all go through ``load_input(a, i, scope)`` and whose stores all go through
-# ``store_output(a, i, v, scope)`` tells LLVM (scoped alias metadata) that, for that scope,
+# ``store_output3/4(a, i, row, scope)`` tells LLVM (scoped alias metadata) that, for that scope,
 # no store ever writes memory that a load reads. Use it only when that is true for *every*
 # execution of the scope in a compiled function: a loop that reads back what it writes
 # (in-place update) must not use these. Values and arithmetic are unchanged (bits identical).
@@ -83,23 +83,6 @@ def _row_intrinsic(n):
 
 load_input3 = _row_intrinsic(3)
 load_input4 = _row_intrinsic(4)
-
-
-@intrinsic
-def store_output(typingctx, array, index, value, scope):
-    """``array[index] = value`` (1-D C array, unsigned index) as an output of loop ``scope``."""
-    if not (isinstance(array, types.Array) and array.ndim == 1 and isinstance(index, types.Integer)
-            and isinstance(scope, types.StringLiteral)):
-        return None
-    name = scope.literal_value
-
-    def codegen(context, builder, sig, args):
-        v = context.cast(builder, args[2], sig.args[2], sig.args[0].dtype)
-        store = builder.store(v, _flat_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1]))
-        store.set_metadata("noalias", _scope_list(builder.module, name))
-        return context.get_dummy_value()
-
-    return types.none(array, index, value, scope), codegen
 
 
 def _row_store_intrinsic(n):

@@ -1,4 +1,4 @@
-"""BoneCloth parameters: the table (ref §F.1), the 11 presets (§F.2) and their resolution.
+"""BoneCloth parameters: the table (docs/solver.md §F.1), the 11 presets (§F.2) and their resolution.
 
 ``resolve_parameters(preset, overrides, where)`` returns a ``ClothParameters``: a frozen
 mapping from every dotted key of ``PARAMETERS`` to its value (floats, ``Curve`` objects,
@@ -10,6 +10,7 @@ bools, enum strings, 3-tuples, transform names or None; limits as floats with -1
 from __future__ import annotations
 
 import difflib
+import functools
 import math
 import re
 from collections.abc import Mapping
@@ -20,7 +21,7 @@ from magica_py.params.table import LIMIT_ENABLED_DEFAULTS, PARAMETER_DEFS, PARAM
 
 __all__ = [
     "Curve", "ClothParameters", "ParameterError", "PARAMETERS", "PARAMETER_DEFS", "PRESETS",
-    "preset_names", "resolve_parameters", "parse_value", "evaluate_curve", "evaluate_curve_clamp01",
+    "default_parameters", "preset_names", "resolve_parameters", "parse_value", "evaluate_curve", "evaluate_curve_clamp01",
 ]
 
 _OFF_WORDS = ("off", "false", "none", "disabled")
@@ -212,6 +213,14 @@ def _defaults(gravity_direction=None) -> dict:
     if gravity_direction is not None:
         values["gravity_direction"] = parse_value(PARAMETERS["gravity_direction"], list(gravity_direction), "scene.gravity")
     return values
+
+
+@functools.lru_cache(maxsize=1)
+def default_parameters() -> ClothParameters:
+    """Every parameter at its default of the table (``params/table.py``, the one place the
+    defaults are written), parsed as a scene's values are: what a parameter mapping that
+    lacks a key stands for (the solver's job data, the build's switches)."""
+    return ClothParameters(_defaults())
 
 
 def resolve_parameters(preset: str | None = None, overrides: Mapping | None = None,

@@ -1,4 +1,4 @@
-"""Depth curves (ref §0.3, MagicaCloth2's CurveSerializeData).
+"""Depth curves (docs/solver.md §0.3, MagicaCloth2's CurveSerializeData).
 
 A curve parameter is a scalar ``value`` times an optional Unity AnimationCurve over depth
 t in [0, 1]. The simulation never evaluates the AnimationCurve: it gets a 16-entry table
@@ -47,7 +47,7 @@ class Curve:
 
     @staticmethod
     def hermite(value: float, k0: tuple[float, float], k1: tuple[float, float], use_curve: bool = True) -> "Curve":
-        """Two keys at t=0 and t=1 given as (value, out_slope) and (value, in_slope) (ref §F.2 notation)."""
+        """Two keys at t=0 and t=1 given as (value, out_slope) and (value, in_slope) (§F.2 notation)."""
         return Curve(float(value), ((0.0, float(k0[0]), 0.0, float(k0[1])), (1.0, float(k1[0]), float(k1[1]), 0.0)), use_curve)
 
     def with_value(self, value: float) -> "Curve":
@@ -75,7 +75,7 @@ class Curve:
 
     @property
     def samples(self) -> np.ndarray:
-        """The 16-entry job table ``S`` (ref §0.3 ConvertFloatArray), read-only."""
+        """The 16-entry job table ``S`` (§0.3 ConvertFloatArray), read-only."""
         if self.use_curve:
             table = np.array([self.shape(i / 15.0) * self.value for i in range(CURVE_SAMPLES)])
         else:

@@ -1,4 +1,4 @@
-"""The 11 presets shipped with MagicaCloth2 (ref §F.2, ``MC2_Preset_*.json``).
+"""The 11 presets shipped with MagicaCloth2 (docs/solver.md §F.2, ``MC2_Preset_*.json``).
 
 Each preset is a dict of the parameter keys it sets; every other key keeps the table
 default. Curves are ``Curve.hermite(value, (v0, out_slope0), (v1, in_slope1), use)`` — the

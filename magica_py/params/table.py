@@ -1,4 +1,4 @@
-"""The BoneCloth parameter table (ref §F.1), one row per parameter.
+"""The BoneCloth parameter table (docs/solver.md §F.1), one row per parameter.
 
 Keys are MagicaCloth2's serialized names in snake_case, grouped as in its inspector
 (``inertia.world_inertia``). Kinds:
@@ -102,11 +102,11 @@ PARAMETER_DEFS: tuple[ParameterDef, ...] = (
     _p("wind.synchronization", "float", 0.7, 0, 1, "", "D.1", "Wind synchronization.", implemented=False),
     _p("wind.depth_weight", "float", 0.0, 0, 1, "", "D.1", "Wind depth weight.", implemented=False),
     _p("wind.moving_wind", "float", 0.0, 0, 10, "", "D.1", "Wind from the cloth's own movement.", implemented=False),
-    # -- beyond MagicaCloth2 (issue 4 item 4, issue 8)
+    # -- beyond MagicaCloth2 (docs/parameters.md, docs/quality-mode.md)
     _p("solver.rate_mode", "enum", "magica", ref="docs/parameters.md",
        doc="magica: per-step rates tuned for 90 Hz and patched by SimulationPower (MagicaCloth2); frequency_consistent: every per-step rate k becomes 1-(1-k)^(90/f), so the same parameters give the same motion at any frequency (identical at 90 Hz).",
        choices=("magica", "frequency_consistent")),
-    # -- quality mode (issue 8, docs/quality-mode.md); "auto" = disabled in faithful mode, the measured default in quality mode (enabled/disabled, not on/off: YAML reads on/off as booleans)
+    # -- quality mode (docs/quality-mode.md); "auto" = disabled in faithful mode, the measured default in quality mode (enabled/disabled, not on/off: YAML reads on/off as booleans)
     _p("solver.mode", "enum", "faithful", ref="docs/quality-mode.md",
        doc="faithful: MagicaCloth2's BoneCloth as specified (what its users tune against); quality: frequency-consistent rates, time-based smoothing and display, inextensibility and collision last (each switch below set to auto takes its quality default).",
        choices=("faithful", "quality")),
@@ -127,7 +127,7 @@ PARAMETER_DEFS: tuple[ParameterDef, ...] = (
        choices=("auto", "enabled", "disabled")),
 )
 
-# Defaults a limit takes when enabled without a value (ref §F.1 "check (false, v)").
+# Defaults a limit takes when enabled without a value (§F.1 "check (false, v)").
 LIMIT_ENABLED_DEFAULTS = {
     "inertia.movement_speed_limit": 5.0,
     "inertia.rotation_speed_limit": 720.0,

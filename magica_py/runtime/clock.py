@@ -1,4 +1,4 @@
-"""Frame-time sources and a Unity-semantics time manager (ref §A.2; Unity ``Time``).
+"""Frame-time sources and a Unity-semantics time manager (docs/solver.md §A.2; Unity ``Time``).
 
 A *frame-time source* says how much real time passed since the previous rendered frame:
 

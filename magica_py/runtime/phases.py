@@ -1,6 +1,6 @@
 """Frame phases as data: an ordered list of phases, an ordered list of systems in each.
 
-The six phases mirror where MagicaCloth2 hooks Unity's PlayerLoop (ref §A.2). Systems are
+The six phases mirror where MagicaCloth2 hooks Unity's PlayerLoop (docs/solver.md §A.2). Systems are
 plain ``System(name, run)`` values with ``run(ctx: FrameContext) -> None``; the ``Player``
 walks ``Phase`` in order and runs each phase's systems in their registered order (there is
 one explicit, total order: no ambiguity between systems of a phase).
@@ -39,7 +39,7 @@ class Phase(IntEnum):
     LATE_UPDATE = 3
     """Unity ``PreLateUpdate`` after ``ScriptRunBehaviourLateUpdate`` (MagicaCloth2's default
     ``AfterLateUpdate``): the cloth simulation reads transforms, runs team time and steps and
-    writes bone poses back (ref §A.3). Game code that must see the simulated pose goes after
+    writes bone poses back (§A.3). Game code that must see the simulated pose goes after
     the cloth system in this phase."""
 
     RENDER_WRITE = 4

@@ -1,4 +1,4 @@
-"""The player loop: one rendered frame = every phase of the schedule, in order (ref §A.2).
+"""The player loop: one rendered frame = every phase of the schedule, in order (docs/solver.md §A.2).
 
 ``Player.step()``:
 
@@ -110,6 +110,19 @@ class Player:
         source, manager = time_from_settings(getattr(scene, "settings", None) or {})
         return cls(scene, schedule if schedule is not None else default_schedule(scene),
                    source, manager)
+
+    # -- state capture (runtime/snapshot.py)
+    def capture(self):
+        """A ``Snapshot`` of the whole simulation state (clock, poses, animation, systems)."""
+        from magica_py.runtime.snapshot import capture
+
+        return capture(self)
+
+    def restore(self, snapshot) -> None:
+        """Back to ``snapshot``: the frames that follow give the same bits as after the capture."""
+        from magica_py.runtime.snapshot import restore
+
+        restore(self, snapshot)
 
     # -- restore registry (kept on the schedule so systems built before the player see it)
     def register_restored_bones(self, indices, owner: object = None) -> None:

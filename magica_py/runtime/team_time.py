@@ -1,4 +1,4 @@
-"""MagicaCloth2 per-team simulation timing (ref §A.3 TimeManager.FrameUpdate, §A.4, §A.6, §A.7).
+"""MagicaCloth2 per-team simulation timing (docs/solver.md §A.3 TimeManager.FrameUpdate, §A.4, §A.6, §A.7).
 
 Every cloth component is a *team*. Each team keeps its own clock, fed by the frame delta
 of its update mode, and decides once per frame how many fixed-size simulation steps of
@@ -6,16 +6,18 @@ of its update mode, and decides once per frame how many fixed-size simulation st
 not queued). During the steps ``frame_interpolation`` says where between "the last frame
 that simulated" and "this frame" each step sits.
 
-Calling sequence (LATE_UPDATE, all teams in one kernel call each; the Python wrappers
-``frame_update``, ``begin_step``, ``end_frame`` pass the arrays)::
+Calling sequence (LATE_UPDATE, all teams, inside the frame kernel ``solver/frame.py``;
+``tests/team_time_driver.py`` drives the same kernels from Python)::
 
-    frame_update(state, settings, unity_time)        # §A.4: update_count, skip_count, time...
-    for k in range(state.max_update_count()):        # or the solver's own loop to max steps
-        begin_step(state, settings, k)               # §A.6: now_update_time += dt, interpolation
-        ... solver step for teams with state.step_running ...
-    end_frame(state, settings)                       # §A.7: clear flags, 7200 s wrap
+    team_time_frame_update(...)                      # §A.4: update_count, skip_count, time...
+    for k in range(most steps of any team):
+        team_time_begin_step(k, ...)                 # §A.6: now_update_time += dt, interpolation
+        ... solver step for teams with step_running ...
+    team_time_end_frame(...)                         # §A.7: clear flags, 7200 s wrap
 
-``TeamTimeState`` fields (capacity ``n`` teams; slots with ``active == False`` are ignored):
+``TeamTimeState`` fields (capacity ``n`` teams; slots with ``active == False`` are ignored;
+"written by" frame_update / begin_step / end_frame means ``team_time_frame_update`` /
+``team_time_begin_step(_team)`` / ``team_time_end_frame``):
 
 =====================  ==========  =====  ====================================================
 field                  dtype       units  meaning / written by
@@ -46,7 +48,7 @@ step_running           bool        -      the team runs step k (begin_step; clea
 
 Timing modes (``SimulationTimeSettings.timing``):
 
-* ``"exact"`` (default, a documented deviation, ref Appendix 3.1): float64 counters, and the
+* ``"exact"`` (default, a documented deviation, Appendix 3.1): float64 counters, and the
   planned step count is ``trunc((T - now_update_time)/dt + STEP_EPSILON)`` with
   ``STEP_EPSILON = 1e-6`` of a step (11 ns at 90 Hz). Frame rates commensurate with the
   frequency (30, 45, 90, 180 fps at 90 Hz) then give exact step counts (30 fps: 3 every
@@ -68,8 +70,9 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import saturate
+from magica_py.kernels import portable
 
-# update modes (ref §A.4; AnimatorLinkage resolves to one of these, NORMAL without an animator)
+# update modes (§A.4; AnimatorLinkage resolves to one of these, NORMAL without an animator)
 UPDATE_NORMAL = 0
 UPDATE_UNITY_PHYSICS = 1
 UPDATE_UNSCALED = 2
@@ -90,7 +93,7 @@ DEFAULT_FREQUENCY = 90
 FREQUENCY_RANGE = (30, 150)
 DEFAULT_MAX_STEPS = 3
 MAX_STEPS_RANGE = (1, 5)
-# quality mode and converged references (issue 8, docs/quality-mode.md): frequencies and step
+# quality mode and converged references (docs/quality-mode.md): frequencies and step
 # counts beyond MagicaCloth2's caps, opted into with ``extended_range``
 EXTENDED_FREQUENCY_RANGE = (30, 2880)
 EXTENDED_MAX_STEPS_RANGE = (1, 64)
@@ -119,7 +122,7 @@ def timing_code(name) -> int:
 # ----------------------------------------------------------------------------- global settings
 @dataclass
 class SimulationTimeSettings:
-    """MagicaCloth2's global timing (``TimeManager.FrameUpdate``, ref §A.3).
+    """MagicaCloth2's global timing (``TimeManager.FrameUpdate``, §A.3).
 
     Out-of-range values are clamped as MagicaCloth2 does (the scene loader reports them as
     errors before they get here); ``timing`` is validated.
@@ -161,13 +164,14 @@ class SimulationTimeSettings:
 
     @property
     def simulation_power(self) -> tuple[float, float, float, float]:
-        """``SimulationPower`` (x, y, z, w) with ``r = 90/frequency`` (ref §A.3).
+        """``SimulationPower`` (x, y, z, w) with ``r = 90/frequency`` (§A.3).
 
         y scales distance and bending stiffness, z damping, w angle restoration; x is unused.
         All four are 1 at 90 Hz.
         """
         r = 90.0 / self.frequency
-        return (r, r ** 0.5 if r > 1.0 else r, r ** 0.3 if r > 1.0 else r, r ** 1.8)
+        return (r, math.sqrt(r) if r > 1.0 else r, portable.pow(r, 0.3) if r > 1.0 else r,
+                portable.pow(r, 1.8))
 
     @classmethod
     def from_scene_settings(cls, settings) -> "SimulationTimeSettings":
@@ -392,37 +396,3 @@ class TeamTimeState:
         if not self.active.any():
             return 0
         return int(self.update_count[self.active].max())
-
-
-# ----------------------------------------------------------------------------- wrappers
-def frame_update(state: TeamTimeState, settings: SimulationTimeSettings, unity_time,
-                 fixed_update_count: int | None = None) -> None:
-    """§A.4 for all teams. ``unity_time`` is a ``clock.UnityTime`` (or anything with its
-    fields); ``fixed_update_count`` overrides ``unity_time.fixed_update_count`` (the player's
-    live counter, ``ctx.counters.fixed_update_count``)."""
-    fixed_count = unity_time.fixed_update_count if fixed_update_count is None else fixed_update_count
-    team_time_frame_update(
-        state.active, state.suspended, state.update_mode, state.team_time_scale,
-        state.time, state.old_time, state.now_update_time, state.old_update_time,
-        state.frame_update_time, state.frame_old_time,
-        state.update_count, state.skip_count, state.frame_delta_time, state.now_time_scale,
-        state.frame_add, state.running,
-        float(unity_time.delta_time), float(unity_time.unscaled_delta_time),
-        float(unity_time.fixed_delta_time), int(fixed_count),
-        float(settings.global_time_scale), float(settings.simulation_delta_time),
-        int(settings.max_steps_per_frame), int(settings.timing_code))
-
-
-def begin_step(state: TeamTimeState, settings: SimulationTimeSettings, step: int) -> None:
-    """§A.6 for all teams at the start of step ``step``; sets ``state.step_running``."""
-    team_time_begin_step(int(step), state.active, state.update_count, state.time,
-                         state.now_update_time, state.frame_old_time, state.frame_interpolation,
-                         state.step_running, float(settings.simulation_delta_time),
-                         int(settings.timing_code))
-
-
-def end_frame(state: TeamTimeState, settings: SimulationTimeSettings) -> None:
-    """§A.7 timing part for all teams."""
-    team_time_end_frame(state.active, state.running, state.step_running, state.skip_count,
-                        state.time, state.old_time, state.now_update_time, state.old_update_time,
-                        state.frame_update_time, state.frame_old_time, int(settings.timing_code))

@@ -1,4 +1,4 @@
-"""Animation drivers and timed events, applied in the UPDATE phase (ref §A.2).
+"""Animation drivers and timed events, applied in the UPDATE phase (docs/solver.md §A.2).
 
 ``Animation.from_specs(entries, hierarchy)`` builds it from the validated ``animation``
 section after instance replication. Each entry is either a **driver**::
@@ -92,6 +92,7 @@ from magica_py.kernels.math3d import (
     v_lerp,
     v_normalize,
 )
+from magica_py.kernels import portable
 
 KEYFRAMES, ORBIT, OSCILLATE, SPIN, WALK = 0, 1, 2, 3, 4
 DRIVER_KINDS = {"keyframes": KEYFRAMES, "orbit": ORBIT, "oscillate": OSCILLATE,
@@ -267,7 +268,7 @@ def apply_drivers(t, kind, target, start, end, phase_offset, fade, params, key_f
             w = window_weight(t, start[d], end[d], fade[d])
             if w == 0.0:
                 continue
-            value = w * params[d, 3] * math.sin(two_pi * params[d, 4] * tau + params[d, 5])
+            value = w * params[d, 3] * portable.sin(two_pi * params[d, 4] * tau + params[d, 5])
             if params[d, 6] != 0.0:
                 axis = (params[d, 0], params[d, 1], params[d, 2])
                 q = q_mul(load4(local_rotation, i), q_axis_angle(axis, value))
@@ -288,13 +289,13 @@ def apply_drivers(t, kind, target, start, end, phase_offset, fade, params, key_f
             if w == 0.0:
                 continue
             phase = two_pi * params[d, 4] * tau
-            bob = w * params[d, 5] * math.sin(2.0 * phase)
-            lateral = w * params[d, 7] * math.sin(phase)
+            bob = w * params[d, 5] * portable.sin(2.0 * phase)
+            lateral = w * params[d, 7] * portable.sin(phase)
             side = v_normalize(v_cross(up, direction))
             for c in range(3):
                 local_position[i, c] += up[c] * bob + side[c] * lateral
-            roll = q_axis_angle((0.0, 0.0, 1.0), w * params[d, 6] * math.sin(phase))
-            yaw = q_axis_angle((0.0, 1.0, 0.0), w * params[d, 8] * math.sin(phase))
+            roll = q_axis_angle((0.0, 0.0, 1.0), w * params[d, 6] * portable.sin(phase))
+            yaw = q_axis_angle((0.0, 1.0, 0.0), w * params[d, 8] * portable.sin(phase))
             q = q_mul(load4(local_rotation, i), q_mul(yaw, roll))
             store4(local_rotation, i, q_normalize(q))
     for m in range(driven.shape[0]):
@@ -310,7 +311,7 @@ def apply_drivers(t, kind, target, start, end, phase_offset, fade, params, key_f
 # ----------------------------------------------------------------------------- building
 def _unit(v, where: str) -> np.ndarray:
     a = np.asarray(v, dtype=np.float64).reshape(3)
-    n = float(np.linalg.norm(a))
+    n = portable.norm(a) if np.isfinite(a).all() else math.nan
     if not np.isfinite(n) or n < 1e-12:
         raise ValueError(f"{where}: expected a non-zero direction, got {list(a)}")
     return a / n
@@ -572,8 +573,8 @@ def _driver_params(kind: str, p: dict, where: str) -> np.ndarray:
     if kind == "orbit":
         axis = _unit(p.get("axis", (0.0, 1.0, 0.0)), f"{where}.axis")
         ref = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.99 else np.array([0.0, 0.0, 1.0])
-        u = ref - np.dot(ref, axis) * axis
-        u /= np.linalg.norm(u)
+        u = ref - portable.dot3(ref, axis) * axis
+        u /= portable.norm(u)
         period = num("period")
         if period == 0.0:
             raise ValueError(f"{where}.period: expected a non-zero period")
@@ -595,7 +596,7 @@ def _driver_params(kind: str, p: dict, where: str) -> np.ndarray:
     if kind == "walk":
         direction = _unit(p.get("direction", (0.0, 0.0, 1.0)), f"{where}.direction")
         up = _unit(p.get("up", (0.0, 1.0, 0.0)), f"{where}.up")
-        if np.linalg.norm(np.cross(up, direction)) < 1e-6:
+        if portable.norm(np.cross(up, direction)) < 1e-6:
             raise ValueError(f"{where}: direction must not be parallel to up")
         return np.concatenate([direction, [num("speed", 0.0), num("stride_frequency", 1.8),
                                            num("bob", 0.03), rad(num("sway", 4.0)),

@@ -1,6 +1,6 @@
 """Colliders: the scene's ``ColliderSet`` (model data, read-only) and their world shapes.
 
-``ColliderSet`` is a structure-of-arrays over n colliders (ref §G.1), built once from the
+``ColliderSet`` is a structure-of-arrays over n colliders (docs/solver.md §G.1), built once from the
 validated ``colliders`` section; every array is ``writeable=False``:
 
 ==================  ===========  =====  ===================================================
@@ -33,7 +33,7 @@ sits on a static node the config package creates before the hierarchy is built:
 ``static_transforms[collider name]`` when given.
 
 ``world_shapes(hierarchy)`` evaluates every collider at the hierarchy's current world pose
-(ref §G.2 frame pose, §G.3 shape work data) with numpy: it is what the Rerun sink draws and
+(§G.2 frame pose, §G.3 shape work data) with numpy: it is what the Rerun sink draws and
 the oracle the solver's collider kernels are tested against.
 """
 from __future__ import annotations
@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from magica_py.scene.hierarchy import BoneSpec, TransformHierarchy
+from magica_py.kernels import portable
 
 SPHERE, CAPSULE, PLANE = 0, 1, 2
 SHAPE_NAMES = ("sphere", "capsule", "plane")
@@ -217,7 +218,7 @@ def _rotation_matrices(q: np.ndarray) -> np.ndarray:
 
 
 def world_shapes(colliders: ColliderSet, hierarchy: TransformHierarchy) -> ColliderWorldShapes:
-    """Evaluate ``colliders`` at ``hierarchy``'s world pose (ref §G.2, §G.3); numpy, no kernel."""
+    """Evaluate ``colliders`` at ``hierarchy``'s world pose (§G.2, §G.3); numpy, no kernel."""
     t = colliders.transform
     n = colliders.count
     pos = hierarchy.world_position[t]
@@ -228,7 +229,7 @@ def world_shapes(colliders: ColliderSet, hierarchy: TransformHierarchy) -> Colli
     scale[tiny] = SCALE_EPSILON
     sign = np.where(scale < 0.0, -1.0, 1.0)
     rmat = _rotation_matrices(rot)
-    frame_pos = pos + np.einsum("nij,nj->ni", rmat, colliders.center * sign) * np.abs(scale)
+    frame_pos = pos + portable.rotate_vectors(rmat, colliders.center * sign) * np.abs(scale)
 
     shape = colliders.shape
     radius = np.zeros(n)
@@ -258,7 +259,7 @@ def world_shapes(colliders: ColliderSet, hierarchy: TransformHierarchy) -> Colli
         b = np.where(aligned, 0.5 * length, length - rs)
         a = np.maximum(a - rs, 0.0)
         b = np.maximum(b - re, 0.0)
-        world_axis = np.einsum("nij,nj->ni", rmat[cap], axis)
+        world_axis = portable.rotate_vectors(rmat[cap], axis)
         start[cap] = frame_pos[cap] + world_axis * a[:, None]
         end[cap] = frame_pos[cap] - world_axis * b[:, None]
         radius[cap] = rs

@@ -3,7 +3,7 @@
 Unity semantics: Y up, left-handed, quaternions (x, y, z, w). A node has a local position,
 rotation and scale relative to its parent; its world matrix is ``parent_local_to_world @
 TRS(local)``, its world rotation ``parent_world_rotation * local_rotation`` and its lossy
-scale the diagonal of ``inverse(R_world) @ local_to_world[:3, :3]`` (reference §A.3), so
+scale the diagonal of ``inverse(R_world) @ local_to_world[:3, :3]`` (docs/solver.md §A.3), so
 numbers read off a Unity scene carry over unchanged.
 
 Nodes are stored parents-before-children, so one forward pass (``propagate_world``, a numba
@@ -31,11 +31,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import math
+
 import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load4, q_inverse, q_mul, q_normalize, q_rotate
 from magica_py.scene.propagation import PropagationPlan, build_plan, propagate_node
+from magica_py.kernels import portable
 
 
 # ----------------------------------------------------------------------------- kernels
@@ -52,7 +55,7 @@ def propagate_world(parent, local_position, local_rotation, local_scale,
 
 @kernel
 def restore_local_pose(indices, rest_position, rest_rotation, local_position, local_rotation):
-    """RESTORE phase: write the build-time local position and rotation back (reference §A.2)."""
+    """RESTORE phase: write the build-time local position and rotation back (§A.2)."""
     for k in range(indices.shape[0]):
         i = indices[k]
         for c in range(3):
@@ -124,7 +127,7 @@ class TransformHierarchy:
             self.parent[new] = -1 if b.parent is None else self.index_of[b.parent]
             self.local_position[new] = b.position
             q = np.asarray(b.rotation, dtype=np.float64)
-            norm = float(np.linalg.norm(q))
+            norm = portable.norm(q) if np.isfinite(q).all() else math.nan
             if not np.isfinite(q).all() or norm < 1e-12:
                 raise HierarchyError(f"transform {b.name!r}: rotation {tuple(b.rotation)} is not a valid quaternion (zero length or non-finite)")
             self.local_rotation[new] = q / norm
@@ -218,10 +221,11 @@ class TransformHierarchy:
     # -- Unity Transform helpers (after propagate)
     def transform_point(self, i: int, p) -> np.ndarray:
         m = self.local_to_world[i]
-        return m[:3, :3] @ np.asarray(p, dtype=np.float64) + m[:3, 3]
+        return portable.transform_points(m, p)
 
     def inverse_transform_point(self, i: int, p) -> np.ndarray:
-        return np.linalg.solve(self.local_to_world[i][:3, :3], np.asarray(p, dtype=np.float64) - self.local_to_world[i][:3, 3])
+        m = self.local_to_world[i]
+        return portable.rotate_vectors(portable.inverse3(m[:3, :3]), np.asarray(p, dtype=np.float64) - m[:3, 3])
 
     def transform_direction(self, i: int, d) -> np.ndarray:
         """Rotate a direction by node i's world rotation (scale ignored, as Unity does)."""

@@ -72,7 +72,7 @@ def propagate_node(i, parent, local_position, local_rotation, local_scale,
                    world_position, world_rotation, lossy_scale, local_to_world):
     """Node i's world pose, lossy scale and matrix from its local pose and its parent's (final)
     world pose: ``world = parent_l2w @ TRS(local)``, ``world_rotation = normalize(parent *
-    normalize(local))``, lossy scale = ``diag(R_world^-1 @ M3x3)`` (reference §A.3)."""
+    normalize(local))``, lossy scale = ``diag(R_world^-1 @ M3x3)`` (docs/solver.md §A.3)."""
     lp = load3(local_position, i)
     lr = q_normalize(load4(local_rotation, i))
     ls = load3(local_scale, i)

@@ -4,7 +4,7 @@ Every generator returns ``list[BoneSpec]`` (``magica_py.scene.hierarchy``) in pa
 children order, ready to be appended to a rig's explicit bones. All lengths are metres, all
 angles degrees, all vectors are given in the *parent bone's* local space.
 
-Bone axis convention (what the solver sees, ref §B.2: normal = bone +Y, tangent = bone +Z)
+Bone axis convention (what the solver sees, docs/solver.md §B.2: normal = bone +Y, tangent = bone +Z)
 ------------------------------------------------------------------------------------------
 * local **+Y** points along the strand, from a bone to its child (like Mixamo / Unity
   humanoid bones), so ``child.local_position == (0, segment, 0)``;
@@ -63,6 +63,7 @@ from magica_py.kernels.math3d import (
     q_rotate,
 )
 from magica_py.scene.hierarchy import BoneSpec
+from magica_py.kernels import portable
 
 UP = (0.0, 1.0, 0.0)
 BACK = (0.0, 0.0, -1.0)
@@ -71,7 +72,7 @@ BACK = (0.0, 0.0, -1.0)
 # ----------------------------------------------------------------------------- small vector helpers
 def _unit(v, what: str) -> tuple[float, float, float]:
     a = np.asarray(v, dtype=np.float64)
-    n = float(np.linalg.norm(a))
+    n = portable.norm(a)
     if not np.isfinite(n) or n < 1e-12:
         raise ValueError(f"{what}: expected a non-zero vector, got {list(v)}")
     return tuple(float(x) for x in a / n)
@@ -81,7 +82,7 @@ def _orthogonal_part(v, axis) -> np.ndarray:
     """v without its component along the unit vector axis."""
     v = np.asarray(v, dtype=np.float64)
     a = np.asarray(axis, dtype=np.float64)
-    return v - np.dot(v, a) * a
+    return v - portable.dot3(v, a) * a
 
 
 def bone_frame(y_axis, z_hint) -> tuple[float, float, float, float]:
@@ -91,7 +92,7 @@ def bone_frame(y_axis, z_hint) -> tuple[float, float, float, float]:
     """
     for hint in (z_hint, BACK, (1.0, 0.0, 0.0)):
         z = _orthogonal_part(hint, y_axis)
-        n = float(np.linalg.norm(z))
+        n = portable.norm(z)
         if n > 1e-6:
             z = tuple(float(c) for c in z / n)
             return tuple(q_look_rotation(z, tuple(y_axis)))
@@ -134,7 +135,7 @@ def chain(name: str, parent: str | None, bones: int, length: float,
         rotation = bone_frame(d, z_hint)
     else:
         x = _orthogonal_part(_unit(curl_axis, f"chain {name!r} curl_axis"), d)
-        if np.linalg.norm(x) < 1e-6:
+        if portable.norm(x) < 1e-6:
             raise ValueError(f"chain {name!r}: curl_axis must not be parallel to direction")
         rotation = bone_frame(d, np.cross(x, d))  # Z = X x Y
     return _strand(name, parent, bones, length, position, rotation, curl,
@@ -153,9 +154,9 @@ def _ring_strands(kind: str, name: str, parent: str | None, strands: int, bones:
     """
     a = np.asarray(_unit(axis, f"{kind} {name!r} axis"))
     c = _orthogonal_part(_unit(facing, f"{kind} {name!r} facing"), a)
-    if np.linalg.norm(c) < 1e-6:
+    if portable.norm(c) < 1e-6:
         raise ValueError(f"{kind} {name!r}: facing must not be parallel to the axis")
-    c = tuple(c / np.linalg.norm(c))
+    c = tuple(c / portable.norm(c))
     if radius < 0.0:
         raise ValueError(f"{kind} {name!r}: expected radius >= 0, got {radius}")
     t = math.radians(tilt)
@@ -163,9 +164,10 @@ def _ring_strands(kind: str, name: str, parent: str | None, strands: int, bones:
     out: list[BoneSpec] = []
     for s, phi in enumerate(azimuths_deg):
         outward = np.asarray(q_rotate(tuple(q_axis_angle(tuple(a), math.radians(phi))), c))
-        y = math.cos(t) * a + math.sin(t) * outward
-        z = math.cos(t) * outward - math.sin(t) * a
-        rotation = bone_frame(tuple(y / np.linalg.norm(y)), tuple(z))
+        sin_t, cos_t = portable.sincos(t)
+        y = cos_t * a + sin_t * outward
+        z = cos_t * outward - sin_t * a
+        rotation = bone_frame(tuple(y / portable.norm(y)), tuple(z))
         root = base + radius * outward
         tags = {"generator": kind, "part": name, "strand": s, "azimuth": float(phi)}
         out.extend(_strand(f"{name}_{s}", parent, bones, length, root, rotation, curl, tags))
@@ -229,9 +231,9 @@ def sheet(name: str, parent: str | None, strands: int, bones: int, length: float
         raise ValueError(f"sheet {name!r}: expected width >= 0, got {width}")
     d = np.asarray(_unit(direction, f"sheet {name!r} direction"))
     a = _orthogonal_part(_unit(across, f"sheet {name!r} across"), d)
-    if np.linalg.norm(a) < 1e-6:
+    if portable.norm(a) < 1e-6:
         raise ValueError(f"sheet {name!r}: across must not be parallel to direction")
-    a /= np.linalg.norm(a)
+    a /= portable.norm(a)
     rotation = bone_frame(tuple(d), tuple(np.cross(a, d)))
     base = np.asarray(position, dtype=np.float64)
     out: list[BoneSpec] = []
@@ -261,7 +263,7 @@ def rotation_from_spec(spec: dict, default=(0.0, 0.0, 0.0, 1.0)) -> tuple[float,
     """``rotation`` (quaternion xyzw) or ``euler`` (degrees, Unity order Z, X, Y) of a mapping."""
     if spec.get("rotation") is not None:
         q = np.asarray(spec["rotation"], dtype=np.float64)
-        n = float(np.linalg.norm(q))
+        n = portable.norm(q)
         if n < 1e-12:
             raise ValueError(f"zero-length quaternion {list(spec['rotation'])}")
         return tuple(float(c) for c in q / n)
@@ -303,8 +305,8 @@ def default_row_spacing(spacing) -> np.ndarray:
     vertical spacing -> rows along +X."""
     s = np.asarray(spacing, dtype=np.float64)
     row = np.array([-s[2], 0.0, s[0]])  # s rotated -90 deg about Y, horizontal part only
-    n = float(np.linalg.norm(row))
-    length = float(np.linalg.norm(s))
+    n = portable.norm(row)
+    length = portable.norm(s)
     if n < 1e-12:
         return np.array([length, 0.0, 0.0])
     return row / n * length

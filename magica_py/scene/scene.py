@@ -28,14 +28,14 @@ class SceneSettings:
     frames: int | None = 600
     duration: float | None = None
     time_scale: float = 1.0
-    update_mode: str = "normal"            # normal | unity_physics | unscaled (ref §A.4)
-    simulation_frequency: int = 90         # Hz, [30, 150] (ref §A.3)
+    update_mode: str = "normal"            # normal | unity_physics | unscaled (docs/solver.md §A.4)
+    simulation_frequency: int = 90         # Hz, [30, 150] (§A.3)
     max_steps_per_frame: int = 3           # [1, 5]
     global_time_scale: float = 1.0         # MagicaCloth2's global time scale [0, 1] (cloth only)
     fixed_delta_time: float = 0.02         # s, Unity Time.fixedDeltaTime
     maximum_delta_time: float = 1.0 / 3.0  # s, Unity Time.maximumDeltaTime
     gravity: tuple[float, float, float] = (0.0, -1.0, 0.0)  # unit world direction
-    timing: str = "exact"                  # exact | faithful | faithful32 (ref Appendix 3.1)
+    timing: str = "exact"                  # exact | faithful | faithful32 (Appendix 3.1)
     seed: int = 0
 
     @property

@@ -29,7 +29,7 @@ class ClothTopology:
 
     ===============  ===========  =================================================
     name             str          cloth name (scene ``cloths[i].name``)
-    attribute        (N,) uint8   0x01 fixed, 0x02 move, 0x08 invalid (build §B.5)
+    attribute        (N,) uint8   0x01 fixed, 0x02 move, 0x08 invalid (docs/solver.md §B.5)
     radius           (N,) float   particle radius, m (radius curve at the depth)
     parent           (N,) int32   parent vertex or -1: drawn as the baselines
     edges            (E, 2) int32 proxy edges
@@ -59,7 +59,7 @@ class ClothTopology:
 class ClothFrame:
     """One cloth at the end of LATE_UPDATE (world space, m).
 
-    positions       (N, 3) display positions (ref §E.1): what the bones were written from
+    positions       (N, 3) display positions (§E.1): what the bones were written from
     base_positions  (N, 3) animated base pose the solver read this frame (§C.1), or None
     steps           simulation steps this team ran this frame (§A.4 update_count)
     """
@@ -87,7 +87,7 @@ class SnapshotProvider(Protocol):
 # ----------------------------------------------------------------------------- colliders
 @dataclass
 class ColliderShapes:
-    """World-space collider shapes of one frame (ref §G.2/§G.3 evaluated at the frame pose).
+    """World-space collider shapes of one frame (§G.2/§G.3 evaluated at the frame pose).
 
     sphere_center (S,3), sphere_radius (S,); capsule_start/end (C,3) centres of the end
     caps, capsule_start_radius/end_radius (C,); plane_point/normal (P,3).

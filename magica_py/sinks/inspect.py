@@ -16,6 +16,20 @@ from magica_py.sinks import layout as L
 from magica_py.sinks.readback import Recording, RecordingError
 
 
+# Units of the metrics a recording holds (docs/recordings.md): the sink converts ``time.*`` to
+# ms and logs everything else as the systems reported it.
+METRIC_UNITS = {"steps": "steps", "max_edge_stretch": "ratio", "max_penetration": "m", "max_speed": "m/s",
+                "cloth/kernel": "s", "cloth/propagate": "s", "cloth/steps": "particle-steps",
+                "cloth/simulation_steps": "steps", "frame/fixed_updates": "count"}
+
+
+def metric_unit(name: str) -> str:
+    """The unit of metric ``name`` (``time/late_update`` -> ``ms``); "" when unknown."""
+    if name.startswith("time/"):
+        return "ms"
+    return METRIC_UNITS.get(name, "")
+
+
 def summarize(path) -> dict:
     rec = Recording(path)
     frames = rec.timeline_values(L.TIMELINE_FRAME)
@@ -39,8 +53,9 @@ def summarize(path) -> dict:
             _, values = rec.scalars(entity)
             finite = values[np.isfinite(values)]
             if finite.size:
-                metrics[entity[len(L.METRICS) + 2:]] = {"min": float(finite.min()), "mean": float(finite.mean()),
-                                                        "max": float(finite.max()), "count": int(finite.size)}
+                name = entity[len(L.METRICS) + 2:]
+                metrics[name] = {"min": float(finite.min()), "mean": float(finite.mean()),
+                                 "max": float(finite.max()), "count": int(finite.size), "unit": metric_unit(name)}
     events = [{"frame": f, "text": t} for f, t in rec.text_rows(f"/{L.EVENTS}", "TextLog:text")]
     replay_nodes = 0
     if f"/{L.REPLAY_NODES}" in rec.entities:
@@ -90,9 +105,11 @@ def format_summary(s: dict, max_entities: int = 40, max_events: int = 30) -> str
     if len(s["entities"]) > max_entities:
         lines.append(f"            ... {len(s['entities']) - max_entities} more (use --json for all)")
     if s["metrics"]:
-        lines.append("metrics     name                              min          mean         max")
+        lines.append("metrics     name                           unit                    min         mean          max")
         for name, m in s["metrics"].items():
-            lines.append(f"            {name:<30} {m['min']:>12.6g} {m['mean']:>12.6g} {m['max']:>12.6g}")
+            unit = m.get("unit", metric_unit(name)) or "-"
+            lines.append(f"            {name:<30} {unit:<15} {m['min']:>12.6g} {m['mean']:>12.6g} "
+                         f"{m['max']:>12.6g}")
     lines.append(f"events      {len(s['events'])}")
     for e in s["events"][:max_events]:
         lines.append(f"            frame {e['frame']:>6}  {e['text']}")

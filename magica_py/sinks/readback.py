@@ -1,4 +1,4 @@
-"""Read a magica_py recording back with rerun's own chunk reader (tech-notes §4, route A).
+"""Read a magica_py recording back with rerun's own chunk reader (docs/tech-notes.md §4, route A).
 
 ``Recording(path)`` loads the file once and answers per entity / component queries:
 

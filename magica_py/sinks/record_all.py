@@ -2,7 +2,7 @@
 
 Each scene runs in this process with the cloth solver (when ``magica_py.solver.attach``
 exists) and the Rerun sink in batched file mode. The table printed at the end is the cost
-figure of issue 5: simulation wall time (everything but the sink) against the sink's own
+figure of docs/recordings.md: simulation wall time (everything but the sink) against the sink's own
 time (copying, sending, closing the file).
 """
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The Rerun sink: writes the layout of ``layout.py`` to an .rrd file and/or a live viewer.
 
-Cost (tech-notes §3): the Python overhead per rerun call (~50–90 µs) dominates, the data is
+Cost (docs/tech-notes.md §3): the Python overhead per rerun call (~50–90 µs) dominates, the data is
 almost free. So a frame only *copies* a few whole arrays (joint positions, every cloth's
 particles as one (P, 3) array, collider shapes, replay pose) into float64 batch buffers;
 every ``batch_frames`` frames ``flush`` derives everything else for the whole batch at once
@@ -197,7 +197,7 @@ class RerunSink:
             self.temp_path = self.final_path.with_name(f".{self.final_path.stem}.{os.getpid()}.partial.rrd")
             sinks.append(rr.FileSink(str(self.temp_path)))
         try:
-            if spawn:   # the viewer bundled with rerun-sdk; needs a display (tech-notes §6)
+            if spawn:   # the viewer bundled with rerun-sdk; needs a display (docs/tech-notes.md §6)
                 rr.spawn(connect=False)
                 sinks.append(rr.GrpcSink())
             if connect is not None:
@@ -225,7 +225,7 @@ class RerunSink:
         cloth_node = np.zeros(parent.size, bool)
         for c in statics.cloths:
             cloth_node[np.asarray(c.transform_index, np.int64)] = True
-        # cloth bones sit on their particles (ref §E.4): the rig's points are the other joints
+        # cloth bones sit on their particles (docs/solver.md §E.4): the rig's points are the other joints
         self.joint_nodes = None if not cloth_node.any() else np.flatnonzero(~cloth_node)
         child = np.flatnonzero(parent >= 0)
         child = child[~(cloth_node[child] & cloth_node[parent[child]])]

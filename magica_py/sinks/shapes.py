@@ -1,6 +1,6 @@
 """Collider world shapes for drawing and for the penetration metric (numpy, all colliders at once).
 
-The shapes are those of ref §G.2/§G.3 at the frame pose (no step interpolation): for a
+The shapes are those of docs/solver.md §G.2/§G.3 at the frame pose (no step interpolation): for a
 collider on node t with world position P, rotation R and lossy scale S (|S| < 1e-6 -> 1e-6)
 
 * frame position   ``framePos = P + (R·(center ∘ sign S)) ∘ |S|``

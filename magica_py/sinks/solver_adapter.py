@@ -4,7 +4,7 @@ The solver keeps every team's particles in one SoA (``system.particles``), teams
 in team order, so the sink copies one (P, 3) array per frame whatever the number of cloths.
 What is read (all world space, after LATE_UPDATE):
 
-* ``particles.position``        display positions (ref §E.1 overwrites the base pose with them)
+* ``particles.position``        display positions (docs/solver.md §E.1 overwrites the base pose with them)
 * ``particles.base_pos_buffer`` the animated base pose of this frame (§C.1, kept for §E.2)
 * ``time_state.update_count``   steps each team ran this frame (§A.4)
 

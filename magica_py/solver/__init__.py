@@ -1,8 +1,8 @@
-"""The BoneCloth solver (ref §A.3-§A.7, §C-§G of magica2-bonecloth.md): MagicaCloth2's
+"""The BoneCloth solver (§A.3-§A.7, §C-§G of docs/solver.md): MagicaCloth2's
 LATE_UPDATE frame for every cloth of a scene in one numba call.
 
 * ``system.ClothSystem`` — the LATE_UPDATE system (build, state, parameters, runtime API);
-* ``frame.simulate_frame`` — the frame kernel (stage order of ref §D.0);
+* ``frame.simulate_frame`` — the frame kernel (stage order of §D.0);
 * ``state`` / ``layout`` / ``parameters`` — the SoA tables (state, concatenated model, job
   parameters); ``center``, ``step``, ``colliders``, ``constraints/*``, ``display``,
   ``rotations``, ``writeback``, ``guards`` — the stages.

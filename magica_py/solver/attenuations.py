@@ -1,4 +1,4 @@
-"""The velocity attenuations of one step's constraints (ref §D.3-§D.9), in one place for the
+"""The velocity attenuations of one step's constraints (docs/solver.md §D.3-§D.9), in one place for the
 per-team step (``frame.run_step``) and the block step (``batched.run.run_block_step``).
 
 Each is the 90 Hz value converted to the step size by the team's rate mode

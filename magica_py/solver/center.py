@@ -1,4 +1,4 @@
-"""Per-frame team stages before the steps (ref §C.1, §C.2, §C.4, §C.5, §H.1).
+"""Per-frame team stages before the steps (docs/solver.md §C.1, §C.2, §C.4, §C.5, §H.1).
 
 ``skin_team`` (C.1) computes every particle's animated base pose from the bones read this
 frame; ``center_and_inertia_team`` (C.2 + C.4) the center, anchor, teleport test, movement
@@ -21,6 +21,7 @@ from magica_py.kernels.rows import (
     flat, load_input, load_input3, load_input4, row3, row4, set_row3, set_row4, store_output3, store_output4,
 )
 from magica_py.solver.rotations import normalize_or_zero, rot_from_normal_tangent_select
+from magica_py.kernels import portable
 
 MOVE = 0x02
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -45,13 +46,6 @@ def world_point(l0, l1, l2, x):
     return (l0[0] * x[0] + l0[1] * x[1] + l0[2] * x[2] + l0[3] * x[3],
             l1[0] * x[0] + l1[1] * x[1] + l1[2] * x[2] + l1[3] * x[3],
             l2[0] * x[0] + l2[1] * x[1] + l2[2] * x[2] + l2[3] * x[3])
-
-
-@kernel
-def transform_point_rows(l0, l1, l2, b0, b1, b2, b3, v, w):
-    """``(L @ B) @ (v, w)`` without forming the product: ``B`` (rows b0..b3) first, then the
-    first three rows l0..l2 of ``L`` (4-tuples)."""
-    return world_point(l0, l1, l2, bind_point(b0, b1, b2, b3, v, w))
 
 
 @kernel
@@ -111,7 +105,7 @@ def smoothing_time_constant(s):
     a = saturate((1.0 - s) ** 3 * 0.99 + 0.01)
     if a >= 1.0:
         return 0.0
-    return -1.0 / (SMOOTHING_REFERENCE_RATE * math.log(1.0 - a))
+    return -1.0 / (SMOOTHING_REFERENCE_RATE * portable.log(1.0 - a))
 
 
 @kernel
@@ -141,7 +135,7 @@ def time_based_smoothing(ts, team, delta, frame_delta_time, s, speed_limit):
     if tau <= 0.0:
         store3(ts.smoothing_velocity, team, v)
         return v_scale(v, h)
-    decay = math.exp(-h / tau)
+    decay = portable.exp(-h / tau)
     lag = v_sub(sv0, v)
     store3(ts.smoothing_velocity, team, v_add(v, v_scale(lag, decay)))
     # integral over the frame of v + (sv0 - v) exp(-t/tau)

@@ -1,4 +1,4 @@
-"""Collider poses per frame (ref §G.2) and per step (§G.3), one slot per (team, collider).
+"""Collider poses per frame (docs/solver.md §G.2) and per step (§G.3), one slot per (team, collider).
 
 ``ColliderSlots`` maps the scene's ``ColliderSet`` onto per-team slots; the kernels keep
 each slot's frame history (shifted with the team's inertia shift, reset with the team) and

@@ -1,4 +1,4 @@
-"""Display positions after the steps (ref §E.1), run every frame even with 0 steps.
+"""Display positions after the steps (docs/solver.md §E.1), run every frame even with 0 steps.
 
 The display extrapolates the last step by its real velocity to the frame time (frame
 interpolation), clamps it to 1.3x the root distance of the animated pose, and blends it with

@@ -1,4 +1,4 @@
-"""The LATE_UPDATE frame of every team in one numba call (ref §A.3, §D.0 order).
+"""The LATE_UPDATE frame of every team in one numba call (docs/solver.md §A.3, §D.0 order).
 
 ``simulate_frame`` runs, for all teams: scale suspension and distance culling, the runtime's
 team time (§A.4), skinning / center / inertia / reset-or-shift / collider frame (§C, §G.2),
@@ -112,7 +112,7 @@ def prepare_teams(m, ts, prm, tt, h):
 
 @kernel
 def run_step(m, ps, prm, ts, cs, tt, t, fi):
-    """One simulation step of team t (ref §D.0 order) at frame interpolation fi."""
+    """One simulation step of team t (§D.0 order) at frame interpolation fi."""
     dt = fi.dt
     ratio = fi.frequency_ratio
     frac = tt.frame_interpolation[t]
@@ -135,7 +135,7 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi):
             edge_collision_team(m, ps, prm, ts, cs, t)
     distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
     motion_team(m, ps, prm, t, motion_attenuation)
-    if prm.inextensibility[t] != 0 or prm.collision_last[t] != 0:  # quality mode (issue 8)
+    if prm.inextensibility[t] != 0 or prm.collision_last[t] != 0:  # quality mode (§D.0)
         quality_end_of_step(m, ps, prm, ts, cs, t, ratio, fi.power_y, distance_attenuation)
     end_step_team(m, ps, prm, ts, t, dt, ratio)
     collider_end_step_team(cs, ts, t)
@@ -247,7 +247,7 @@ def end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t):
     display_team(m, ps, prm, ts, t, fi.dt, tt.time[t], tt.old_time[t], tt.now_update_time[t],
                  tt.running[t])
     if prm.collision_last[t] != 0 and prm.time_based_smoothing[t] != 0 and ts.collider_count[t] > 0:
-        display_collision_team(m, ps, prm, ts, cs, t)  # quality mode (issue 8)
+        display_collision_team(m, ps, prm, ts, cs, t)  # quality mode (§E.1)
     line_rotations_team(m, ps, prm, ts, t)
     triangle_rotations_team(m, ps, t)
     if transform_data_team(m, ps, t):

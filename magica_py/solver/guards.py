@@ -1,4 +1,4 @@
-"""Guards (issue 4 item 5): a team whose particles become non-finite or exceed a speed bound
+"""Guards (docs/solver.md §E.5): a team whose particles become non-finite or exceed a speed bound
 is reset to its base pose, and the reason is recorded in ``TeamState.guard_code`` (the system
 turns it into a ``("cloth_reset", {...})`` event). Nothing non-finite reaches a transform."""
 from __future__ import annotations
@@ -67,7 +67,7 @@ def guard_code(non_finite, too_fast):
 
 @kernel
 def reset_team_to_base(m, ps, ts, team):
-    """Snap a team's particles to this frame's animated pose with zero velocity (C.5 Reset)."""
+    """Snap a team's particles to this frame's animated pose with zero velocity (docs/solver.md §C.5 Reset)."""
     start = m.team_particle_start[team]
     end = start + m.team_particle_count[team]
     snap_particles_to_base_pose(ps, start, end)

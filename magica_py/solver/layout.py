@@ -1,12 +1,11 @@
 """The solver's global model: every team's ``ClothModel`` in one SoA, one chunk per team.
 
 Team-local indices are offset to global ones, so that one numba call processes every team
-(tech-notes LAYOUT). ``SolverLayout`` owns the chunks: each pool (particles, baselines,
+(docs/tech-notes.md LAYOUT). ``SolverLayout`` owns the chunks: each pool (particles, baselines,
 distance links, ...) has a first-fit ``ChunkAllocator``; adding a team takes a chunk of every
 pool (freed space first, growing the pool at its end otherwise), removing a team frees its
 chunks. Other teams' chunks never move, so their rows of the model and of the state tables
-stay where they are, bit for bit (issue 3 item 7; MagicaCloth2's TeamManager with chunked
-native arrays). ``-1`` stays ``-1`` when offsetting. The ``SolverModel`` handed to kernels is
+stay where they are, bit for bit (MagicaCloth2's TeamManager with chunked native arrays). ``-1`` stays ``-1`` when offsetting. The ``SolverModel`` handed to kernels is
 read-only; it is rebuilt (outside the frame path) when a team is added or removed.
 
 Ragged data use ``*_start``/``*_count`` pairs: per team (``team_*``) ranges into the
@@ -41,7 +40,7 @@ MODEL_FIELDS = [
     ("team_volume_count", "team", (), I32, ""),
     ("team_component_transform", "team", (), I32, "hierarchy node of the component"),
     ("team_init_scale", "team", V3, F64, "component lossy scale at build"),
-    ("team_init_local_gravity", "team", V3, F64, "gravity reference in the center frame (C.2)"),
+    ("team_init_local_gravity", "team", V3, F64, "gravity reference in the center frame (docs/solver.md §C.2)"),
     ("team_has_lines", "team", (), U8, "1: the proxy has lines (E.2 runs)"),
     ("live_teams", "live", (), I32, "ids of the teams in use, ascending (the frame kernel's team list)"),
     # per particle
@@ -299,7 +298,7 @@ class SolverLayout:
         if self._model is None:
             arrays = {}
             for name, a in self.arrays.items():
-                a = a.copy()
+                a = a[:self._rows(_FIELD_INFO[name][0])].copy()   # the storage may hold spare rows
                 a.flags.writeable = False
                 arrays[name] = a
             live = np.asarray(self.live_teams, dtype=np.int32)
@@ -308,24 +307,27 @@ class SolverLayout:
             self._model = SolverModel(**arrays)
         return self._model
 
+    def _rows(self, per: str) -> int:
+        """Rows of ``per`` in use: the pool's capacity, the team count for ``team`` (``live``,
+        replaced by ``model()``: all)."""
+        if per == "team":
+            return self.team_count
+        return self.allocators[per].capacity if per in self.allocators else None
+
     def _fit(self, per: str, size: int) -> None:
-        """Grow every array of ``per`` to ``size`` rows (old rows kept, new rows zero)."""
+        """Make every array of ``per`` hold at least ``size`` rows (old rows kept, new rows zero,
+        ``particle_team`` -1). The storage grows geometrically so that adding n teams copies
+        O(n) rows, not O(n^2); ``model()`` publishes the rows in use only."""
         for name, (p, shape, dtype) in _FIELD_INFO.items():
             if p != per or name == "live_teams":
                 continue
             old = self.arrays[name]
             if old.shape[0] >= size:
                 continue
-            new = np.zeros((size,) + shape, dtype=dtype)
+            new = np.zeros((max(size, 2 * old.shape[0]),) + shape, dtype=dtype)
             if name == "particle_team":
                 new[:] = -1
             new[:old.shape[0]] = old
             self.arrays[name] = new
 
 
-def build_solver_model(models: list) -> "SolverModel":
-    """Concatenate team models (``build.ClothModel`` field names) into one ``SolverModel``."""
-    layout = SolverLayout()
-    for model in models:
-        layout.add(model)
-    return layout.model()

@@ -1,4 +1,4 @@
-"""Per-team parameter table: ``params.ClothParameters`` converted to job data (ref §F.1).
+"""Per-team parameter table: ``params.ClothParameters`` converted to job data (docs/solver.md §F.1).
 
 One row per team; kernels read ``prm.<field>[team]``. Conversions of §F.1 happen here once:
 damping and restoration stiffness tables are multiplied by 0.2, limits arrive as -1 when off,
@@ -16,7 +16,9 @@ import math
 import numpy as np
 
 from magica_py.jit import kernel
+from magica_py.params import default_parameters
 from magica_py.solver.fields import F64, I32, U8, allocate, make_soa
+from magica_py.kernels import portable
 
 CURVE = (16,)
 
@@ -62,7 +64,7 @@ TEAM_PARAMETER_FIELDS = [
     ("culling_fade_ratio", "team", (), F64, ""),
     ("culling_reference", "team", (), I32, "hierarchy node or -1"),
     ("rate_mode", "team", (), I32, "0 magica, 1 frequency_consistent"),
-    # quality mode (issue 8, docs/quality-mode.md); all zero in faithful mode
+    # quality mode (docs/quality-mode.md); all zero in faithful mode
     ("quality", "team", (), U8, "1: solver.mode quality (implies rate_mode 1)"),
     ("time_based_smoothing", "team", (), U8, "1: smoothing and display converted by the frame time"),
     ("inextensibility", "team", (), I32, "0 none, 1 tether, 2 ftl, 3 ftl_tether, 4 iterations, 5 ftl_edges"),
@@ -92,39 +94,6 @@ INEXTENSIBILITY = ("none", "tether", "ftl", "ftl_tether", "iterations", "ftl_edg
 QUALITY_AUTO = {"solver.time_based_smoothing": "enabled", "solver.inextensibility": "ftl_edges",
                 "solver.distance_velocity": "full", "solver.collision_last": "enabled"}
 
-# reference defaults (§F.1), used for keys a parameter mapping does not carry
-_DEFAULTS = {
-    "rotational_interpolation": 0.5, "root_rotation": 0.5, "animation_pose_ratio": 0.0,
-    "normal_axis": "up", "gravity": 5.0, "gravity_direction": (0.0, -1.0, 0.0),
-    "gravity_falloff": 0.0, "stabilization_time_after_reset": 0.1, "blend_weight": 1.0,
-    "damping": 0.05, "radius": 0.02, "inertia.anchor": None, "inertia.anchor_inertia": 0.0,
-    "inertia.world_inertia": 1.0, "inertia.movement_inertia_smoothing": 0.4,
-    "inertia.movement_speed_limit": 5.0, "inertia.rotation_speed_limit": 720.0,
-    "inertia.local_inertia": 1.0, "inertia.local_movement_speed_limit": -1.0,
-    "inertia.local_rotation_speed_limit": -1.0, "inertia.depth_inertia": 0.0,
-    "inertia.centrifugal_acceleration": 0.0, "inertia.particle_speed_limit": 4.0,
-    "inertia.teleport_mode": "none", "inertia.teleport_distance": 0.5,
-    "inertia.teleport_rotation": 90.0, "tether.distance_compression": 0.4,
-    "distance.stiffness": 1.0, "triangle_bending.stiffness": 1.0,
-    "angle_restoration.use": True, "angle_restoration.stiffness": None,
-    "angle_restoration.velocity_attenuation": 0.8, "angle_restoration.gravity_falloff": 0.0,
-    "angle_limit.use": False, "angle_limit.limit_angle": None, "angle_limit.stiffness": 1.0,
-    "motion.use_max_distance": False, "motion.max_distance": 0.3, "motion.use_backstop": False,
-    "motion.backstop_radius": 10.0, "motion.backstop_distance": 0.0, "motion.stiffness": 1.0,
-    "collider_collision.mode": "point", "collider_collision.friction": 0.05,
-    "culling.distance_culling_length": -1.0, "culling.distance_culling_fade_ratio": 0.2,
-    "culling.distance_culling_reference": None, "solver.rate_mode": "magica",
-    "solver.mode": "faithful", "solver.time_based_smoothing": "auto", "solver.inextensibility": "auto",
-    "solver.tether_limit": 0.008, "solver.distance_iterations": 2, "solver.ftl_damping": 0.9,
-    "solver.distance_velocity": "auto", "solver.collision_last": "auto",
-}
-# curves whose default is a linear curve (value, start -> end), §F.1
-_LINEAR_DEFAULTS = {
-    "angle_restoration.stiffness": (0.2, 1.0, 0.2),
-    "angle_limit.limit_angle": (60.0, 0.0, 1.0),
-}
-
-
 def curve_table(value) -> np.ndarray:
     """The 16-sample depth table of a ``Curve`` (``.samples``) or of a plain number."""
     samples = getattr(value, "samples", None)
@@ -134,13 +103,10 @@ def curve_table(value) -> np.ndarray:
 
 
 def _lookup(parameters, key):
+    """``parameters[key]``, or the table's default (``params.default_parameters``) when the
+    mapping lacks the key or holds None."""
     value = parameters.get(key, None) if hasattr(parameters, "get") else None
-    if value is None:
-        value = _DEFAULTS.get(key)
-        if value is None and key in _LINEAR_DEFAULTS:
-            v, s, e = _LINEAR_DEFAULTS[key]
-            return np.array([v * (s + (e - s) * i / 15.0) for i in range(16)])
-    return value
+    return default_parameters()[key] if value is None else value
 
 
 def _limit(value) -> float:
@@ -170,7 +136,7 @@ def write_row(table, team: int, parameters, collision_mode: str | None = None,
     t = team
     table.gravity[t] = float(g("gravity"))
     d = np.asarray(g("gravity_direction"), dtype=np.float64)
-    n = float(np.linalg.norm(d))
+    n = portable.norm(d)
     table.gravity_direction[t] = d / n if n > 1e-8 else 0.0
     table.gravity_falloff[t] = float(g("gravity_falloff"))
     table.stabilization_time[t] = float(g("stabilization_time_after_reset"))
@@ -234,7 +200,7 @@ def _switch(g, key, quality: bool) -> str:
 
 
 def _write_quality(table, t: int, g) -> None:
-    """Quality-mode columns (issue 8). Faithful mode leaves them all at their "off" value,
+    """Quality-mode columns (docs/quality-mode.md). Faithful mode leaves them all at their "off" value,
     so its kernels take exactly the MagicaCloth2 paths."""
     quality = _enum(g("solver.mode"), SOLVER_MODES, "solver.mode") == 1
     table.quality[t] = 1 if quality else 0
@@ -287,7 +253,7 @@ def step_rate(k, frequency_ratio, power, rate_mode):
     if frequency_ratio == 1.0:
         return k
     kk = 0.0 if k < 0.0 else (1.0 if k > 1.0 else k)
-    return 1.0 - math.pow(1.0 - kk, frequency_ratio)
+    return 1.0 - portable.pow(1.0 - kk, frequency_ratio)
 
 
 @kernel
@@ -296,4 +262,4 @@ def step_keep(keep, frequency_ratio, rate_mode):
     ``keep^(90/f)`` in frequency-consistent mode."""
     if rate_mode == 0 or frequency_ratio == 1.0:
         return keep
-    return math.pow(keep, frequency_ratio)
+    return portable.pow(keep, frequency_ratio)

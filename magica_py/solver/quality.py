@@ -1,6 +1,6 @@
-"""Quality mode passes at the end of a step (issue 8, ``docs/quality-mode.md``).
+"""Quality mode passes at the end of a step (``docs/quality-mode.md``).
 
-MagicaCloth2's constraints are soft (ref Appendix 4): edges stretch by 5-60 % under load and
+MagicaCloth2's constraints are soft (docs/solver.md Appendix 4): edges stretch by 5-60 % under load and
 fast particles end a step inside colliders. Quality mode adds, after the second distance pass
 and the motion constraint (D.9), before the end of the step (D.10):
 
@@ -37,6 +37,7 @@ from magica_py.solver.constraints.collision import (
 )
 from magica_py.solver.constraints.distance import distance_team
 from magica_py.solver.parameters import curve_at
+from magica_py.kernels import portable
 
 MOVE = 0x02
 INEXT_NONE = 0
@@ -226,7 +227,7 @@ def quality_hard_attenuation(prm, team, frequency_ratio, attenuation, converted)
     surviving share tend to 1 - and the limit to a hard bounce - as f grows)."""
     if prm.quality[team] == 0:
         return converted
-    return math.pow(attenuation, frequency_ratio)
+    return portable.pow(attenuation, frequency_ratio)
 
 
 @kernel

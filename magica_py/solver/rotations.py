@@ -1,4 +1,4 @@
-"""Bone rotations from the display positions (ref §E.2 line mode, §E.3 triangle mode).
+"""Bone rotations from the display positions (docs/solver.md §E.2 line mode, §E.3 triangle mode).
 
 E.2 walks each baseline parent-first: a moving bone takes the rest rotation carried by its
 parent, swung so the parent->bone edge matches the simulated one, then turns by
@@ -17,10 +17,9 @@ from magica_py.kernels.rows import (
     flat, load_input, load_input3, row3, row4, set_row4, store_output3, store_output4,
 )
 from magica_py.kernels.math3d import (
-    from_to_rotation, from_to_rotation_unit, load3, load4, orthogonal_axis, q_axis_angle, q_inverse,
-    q_look_rotation, q_mul,
-    q_rotate, q_slerp, store3, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp,
-    v_normalize, v_scale, v_sub,
+    from_to_rotation, from_to_rotation_unit, load3, orthogonal_axis, q_axis_angle, q_inverse, q_mul,
+    q_rotate, q_slerp, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp, v_normalize, v_scale,
+    v_sub,
 )
 from magica_py.kernels import trig
 from magica_py.solver.constraints.angle import swing_rotation
@@ -37,8 +36,7 @@ def from_to_rotation_fraction(a, b, t, full):
     """``from_to_rotation_unit(a, b, t)`` (unit a, b), the same bits on every path, with one
     sincos for both the opposite and the general case (the axis and angle are selected
     first): a lane loop computes every branch, so two q_axis_angle would cost two sincos.
-    (E.2's turn towards the children; it was the angle restoration's until that stage
-    stopped building a quaternion, docs/angle_maths.md.)
+    E.2's turn towards the children.
 
     Returns (rotation, opposite); ``full`` False (a literal) leaves the opposite case out."""
     c = v_dot(a, b)
@@ -104,7 +102,7 @@ def look_rotation_select(forward, up):
 
 @kernel
 def rot_from_normal_tangent_select(normal, tangent):
-    """``rot_from_normal_tangent`` (ref §0.2 rot_from) without branches."""
+    """``rot_from_normal_tangent`` (§0.2 rot_from) without branches."""
     return look_rotation_select(tangent, normal)
 
 
@@ -366,11 +364,3 @@ def crowded_vertex_rotation(m, ps, p):
         store4(ps.rotation, p, q)
 
 
-@kernel
-def triangle_frame(m, ps, tri):
-    """Normal and uv tangent of triangle ``tri`` at the display positions (0 when degenerate)."""
-    return triangle_frame_from(load3(ps.position, m.triangles[tri, 0]), load3(ps.position, m.triangles[tri, 1]),
-                               load3(ps.position, m.triangles[tri, 2]),
-                               (m.triangle_uv[tri, 0, 0], m.triangle_uv[tri, 0, 1]),
-                               (m.triangle_uv[tri, 1, 0], m.triangle_uv[tri, 1, 1]),
-                               (m.triangle_uv[tri, 2, 0], m.triangle_uv[tri, 2, 1]))

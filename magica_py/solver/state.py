@@ -1,4 +1,4 @@
-"""Simulation state: preallocated structure-of-arrays for every team at once (ref §D.0, §C, §G).
+"""Simulation state: preallocated structure-of-arrays for every team at once (docs/solver.md §D.0, §C, §G).
 
 Three tables, all float64 / int32 / uint8, world space, metres and seconds:
 
@@ -6,7 +6,7 @@ Three tables, all float64 / int32 / uint8, world space, metres and seconds:
   ``team_particle_start[t] : + team_particle_count[t]`` of the solver model; plus a
   per-triangle scratch for E.3 sized like the model's triangle pool);
 * ``TeamState`` (one row per team: center, inertia, flags, weights);
-* ``ColliderState`` (one row per collider *slot*: colliders are per team, ref §G.3, so a
+* ``ColliderState`` (one row per collider *slot*: colliders are per team, §G.3, so a
   collider shared by two cloths is simulated as two slots).
 
 A step never allocates: every buffer a kernel needs is a field here.
@@ -52,7 +52,7 @@ PARTICLE_FIELDS = [
     ("angle_limit", "particle", (), F64, "rad; limit angle at the particle's depth (per step)"),
     ("angle_limit_cos", "particle", (), F64, "cos of angle_limit: the no-violation test without acos"),
     ("angle_restoration_k", "particle", (), F64, "restoration stiffness of this step (curve, rate, gravity factor)"),
-    # fixed-point accumulators of bending and edge collision (ref §0.2; 1 unit = 1e-6 m)
+    # fixed-point accumulators of bending and edge collision (§0.2; 1 unit = 1e-6 m)
     ("accum_vector", "particle", V3, F64, "1e-6 m integer units summed as float64 (exact below 2^53)"),
     ("accum_count", "particle", (), I32, "number of contributions"),
     ("bend_inverse_mass", "particle", (), F64, "inverse mass of this bending pass (D.7, per step)"),

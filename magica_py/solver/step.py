@@ -1,4 +1,4 @@
-"""One simulation step's team update and particle stages (ref §A.6/§C.3, §D.1, §D.2, §D.10).
+"""One simulation step's team update and particle stages (docs/solver.md §A.6/§C.3, §D.1, §D.2, §D.10).
 
 ``team_step_update`` runs after the runtime's ``team_time_begin_step`` (A.6: now_update_time,
 frame_interpolation) and interpolates the center, derives local inertia, gravity falloff and

@@ -13,7 +13,7 @@ Runtime control (all take effect at the next frame, none resets the simulation u
   KeepTeleport when keep_pose);
 * ``set_enabled(cloth, enabled)`` (disable mode Reset: re-enabling resets), ``set_time_scale``,
   ``add_force(cloth, direction, speed, mode)``;
-* ``add_cloth(spec) -> team id`` / ``remove_cloth(team)`` — teams at runtime (issue 3 item 7):
+* ``add_cloth(spec) -> team id`` / ``remove_cloth(team)`` — teams at runtime:
   chunks of the global SoA are allocated from freed space first and freed on removal
   (``layout.SolverLayout``); other teams' rows never move or change; the frame kernel visits
   ``model.live_teams`` only; a removed cloth's bones are no longer restored nor written.
@@ -30,6 +30,7 @@ import time as _time
 import numba
 import numpy as np
 
+from magica_py.params import default_parameters
 from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, update_mode_code
 from magica_py.solver.colliders import fill_slots
 from magica_py.solver.fields import F64
@@ -44,9 +45,13 @@ from magica_py.solver.parameters import allocate_parameters, write_row
 from magica_py.solver.state import (
     allocate_state, free_collider_rows, free_particle_rows, free_team_row, grow_state,
 )
+from magica_py.kernels import portable
 
 FORCE_MODES = {"velocity_add": 1, "velocity_add_without_depth": 2, "velocity_change": 3,
                "velocity_change_without_depth": 4}
+# the system's own copies in the frame kernel's hierarchy table (``frame.hierarchy_arrays``)
+_BUILD_POSE_FIELDS = ("build_world_position", "build_world_rotation", "build_lossy_scale",
+                      "build_local_to_world", "build_pose_pending", "ramp_from_build")
 GUARD_REASONS = {GUARD_NON_FINITE: "non-finite particle state", GUARD_SPEED: "particle speed above the guard bound"}
 
 
@@ -56,7 +61,7 @@ class ClothSystem:
     ``models`` may be given (prebuilt ``build.ClothModel`` in the same order); otherwise each
     spec is built with ``build.build_cloth`` from the hierarchy's current (rest) pose.
     ``parallel=True`` spreads teams over numba threads (same results bit for bit; worth it
-    for crowds on idle cores only, tech-notes §8: off by default). ``batched=True`` (default)
+    for crowds on idle cores only, docs/tech-notes.md §8: off by default). ``batched=True`` (default)
     runs the steps of teams with identical topology and parameters side by side in blocks
     (``solver/batched``: same results bit for bit, several times faster for crowds);
     ``batched=False`` runs every team alone (benchmarks, debugging). After the write-back the
@@ -123,7 +128,7 @@ class ClothSystem:
     # ------------------------------------------------------------------ registration
     def attach(self, player, scene=None) -> "ClothSystem":
         """Add the system to ``player``'s LATE_UPDATE and register the restored bones (every
-        non-invalid bone of every cloth, ref §A.2, §B.5)."""
+        non-invalid bone of every cloth, docs/solver.md §A.2, §B.5)."""
         from magica_py.runtime.phases import Phase, System
 
         player.schedule.add(Phase.LATE_UPDATE, System(self.name, self.run))
@@ -138,7 +143,7 @@ class ClothSystem:
 
     # ------------------------------------------------------------------ teams at runtime
     def add_cloth(self, spec, model=None) -> int:
-        """Add a cloth at runtime (issue 3 item 7); returns its team id (ids are not reused).
+        """Add a cloth at runtime; returns its team id (ids are not reused).
 
         The model is built (unless given) after putting the cloth's bones back to their rest
         local pose. Its chunks come from
@@ -239,7 +244,7 @@ class ClothSystem:
             self._player.register_restored_bones(self.restored_bones(), owner=self)
 
     def _activate(self, t: int) -> None:
-        mode = self._parameter(t, "update_mode", "normal")
+        mode = self._parameter(t, "update_mode", default_parameters()["update_mode"])
         if str(mode) in ("normal", "animator_linkage") and self._scene_update_mode:
             mode = self._scene_update_mode
         self.time_state.activate(t, update_mode=update_mode_code(mode))
@@ -289,7 +294,7 @@ class ClothSystem:
                                                    "reason": GUARD_REASONS.get(int(codes[team]), "guard")}))
             codes[:] = 0
         if metrics is not None:
-            steps = int(np.dot(self.time_state.update_count, self.model.team_particle_count))
+            steps = int((self.time_state.update_count.astype(np.int64) * self.model.team_particle_count).sum())
             metrics["cloth.steps"] = float(steps)
             metrics["cloth.simulation_steps"] = float(self.time_state.update_count.max(initial=0))
             metrics["cloth.kernel"] = t1 - t0
@@ -347,12 +352,56 @@ class ClothSystem:
     def add_force(self, cloth, direction, speed: float, mode: str = "velocity_add") -> None:
         """MagicaCloth.AddForce: an acceleration on every step of the next frame that runs."""
         d = np.asarray(direction, dtype=F64)
-        n = float(np.linalg.norm(d))
+        n = portable.norm(d)
         if mode not in FORCE_MODES:
             raise ValueError(f"add_force mode {mode!r}: expected one of {sorted(FORCE_MODES)}")
         for t in self.teams_of(cloth):
             self.teams.external_force[t] = d / n * float(speed) if n > 1e-8 else 0.0
             self.teams.external_force_mode[t] = FORCE_MODES[mode]
+
+    # ------------------------------------------------------------------ state capture
+    def capture_state(self) -> dict:
+        """Copies of everything the next frame reads (``runtime/snapshot.py``): the particle,
+        team, collider, parameter and team-clock tables, the build pose and first-frame flags,
+        and the runtime parameter overrides. Block tables are not state: the block rows are
+        gathered from the team rows every frame, and blocks are formed again on restore."""
+        from magica_py.runtime.snapshot import table_state
+
+        h = self._hierarchy
+        return {
+            "layout": self._layout_signature(),
+            "tables": {name: table_state(table) for name, table in self._state_tables().items()},
+            "build_pose": {name: getattr(h, name).copy() for name in _BUILD_POSE_FIELDS},
+            "frame_count": self.frame_count,
+            "team_parameters": list(self.team_parameters),
+            "collision_modes": list(self.collision_modes),
+        }
+
+    def restore_state(self, state: dict) -> None:
+        """Write a ``capture_state`` result back in place (the kernel tables keep their arrays)."""
+        from magica_py.runtime.snapshot import SnapshotError, restore_arrays, table_arrays
+
+        if state["layout"] != self._layout_signature():
+            raise SnapshotError(f"cloth {self.name!r}: the snapshot was taken with teams "
+                                f"{state['layout'][0]}, this system has {self._layout_signature()[0]} "
+                                "(cloths added or removed since: a snapshot restores state, not structure)")
+        tables = self._state_tables()
+        for name, saved in state["tables"].items():
+            restore_arrays(f"{self.name}.{name}", table_arrays(tables[name]), saved)
+        restore_arrays(f"{self.name}.build_pose", {n: getattr(self._hierarchy, n) for n in _BUILD_POSE_FIELDS},
+                       state["build_pose"])
+        self.frame_count = state["frame_count"]
+        self.team_parameters = list(state["team_parameters"])
+        self.collision_modes = list(state["collision_modes"])
+        self._form_blocks()
+
+    def _state_tables(self) -> dict:
+        return {"particles": self.particles, "teams": self.teams, "colliders": self.collider_state,
+                "parameters": self.parameters, "time": self._time}
+
+    def _layout_signature(self) -> tuple:
+        return (tuple(int(t) for t in self.live_teams), self.layout.capacity("particle"),
+                self._slots.capacity, tuple(self.team_names))
 
     # ------------------------------------------------------------------ queries
     def team_particles(self, team: int) -> slice:
@@ -401,7 +450,7 @@ class ClothSystem:
         return default if value is None else value
 
     def _check_positive_scale(self, hierarchy, pairs=None) -> None:
-        """Negative scale is rejected (ref §H.7 allows a Python port to assume positive scale)."""
+        """Negative scale is rejected (§H.7 allows a Python port to assume positive scale)."""
         for spec, model in (pairs if pairs is not None else zip(self.specs, self.models)):
             nodes = list(np.asarray(model.transform_index)) + [int(model.component_transform)]
             for node in nodes:
@@ -410,7 +459,7 @@ class ClothSystem:
                     raise ValueError(
                         f"{where}: transform {hierarchy.names[node]!r} has a negative scale "
                         f"{tuple(float(x) for x in hierarchy.lossy_scale[node])}; negative scale is not "
-                        f"supported (MagicaCloth2 refuses it at build too, ref §H.7): use positive scales")
+                        f"supported (MagicaCloth2 refuses it at build too, docs/solver.md §H.7): use positive scales")
 
     def _write_parameters(self, team: int) -> None:
         def resolve(name):

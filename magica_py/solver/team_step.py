@@ -1,4 +1,4 @@
-"""C.3, the team update at the start of a step (ref §C.3), as one per-element function, and
+"""C.3, the team update at the start of a step (docs/solver.md §C.3), as one per-element function, and
 its block form (every lane of a block at once, ``solver/batched``).
 
 ``team_step_values`` is the maths of ``step.team_step_update``; the per-team path

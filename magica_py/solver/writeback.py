@@ -1,4 +1,4 @@
-"""Transform data and write-back (ref §E.4).
+"""Transform data and write-back (docs/solver.md §E.4).
 
 World transform data: ``T_pos = position``, ``T_rot = rotation * v2t``. Fixed bones get their
 world rotation written (as a local rotation under the parent's current world rotation); moving

@@ -1,7 +1,7 @@
 """Batched steps: teams of identical topology and parameters simulated side by side.
 
 A crowd is many copies of a few cloths. Running one team after another makes each step a
-chain of dependent scalar operations (latency-bound: tech-notes LAYOUT measured 17-21x
+chain of dependent scalar operations (latency-bound: docs/tech-notes.md LAYOUT measured 17-21x
 between that and the same maths with the chain index innermost). Here teams that share
 their topology, their per-particle model data and their parameters form a **block** of up to
 ``BLOCK_WIDTH`` **lanes** (one lane per team). A block's step state is stored lane-innermost
@@ -18,7 +18,7 @@ compare the two on whole runs (``tests/test_batched_steps.py``).
 Frame flow (``solver/frame.py``, ``simulate_frame_blocks``: a scene without blocks runs and
 compiles the plain per-team kernel). A *running* block (every lane active, the same number of
 steps this frame) runs its whole frame in block form: the begin of frame
-(``frame.begin_frame_block``, ``frame_begin``: per lane the scalar team-level stages, C.1
+(``frame.begin_frame_block``, ``frame_begin``: per lane the scalar team-level stages, docs/solver.md §C.1
 skinning into the block rows, C.2 sums, the history gathered through the C.5 shift), every
 step (lane-form C.3/G.3, then the block stages), the end of frame (``frame_end``: guards,
 E.1 display, E.2/E.3 rotations, E.4 bone poses, on the block rows), the scatters to the team

@@ -29,7 +29,7 @@ from magica_py.solver.fields import I32, U8
 # model fields (per particle and link pools) the step stages read, compared bit for bit
 STEP_MODEL_FIELDS = ("depth", "baseline_local_position", "baseline_local_rotation", "distance_rest",
                      "bend_rest_angle", "bend_sign", "volume_rest", "root_length")
-# model fields the end-of-frame stages in block form read from the exemplar (E.3, E.4)
+# model fields the end-of-frame stages in block form read from the exemplar (docs/solver.md §E.3, E.4)
 END_MODEL_FIELDS = ("triangle_uv", "vertex_to_transform_rotation")
 # parameters that name hierarchy nodes (per instance; read by the per-team frame stages only)
 PER_TEAM_PARAMETERS = ("anchor_transform", "culling_reference")
@@ -148,12 +148,5 @@ def form_blocks(system, enabled: bool = True):
     return table, state
 
 
-def describe_blocks(table) -> list[str]:
-    """One line per block (``magica-py info``, benchmarks)."""
-    return [f"block {b}: {int(table.block_width[b])} lanes x {int(table.block_particle_count[b])} particles "
-            f"(teams {table.lane_team[table.block_lane_base[b]:table.block_lane_base[b] + table.block_width[b]].tolist()})"
-            for b in range(len(table.block_width))]
-
-
-__all__ = ["form_blocks", "describe_blocks", "unsupported_reason", "BLOCK_WIDTH",
+__all__ = ["form_blocks", "unsupported_reason", "BLOCK_WIDTH",
            "PARTICLE_BLOCK_FIELDS", "SHARED_PARTICLE_FIELDS", "LANE_FIELDS", "COLLIDER_FIELDS"]

@@ -1,4 +1,4 @@
-"""The begin of frame of a running block (ref §C.1-§C.5, §G.2), lanes innermost.
+"""The begin of frame of a running block (docs/solver.md §C.1-§C.5, §G.2), lanes innermost.
 
 ``frame.begin_frame_team`` for every lane of block b, with the per-particle work on the
 block's rows instead of the team rows:

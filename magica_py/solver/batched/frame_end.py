@@ -1,4 +1,4 @@
-"""The end-of-frame stages of a running block in block form: guards, display (ref §E.1), line
+"""The end-of-frame stages of a running block in block form: guards, display (docs/solver.md §E.1), line
 and triangle rotations (§E.2, §E.3) and transform data (§E.4) for every lane at once, lanes
 innermost on the block rows, after the steps and before the scatter.
 

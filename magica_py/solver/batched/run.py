@@ -1,6 +1,6 @@
 """The block step: ``run_step`` of ``solver/frame.py`` for every lane of a block at once.
 
-The per-team parts of a step run for all lanes at once too (C.3 ``team_step.team_step_block``,
+The per-team parts of a step run for all lanes at once too (docs/solver.md §C.3 ``team_step.team_step_block``,
 G.3 ``colliders.collider_step_block``: copy-in, lane loop, copy-out, the collider end of step
 folded into the copy-out); the particle stages run in block form, in ``run_step``'s order with the same
 arguments (``attenuations.step_attenuations`` of the exemplar's parameter row, equal in every

@@ -16,7 +16,7 @@
 ``BlockState``: particle fields mirror ``ParticleState`` (same names, units and meaning) but
 component-major, ``(3, rows)`` / ``(4, rows)`` / ``(rows,)``, so that a loop over the lanes of
 one particle reads contiguous memory. Lane fields (``lane_*``) hold the team values of the
-current step (written at each step by the lane form of C.3, ``team_step.team_step_block``, which
+current step (written at each step by the lane form of docs/solver.md §C.3, ``team_step.team_step_block``, which
 also copies them back to ``TeamState``; ``transfer.load_lanes`` copies them from the team rows
 for the stage tests);
 collider fields (``col_*``) hold each lane's collider slots at this step (``ColliderState``).
@@ -200,15 +200,6 @@ def allocate_block_state(rows: int, shared_rows: int, lanes: int, collider_rows:
     arrays += [_array(c, collider_rows, dt, n) for n, c, dt in COLLIDER_FIELDS]
     arrays += [_array(c, triangle_rows, dt, n) for n, c, dt, _doc in TRIANGLE_BLOCK_FIELDS]
     return BlockState(*arrays)
-
-
-def empty_block_table(team_count: int) -> BlockTable:
-    """No blocks: every team runs per team."""
-    z = np.zeros(0, dtype=I32)
-    return BlockTable(z, z, z, z, z, z, z, z, np.zeros(0, dtype=U8), z,
-                      np.full(max(team_count, 1), -1, dtype=I32), z, z.copy(),
-                      np.zeros(max(team_count, 1), dtype=I32), np.zeros(worker_capacity(), dtype=I64),
-                      z.copy(), np.zeros(0, dtype=U8))
 
 
 def worker_capacity() -> int:

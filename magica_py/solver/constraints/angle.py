@@ -1,4 +1,4 @@
-"""Angle limit (ref §D.5) and angle restoration (§D.6), one routine per baseline, 3 iterations.
+"""Angle limit (docs/solver.md §D.5) and angle restoration (§D.6), one routine per baseline, 3 iterations.
 
 Restoration pulls each edge towards its *absolute* world direction in the step basic pose
 (not parent-relative, Appendix 2.2). Masses use friction only (Appendix 2.3). Both parent and
@@ -47,21 +47,6 @@ LIMIT_ATTENUATION = 0.9      # AngleLimitAttenuation
 LIMIT_PIVOT = 0.4
 ZERO3 = (0.0, 0.0, 0.0)
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
-
-
-@kernel
-def solve_pivot_pair(pp, cp, v, r, pivot_ratio, wp, wc):
-    """Rotate the segment p->c from ``v`` to ``r`` about the point at ``pivot_ratio`` along it.
-
-    Returns the corrections (dp, dc) weighted by the inverse masses. The reference's form, on
-    world positions; the stage's entries write it on the edge (with cp - pp = v the pivot
-    cancels: dp = (v - r) pivot_ratio wp, dc = (r - v) (1 - pivot_ratio) wc for the
-    restoration), the same result up to the world positions' round-off (docs/angle_maths.md)."""
-    pivot = v_add(pp, v_scale(v, pivot_ratio))
-    dp = v_scale(v_sub(v_sub(pivot, v_scale(r, pivot_ratio)), pp), wp)
-    dc = v_scale(v_sub(v_add(pivot, v_scale(r, 1.0 - pivot_ratio)), cp), wc)
-    return dp, dc
-
 
 
 @kernel(inline="always")

@@ -1,7 +1,7 @@
-"""Triangle bending and volume (ref §D.7), mesh connection modes only.
+"""Triangle bending and volume (docs/solver.md §D.7), mesh connection modes only.
 
 Corrections are accumulated per particle in MagicaCloth2's fixed point (1e-6 m units, each
-contribution truncated toward zero, ref §0.2), averaged by count and added to the moving
+contribution truncated toward zero, §0.2), averaged by count and added to the moving
 particles' ``next_pos`` (Jacobi, not Gauss-Seidel). ``velocity_pos`` is untouched, so the whole
 correction becomes velocity. The rest volume scales with scaleRatio, not its cube (Appendix 2.6).
 

@@ -1,4 +1,4 @@
-"""Collider collision (ref §D.8): point mode (particle spheres) and edge mode (proxy edges)
+"""Collider collision (docs/solver.md §D.8): point mode (particle spheres) and edge mode (proxy edges)
 against spheres, capsules with two radii and infinite planes, all as "moving planes" built
 from the collider's previous-step and current-step poses (``ColliderState`` work data, G.3).
 

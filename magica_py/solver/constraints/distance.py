@@ -1,4 +1,4 @@
-"""Distance (ref §D.4): relax each moving particle towards the mass-weighted mean of its
+"""Distance (docs/solver.md §D.4): relax each moving particle towards the mass-weighted mean of its
 links' corrections. Vertical links (parent/child) use the stiffness curve, horizontal and
 shear links half of it; a zero-rest link *overwrites* the accumulated correction (Appendix 2.1).
 

@@ -1,4 +1,4 @@
-"""Motion constraint (ref §D.9): max distance from the animated pose and a backstop sphere
+"""Motion constraint (docs/solver.md §D.9): max distance from the animated pose and a backstop sphere
 behind it. The reference is always the animated ``base_pos``; distances are not scaled and the
 curves are evaluated at depth^2.
 

@@ -1,4 +1,4 @@
-"""Tether (ref §D.3): keep each moving particle between (1 - compression) and 1.03 times its
+"""Tether (docs/solver.md §D.3): keep each moving particle between (1 - compression) and 1.03 times its
 rest distance to its root. Only the particle moves; the root is infinitely heavy.
 
 ``tether_team`` runs one team; ``tether_block`` runs every lane of a block

@@ -1,0 +1,189 @@
+"""magica-py watch, headless: each run is written to --rrd-dir (the viewer is not needed)."""
+import io
+import pathlib
+import threading
+import time
+
+import pytest
+
+from magica_py import watch as W
+from magica_py.sinks.readback import Recording
+
+SCENE = """\
+version: 1
+scene: {name: wt, fps: 60, frames: 6}
+rigs:
+  - name: r
+    bones: [{name: root, position: [0, 1, 0]}]
+    parts: [{chain: {name: tail, parent: root, bones: 4, length: 0.3, direction: [0, 0, -1]}}]
+animation:
+  - {target: root, oscillate: {property: rotation, axis: [0, 1, 0], amplitude: 30, frequency: 1}}
+cloths:
+  - {name: tail, root_bones: [tail_0], preset: tail, parameters: {damping: 0.05}}
+"""
+
+
+def test_describe_change_names_what_differs():
+    old = {"scene": {"fps": 60}, "cloths": [{"name": "tail", "parameters": {"damping": 0.05}}]}
+    new = {"scene": {"fps": 60}, "cloths": [{"name": "tail", "parameters": {"damping": 0.2, "gravity": 3}}]}
+    assert W.describe_change(None, new) == "first run"
+    assert W.describe_change(old, new) == "tail.parameters.damping 0.05→0.2, +tail.parameters.gravity=3"
+    assert W.describe_change(old, old) == "saved unchanged"
+    assert W.describe_change(old, old, [pathlib.Path("a/Fox.glb")]) == "Fox.glb changed"
+    many = {"scene": {"fps": 30, "frames": 9, "seed": 2, "name": "x"}}
+    assert W.describe_change({"scene": {}}, many).endswith("and 1 more")
+    # vectors are one value; cloths are matched by name, not by position in the list
+    assert W.describe_change({"g": [0, -1, 0]}, {"g": [0, -2, 0]}) == "g [0, -1, 0]→[0, -2, 0]"
+    swapped = {"cloths": [{"name": "b", "x": 1}, {"name": "a", "x": 2}]}
+    assert W.describe_change({"cloths": [{"name": "a", "x": 2}, {"name": "b", "x": 1}]}, swapped) == "saved unchanged"
+
+
+def test_scene_assets_are_resolved_beside_the_scene(tmp_path):
+    data = {"rigs": [{"name": "a", "file": "../m/avatar.vrm"}, {"name": "b", "bones": []}],
+            "animation": [{"clip": "clips/Fox.glb#Run"}, {"target": "x"}]}
+    scene = tmp_path / "s" / "scene.yaml"
+    assert W.scene_assets(data, scene) == sorted([tmp_path / "m" / "avatar.vrm", tmp_path / "s" / "clips" / "Fox.glb"])
+    assert W.scene_assets(None, scene) == []
+
+
+def _start(watch, runs):
+    thread = threading.Thread(target=watch.run_forever, kwargs={"max_runs": runs}, daemon=True)
+    thread.start()
+    return thread
+
+
+def _wait(watch, count, timeout=600.0):
+    end = time.monotonic() + timeout
+    while len(watch.reports) < count:
+        assert time.monotonic() < end, f"only {len(watch.reports)} runs"
+        time.sleep(0.02)
+    time.sleep(0.05)
+
+
+def _save(path, content):
+    path.write_bytes(content.encode() if isinstance(content, str) else content)
+    stamp = path.stat().st_mtime_ns + 10_000_000    # coarse file-system clocks: a new stamp for sure
+    import os
+    os.utime(path, ns=(stamp, stamp))
+
+
+def test_watch_reruns_on_save_names_each_recording_and_survives_a_bad_edit(tmp_path):
+    scene = tmp_path / "wt.yaml"
+    scene.write_text(SCENE)
+    out = io.StringIO()
+    watch = W.Watch(scene, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02, stream=out)
+    thread = _start(watch, 4)
+    _wait(watch, 1)
+    _save(scene, SCENE.replace("damping: 0.05", "damping: 0.2"))
+    _wait(watch, 2)
+    _save(scene, SCENE.replace("damping: 0.05", "damping: 7"))          # out of range
+    _wait(watch, 3)
+    _save(scene, SCENE.replace("damping: 0.05", "damping: 1e-1"))       # fixed (YAML 1.2 number)
+    thread.join(600)
+    first, second, bad, fixed = watch.reports
+    assert [r.ok for r in watch.reports] == [True, True, False, True]
+    assert first.description == "first run" and first.frames == 6
+    assert second.description == "tail.parameters.damping 0.05→0.2"
+    assert "cloths[0].parameters.damping" in bad.error and "out of range [0, 1]" in bad.error
+    assert fixed.description == "tail.parameters.damping 0.2→0.1"       # against the last good run
+    for report in (first, second, fixed):
+        rec = Recording(report.recording)
+        assert rec.static_value("/__properties", "RecordingInfo:name") == [report.recording_name]
+        assert report.latency is not None and report.latency >= 0.0
+    assert second.recording_name == "wt · tail.parameters.damping 0.05→0.2"
+    assert len(list((tmp_path / "runs").glob("*.rrd"))) == 3
+    text = out.getvalue()
+    assert "the scene has problems" in text and "Traceback" not in text
+
+
+def test_a_burst_of_saves_runs_once(tmp_path):
+    scene = tmp_path / "wt.yaml"
+    scene.write_text(SCENE)
+    watch = W.Watch(scene, debounce=0.4, poll=0.02, stream=io.StringIO())
+    stop = threading.Event()
+    thread = threading.Thread(target=watch.run_forever, kwargs={"stop": stop.is_set}, daemon=True)
+    thread.start()
+    _wait(watch, 1)
+    for damping in (0.1, 0.15, 0.2):      # three saves inside the debounce window
+        _save(scene, SCENE.replace("damping: 0.05", f"damping: {damping}"))
+        time.sleep(0.05)
+    _wait(watch, 2)
+    time.sleep(0.6)
+    stop.set()
+    thread.join(60)
+    assert len(watch.reports) == 2
+    assert watch.reports[1].description == "tail.parameters.damping 0.05→0.2"
+
+
+def test_ctrl_c_ends_the_watch_cleanly(tmp_path):
+    scene = tmp_path / "wt.yaml"
+    scene.write_text(SCENE)
+    out = io.StringIO()
+    watch = W.Watch(scene, debounce=0.05, poll=0.02, stream=out)
+
+    def interrupt():
+        raise KeyboardInterrupt
+    assert watch.run_forever(stop=interrupt) == 0
+    assert out.getvalue().rstrip().endswith("watch: stopped")
+
+
+def test_watch_command_checks_its_arguments(tmp_path, capsys):
+    assert W.main_watch([str(tmp_path / "missing.yaml")]) == 2
+    assert "file not found" in capsys.readouterr().err
+    scene = tmp_path / "wt.yaml"
+    scene.write_text(SCENE)
+    assert W.main_watch([str(scene), "--no-viewer"]) == 2
+    assert "without any output" in capsys.readouterr().err
+
+
+def test_saving_an_asset_the_scene_reads_reruns_it(tmp_path, shared_data):
+    import shutil
+
+    shutil.copy(shared_data / "gltf" / "Fox.glb", tmp_path / "Fox.glb")
+    scene = tmp_path / "fox.yaml"
+    scene.write_text("version: 1\nscene: {name: fox, frames: 2}\n"
+                     "rigs:\n  - {name: fox, file: Fox.glb, unit_scale: 0.01}\n")
+    watch = W.Watch(scene, debounce=0.05, poll=0.02, stream=io.StringIO())
+    assert watch.stamps.paths == [scene]
+    thread = _start(watch, 2)
+    _wait(watch, 1)
+    assert tmp_path / "Fox.glb" in watch.stamps.paths     # learnt from the document
+    _save(tmp_path / "Fox.glb", (tmp_path / "Fox.glb").read_bytes())    # re-exported unchanged
+    thread.join(600)
+    assert [r.description for r in watch.reports] == ["first run", "Fox.glb changed"]
+    assert all(r.ok for r in watch.reports)
+
+
+def test_watch_refuses_to_stream_to_a_viewer_that_is_not_there(tmp_path, capsys):
+    import socket
+
+    with socket.socket() as free:
+        free.bind(("127.0.0.1", 0))
+        port = free.getsockname()[1]          # closed again: nothing listens there
+    scene = tmp_path / "wt.yaml"
+    scene.write_text(SCENE)
+    assert W.main_watch([str(scene), "--connect", f"127.0.0.1:{port}"]) == 2
+    assert "no Rerun viewer is listening" in capsys.readouterr().err
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        assert W.viewer_listening(f"rerun+http://127.0.0.1:{server.getsockname()[1]}/proxy")
+
+
+def test_a_save_during_a_run_stops_it_and_starts_the_new_one(tmp_path):
+    scene = tmp_path / "wt.yaml"
+    scene.write_text(SCENE)
+    watch = W.Watch(scene, frames=10_000_000, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02,
+                    stream=io.StringIO())
+    thread = threading.Thread(target=watch.run_forever, kwargs={"max_runs": 2}, daemon=True)
+    thread.start()
+    while not watch.reports and watch.run_index == 0:
+        time.sleep(0.02)
+    time.sleep(1.0)                              # the first run is under way (it would take hours)
+    watch.frames = 3                             # the new run is short
+    _save(scene, SCENE.replace("damping: 0.05", "damping: 0.3"))
+    thread.join(600)
+    first, second = watch.reports
+    assert first.superseded and not first.ok and 0 < first.frames < 10_000_000
+    assert second.ok and second.frames == 3 and second.description == "tail.parameters.damping 0.05→0.3"
+    assert [p.name for p in (tmp_path / "runs").glob("*.rrd")] == [pathlib.Path(second.recording).name]
