@@ -71,6 +71,7 @@ class RestoreRegistry:
     def __init__(self):
         self._by_owner: dict[object, np.ndarray] = {}
         self._indices = np.zeros(0, dtype=np.int32)
+        self.version = 0  # counts the changes (plans built from the indices compare it)
 
     def register(self, indices, owner: object = None) -> None:
         """Add ``indices`` (hierarchy node indices) under ``owner`` (added to what it had)."""
@@ -91,6 +92,7 @@ class RestoreRegistry:
         else:
             merged = np.zeros(0)
         self._indices = np.ascontiguousarray(merged, dtype=np.int32)
+        self.version += 1
 
     @property
     def indices(self) -> np.ndarray:

@@ -65,7 +65,9 @@ appends ``("time_scale", value)``; ``set_parameter: {cloth, key, value}`` append
 ``("set_parameter", {...})``. ``reset()`` re-arms the events and clears teleport offsets.
 
 Cost: one numba kernel call per frame evaluates every driver of every target (crowds
-included); events are a pointer into a sorted list.
+included), writing local poses only (the player's UPDATE system then propagates the driven
+subtrees, ``scene/propagation.py``); events are a pointer into a sorted list, and a frame
+without a due event allocates nothing.
 """
 from __future__ import annotations
 
@@ -189,12 +191,34 @@ def window_weight(t, start, end, fade):
 
 
 @kernel
+def orbit_radials(t, orbit_columns, orbit_radial):
+    """The unit radial vector ``rotate(axis, 360 tau / period + phase) * u`` of every orbit
+    driver at time t, one column per orbit (``Animation.orbit_columns`` rows: start, end,
+    phase offset, period, phase, axis x3, u x3). A pure function of time, evaluated for all
+    orbits in one loop that vectorises across them; ``apply_drivers`` reads the result at the
+    driver's place in the list."""
+    two_pi = 2.0 * math.pi
+    for j in range(orbit_columns.shape[1]):
+        start = orbit_columns[0, j]
+        tau = min(max(t, start), orbit_columns[1, j]) - start + orbit_columns[2, j]
+        angle = two_pi * tau / orbit_columns[3, j] + orbit_columns[4, j]
+        turn = q_axis_angle((orbit_columns[5, j], orbit_columns[6, j], orbit_columns[7, j]), angle)
+        radial = q_rotate(turn, (orbit_columns[8, j], orbit_columns[9, j], orbit_columns[10, j]))
+        orbit_radial[0, j] = radial[0]
+        orbit_radial[1, j] = radial[1]
+        orbit_radial[2, j] = radial[2]
+
+
+@kernel
 def apply_drivers(t, kind, target, start, end, phase_offset, fade, params, key_first,
                   key_count, key_time, key_value, driven, offset_position, offset_rotation,
                   rest_position, rest_rotation, rest_scale,
-                  local_position, local_rotation, local_scale):
+                  local_position, local_rotation, local_scale,
+                  orbit_slot, orbit_columns, orbit_radial):
     """UPDATE phase: rest pose of every driven node, then each driver in list order, then
-    the teleport offsets (see the module docstring for the composition rule)."""
+    the teleport offsets (see the module docstring for the composition rule). The orbits'
+    radial vectors are evaluated first, all at once (``orbit_radials``)."""
+    orbit_radials(t, orbit_columns, orbit_radial)
     for m in range(driven.shape[0]):
         i = driven[m]
         store3(local_position, i, load3(rest_position, i))
@@ -229,9 +253,8 @@ def apply_drivers(t, kind, target, start, end, phase_offset, fade, params, key_f
                         store3(local_scale, i, v)
         elif k == ORBIT:
             axis = (params[d, 5], params[d, 6], params[d, 7])
-            angle = two_pi * tau / params[d, 4] + params[d, 11]
-            turn = q_axis_angle(axis, angle)
-            radial = q_rotate(turn, (params[d, 8], params[d, 9], params[d, 10]))
+            o = orbit_slot[d]
+            radial = (orbit_radial[0, o], orbit_radial[1, o], orbit_radial[2, o])
             radius = params[d, 3]
             store3(local_position, i, (params[d, 0] + radius * radial[0],
                                        params[d, 1] + radius * radial[1],
@@ -350,7 +373,11 @@ class Animation:
     params (D, 16) (see the layout comment above), key_first / key_count (D, 3) int32 per
     channel (position, rotation, scale) into key_time (K,) s and key_value (K, 4)
     (vectors in the first three columns), driven (M,) int32 hierarchy nodes,
-    offset_position (M, 3) m and offset_rotation (M, 4) teleport offsets (parent space).
+    offset_position (M, 3) m and offset_rotation (M, 4) teleport offsets (parent space);
+    for the O orbit drivers: orbit_slot (D,) int32 (column of driver d, -1 for other kinds),
+    orbit_columns (11, O) (start, end, phase offset, period, phase rad, axis x3, u x3: copies
+    of the rows above) and orbit_radial (3, O), the unit radial vectors of the current frame
+    (written by ``orbit_radials``).
     """
 
     def __init__(self, hierarchy, drivers: list[dict], events: list[Event]):
@@ -413,6 +440,15 @@ class Animation:
                 self._add_keys(n, drv["params"], key_time, key_value, f"{drv['where']}.keyframes")
         self.key_time = np.asarray(key_time, dtype=np.float64).reshape(-1)
         self.key_value = np.asarray(key_value, dtype=np.float64).reshape(-1, 4)
+        # the orbits' time and circle parameters column by column, in list order
+        orbits = np.flatnonzero(self.kind == ORBIT)
+        self.orbit_slot = np.full(d, -1, np.int32)
+        self.orbit_slot[orbits] = np.arange(orbits.size, dtype=np.int32)
+        self.orbit_columns = np.ascontiguousarray(np.vstack([
+            self.start[orbits], self.end[orbits], self.phase_offset[orbits],
+            self.params[orbits, 4], self.params[orbits, 11], self.params[orbits, 5:8].T,
+            self.params[orbits, 8:11].T]).reshape(11, orbits.size))
+        self.orbit_radial = np.zeros((3, orbits.size))
 
     def _add_keys(self, n, params, key_time, key_value, where) -> None:
         keys = params.get("keys") or []
@@ -454,13 +490,16 @@ class Animation:
                       self.offset_position, self.offset_rotation,
                       hierarchy.rest_local_position, hierarchy.rest_local_rotation,
                       hierarchy.rest_local_scale, hierarchy.local_position,
-                      hierarchy.local_rotation, hierarchy.local_scale)
+                      hierarchy.local_rotation, hierarchy.local_scale,
+                      self.orbit_slot, self.orbit_columns, self.orbit_radial)
 
     def apply(self, hierarchy, ctx) -> None:
         """UPDATE phase: drivers at ``ctx.time.time``, then the events now due, in ``at``
         order (list order at equal times). Writes local poses only: the caller propagates."""
         t = float(ctx.time.time)
         self.evaluate(hierarchy, t)
+        if self.next_event >= len(self.events) or self.events[self.next_event].at > t:
+            return  # the usual frame: no event due, nothing more to do or allocate
         moved: set[int] = set()  # nodes teleported this frame (their subtrees are stale)
         while self.next_event < len(self.events) and self.events[self.next_event].at <= t:
             event = self.events[self.next_event]

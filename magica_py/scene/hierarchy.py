@@ -7,7 +7,10 @@ scale the diagonal of ``inverse(R_world) @ local_to_world[:3, :3]`` (docs/solver
 numbers read off a Unity scene carry over unchanged.
 
 Nodes are stored parents-before-children, so one forward pass (``propagate_world``, a numba
-kernel) updates every world pose. Arrays (n = ``count``):
+kernel) updates every world pose. Per frame, ``propagate(plan)`` runs a precomputed
+``scene.propagation.PropagationPlan``: only the subtrees of the nodes that move, by depth
+level with the nodes of a level computed side by side, over ``threads`` threads, with the
+same bits as the forward pass. Arrays (n = ``count``):
 
 ==================  ===========  ======  ================================================
 field               shape        units   written by
@@ -33,74 +36,21 @@ import math
 import numpy as np
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import (
-    load3,
-    load4,
-    q_inverse,
-    q_mul,
-    q_normalize,
-    q_rotate,
-    q_to_matrix,
-    store3,
-    store4,
-)
+from magica_py.kernels.math3d import load4, q_inverse, q_mul, q_normalize, q_rotate
+from magica_py.scene.propagation import PropagationPlan, build_plan, propagate_node
 from magica_py.kernels import portable
 
 
 # ----------------------------------------------------------------------------- kernels
 @kernel
-def compose_trs(position, rotation, scale, out, i):
-    """Write TRS(position, rotation, scale) into out[i] (4x4)."""
-    r0, r1, r2 = q_to_matrix(rotation)
-    for c in range(3):
-        out[i, 0, c] = r0[c] * scale[c]
-        out[i, 1, c] = r1[c] * scale[c]
-        out[i, 2, c] = r2[c] * scale[c]
-        out[i, 3, c] = 0.0
-    out[i, 0, 3] = position[0]
-    out[i, 1, 3] = position[1]
-    out[i, 2, 3] = position[2]
-    out[i, 3, 3] = 1.0
-
-
-@kernel
 def propagate_world(parent, local_position, local_rotation, local_scale,
                     world_position, world_rotation, lossy_scale, local_to_world):
-    """Forward pass over parents-before-children nodes: world pose, lossy scale, matrices."""
-    n = parent.shape[0]
-    for i in range(n):
-        lp = load3(local_position, i)
-        lr = q_normalize(load4(local_rotation, i))
-        ls = load3(local_scale, i)
-        p = parent[i]
-        if p < 0:
-            compose_trs(lp, lr, ls, local_to_world, i)
-            wr = lr
-        else:
-            # world = parent_l2w @ TRS(local); expand the product without temporaries
-            r0, r1, r2 = q_to_matrix(lr)
-            for row in range(3):
-                a0 = local_to_world[p, row, 0]
-                a1 = local_to_world[p, row, 1]
-                a2 = local_to_world[p, row, 2]
-                a3 = local_to_world[p, row, 3]
-                for c in range(3):
-                    local_to_world[i, row, c] = (a0 * r0[c] + a1 * r1[c] + a2 * r2[c]) * ls[c]
-                local_to_world[i, row, 3] = a0 * lp[0] + a1 * lp[1] + a2 * lp[2] + a3
-            local_to_world[i, 3, 0] = 0.0
-            local_to_world[i, 3, 1] = 0.0
-            local_to_world[i, 3, 2] = 0.0
-            local_to_world[i, 3, 3] = 1.0
-            wr = q_normalize(q_mul(load4(world_rotation, p), lr))
-        store4(world_rotation, i, wr)
-        world_position[i, 0] = local_to_world[i, 0, 3]
-        world_position[i, 1] = local_to_world[i, 1, 3]
-        world_position[i, 2] = local_to_world[i, 2, 3]
-        # lossy scale = diag(R^-1 @ M3x3): column c of M rotated back, component c
-        for c in range(3):
-            col = (local_to_world[i, 0, c], local_to_world[i, 1, c], local_to_world[i, 2, c])
-            back = q_rotate(q_inverse(wr), col)
-            lossy_scale[i, c] = back[c]
+    """Forward pass over parents-before-children nodes: world pose, lossy scale, matrices
+    (``propagation.propagate_node`` for every node in index order; the plain full pass, used
+    for a hierarchy's first pass and for sub-hierarchies)."""
+    for i in range(parent.shape[0]):
+        propagate_node(i, parent, local_position, local_rotation, local_scale,
+                       world_position, world_rotation, lossy_scale, local_to_world)
 
 
 @kernel
@@ -191,7 +141,13 @@ class TransformHierarchy:
         for i in range(n):  # sibling order = order of appearance in the bone list
             if self.parent[i] >= 0:
                 self.children[self.parent[i]].append(i)
-        self.propagate()
+        self._threads = 1
+        self._full_plan: PropagationPlan | None = None
+        # the first pass also writes the constant bottom row of every matrix, which the
+        # propagation plans leave alone
+        propagate_world(self.parent, self.local_position, self.local_rotation, self.local_scale,
+                        self.world_position, self.world_rotation, self.lossy_scale,
+                        self.local_to_world)
         self.capture_rest_pose()
 
     # -- queries
@@ -211,11 +167,36 @@ class TransformHierarchy:
         return out
 
     # -- updates
-    def propagate(self) -> None:
-        """Recompute every world pose from the local poses (one numba pass)."""
-        propagate_world(self.parent, self.local_position, self.local_rotation, self.local_scale,
-                        self.world_position, self.world_rotation, self.lossy_scale,
-                        self.local_to_world)
+    @property
+    def threads(self) -> int:
+        """Threads a propagation may use (1 by default; plans built from now on use them)."""
+        return self._threads
+
+    @threads.setter
+    def threads(self, value: int) -> None:
+        value = int(value)
+        if value < 1:
+            raise ValueError(f"hierarchy threads: expected >= 1, got {value}")
+        if value != self._threads:
+            self._threads = value
+            self._full_plan = None
+
+    def plan(self, nodes=None) -> PropagationPlan:
+        """A propagation plan (``scene/propagation.py``) for ``nodes`` and all their
+        descendants, or for every node (None). Build it once for a set of nodes whose local
+        poses change (the animated bones, the cloth bones) and pass it to ``propagate`` each
+        frame; rebuild it when the set or ``threads`` changes."""
+        if nodes is None:
+            if self._full_plan is None or self._full_plan.threads != self._threads:
+                self._full_plan = build_plan(self.parent, None, self._threads)
+            return self._full_plan
+        return build_plan(self.parent, nodes, self._threads)
+
+    def propagate(self, plan: PropagationPlan | None = None) -> None:
+        """Recompute world poses from the local poses: every node (``plan=None``), or the nodes
+        of ``plan`` (``plan(nodes)``: the subtrees of nodes whose local pose changed). Either
+        way one numba call, the same bits as a full pass over the nodes it covers."""
+        (plan if plan is not None else self.plan()).run(self)
 
     def capture_rest_pose(self) -> None:
         """Remember the current local pose as the rest (build-time) pose restored each frame."""

@@ -64,7 +64,9 @@ class ClothSystem:
     for crowds on idle cores only, docs/tech-notes.md §8: off by default). ``batched=True`` (default)
     runs the steps of teams with identical topology and parameters side by side in blocks
     (``solver/batched``: same results bit for bit, several times faster for crowds);
-    ``batched=False`` runs every team alone (benchmarks, debugging).
+    ``batched=False`` runs every team alone (benchmarks, debugging). After the write-back the
+    hierarchy is propagated over the subtrees of the cloth bones only (a plan rebuilt when teams
+    change); with ``parallel=True`` over the numba threads too (``hierarchy.threads``).
     """
 
     name = "cloth"
@@ -119,6 +121,9 @@ class ClothSystem:
         self.batched = bool(batched)
         self._block_tables = None
         self._form_blocks()
+        if self.parallel:  # the hierarchy propagation spreads over the same threads
+            hierarchy.threads = max(hierarchy.threads, int(numba.get_num_threads()))
+        self._written_plan = hierarchy.plan(self.restored_bones())
 
     # ------------------------------------------------------------------ registration
     def attach(self, player, scene=None) -> "ClothSystem":
@@ -233,6 +238,7 @@ class ClothSystem:
         self._time = time_arrays(self.time_state)
         self._tables = None
         self._form_blocks()
+        self._written_plan = self.hierarchy.plan(self.restored_bones())
         if self._player is not None:
             self._player.unregister_restored_bones(self)
             self._player.register_restored_bones(self.restored_bones(), owner=self)
@@ -275,7 +281,9 @@ class ClothSystem:
         t0 = clock()
         self._call_frame(fi)
         t1 = clock()
-        self.hierarchy.propagate()
+        if self._written_plan.threads != self.hierarchy.threads:
+            self._written_plan = self.hierarchy.plan(self.restored_bones())
+        self.hierarchy.propagate(self._written_plan)  # the subtrees of the bones written back
         t2 = clock()
         self.frame_count += 1
         codes = self.teams.guard_code

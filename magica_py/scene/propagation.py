@@ -1,0 +1,404 @@
+"""World-pose propagation over a precomputed plan: by depth level, lanes side by side, threads
+over independent trees.
+
+A ``PropagationPlan`` is built once for a set of nodes (``TransformHierarchy.plan``: every
+node, or the subtrees of the nodes that move, e.g. the animated and the cloth bones) and
+reused every frame; a frame's pass allocates nothing. Every node gets exactly the arithmetic
+of ``propagate_node`` (the per-node pass of ``hierarchy.propagate_world``), so the results
+are the same bits; only the order of independent nodes changes:
+
+* the plan's nodes are split into **chunks** of whole top-level trees (the hierarchy's roots),
+  balanced by node count; chunks share no node and no parent, so they run on separate
+  threads (``threads`` > 1, numba ``prange``);
+* inside a chunk the nodes go by **depth level** (depth counted from the plan's own top
+  nodes): every parent is final before its level starts and the nodes of a level do not
+  depend on each other. A level is cut into **segments** of at most ``SEGMENT_WIDTH`` (512) nodes;
+  a segment's local poses are gathered into structure-of-arrays scratch rows, computed in one
+  loop that LLVM vectorises across the lanes (``compose_lanes``) and scattered back to the
+  hierarchy's arrays. The parents' matrices and rotations come either from the hierarchy
+  (gathered) or, when the segment's parents are lane for lane the nodes of the segment one
+  level up (a forest of chains: strands, tails, the light scene), straight from that
+  segment's output rows;
+* hierarchy roots (parent -1) of the plan are done first, one by one (``propagate_node``).
+
+The plan never writes the constant bottom row ``(0, 0, 0, 1)`` of ``local_to_world``: the
+hierarchy's constructor writes it with its first full pass and nothing else changes it.
+
+Arrays of a plan (k nodes in the plan, r of them hierarchy roots, s segments, c chunks, W
+lanes per segment plus padding, L output slots):
+
+====================  ===================  ==============================================
+field                 shape                meaning
+====================  ===================  ==============================================
+roots                 (r,) int32           hierarchy roots in the plan, chunk by chunk
+chunk_roots           (c + 1,) int64       chunk j's roots: roots[chunk_roots[j]:chunk_roots[j+1]]
+order                 (k - r,) int32       the other nodes, chunk by chunk, level by level
+segment_start         (s + 1,) int64       segment g: order[segment_start[g]:segment_start[g+1]]
+chunk_segments        (c + 1,) int64       chunk j's segments
+segment_slot          (s,) int32           output slot segment g writes
+parent_slot           (s,) int32           slot holding g's parents lane for lane, or -1
+lane_input            (c, 10, W)           scratch: local pose rows, one column per lane
+lane_parent           (c, 16, W)           scratch: gathered parent rows (output layout)
+lane_output           (c, L, 19, W)        scratch: result rows per slot
+====================  ===================  ==============================================
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import prange
+
+from magica_py.jit import kernel
+from magica_py.kernels.math3d import (
+    load3, load4, q_inverse, q_mul, q_normalize, q_rotate, q_to_matrix, store4,
+)
+
+# lanes per segment: wide enough that the per-segment work is small beside the lanes' (128: 10 %
+# slower on the light scene, 64: twice as slow), small enough for the scratch to stay in L2
+SEGMENT_WIDTH = 512
+# scratch rows are padded so that rows do not sit a multiple of 4 KiB apart (cache set
+# conflicts between the row streams of a segment)
+_ROW_PAD = 8
+# lane_input rows: local position 0-2, local rotation 3-6, local scale 7-9
+LANE_INPUT = 10
+# lane_output rows: local_to_world rows 0-2 at 0-3, 4-7, 8-11, world rotation 12-15,
+# lossy scale 16-18; lane_parent: the parents' rows 0-15 in the same layout
+LANE_OUTPUT = 19
+LANE_PARENT = 16
+
+
+# ----------------------------------------------------------------------------- per node
+@kernel
+def propagate_node(i, parent, local_position, local_rotation, local_scale,
+                   world_position, world_rotation, lossy_scale, local_to_world):
+    """Node i's world pose, lossy scale and matrix from its local pose and its parent's (final)
+    world pose: ``world = parent_l2w @ TRS(local)``, ``world_rotation = normalize(parent *
+    normalize(local))``, lossy scale = ``diag(R_world^-1 @ M3x3)`` (docs/solver.md §A.3)."""
+    lp = load3(local_position, i)
+    lr = q_normalize(load4(local_rotation, i))
+    ls = load3(local_scale, i)
+    p = parent[i]
+    r0, r1, r2 = q_to_matrix(lr)
+    if p < 0:
+        for c in range(3):
+            local_to_world[i, 0, c] = r0[c] * ls[c]
+            local_to_world[i, 1, c] = r1[c] * ls[c]
+            local_to_world[i, 2, c] = r2[c] * ls[c]
+            local_to_world[i, 3, c] = 0.0
+        local_to_world[i, 0, 3] = lp[0]
+        local_to_world[i, 1, 3] = lp[1]
+        local_to_world[i, 2, 3] = lp[2]
+        local_to_world[i, 3, 3] = 1.0
+        wr = lr
+    else:
+        # world = parent_l2w @ TRS(local); expand the product without temporaries
+        for row in range(3):
+            a0 = local_to_world[p, row, 0]
+            a1 = local_to_world[p, row, 1]
+            a2 = local_to_world[p, row, 2]
+            a3 = local_to_world[p, row, 3]
+            for c in range(3):
+                local_to_world[i, row, c] = (a0 * r0[c] + a1 * r1[c] + a2 * r2[c]) * ls[c]
+            local_to_world[i, row, 3] = a0 * lp[0] + a1 * lp[1] + a2 * lp[2] + a3
+        local_to_world[i, 3, 0] = 0.0
+        local_to_world[i, 3, 1] = 0.0
+        local_to_world[i, 3, 2] = 0.0
+        local_to_world[i, 3, 3] = 1.0
+        wr = q_normalize(q_mul(load4(world_rotation, p), lr))
+    store4(world_rotation, i, wr)
+    world_position[i, 0] = local_to_world[i, 0, 3]
+    world_position[i, 1] = local_to_world[i, 1, 3]
+    world_position[i, 2] = local_to_world[i, 2, 3]
+    # lossy scale = diag(R^-1 @ M3x3): column c of M rotated back, component c
+    for c in range(3):
+        col = (local_to_world[i, 0, c], local_to_world[i, 1, c], local_to_world[i, 2, c])
+        back = q_rotate(q_inverse(wr), col)
+        lossy_scale[i, c] = back[c]
+
+
+# ----------------------------------------------------------------------------- lanes
+@kernel
+def gather_local(order, k0, k1, local_position, local_rotation, local_scale, lane_input):
+    """Local poses of nodes order[k0:k1] into the scratch rows, lane j = node order[k0 + j]."""
+    for j in range(k1 - k0):
+        i = order[k0 + j]
+        for c in range(3):
+            lane_input[c, j] = local_position[i, c]
+            lane_input[7 + c, j] = local_scale[i, c]
+        for c in range(4):
+            lane_input[3 + c, j] = local_rotation[i, c]
+
+
+@kernel
+def gather_parents(order, k0, k1, parent, world_rotation, local_to_world, lane_parent):
+    """The parents' matrix rows and world rotations of nodes order[k0:k1], in the row layout of
+    ``lane_output`` (so that an aligned segment reads its parents' output rows instead)."""
+    for j in range(k1 - k0):
+        p = parent[order[k0 + j]]
+        for row in range(3):
+            for c in range(4):
+                lane_parent[4 * row + c, j] = local_to_world[p, row, c]
+        for c in range(4):
+            lane_parent[12 + c, j] = world_rotation[p, c]
+
+
+@kernel
+def _matrix_row(a0, a1, a2, a3, r0, r1, r2, ls, lp):
+    """One row of ``parent_l2w @ TRS(local)``: ``propagate_node``'s expression, element by element."""
+    return ((a0 * r0[0] + a1 * r1[0] + a2 * r2[0]) * ls[0],
+            (a0 * r0[1] + a1 * r1[1] + a2 * r2[1]) * ls[1],
+            (a0 * r0[2] + a1 * r1[2] + a2 * r2[2]) * ls[2],
+            a0 * lp[0] + a1 * lp[1] + a2 * lp[2] + a3)
+
+
+@kernel
+def compose_lanes(lanes, lane_input, lane_parent, lane_output):
+    """``propagate_node``'s arithmetic for a node with a parent, on ``lanes`` scratch columns.
+    Reads only ``lane_input`` and ``lane_parent`` and writes only ``lane_output`` (values kept
+    in registers in between), so the loop vectorises across lanes."""
+    for j in range(lanes):
+        lp = (lane_input[0, j], lane_input[1, j], lane_input[2, j])
+        lr = q_normalize((lane_input[3, j], lane_input[4, j], lane_input[5, j], lane_input[6, j]))
+        ls = (lane_input[7, j], lane_input[8, j], lane_input[9, j])
+        r0, r1, r2 = q_to_matrix(lr)
+        m0 = _matrix_row(lane_parent[0, j], lane_parent[1, j], lane_parent[2, j], lane_parent[3, j],
+                         r0, r1, r2, ls, lp)
+        m1 = _matrix_row(lane_parent[4, j], lane_parent[5, j], lane_parent[6, j], lane_parent[7, j],
+                         r0, r1, r2, ls, lp)
+        m2 = _matrix_row(lane_parent[8, j], lane_parent[9, j], lane_parent[10, j], lane_parent[11, j],
+                         r0, r1, r2, ls, lp)
+        wr = q_normalize(q_mul((lane_parent[12, j], lane_parent[13, j], lane_parent[14, j],
+                                lane_parent[15, j]), lr))
+        inverse = q_inverse(wr)
+        s0 = q_rotate(inverse, (m0[0], m1[0], m2[0]))[0]
+        s1 = q_rotate(inverse, (m0[1], m1[1], m2[1]))[1]
+        s2 = q_rotate(inverse, (m0[2], m1[2], m2[2]))[2]
+        for c in range(4):
+            lane_output[c, j] = m0[c]
+            lane_output[4 + c, j] = m1[c]
+            lane_output[8 + c, j] = m2[c]
+            lane_output[12 + c, j] = wr[c]
+        lane_output[16, j] = s0
+        lane_output[17, j] = s1
+        lane_output[18, j] = s2
+
+
+@kernel
+def scatter_lanes(order, k0, k1, world_position, world_rotation, lossy_scale, local_to_world,
+                  lane_output):
+    """Results of lanes 0..k1-k0 to nodes order[k0:k1] (the bottom matrix row is constant)."""
+    for j in range(k1 - k0):
+        i = order[k0 + j]
+        for row in range(3):
+            for c in range(4):
+                local_to_world[i, row, c] = lane_output[4 * row + c, j]
+            world_position[i, row] = lane_output[4 * row + 3, j]
+            lossy_scale[i, row] = lane_output[16 + row, j]
+        for c in range(4):
+            world_rotation[i, c] = lane_output[12 + c, j]
+
+
+@kernel
+def propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segments, segment_slot,
+                    parent_slot, lane_input, lane_parent, lane_output, parent, local_position,
+                    local_rotation, local_scale, world_position, world_rotation, lossy_scale,
+                    local_to_world):
+    """One chunk of a plan: its hierarchy roots, then its segments in order; a segment whose
+    parents are lane for lane the nodes of an earlier segment (``parent_slot`` >= 0) reads
+    their results from that segment's output rows."""
+    for k in range(chunk_roots[chunk], chunk_roots[chunk + 1]):
+        propagate_node(roots[k], parent, local_position, local_rotation, local_scale,
+                       world_position, world_rotation, lossy_scale, local_to_world)
+    scratch_in = lane_input[chunk]
+    gathered = lane_parent[chunk]
+    for g in range(chunk_segments[chunk], chunk_segments[chunk + 1]):
+        k0 = segment_start[g]
+        k1 = segment_start[g + 1]
+        gather_local(order, k0, k1, local_position, local_rotation, local_scale, scratch_in)
+        out = lane_output[chunk, segment_slot[g]]
+        if parent_slot[g] >= 0:
+            compose_lanes(k1 - k0, scratch_in, lane_output[chunk, parent_slot[g]], out)
+        else:
+            gather_parents(order, k0, k1, parent, world_rotation, local_to_world, gathered)
+            compose_lanes(k1 - k0, scratch_in, gathered, out)
+        scatter_lanes(order, k0, k1, world_position, world_rotation, lossy_scale, local_to_world, out)
+
+
+@kernel
+def propagate_plan_serial(roots, chunk_roots, order, segment_start, chunk_segments, segment_slot,
+                          parent_slot, lane_input, lane_parent, lane_output, parent,
+                          local_position, local_rotation, local_scale, world_position,
+                          world_rotation, lossy_scale, local_to_world):
+    """Every chunk of a plan in turn (one thread)."""
+    for chunk in range(chunk_roots.shape[0] - 1):
+        propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segments,
+                        segment_slot, parent_slot, lane_input, lane_parent, lane_output, parent,
+                        local_position, local_rotation, local_scale, world_position,
+                        world_rotation, lossy_scale, local_to_world)
+
+
+@kernel(parallel=True)
+def propagate_plan_parallel(roots, chunk_roots, order, segment_start, chunk_segments,
+                            segment_slot, parent_slot, lane_input, lane_parent, lane_output,
+                            parent, local_position, local_rotation, local_scale, world_position,
+                            world_rotation, lossy_scale, local_to_world):
+    """The chunks of a plan on numba's threads (chunks share no node: same bits as serial)."""
+    for chunk in prange(chunk_roots.shape[0] - 1):
+        propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segments,
+                        segment_slot, parent_slot, lane_input, lane_parent, lane_output, parent,
+                        local_position, local_rotation, local_scale, world_position,
+                        world_rotation, lossy_scale, local_to_world)
+
+
+# ----------------------------------------------------------------------------- plans
+class PropagationPlan:
+    """The nodes to update and the order to update them in (module docstring); built by
+    ``build_plan``, run by ``run`` against the hierarchy arrays it was built for."""
+
+    def __init__(self, roots, chunk_roots, order, segment_start, chunk_segments, segment_slot,
+                 parent_slot, slots, nodes, threads, width):
+        self.roots = roots
+        self.chunk_roots = chunk_roots
+        self.order = order
+        self.segment_start = segment_start
+        self.chunk_segments = chunk_segments
+        self.segment_slot = segment_slot
+        self.parent_slot = parent_slot
+        self.nodes = nodes              # (k,) int32 sorted: every node the plan updates
+        self.threads = threads          # threads it was built for (``chunks`` <= threads)
+        chunks = max(chunk_roots.shape[0] - 1, 1)
+        width = width + _ROW_PAD                # lanes per segment, padded
+        self.lane_input = np.zeros((chunks, LANE_INPUT, width))
+        self.lane_parent = np.zeros((chunks, LANE_PARENT, width))
+        # two levels of output slots: the level being computed and the one above it
+        self.lane_output = np.zeros((chunks, max(slots, 1), LANE_OUTPUT, width))
+
+    @property
+    def chunks(self) -> int:
+        return self.chunk_roots.shape[0] - 1
+
+    @property
+    def size(self) -> int:
+        return int(self.nodes.shape[0])
+
+    def run(self, h) -> None:
+        """Update the plan's nodes of hierarchy ``h`` (one numba call)."""
+        if self.size == 0:
+            return
+        fn = propagate_plan_parallel if self.chunks > 1 else propagate_plan_serial
+        fn(self.roots, self.chunk_roots, self.order, self.segment_start, self.chunk_segments,
+           self.segment_slot, self.parent_slot, self.lane_input, self.lane_parent,
+           self.lane_output, h.parent, h.local_position, h.local_rotation, h.local_scale,
+           h.world_position, h.world_rotation, h.lossy_scale, h.local_to_world)
+
+
+def subtree_closure(parent: np.ndarray, nodes) -> np.ndarray:
+    """Sorted int32 indices of ``nodes`` and all their descendants (parents-before-children
+    storage: one forward pass)."""
+    mark = np.zeros(parent.shape[0], dtype=bool)
+    seeds = np.asarray(nodes, dtype=np.int64).ravel()
+    if seeds.size:
+        if seeds.min() < 0 or seeds.max() >= parent.shape[0]:
+            raise IndexError(f"propagation plan: node index out of range [0, {parent.shape[0]}): "
+                             f"{seeds[(seeds < 0) | (seeds >= parent.shape[0])][:5].tolist()}")
+        mark[seeds] = True
+    _mark_descendants(parent, mark)
+    return np.flatnonzero(mark).astype(np.int32)
+
+
+@kernel
+def _mark_descendants(parent, mark):
+    for i in range(parent.shape[0]):
+        p = parent[i]
+        if p >= 0 and mark[p]:
+            mark[i] = True
+
+
+def build_plan(parent: np.ndarray, nodes, threads: int = 1,
+               width: int = SEGMENT_WIDTH) -> PropagationPlan:
+    """The plan that updates ``nodes`` and their descendants (``nodes=None``: every node) of a
+    hierarchy with parents-before-children ``parent``, split into at most ``threads`` chunks
+    and segments of at most ``width`` lanes."""
+    if int(threads) < 1 or int(width) < 1:
+        raise ValueError(f"propagation plan: expected threads >= 1 and width >= 1, got {threads}, {width}")
+    n = parent.shape[0]
+    members = np.arange(n, dtype=np.int32) if nodes is None else subtree_closure(parent, nodes)
+    in_plan = np.zeros(n, dtype=bool)
+    in_plan[members] = True
+    # depth from the plan's top nodes and the hierarchy root (tree) of every node
+    depth = np.zeros(n, dtype=np.int64)
+    tree = np.zeros(n, dtype=np.int64)
+    _depth_and_tree(parent, in_plan, depth, tree)
+    m_tree = tree[members]
+    # chunks: whole trees, contiguous in index order, about members / threads nodes each
+    chunks = max(1, min(int(threads), int(np.unique(m_tree).size) if members.size else 1))
+    chunk = np.zeros(members.size, dtype=np.int64)
+    if chunks > 1:
+        trees, counts = np.unique(m_tree, return_counts=True)
+        before = np.cumsum(counts) - counts            # plan nodes in earlier trees
+        tree_chunk = np.minimum((before * chunks) // members.size, chunks - 1)
+        chunk = tree_chunk[np.searchsorted(trees, m_tree)]
+        chunks = int(tree_chunk.max()) + 1
+    is_root = parent[members] < 0
+    roots = members[is_root]
+    chunk_roots = np.searchsorted(chunk[is_root], np.arange(chunks + 1)).astype(np.int64)
+    rest = members[~is_root]
+    rest_chunk = chunk[~is_root]
+    rest_depth = depth[rest]
+    key = np.lexsort((rest, rest_depth, rest_chunk))
+    order = rest[key].astype(np.int32)
+    rest_chunk = rest_chunk[key]
+    rest_depth = rest_depth[key]
+    # segments: a new one where the chunk or the depth changes or the width is reached
+    starts = [0]
+    for k in range(1, order.size + 1):
+        if k == order.size or rest_chunk[k] != rest_chunk[k - 1] or rest_depth[k] != rest_depth[k - 1] \
+                or k - starts[-1] >= width:
+            starts.append(k)
+    first = np.asarray(starts[:-1], dtype=np.int64)
+    seg_chunk = rest_chunk[first]
+    seg_depth = rest_depth[first]
+    chunk_segments = np.searchsorted(seg_chunk, np.arange(chunks + 1)).astype(np.int64)
+    slot, parent_slot, slots = _output_slots(parent, order, np.asarray(starts, dtype=np.int64),
+                                             seg_chunk, seg_depth)
+    return PropagationPlan(roots.astype(np.int32), chunk_roots, order,
+                           np.asarray(starts, dtype=np.int64), chunk_segments, slot, parent_slot,
+                           slots, members, int(threads), int(width))
+
+
+def _output_slots(parent, order, starts, seg_chunk, seg_depth):
+    """Output rows of each segment: segment s of a level (s-th of its chunk and depth) writes
+    slot ``(depth % 2) * per_level + s``, which stays untouched during the next level. A segment
+    whose parents are, lane for lane, the nodes of the same-numbered segment one level up (a
+    forest of chains) reads them from there (``parent_slot``); -1: gather from the hierarchy."""
+    count = seg_chunk.size
+    slot = np.zeros(count, dtype=np.int32)
+    parent_slot = np.full(count, -1, dtype=np.int32)
+    index_in_level = np.zeros(count, dtype=np.int64)
+    where: dict[tuple[int, int, int], int] = {}
+    for g in range(count):
+        if g > 0 and seg_chunk[g] == seg_chunk[g - 1] and seg_depth[g] == seg_depth[g - 1]:
+            index_in_level[g] = index_in_level[g - 1] + 1
+        where[(int(seg_chunk[g]), int(seg_depth[g]), int(index_in_level[g]))] = g
+    per_level = int(index_in_level.max()) + 1 if count else 1
+    for g in range(count):
+        slot[g] = (seg_depth[g] % 2) * per_level + index_in_level[g]
+        up = where.get((int(seg_chunk[g]), int(seg_depth[g]) - 1, int(index_in_level[g])))
+        if up is None:
+            continue
+        lanes = parent[order[starts[g]:starts[g + 1]]]
+        above = order[starts[up]:starts[up + 1]]
+        if lanes.size <= above.size and np.array_equal(lanes, above[:lanes.size]):
+            parent_slot[g] = (seg_depth[up] % 2) * per_level + index_in_level[up]
+    return slot, parent_slot, 2 * per_level
+
+
+@kernel
+def _depth_and_tree(parent, in_plan, depth, tree):
+    for i in range(parent.shape[0]):
+        p = parent[i]
+        if p < 0:
+            tree[i] = i
+            depth[i] = 0
+        else:
+            tree[i] = tree[p]
+            depth[i] = depth[p] + 1 if in_plan[p] else 0
