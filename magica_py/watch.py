@@ -291,13 +291,11 @@ class Watch:
                 rrd = self.rrd_dir / f"{_slug(scene.name)}-{report.index:03d}-{_slug(report.description)}.rrd"
             recorder = attach(player, scene, SinkOptions(rrd=rrd, no_rrd=rrd is None, connect=self.connect,
                                                          batch_frames=1 if self.connect else None,
-                                                         recording_id=str(uuid.uuid4())))
+                                                         recording_id=str(uuid.uuid4()),
+                                                         recording_name=report.recording_name))
             ok = False
             try:
                 recorder.open()
-                rec = getattr(recorder.sink, "rec", None)
-                if rec is not None:
-                    rec.send_recording_name(report.recording_name)
                 next_check = [time.monotonic() + SUPERSEDE_CHECK_SECONDS]
 
                 def on_frame(ctx):

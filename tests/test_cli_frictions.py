@@ -124,12 +124,17 @@ def test_inspect_shows_units(tmp_path):
 
     assert metric_unit("time/late_update") == "ms" and metric_unit("cloth/kernel") == "s"
     assert metric_unit("max_speed") == "m/s" and metric_unit("unknown/thing") == ""
+    # the sink's names carry their unit (layout.series_label)
+    assert metric_unit("quality/max_edge_stretch_pct") == "%" and metric_unit("quality/max_penetration_mm") == "mm"
+    assert metric_unit("motion/max_speed_m_per_s") == "m/s" and metric_unit("solver/steps_per_frame") == "steps"
     (tmp_path / "s.yaml").write_text(BASE)
     target = tmp_path / "r.rrd"
     assert cli.main(["run", str(tmp_path / "s.yaml"), "--rrd", str(target), "-q"]) == 0
     text = format_summary(summarize(target))
     lines = {line.split()[0]: line for line in text.splitlines()[1:] if line.startswith("            ")}
-    assert " ms " in lines["time/late_update"] and " s " in lines["cloth/kernel"]
+    late_update = next(v for k, v in lines.items() if k.startswith("time/late_update"))
+    assert " ms " in late_update and " steps " in lines["solver/steps_per_frame"]
+    assert " m/s " in lines["motion/max_speed_m_per_s"]
 
 
 def test_counts_are_plural_only_when_they_should_be():
@@ -227,6 +232,6 @@ def test_warnings_inside_frames_are_recorded_as_events(repo_root, tmp_path, monk
                 np.exp(np.float64(1000.0))
         session.player.schedule.add(Phase.LATE_UPDATE, System("overflow", overflow))
         session.run(5)
-    events = summarize(target)["events"]
+    events = [e for e in summarize(target)["events"] if "warning" in e["text"].split(":")[0]]
     assert [e["frame"] for e in events] == [1, 3]
     assert all(e["text"].startswith("numpy_warning: ") and "overflow" in e["text"] for e in events)

@@ -44,6 +44,7 @@ class SinkOptions:
     toggles: Any = None            # overrides scene.output.log
     replay_nodes: Any = None       # hierarchy indices to record for resim (default: driven_nodes)
     open_at_end: bool = False      # the viewer opens the file at its last frame (screenshots)
+    recording_name: str | None = None  # the name the viewer lists (default: the scene's name)
 
 
 def driven_nodes(scene, player) -> np.ndarray:
@@ -147,7 +148,7 @@ class Recorder:
                               batch_frames=opts.batch_frames, recording_id=opts.recording_id,
                               collider_kind=self.collider_kind, collider_slot=self.collider_slot,
                               collider_set=self.colliders, live_urls=self.live_urls,
-                              open_at_end=opts.open_at_end)
+                              open_at_end=opts.open_at_end, recording_name=opts.recording_name)
 
     def _view_box(self, cloths):
         """(min, max) of every joint and particle now (the first frame): where the camera starts."""

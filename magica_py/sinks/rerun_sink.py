@@ -185,7 +185,8 @@ class RerunSink:
     def __init__(self, statics: SceneStatics, *, rrd_path=None, spawn: bool = False, connect: str | None = None,
                  batch_frames: int | None = None, recording_id: str | None = None,
                  collider_kind: np.ndarray | None = None, collider_slot: np.ndarray | None = None,
-                 collider_set=None, live_urls: list[str] | None = None, open_at_end: bool = False):
+                 collider_set=None, live_urls: list[str] | None = None, open_at_end: bool = False,
+                 recording_name: str | None = None):
         t_import = time.perf_counter()
         import rerun as rr
         import rerun.blueprint  # noqa: F401 - one-time import cost, kept out of `seconds`
@@ -223,7 +224,7 @@ class RerunSink:
                                           penetration=self.metrics.has_collision, phases=PHASES,
                                           follow=open_at_end or self.live)
             self.rec.set_sinks(*sinks, default_blueprint=blueprint)
-            self.rec.send_recording_name(statics.name or "magica_py")
+            self.rec.send_recording_name(recording_name or statics.name or "magica_py")
         except Exception as exc:  # noqa: BLE001 - rerun raises plain RuntimeError
             self._discard()
             raise OutputError(f"cannot open the recording output: {exc}") from exc
