@@ -354,3 +354,17 @@ def test_an_animation_without_a_driven_list_propagates_every_node():
     player.run(3)
     assert_same_bits(world_state(h), reference_propagate(h))
     assert h.world_position[h.index("prop_child"), 1] == pytest.approx(0.5 + 3 / 30)
+
+
+@pytest.mark.parametrize("small_plan", [0, 10_000])
+def test_small_and_lane_paths_give_the_same_reference_bits(small_plan, monkeypatch):
+    """A plan of at most ``SMALL_PLAN`` nodes runs as a plain pass over its nodes: both paths
+    give the reference bits (``small_plan`` 0 forces the lane path, 10,000 the plain pass)."""
+    from magica_py.scene import propagation
+
+    monkeypatch.setattr(propagation, "SMALL_PLAN", small_plan)
+    rng = np.random.default_rng(21)
+    h = random_forest(rng, 300, 5)
+    perturb(rng, h, np.arange(300))
+    h.propagate()
+    assert_same_bits(world_state(h), reference_propagate(h))

@@ -55,6 +55,10 @@ from magica_py.kernels.math3d import (
 # lanes per segment: wide enough that the per-segment work is small beside the lanes' (128: 10 %
 # slower on the light scene, 64: twice as slow), small enough for the scratch to stay in L2
 SEGMENT_WIDTH = 512
+# a plan of at most this many nodes runs as a plain pass over its sorted nodes: for a few
+# dozen bones the call with the plan's lane arrays costs more than the nodes themselves
+# (a single 8-bone tail: two calls a frame, ~2 us each)
+SMALL_PLAN = 256
 # scratch rows are padded so that rows do not sit a multiple of 4 KiB apart (cache set
 # conflicts between the row streams of a segment)
 _ROW_PAD = 8
@@ -249,6 +253,15 @@ def propagate_plan_parallel(roots, chunk_roots, order, segment_start, chunk_segm
                         world_rotation, lossy_scale, local_to_world)
 
 
+@kernel
+def propagate_listed(nodes, parent, local_position, local_rotation, local_scale,
+                     world_position, world_rotation, lossy_scale, local_to_world):
+    """``propagate_node`` for ``nodes`` (sorted: parents before children), one after another."""
+    for k in range(nodes.shape[0]):
+        propagate_node(nodes[k], parent, local_position, local_rotation, local_scale,
+                       world_position, world_rotation, lossy_scale, local_to_world)
+
+
 # ----------------------------------------------------------------------------- plans
 class PropagationPlan:
     """The nodes to update and the order to update them in (module docstring); built by
@@ -283,6 +296,10 @@ class PropagationPlan:
     def run(self, h) -> None:
         """Update the plan's nodes of hierarchy ``h`` (one numba call)."""
         if self.size == 0:
+            return
+        if self.size <= SMALL_PLAN:
+            propagate_listed(self.nodes, h.parent, h.local_position, h.local_rotation, h.local_scale,
+                             h.world_position, h.world_rotation, h.lossy_scale, h.local_to_world)
             return
         fn = propagate_plan_parallel if self.chunks > 1 else propagate_plan_serial
         fn(self.roots, self.chunk_roots, self.order, self.segment_start, self.chunk_segments,
