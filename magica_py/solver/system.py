@@ -294,7 +294,7 @@ class ClothSystem:
                                                    "reason": GUARD_REASONS.get(int(codes[team]), "guard")}))
             codes[:] = 0
         if metrics is not None:
-            steps = int((self.time_state.update_count.astype(np.int64) * self.model.team_particle_count).sum())
+            steps = int(np.dot(self.time_state.update_count, self.model.team_particle_count))  # cpu-independent: integers
             metrics["cloth.steps"] = float(steps)
             metrics["cloth.simulation_steps"] = float(self.time_state.update_count.max(initial=0))
             metrics["cloth.kernel"] = t1 - t0
