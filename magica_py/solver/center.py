@@ -18,7 +18,7 @@ from magica_py.kernels.math3d import (
     store3, store4, unlerp, v_add, v_length, v_lerp, v_normalize, v_scale, v_sub,
 )
 from magica_py.kernels.rows import (
-    flat, load_input, load_input3, load_input4, row3, row4, set_row3, set_row4, store_output3, store_output4,
+    flat, row3, row4, set_row3, set_row4,
 )
 from magica_py.solver.rotations import normalize_or_zero, rot_from_normal_tangent_select
 from magica_py.kernels import portable
@@ -81,17 +81,17 @@ def skin_team(m, ps, local_to_world, team):
     start = np.uint64(m.team_particle_start[team])
     for j in range(m.team_particle_count[team]):
         p = start + np.uint64(j)
-        node = np.uint64(16) * np.uint64(load_input(node_of, p, "skin"))
+        node = np.uint64(16) * np.uint64(node_of[p])
         b = np.uint64(16) * p
         v = np.uint64(3) * p
-        pos, rot = skin_vertex(load_input4(l2w, node, "skin"), load_input4(l2w, node + np.uint64(4), "skin"),
-                               load_input4(l2w, node + np.uint64(8), "skin"),
-                               load_input4(bind, b, "skin"), load_input4(bind, b + np.uint64(4), "skin"),
-                               load_input4(bind, b + np.uint64(8), "skin"), load_input4(bind, b + np.uint64(12), "skin"),
-                               load_input3(local_position, v, "skin"), load_input3(local_normal, v, "skin"),
-                               load_input3(local_tangent, v, "skin"))
-        store_output3(position, v, pos, "skin")
-        store_output4(rotation, np.uint64(4) * p, rot, "skin")
+        pos, rot = skin_vertex(row4(l2w, node), row4(l2w, node + np.uint64(4)),
+                               row4(l2w, node + np.uint64(8)),
+                               row4(bind, b), row4(bind, b + np.uint64(4)),
+                               row4(bind, b + np.uint64(8)), row4(bind, b + np.uint64(12)),
+                               row3(local_position, v), row3(local_normal, v),
+                               row3(local_tangent, v))
+        set_row3(position, v, pos)
+        set_row4(rotation, np.uint64(4) * p, rot)
 
 
 SMOOTHING_REFERENCE_RATE = 90.0   # 1/s: the frame rate at which the C.4 ratio is taken as is

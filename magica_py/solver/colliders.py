@@ -10,13 +10,11 @@ from __future__ import annotations
 import numpy as np
 
 from magica_py.jit import kernel
-from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
-from magica_py.solver.batched.transfer import in3, in4, out3, out4
 from magica_py.kernels.math3d import (
+    q_slerp,
     load3, load4, q_inverse, q_mul, q_normalize, q_rotate, shift_position, store3,
-    slerp_is_near, slerp_near, store4, v_add, v_lerp, v_scale, v_sub,
+    store4, v_add, v_lerp, v_scale, v_sub,
 )
-from magica_py.solver.team_step import LANES, LANES_NEAR, SCALAR, slerp_in_mode
 
 SPHERE = 0
 CAPSULE = 1
@@ -105,15 +103,14 @@ def capsule_ends(pos, rot, direction, reverse, aligned, size, s):
 
 
 @kernel(inline="always")  # numba-level: too big for LLVM's inliner, and a call stops vectorisation
-def collider_step_pose(old_frame_pos, frame_pos, old_frame_rot, frame_rot, old_pos, old_rot, t, mv, rv, mode):
+def collider_step_pose(old_frame_pos, frame_pos, old_frame_rot, frame_rot, old_pos, old_rot, t, mv, rv):
     """G.3 pose of one slot: (now_pos, now_rot, old_pos, old_rot, inverse old_rot) at frame
     interpolation t, the old pose pulled towards the new one by the team's local inertia ratios
-    (mv, rv: ``step_move/rotation_inertia_ratio``). ``mode`` (a literal) as in
-    ``team_step``: SCALAR per team, LANES branch-free, LANES_NEAR where both slerps are near."""
+    (mv, rv: ``step_move/rotation_inertia_ratio``)."""
     now_pos = v_lerp(old_frame_pos, frame_pos, t)
-    now_rot = q_normalize(slerp_in_mode(old_frame_rot, frame_rot, t, mode))
+    now_rot = q_normalize(q_slerp(old_frame_rot, frame_rot, t))
     old_pos = v_lerp(old_pos, now_pos, mv)
-    old_rot = q_normalize(slerp_in_mode(old_rot, now_rot, rv, mode))
+    old_rot = q_normalize(q_slerp(old_rot, now_rot, rv))
     return now_pos, now_rot, old_pos, old_rot, q_inverse(old_rot)
 
 
@@ -146,7 +143,7 @@ def collider_step_team(cs, ts, team, frame_interpolation):
     for k in range(c0, c0 + ts.collider_count[team]):
         now_pos, now_rot, old_pos, old_rot, inverse_old_rot = collider_step_pose(
             load3(cs.old_frame_pos, k), load3(cs.frame_pos, k), load4(cs.old_frame_rot, k), load4(cs.frame_rot, k),
-            load3(cs.old_pos, k), load4(cs.old_rot, k), t, mv, rv, SCALAR)
+            load3(cs.old_pos, k), load4(cs.old_rot, k), t, mv, rv)
         store3(cs.now_pos, k, now_pos)
         store4(cs.now_rot, k, now_rot)
         store3(cs.old_pos, k, old_pos)
@@ -185,211 +182,6 @@ def collider_step_team(cs, ts, team, frame_interpolation):
             store3(cs.plane_normal, k, q_rotate(now_rot, (0.0, sy, 0.0)))
             store3(cs.start_new, k, now_pos)
             store3(cs.start_old, k, old_pos)
-
-
-# ----------------------------------------------------------------------------- block form
-@kernel
-def _scale_component(shape, direction):
-    """The frame-scale component a slot's G.3 reads: x (sphere radius), the capsule's axis,
-    y (plane normal)."""
-    return 0 if shape == SPHERE else (direction if shape == CAPSULE else 1)
-
-
-@kernel
-def collider_step_copy_in(cs, ts, blk, bs, b):
-    """Each lane's slots into the lane-collider arrays (``bs.col_*``): the G.3 inputs, and the
-    work fields a slot's shape does not write (so that ``col_*`` holds every slot field as
-    ``transfer.load_lanes`` copies it)."""
-    width = blk.block_width[b]
-    lanes = blk.block_lane_base[b]
-    cbase = blk.block_collider_base[b]
-    e0 = ts.collider_start[blk.block_exemplar[b]]
-    for j in range(blk.block_collider_count[b]):
-        shape = cs.shape[e0 + j]  # the same in every lane (block formation)
-        component = _scale_component(shape, cs.direction[e0 + j])
-        for i in range(width):
-            s = ts.collider_start[blk.lane_team[lanes + i]] + j
-            k = cbase + j * width + i
-            bs.col_shape[k] = cs.shape[s]
-            bs.col_scale_suspend[k] = cs.scale_suspend[s]
-            in3(bs.col_old_frame_pos, k, cs.old_frame_pos, s)
-            in3(bs.col_frame_pos, k, cs.frame_pos, s)
-            in4(bs.col_old_frame_rot, k, cs.old_frame_rot, s)
-            in4(bs.col_frame_rot, k, cs.frame_rot, s)
-            in3(bs.col_old_pos, k, cs.old_pos, s)
-            in4(bs.col_old_rot, k, cs.old_rot, s)
-            bs.col_axis_scale[k] = cs.frame_scale[s, component]
-            if shape == PLANE:
-                bs.col_radius_start[k] = cs.radius_start[s]
-                bs.col_radius_end[k] = cs.radius_end[s]
-                in3(bs.col_end_old, k, cs.end_old, s)
-                in3(bs.col_end_new, k, cs.end_new, s)
-                in3(bs.col_aabb_min, k, cs.aabb_min, s)
-                in3(bs.col_aabb_max, k, cs.aabb_max, s)
-            else:
-                in3(bs.col_plane_normal, k, cs.plane_normal, s)
-
-
-@kernel
-def collider_step_copy_out(cs, ts, blk, bs, b):
-    """The slot fields G.3 writes, from the lane-collider arrays back to each lane's slots, with
-    the end of step (``collider_end_step_team``: old pose = now pose) folded in: nothing reads a
-    slot's old pose from ColliderState during a block step (the block stages read ``bs.col_*``),
-    so it is stored once, as the step leaves it."""
-    width = blk.block_width[b]
-    lanes = blk.block_lane_base[b]
-    cbase = blk.block_collider_base[b]
-    e0 = ts.collider_start[blk.block_exemplar[b]]
-    for j in range(blk.block_collider_count[b]):
-        plane = cs.shape[e0 + j] == PLANE
-        for i in range(width):
-            s = ts.collider_start[blk.lane_team[lanes + i]] + j
-            k = cbase + j * width + i
-            out3(cs.now_pos, s, bs.col_now_pos, k)
-            out4(cs.now_rot, s, bs.col_now_rot, k)
-            out3(cs.old_pos, s, bs.col_now_pos, k)
-            out4(cs.old_rot, s, bs.col_now_rot, k)
-            out4(cs.inverse_old_rot, s, bs.col_inverse_old_rot, k)
-            out3(cs.start_old, s, bs.col_start_old, k)
-            out3(cs.start_new, s, bs.col_start_new, k)
-            if plane:
-                out3(cs.plane_normal, s, bs.col_plane_normal, k)
-            else:
-                cs.radius_start[s] = bs.col_radius_start[k]
-                cs.radius_end[s] = bs.col_radius_end[k]
-                out3(cs.end_old, s, bs.col_end_old, k)
-                out3(cs.end_new, s, bs.col_end_new, k)
-                out3(cs.aabb_min, s, bs.col_aabb_min, k)
-                out3(cs.aabb_max, s, bs.col_aabb_max, k)
-
-
-@kernel
-def collider_step_lanes(cs, ts, blk, bs, b):
-    """G.3 of every lane's slots of block b on the lane-collider arrays, slot by slot (a slot's
-    shape and size are the same in every lane: the exemplar's), lanes innermost. Reads the
-    lanes' C.3 results (``bs.lane_step_*_inertia_ratio``, ``team_step.team_step_block``).
-
-    Streams (``kernels/streams``; every access is to row k = base + j * width + i of one
-    lane-collider array or lane i of a lane array, arrays distinct): now_pos 1-3, now_rot 4-7,
-    old_pos 8-10 and old_rot 11-14 (read and written in place), inverse_old_rot 15-18,
-    radius_start 19, radius_end 20, start_old 21-23, end_old 24-26, start_new 27-29, end_new
-    30-32, aabb_min 33-35, aabb_max 36-38; a plane's loop writes no bounds and its normal
-    takes 33-35; everything else is read only."""
-    width = blk.block_width[b]
-    lanes = np.uint64(blk.block_lane_base[b])
-    cbase = blk.block_collider_base[b]
-    e0 = ts.collider_start[blk.block_exemplar[b]]
-    interpolation, move_ratio, rotation_ratio = (bs.lane_frame_interpolation, bs.lane_step_move_inertia_ratio,
-                                                 bs.lane_step_rotation_inertia_ratio)
-    old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a = (bs.col_old_frame_pos, bs.col_frame_pos,
-                                                                  bs.col_old_frame_rot, bs.col_frame_rot)
-    now_pos_a, now_rot_a, old_pos_a, old_rot_a, inverse_a = (bs.col_now_pos, bs.col_now_rot, bs.col_old_pos,
-                                                             bs.col_old_rot, bs.col_inverse_old_rot)
-    radius_start_a, radius_end_a, axis_scale_a = bs.col_radius_start, bs.col_radius_end, bs.col_axis_scale
-    start_old_a, end_old_a, start_new_a, end_new_a = bs.col_start_old, bs.col_end_old, bs.col_start_new, bs.col_end_new
-    aabb_min_a, aabb_max_a, plane_normal_a = bs.col_aabb_min, bs.col_aabb_max, bs.col_plane_normal
-    # the arrays as one tuple (numba's inliner refuses calls of more than 30 arguments)
-    arrays = (old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a, old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a, start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio, rotation_ratio)
-    for j in range(blk.block_collider_count[b]):
-        e = e0 + j
-        shape = cs.shape[e]
-        direction = cs.direction[e]
-        reverse = cs.reverse_direction[e] != 0
-        aligned = cs.aligned_on_center[e] != 0
-        size = (cs.size[e, 0], cs.size[e, 1], cs.size[e, 2])
-        geometry = (direction, reverse, aligned, size)
-        k0 = np.uint64(cbase + j * width)
-        # every lane's slerps near (the usual case): their lerp path alone; the second slerp's
-        # target is the first's result (read only, no stores)
-        far = 0
-        for i in range(width):
-            k = k0 + np.uint64(i)
-            far += 0 if slerp_is_near(sload4(old_frame_rot_a, k, READ), sload4(frame_rot_a, k, READ)) else 1
-        if far == 0:
-            for i in range(width):
-                k = k0 + np.uint64(i)
-                now_rot = q_normalize(slerp_near(sload4(old_frame_rot_a, k, READ), sload4(frame_rot_a, k, READ),
-                                                      sload(interpolation, lanes + np.uint64(i), READ)))
-                far += 0 if slerp_is_near(sload4(old_rot_a, k, READ), now_rot) else 1
-        # one lane loop per (shape, mode), both constant in each: their branches fold away
-        open_streams()
-        if shape == SPHERE and far == 0:
-            _slot_loop(arrays, k0, lanes, width, SPHERE, LANES_NEAR, geometry)
-        elif shape == SPHERE:
-            _slot_loop(arrays, k0, lanes, width, SPHERE, LANES, geometry)
-        elif shape == CAPSULE and far == 0:
-            _slot_loop(arrays, k0, lanes, width, CAPSULE, LANES_NEAR, geometry)
-        elif shape == CAPSULE:
-            _slot_loop(arrays, k0, lanes, width, CAPSULE, LANES, geometry)
-        elif far == 0:
-            _slot_loop(arrays, k0, lanes, width, PLANE, LANES_NEAR, geometry)
-        else:
-            _slot_loop(arrays, k0, lanes, width, PLANE, LANES, geometry)
-
-
-@kernel(inline="always")
-def _slot_loop(arrays, k0, lanes, width, shape, mode, geometry):
-    """``collider_step_lanes``' lane loop of one slot (rows k0 + i, lanes + i); ``shape`` and
-    ``mode`` are literals, ``arrays`` the lane and lane-collider arrays in ``_slot_lane``'s order."""
-    for i in range(width):
-        _slot_lane(arrays, k0 + np.uint64(i), lanes + np.uint64(i), shape, geometry, mode)
-
-
-@kernel(inline="always")
-def _slot_lane(arrays, k, L, shape, geometry, mode):
-    """``collider_step_team``'s slot body on lane-collider row k, lane L (streams: see
-    ``collider_step_lanes``); ``shape`` and ``mode`` are constant at each call site, ``geometry``
-    the slot's (direction, reverse, aligned, size)."""
-    (old_frame_pos_a, frame_pos_a, old_frame_rot_a, frame_rot_a, now_pos_a, now_rot_a, old_pos_a, old_rot_a, inverse_a, radius_start_a, radius_end_a, axis_scale_a, start_old_a, end_old_a, start_new_a, end_new_a, aabb_min_a, aabb_max_a, plane_normal_a, interpolation, move_ratio, rotation_ratio) = arrays
-    direction, reverse, aligned, size = geometry
-    now_pos, now_rot, old_pos, old_rot, inverse_old_rot = collider_step_pose(
-        sload3(old_frame_pos_a, k, READ), sload3(frame_pos_a, k, READ), sload4(old_frame_rot_a, k, READ),
-        sload4(frame_rot_a, k, READ), sload3(old_pos_a, k, 8), sload4(old_rot_a, k, 11),
-        sload(interpolation, L, READ), sload(move_ratio, L, READ), sload(rotation_ratio, L, READ), mode)
-    sstore3(now_pos_a, k, now_pos, 1)
-    sstore4(now_rot_a, k, now_rot, 4)
-    sstore3(old_pos_a, k, old_pos, 8)
-    sstore4(old_rot_a, k, old_rot, 11)
-    sstore4(inverse_a, k, inverse_old_rot, 15)
-    s = sload(axis_scale_a, k, READ)
-    if shape == SPHERE:
-        r = size[0] * abs(s)
-        lo, hi = sphere_bounds(old_pos, now_pos, r)
-        sstore(radius_start_a, k, r, 19)
-        sstore(radius_end_a, k, r, 20)
-        sstore3(start_old_a, k, old_pos, 21)
-        sstore3(end_old_a, k, old_pos, 24)
-        sstore3(start_new_a, k, now_pos, 27)
-        sstore3(end_new_a, k, now_pos, 30)
-        sstore3(aabb_min_a, k, lo, 33)
-        sstore3(aabb_max_a, k, hi, 36)
-    elif shape == CAPSULE:
-        so, eo, rs, re = capsule_ends(old_pos, old_rot, direction, reverse, aligned, size, s)
-        sn, en, rs, re = capsule_ends(now_pos, now_rot, direction, reverse, aligned, size, s)
-        lo, hi = swept_bounds(so, sn, eo, en, rs, re)
-        sstore(radius_start_a, k, rs, 19)
-        sstore(radius_end_a, k, re, 20)
-        sstore3(start_old_a, k, so, 21)
-        sstore3(end_old_a, k, eo, 24)
-        sstore3(start_new_a, k, sn, 27)
-        sstore3(end_new_a, k, en, 30)
-        sstore3(aabb_min_a, k, lo, 33)
-        sstore3(aabb_max_a, k, hi, 36)
-    else:
-        sstore3(plane_normal_a, k, q_rotate(now_rot, (0.0, _sign(s), 0.0)), 33)
-        sstore3(start_new_a, k, now_pos, 27)
-        sstore3(start_old_a, k, old_pos, 21)
-
-
-@kernel
-def collider_step_block(cs, ts, blk, bs, b):
-    """G.3 of every lane of block b (``collider_step_team`` for each lane's team, the same
-    bits), after the block's C.3 (``team_step.team_step_block``): slots written as there and
-    this step's lane-collider values (``bs.col_*``) filled. The slots' old pose is left as the
-    step's end leaves it (``collider_end_step_team`` included: the block step does not call it)."""
-    collider_step_copy_in(cs, ts, blk, bs, b)
-    collider_step_lanes(cs, ts, blk, bs, b)
-    collider_step_copy_out(cs, ts, blk, bs, b)
 
 
 @kernel

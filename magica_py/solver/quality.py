@@ -26,7 +26,6 @@ rest reference, like the tether of D.3. Faithful mode never calls this module.
 """
 from __future__ import annotations
 
-import math
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (

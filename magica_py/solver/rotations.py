@@ -13,9 +13,7 @@ import math
 import numpy as np
 
 from magica_py.jit import kernel
-from magica_py.kernels.rows import (
-    flat, load_input, load_input3, row3, row4, set_row4, store_output3, store_output4,
-)
+from magica_py.kernels.rows import flat, row3, row4, set_row3, set_row4
 from magica_py.kernels.math3d import (
     from_to_rotation, from_to_rotation_unit, load3, orthogonal_axis, q_axis_angle, q_inverse, q_mul,
     q_rotate, q_slerp, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp, v_normalize, v_scale,
@@ -301,19 +299,19 @@ def triangle_rotations_team(m, ps, team):
     first_triangle = np.uint64(t0)
     for j in range(tn_count):
         tri = first_triangle + np.uint64(j)
-        corners = load_input3(triangles, np.uint64(3) * tri, "triangle_frame")
+        corners = row3(triangles, np.uint64(3) * tri)
         uv = np.uint64(6) * tri
         tn, tt = triangle_frame_from(
-            load_input3(position, np.uint64(3) * np.uint64(corners[0]), "triangle_frame"),
-            load_input3(position, np.uint64(3) * np.uint64(corners[1]), "triangle_frame"),
-            load_input3(position, np.uint64(3) * np.uint64(corners[2]), "triangle_frame"),
-            (load_input(triangle_uv, uv, "triangle_frame"), load_input(triangle_uv, uv + np.uint64(1), "triangle_frame")),
-            (load_input(triangle_uv, uv + np.uint64(2), "triangle_frame"),
-             load_input(triangle_uv, uv + np.uint64(3), "triangle_frame")),
-            (load_input(triangle_uv, uv + np.uint64(4), "triangle_frame"),
-             load_input(triangle_uv, uv + np.uint64(5), "triangle_frame")))
-        store_output3(triangle_normal, np.uint64(3) * tri, tn, "triangle_frame")
-        store_output3(triangle_tangent, np.uint64(3) * tri, tt, "triangle_frame")
+            row3(position, np.uint64(3) * np.uint64(corners[0])),
+            row3(position, np.uint64(3) * np.uint64(corners[1])),
+            row3(position, np.uint64(3) * np.uint64(corners[2])),
+            (triangle_uv[uv], triangle_uv[uv + np.uint64(1)]),
+            (triangle_uv[uv + np.uint64(2)],
+             triangle_uv[uv + np.uint64(3)]),
+            (triangle_uv[uv + np.uint64(4)],
+             triangle_uv[uv + np.uint64(5)]))
+        set_row3(triangle_normal, np.uint64(3) * tri, tn)
+        set_row3(triangle_tangent, np.uint64(3) * tri, tt)
     start = m.team_particle_start[team]
     count = m.team_particle_count[team]
     vt_start, vt_count, vt_data, vt_flip = (m.vertex_triangle_start, m.vertex_triangle_count,
@@ -323,25 +321,25 @@ def triangle_rotations_team(m, ps, team):
     first = np.uint64(start)
     for j in range(count):
         p = first + np.uint64(j)
-        n = load_input(vt_count, p, "triangle_rotation")
-        k0 = load_input(vt_start, p, "triangle_rotation")
+        n = vt_count[p]
+        k0 = vt_start[p]
         ns = (0.0, 0.0, 0.0)
         ts_ = (0.0, 0.0, 0.0)
         for k in range(TRIANGLES_PER_VERTEX):
             used = k < n
             # an unused slot reads entry 0 (always valid) and is selected away
             e = np.uint64(k0 + k) if used else np.uint64(0)
-            tri = np.uint64(3) * np.uint64(load_input(vt_data, e, "triangle_rotation"))
-            flip = load_input(vt_flip, e, "triangle_rotation")
-            ns_k = add_flipped(ns, load_input3(triangle_normal, tri, "triangle_rotation"), (flip & 1) != 0)
-            ts_k = add_flipped(ts_, load_input3(triangle_tangent, tri, "triangle_rotation"), (flip & 2) != 0)
+            tri = np.uint64(3) * np.uint64(vt_data[e])
+            flip = vt_flip[e]
+            ns_k = add_flipped(ns, row3(triangle_normal, tri), (flip & 1) != 0)
+            ts_k = add_flipped(ts_, row3(triangle_tangent, tri), (flip & 2) != 0)
             ns = (ns_k[0] if used else ns[0], ns_k[1] if used else ns[1], ns_k[2] if used else ns[2])
             ts_ = (ts_k[0] if used else ts_[0], ts_k[1] if used else ts_[1], ts_k[2] if used else ts_[2])
         valid, q = vertex_frame_rotation(ns, ts_)
         few = n <= TRIANGLES_PER_VERTEX
         crowded += 0 if few else 1
         if valid & few:
-            store_output4(rotation, np.uint64(4) * p, q, "triangle_rotation")
+            set_row4(rotation, np.uint64(4) * p, q)
     if crowded > 0:
         for p in range(start, start + count):
             if m.vertex_triangle_count[p] > TRIANGLES_PER_VERTEX:

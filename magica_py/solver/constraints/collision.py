@@ -16,15 +16,12 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     closest_segment_segment, load3, load4, q_rotate, saturate, store3, v_add, v_dot, v_length, v_length_sq, v_lerp,
     v_normalize, v_scale, v_sub,
 )
-from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3
-from magica_py.solver.batched.transfer import bload3
 from magica_py.solver.constraints.bending import FIXED_POINT
 from magica_py.solver.parameters import curve_at
 
@@ -178,163 +175,6 @@ def point_collision_team(m, ps, prm, ts, cs, team):
             store3(ps.next_pos, p, new_x)
             ps.friction[p] = friction
         store3(ps.collision_normal, p, n_acc)
-
-
-@kernel
-def _add_lane(sum_push_a, sum_n_a, n_acc_a, count_a, min_dist_a, k, x, r, d, n, x2, suspended, first):
-    """point_contact_add on the sums a block keeps in its scratch rows (row k); a suspended
-    collider (scale_suspend) leaves them as they are. ``first`` (the same in every lane): the
-    sums start from their initial values (``point_collision_team``'s) instead of the scratch.
-    Lane streams: the five sums are updated in place, push 1-3, normals 4-6, near normals 7-9,
-    count 10, closest distance 11 (see ``point_collision_block``)."""
-    z = (0.0, 0.0, 0.0)
-    loaded = (sload3(sum_push_a, k, 1), sload3(sum_n_a, k, 4), sload3(n_acc_a, k, 7), sload(count_a, k, 10),
-              sload(min_dist_a, k, 11))
-    old_push, old_n, old_near, old_count, old_min = (z, z, z, 0, FAR) if first else loaded
-    sum_push, sum_n, n_acc, count, min_dist = point_contact_add(old_push, old_n, old_near, old_count, old_min,
-                                                                x, r, d, n, x2)
-    keep = suspended != 0
-    sstore3(sum_push_a, k, old_push if keep else sum_push, 1)
-    sstore3(sum_n_a, k, old_n if keep else sum_n, 4)
-    sstore3(n_acc_a, k, old_near if keep else n_acc, 7)
-    sstore(count_a, k, old_count if keep else count, 10)
-    sstore(min_dist_a, k, old_min if keep else min_dist, 11)
-
-
-@kernel
-def _lanes_in_bounds(next_pos, scale, aabb_min, aabb_max, k0, c0, lanes, width, radius):
-    """How many lanes' particle bounds overlap their collider's AABB (a sphere or capsule slot
-    whose count is 0 changes nothing in any lane: the block skips it, as the per-team stage
-    skips each missed collider)."""
-    hits = 0
-    for i in range(width):
-        x = bload3(next_pos, k0 + np.uint64(i))
-        bmin, bmax = point_bounds(x, radius * scale[lanes + np.uint64(i)])
-        c = c0 + np.uint64(i)
-        hits += 1 if aabb_overlap(bmin, bmax, bload3(aabb_min, c), bload3(aabb_max, c)) else 0
-    return hits
-
-
-@kernel
-def point_collision_block(m, bs, prm, blk, b):
-    """D.8 point mode for every lane of block b (``solver/batched``): ``point_collision_team``'s
-    maths, lanes innermost. Per particle, collider slot after slot (the per-team order), a
-    particle's sums live in block scratch between slots: push in ``accum_vector``, penetrating
-    normals in ``accum_normal``, near normals in ``collision_normal`` (its final value is built
-    from them), count in ``accum_count``, closest distance in ``accum_friction``; the first slot
-    near any lane starts them from their initial values, the scratch is cleared again at the
-    end. A slot's shape is the same in every lane (block formation), so
-    the shape branch is outside the lane loop; AABB early-outs and suspension are selects.
-
-    Lane streams (``kernels/streams``): every lane loop writes only the particle's own rows
-    (k0 + lane) of the arrays it writes, each of which is either read at those rows in the same
-    stream (an in-place update) or not read; the collider rows and next_pos (except in the last
-    loop, where it is updated in place) are only read."""
-    ex = blk.block_exemplar[b]
-    width = blk.block_width[b]
-    lanes = np.uint64(blk.block_lane_base[b])
-    p0 = m.team_particle_start[ex]
-    slots = blk.block_collider_count[b]
-    if slots == 0:
-        return
-    z = (0.0, 0.0, 0.0)
-    next_pos, friction, normal_a = bs.next_pos, bs.friction, bs.collision_normal
-    sum_push_a, sum_n_a, count_a, min_dist_a = bs.accum_vector, bs.accum_normal, bs.accum_count, bs.accum_friction
-    scale = bs.lane_scale_ratio
-    shape_a, suspend_a = bs.col_shape, bs.col_scale_suspend
-    start_old, end_old, start_new, end_new = bs.col_start_old, bs.col_end_old, bs.col_start_new, bs.col_end_new
-    radius_start, radius_end, plane_normal = bs.col_radius_start, bs.col_radius_end, bs.col_plane_normal
-    inverse_old_rot, now_rot, aabb_min, aabb_max = bs.col_inverse_old_rot, bs.col_now_rot, bs.col_aabb_min, bs.col_aabb_max
-    for p in range(blk.block_particle_count[b]):
-        attr = m.attribute[p0 + p]
-        if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
-            continue
-        radius = max(curve_at(prm.radius_curve, ex, m.depth[p0 + p]), 0.0001)
-        k0 = np.uint64(blk.block_row_base[b] + p * width)
-        first_near = slots  # the first slot that is a plane or in some lane's bounds
-        for j in range(slots):
-            c0 = np.uint64(blk.block_collider_base[b] + j * width)
-            if (shape_a[c0] == PLANE
-                    or _lanes_in_bounds(next_pos, scale, aabb_min, aabb_max, k0, c0, lanes, width, radius) > 0):
-                first_near = j
-                break
-        if first_near == slots:  # no collider near in any lane: no push, friction kept, no contact normal
-            open_streams()
-            for i in range(width):
-                sstore3(normal_a, k0 + np.uint64(i), z, 1)
-            continue
-        # the slots before first_near reach no lane (their sums stay as initialised), first_near
-        # is known near and starts the sums; next_pos does not change before the result loop,
-        # so the bounds tests stand
-        for j in range(first_near, slots):
-            first = j == first_near
-            c0 = np.uint64(blk.block_collider_base[b] + j * width)
-            shape = shape_a[c0]
-            if shape != PLANE and j != first_near and _lanes_in_bounds(next_pos, scale, aabb_min, aabb_max, k0, c0,
-                                                                       lanes, width, radius) == 0:
-                continue  # no lane's particle near this slot's collider: every lane keeps its sums
-            open_streams()
-            if shape == PLANE:
-                for i in range(width):
-                    k = k0 + np.uint64(i)
-                    c = c0 + np.uint64(i)
-                    x = sload3(next_pos, k, READ)
-                    r = radius * sload(scale, lanes + np.uint64(i), READ)
-                    d, n, x2 = point_plane(x, r, sload3(start_new, c, READ), sload3(plane_normal, c, READ))
-                    _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d, n, x2,
-                              sload(suspend_a, c, READ), first)
-            elif shape == SPHERE:
-                for i in range(width):
-                    k = k0 + np.uint64(i)
-                    c = c0 + np.uint64(i)
-                    x = sload3(next_pos, k, READ)
-                    r = radius * sload(scale, lanes + np.uint64(i), READ)
-                    bmin, bmax = point_bounds(x, r)
-                    hit = aabb_overlap(bmin, bmax, sload3(aabb_min, c, READ), sload3(aabb_max, c, READ))
-                    d, n, x2 = point_sphere(x, r, sload3(start_old, c, READ), sload3(start_new, c, READ),
-                                            sload(radius_start, c, READ))
-                    _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d if hit else FAR,
-                              n if hit else z, x2 if hit else x, sload(suspend_a, c, READ), first)
-            else:
-                for i in range(width):
-                    k = k0 + np.uint64(i)
-                    c = c0 + np.uint64(i)
-                    x = sload3(next_pos, k, READ)
-                    r = radius * sload(scale, lanes + np.uint64(i), READ)
-                    bmin, bmax = point_bounds(x, r)
-                    hit = aabb_overlap(bmin, bmax, sload3(aabb_min, c, READ), sload3(aabb_max, c, READ))
-                    d, n, x2 = point_capsule(x, r, sload3(start_old, c, READ), sload3(end_old, c, READ),
-                                             sload3(start_new, c, READ), sload3(end_new, c, READ),
-                                             sload(radius_start, c, READ), sload(radius_end, c, READ),
-                                             sload4(inverse_old_rot, c, READ), sload4(now_rot, c, READ))
-                    _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d if hit else FAR,
-                              n if hit else z, x2 if hit else x, sload(suspend_a, c, READ), first)
-        touching = 0
-        for i in range(width):
-            k = k0 + np.uint64(i)
-            hit = (count_a[k] > 0) | (min_dist_a[k] <= radius * scale[lanes + np.uint64(i)])
-            touching += 1 if hit else 0
-        if touching == 0:  # no lane pushed or in range: the sums are as initialised, the normal 0
-            open_streams()
-            for i in range(width):
-                sstore(min_dist_a, k0 + np.uint64(i), 0.0, 1)
-            continue
-        # streams: next_pos 1-3, push 4-6, normals 7-9, count 10, near normals 11-13, closest
-        # distance 14, friction 15 (each read and written at the particle's rows)
-        open_streams()
-        for i in range(width):
-            k = k0 + np.uint64(i)
-            r = radius * sload(scale, lanes + np.uint64(i), READ)
-            new_x, f, normal = point_contact_result(
-                sload3(next_pos, k, 1), sload3(sum_push_a, k, 4), sload3(sum_n_a, k, 7), sload(count_a, k, 10),
-                sload3(normal_a, k, 11), sload(min_dist_a, k, 14), r, sload(friction, k, 15))
-            sstore3(next_pos, k, new_x, 1)
-            sstore(friction, k, f, 15)
-            sstore3(normal_a, k, normal, 11)
-            sstore3(sum_push_a, k, z, 4)
-            sstore3(sum_n_a, k, z, 7)
-            sstore(count_a, k, 0, 10)
-            sstore(min_dist_a, k, 0.0, 14)
 
 
 @kernel

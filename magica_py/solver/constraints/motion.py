@@ -7,11 +7,9 @@ curves are evaluated at depth^2.
 same bits."""
 from __future__ import annotations
 
-import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_rotate, store3, v_add, v_length, v_lerp, v_scale, v_sub
-from magica_py.kernels.streams import READ, open_streams, sload3, sload4, sstore3
 from magica_py.solver.parameters import curve_at
 
 MOVE = 0x02
@@ -86,41 +84,3 @@ def motion_team(m, ps, prm, team, attenuation):
         store3(ps.velocity_pos, p, v_add(load3(ps.velocity_pos, p), v_scale(v_sub(x, o), attenuation)))
 
 
-@kernel
-def motion_block(m, bs, prm, blk, b, attenuation):
-    """D.9 for every lane of block b: ``motion_team``'s maths, lanes innermost (the curves
-    are read per particle, outside the lane loop).
-
-    Lane streams (``kernels/streams``): the loop updates next_pos (1-3) and velocity_pos (4-6)
-    of the particle's rows in place; the animated pose is only read."""
-    ex = blk.block_exemplar[b]
-    use_max = prm.use_max_distance[ex] != 0
-    use_backstop = prm.use_backstop[ex] != 0
-    if not use_max and not use_backstop:
-        return
-    axis = normal_axis_vector(prm.normal_axis[ex])
-    width = blk.block_width[b]
-    row_base = blk.block_row_base[b]
-    p0 = m.team_particle_start[ex]
-    backstop_radius = prm.backstop_radius[ex]
-    stiffness = prm.motion_stiffness[ex]
-    next_pos_a, velocity_pos_a, base_pos_a, base_rot_a = bs.next_pos, bs.velocity_pos, bs.base_pos, bs.base_rot
-    for p in range(blk.block_particle_count[b]):
-        attr = m.attribute[p0 + p]
-        if (attr & MOVE) == 0 or (attr & INVALID_MOTION) != 0:
-            continue
-        depth = m.depth[p0 + p]
-        d2 = depth * depth
-        r = max(curve_at(prm.radius_curve, ex, depth), 1e-4)
-        max_distance = curve_at(prm.max_distance_curve, ex, d2)
-        backstop_distance = curve_at(prm.backstop_distance_curve, ex, d2)
-        k0 = np.uint64(row_base + p * width)
-        open_streams()
-        for i in range(width):
-            k = k0 + np.uint64(i)
-            direction = q_rotate(sload4(base_rot_a, k, READ), axis)
-            o = sload3(next_pos_a, k, 1)
-            x = solve_motion(o, sload3(base_pos_a, k, READ), direction, max_distance, use_max, use_backstop,
-                             backstop_distance, backstop_radius, r, stiffness)
-            sstore3(next_pos_a, k, x, 1)
-            sstore3(velocity_pos_a, k, v_add(sload3(velocity_pos_a, k, 4), v_scale(v_sub(x, o), attenuation)), 4)
