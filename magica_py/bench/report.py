@@ -229,7 +229,7 @@ def pareto_plot(path, results: list, title: str = "speed against short-horizon e
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     panels = [res for res in results if res.rows]
-    fig, axes = plt.subplots(1, max(1, len(panels)), figsize=(6.4 * max(1, len(panels)), 5.6), squeeze=False)
+    fig, axes = plt.subplots(1, max(1, len(panels)), figsize=(6.6 * max(1, len(panels)), 7.0), squeeze=False)
     markers = "osD^vp*hX"
     family_names = list(dict.fromkeys(r["family"] for res in panels for r in res.rows))
     colours = {f: plt.cm.tab10(i % 10) for i, f in enumerate(family_names)}
@@ -247,27 +247,32 @@ def pareto_plot(path, results: list, title: str = "speed against short-horizon e
             y = np.array([r["short_error"] for r in sel])
             xerr = np.array([[r["ms_per_frame"] - r["ms_q1"] for r in sel], [r["ms_q3"] - r["ms_per_frame"] for r in sel]])
             spread = spreads.get(family)
-            name = family if spread is None else f"{family} (frame-rate spread {spread:.2g} %)"
+            name = family if spread is None else f"{family}: frame-rate spread {spread:.2g} % of the chain"
             c = colours[family]
             ax.errorbar(x, y, xerr=np.maximum(xerr, 0), color=c, linewidth=1.2, elinewidth=0.8, capsize=2,
                         marker=None, label=None, zorder=2)
             resolved = np.array([r.get("resolved", "yes") == "yes" for r in sel])
             ax.plot(x, y, color=c, linewidth=1.2, zorder=2)
+            # one legend entry per family: filled when some of its points are resolved, hollow otherwise
             ax.scatter(x[resolved], y[resolved], color=c, marker=markers[i % len(markers)], s=30, zorder=3,
-                       label=name)
+                       label=name if resolved.any() else None)
             ax.scatter(x[~resolved], y[~resolved], facecolors="white", edgecolors=[c], marker=markers[i % len(markers)],
                        s=30, zorder=3, label=None if resolved.any() else name)
             points += list(zip(x, y))
             labels += [f"{r['frequency']}" for r in sel]
-        for ref in res.references:
-            ax.axhline(10 * ref["short_residual"], color="0.5", linestyle=":", linewidth=1.0, zorder=1,
-                       label=f"10x residual of the {ref['reference']} reference")
+        for ref in res.references:       # written on the line itself (the legend stays short)
+            level = 10 * ref["short_residual"]
+            colour = colours.get(ref["reference"], "0.4")
+            ax.axhline(level, color=colour, linestyle=":", linewidth=1.2, zorder=1)
+            ax.text(0.99, level, f"10x residual of the {ref['reference']} reference", color=colour, fontsize=6.5,
+                    ha="right", va="bottom", transform=ax.get_yaxis_transform(), zorder=1)
         front = pareto_front([(r["ms_per_frame"], r["short_error"]) for r in res.rows])
-        if len(front) > 1:
+        if len(front) > 1:       # a wide grey band behind the series: the points on the front stand out
             ax.plot([res.rows[i]["ms_per_frame"] for i in front], [res.rows[i]["short_error"] for i in front],
-                    color="black", linestyle="--", linewidth=0.9, zorder=4, label="Pareto front")
+                    color="black", alpha=0.22, linewidth=7, solid_capstyle="round", zorder=1, label="Pareto front")
         if any(r.get("resolved") == "NO" for r in res.rows):
-            ax.scatter([], [], facecolors="white", edgecolors="0.3", marker="o", s=30, label="not resolved (hollow)")
+            ax.scatter([], [], facecolors="white", edgecolors="0.3", marker="o", s=30,
+                       label="hollow: under 10x the reference's residual (not resolved)")
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.margins(x=0.08, y=0.1)
@@ -279,7 +284,7 @@ def pareto_plot(path, results: list, title: str = "speed against short-horizon e
         ax.set_title(f"{scene} (labels: simulation Hz)", fontsize=10)
         ax.grid(True, which="major", linewidth=0.4)
         ax.grid(True, which="minor", linewidth=0.15)
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(fontsize=7.5, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=1, frameon=False)
         to_label.append((ax, points, labels))
     fig.suptitle(title)
     fig.tight_layout()

@@ -15,7 +15,6 @@ stretch, penetration, and the time per frame (median and quartiles of interleave
 """
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass, field
 
@@ -225,6 +224,3 @@ def sweep_row(scene, variant, run, err_rms, err_max, short, timing, res_rms) -> 
         "max_penetration_mm": 1000 * float(run.penetration.max()),
     }
 
-
-def finite(values) -> bool:
-    return all(v is not None and math.isfinite(float(v)) for v in values)
