@@ -175,13 +175,19 @@ def extras_markdown(extra: dict) -> list:
 
 
 def log_ticks(ax, axis: str) -> None:
-    """Readable log-axis ticks: plain decimal labels at 1-2-5 steps (1-2-3-5-7 on a short
-    range, decades on a long one), no minor labels, so that labels never run together."""
+    """Readable log-axis ticks: plain decimal labels, denser on a short range (1-1.5-2-2.5-3-4...
+    under 0.6 decades, 1-2-3-5-7 under 1.2, 1-2-5 under 2.5, decades beyond), no minor labels,
+    so that labels never run together."""
     from matplotlib import ticker
 
     lo, hi = (ax.get_xlim() if axis == "x" else ax.get_ylim())
     decades = math.log10(hi / lo) if lo > 0 and hi > lo else 1.0
-    subs = (1.0, 2.0, 3.0, 5.0, 7.0) if decades < 0.8 else (1.0, 2.0, 5.0) if decades < 2.5 else (1.0,)
+    if decades < 0.6:
+        subs = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
+    elif decades < 1.2:
+        subs = (1.0, 2.0, 3.0, 5.0, 7.0)
+    else:
+        subs = (1.0, 2.0, 5.0) if decades < 2.5 else (1.0,)
     target = ax.xaxis if axis == "x" else ax.yaxis
     target.set_major_locator(ticker.LogLocator(base=10.0, subs=subs))
     target.set_major_formatter(ticker.FuncFormatter(lambda v, _pos: f"{v:g}"))
