@@ -143,3 +143,17 @@ def test_a_candidate_at_another_frequency_continues_on_the_snapshots_clock():
     candidate.player.restore(snapshot, keep_model=True)
     assert candidate.system.time_settings.frequency == 90
     assert steps(candidate, 6) == expected == [1, 2, 1, 2, 1, 2]
+
+
+def test_a_snapshot_survives_pickling_into_another_process():
+    """Batch workers (Dask) receive snapshots pickled: the copy restores the same state."""
+    import pickle
+
+    player, system = make_player("character_walk")
+    player.run(6)
+    snapshot = pickle.loads(pickle.dumps(player.capture()))
+    player.run(4)
+    first = state_hash(player, system)
+    player.restore(snapshot)
+    player.run(4)
+    assert state_hash(player, system) == first
