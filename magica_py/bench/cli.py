@@ -110,6 +110,7 @@ def main_bench(argv) -> int:
 
 
 def _bench(args, families: dict, executor) -> int:
+    from magica_py.bench import reference as REF
     from magica_py.bench import report as R
     from magica_py.bench import short_horizon as S
     from magica_py.bench import sweep as W
@@ -147,7 +148,8 @@ def _bench(args, families: dict, executor) -> int:
         sweep = [base.with_(label=f"{scene_name}/{m}/{f}", frequency=f, parameters=dict(params), family=m)
                  for m, params in families.items() for f in freqs]
         total = frames * (3 * n_refs + len(sweep) * (2 + args.repeats))
-        say(f"{scene_name}: {n_refs} reference(s) at 1440 Hz checked at 2880 Hz, {len(sweep)} variants, "
+        say(f"{scene_name}: {n_refs} reference(s) at {REF.REFERENCE_FREQUENCY} Hz checked at {REF.CHECK_FREQUENCY} Hz, "
+            f"{len(sweep)} variants, "
             f"{frames} frames each, windows of {S.window_frames(fps)} frames")
         progress = Progress(total, args.quiet)
         refs = W.run_references(base, families, S.window_frames(fps), progress=progress.run_callback())
@@ -160,8 +162,11 @@ def _bench(args, families: dict, executor) -> int:
             runs[i] = result
             progress.add(2 * frames)
         load.sample()
-        timings = time_repeats(sweep, repeats=args.repeats, progress=lambda v: (progress.add(frames)))
-        load.sample()
+        def timed(_variant):           # the load is sampled after every timed run
+            progress.add(frames)
+            load.sample()
+
+        timings = time_repeats(sweep, repeats=args.repeats, progress=timed)
         progress.close()
         rows = [W.sweep_row(scene_name, v, run, err_rms, err_max, short, timing,
                             refs[family_refs[v.family]].long_residual_rms)
