@@ -98,13 +98,16 @@ def bench_markdown(results: list, extra: dict, header: str) -> str:
     from magica_py.bench import short_horizon as S
     from magica_py.bench.reference import CHECK_FREQUENCY, REFERENCE_FREQUENCY
 
+    refs = [r for res in results for r in res.references]
+    ref_hz, check_hz = ((refs[0]["frequency"], refs[0]["check_frequency"]) if refs
+                        else (REFERENCE_FREQUENCY, CHECK_FREQUENCY))
     checks = [c for res in results for c in res.checks]
     failed = [c for c in checks if not c.ok]
     lines = [f"# magica-py bench ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())})", "", header, ""]
     lines += ["## Reference check", ""]
     if failed:
         lines += [f"**{len(failed)} of {len(checks)} references do not resolve the errors reported against them**: "
-                  f"their {REFERENCE_FREQUENCY}-vs-{CHECK_FREQUENCY} Hz short-horizon residual is not "
+                  f"their {ref_hz}-vs-{check_hz} Hz short-horizon residual is not "
                   f"{1 / S.RESOLUTION_RATIO:g}x below every such error. An error under {1 / S.RESOLUTION_RATIO:g}x the "
                   "residual (rows marked 'NO' in 'resolved', hollow in pareto.png) contains the reference's own error "
                   "at more than a tenth of its size: it is not a measurement of the candidate's error alone.", ""]
@@ -114,8 +117,8 @@ def bench_markdown(results: list, extra: dict, header: str) -> str:
               "(particles, velocities, step history, team clocks, poses; its own parameters, frequency and frame rate "
               "kept) and runs to the window's end; the error is the mean over the windows of the RMS over the moving "
               f"bones of |p - p_ref| / chain length at the window's end. Reference: the family's model at "
-              f"{REFERENCE_FREQUENCY} Hz with frequency-consistent rates (faithful mode: the frequency-consistent model); "
-              f"its residual is the same windows run at {CHECK_FREQUENCY} Hz. Long-horizon error: RMS over the "
+              f"{ref_hz} Hz with frequency-consistent rates (faithful mode: the frequency-consistent model); "
+              f"its residual is the same windows run at {check_hz} Hz. Long-horizon error: RMS over the "
               "frames where the reference's own long-horizon residual is under a tenth of the error (window). "
               "Times: whole player loop per frame, median and quartiles (q1, q3) of interleaved fresh runs after a "
               "warm-up. Stretch and penetration over every frame of the displayed bones.", "",

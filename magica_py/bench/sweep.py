@@ -100,30 +100,37 @@ class ReferenceRuns:
     long_residual_rms: np.ndarray     # (F,) fraction of the chain, 1440 vs 2880 Hz
     long_residual_max: np.ndarray     # (F,)
     short_residual: object            # short_horizon.WindowErrors of the 2880 Hz run
+    frequency: int = 1440             # Hz of the reference run
+    check_frequency: int = 2880       # Hz of its check
 
 
-def run_references(base, families: dict, frames_per_window: int, progress=None) -> dict:
-    """One ``ReferenceRuns`` per distinct reference of ``families`` (keyed by its name)."""
+def run_references(base, families: dict, frames_per_window: int, progress=None,
+                   frequency: int | None = None) -> dict:
+    """One ``ReferenceRuns`` per distinct reference of ``families`` (keyed by its name), at
+    ``frequency`` (default ``REFERENCE_FREQUENCY``) checked at twice that."""
     from magica_py.bench import metrics as M
+    from magica_py.bench import reference as REF
     from magica_py.bench import short_horizon as S
-    from magica_py.bench.reference import CHECK_FREQUENCY, REFERENCE_FREQUENCY
     from magica_py.bench.variants import run_variant
 
+    reference_frequency = int(frequency or REF.REFERENCE_FREQUENCY)
+    check_frequency = REF.CHECK_FREQUENCY if frequency is None else 2 * reference_frequency
     refs = {}
     for params in families.values():
         rp = reference_parameters(params)
         name = reference_name(rp)
         if name in refs:
             continue
-        v = base.with_(label=f"{base.label}@ref:{name}", frequency=REFERENCE_FREQUENCY, parameters=rp,
+        v = base.with_(label=f"{base.label}@ref:{name}", frequency=reference_frequency, parameters=rp,
                        family=f"reference {name}")
         run, windows = S.run_reference(v, frames_per_window, progress=progress)
-        check_v = v.with_(label=f"{base.label}@check:{name}", frequency=CHECK_FREQUENCY)
+        check_v = v.with_(label=f"{base.label}@check:{name}", frequency=check_frequency)
         check = run_variant(check_v, progress=progress)
         g = run.geometry
         res_rms, res_max = M.frame_errors(check.positions, run.positions, g.length_scale, g.moving)
         short = S.candidate_window_errors(check_v, windows)
-        refs[name] = ReferenceRuns(name, rp, run, windows, res_rms, res_max, short)
+        refs[name] = ReferenceRuns(name, rp, run, windows, res_rms, res_max, short, reference_frequency,
+                                   check_frequency)
     return refs
 
 
@@ -167,7 +174,8 @@ def summarise_scene(scene: str, rows: list, refs: dict, family_refs: dict, sprea
         g = ref.run.geometry
         users = [r for r in out.rows if family_refs[r["family"]] == name]
         errors = {f"{r['family']} {r['frequency']} Hz": r["short_error"] / 100 for r in users}
-        check = S.resolution_check(f"{scene}/{name}", ref.short_residual.mean_rms, errors)
+        check = S.resolution_check(f"{scene}/{name} ({ref.frequency} vs {ref.check_frequency} Hz)",
+                                   ref.short_residual.mean_rms, errors)
         out.checks.append(check)
         for r in users:
             r["resolved"] = "yes" if r["short_error"] / 100 >= ref.short_residual.mean_rms / S.RESOLUTION_RATIO else "NO"
@@ -178,6 +186,7 @@ def summarise_scene(scene: str, rows: list, refs: dict, family_refs: dict, sprea
             "long_residual_rms": 100 * float(np.sqrt(np.mean(ref.long_residual_rms ** 2))),
             "long_residual_max": 100 * float(ref.long_residual_max.max()),
             "check": "passes" if check.ok else "FAILS", "margin": check.margin,
+            "frequency": ref.frequency, "check_frequency": ref.check_frequency,
             "smallest_of": check.smallest_of})
     for family in dict.fromkeys(r["family"] for r in out.rows):
         sel = family_rows(out.rows, scene, family)
