@@ -191,10 +191,14 @@ def summarise_scene(scene: str, rows: list, refs: dict, family_refs: dict, sprea
     for family in dict.fromkeys(r["family"] for r in out.rows):
         sel = family_rows(out.rows, scene, family)
         order, r2 = fit_order([r["frequency"] for r in sel], [r["short_error"] for r in sel])
+        good = [r for r in sel if r.get("resolved") == "yes"]
+        order_resolved, r2_resolved = fit_order([r["frequency"] for r in good], [r["short_error"] for r in good])
         at = [r for r in sel if r["frequency"] == scene_frequency] or sel[:1]
         row = at[0]
         out.families.append({
             "scene": scene, "family": family, "reference": family_refs[family], "order": order, "r2": r2,
+            "order_resolved": order_resolved, "r2_resolved": r2_resolved, "resolved_points": len(good),
+            "points": len(sel),
             "frequency": row["frequency"], "short_error": row["short_error"], "spread": spreads.get(family),
             "max_edge_stretch": row["max_edge_stretch"], "max_root_stretch": row["max_root_stretch"],
             "max_penetration_mm": row["max_penetration_mm"], "ms_per_frame": row["ms_per_frame"]})
