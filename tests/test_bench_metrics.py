@@ -266,3 +266,14 @@ def test_kinetic_envelope_of_two_particles_at_known_speeds():
     assert e == pytest.approx([0.0, 1.0, 3.25])
     assert M.kinetic_envelope(pos, t, np.array([False, True, True]), window=2) == pytest.approx([0.0, 2.0, 6.5])
     assert M.kinetic_envelope(pos[::-1], t, np.array([False, True, True]), window=3)[-1] == pytest.approx(6.5)
+
+
+def test_log_axis_ticks_are_few_plain_values_inside_the_range():
+    from magica_py.bench.report import log_tick_values
+
+    assert log_tick_values(0.062, 0.27) == pytest.approx([0.07, 0.08, 0.1, 0.15, 0.2, 0.25])
+    assert log_tick_values(0.2, 4.0) == pytest.approx([0.2, 0.3, 0.5, 0.7, 1.0, 2.0, 3.0])
+    assert log_tick_values(0.01, 100.0) == pytest.approx([0.01, 0.1, 1.0, 10.0, 100.0])
+    for lo, hi in ((0.062, 0.27), (0.3, 0.45), (1e-3, 30.0), (0.2, 4.0)):
+        values = log_tick_values(lo, hi)
+        assert 1 <= len(values) <= 7 and all(lo <= v <= hi for v in values)

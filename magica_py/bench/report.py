@@ -181,25 +181,39 @@ def extras_markdown(extra: dict) -> list:
     return lines
 
 
+TICK_MANTISSAS = ((1.0,), (1.0, 2.0, 5.0), (1.0, 2.0, 3.0, 5.0, 7.0), (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0))
+
+
+def log_tick_values(lo: float, hi: float, most: int = 7) -> list:
+    """Tick values for a log axis from ``lo`` to ``hi``: the densest of the mantissa sets
+    1 / 1-2-5 / 1-2-3-5-7 / 1-1.5-2-2.5-3-4-...-8 (times powers of ten) that puts at most
+    ``most`` ticks in the range (the sparsest when none does)."""
+    if not (lo > 0 and hi > lo):
+        return []
+    best = None
+    for mantissas in TICK_MANTISSAS:
+        values = [m * 10.0 ** k for k in range(math.floor(math.log10(lo)) - 1, math.ceil(math.log10(hi)) + 1)
+                  for m in mantissas]
+        values = sorted(v for v in values if lo <= v <= hi)
+        if best is None or len(values) <= most:
+            best = values
+        if len(values) > most:
+            break
+    return best
+
+
 def log_ticks(ax, axis: str) -> None:
-    """Readable log-axis ticks: plain decimal labels, denser on a short range (1-1.5-2-2.5-3-4...
-    under 0.6 decades, 1-2-3-5-7 under 1.2, 1-2-5 under 2.5, decades beyond), no minor labels,
-    so that labels never run together."""
+    """Readable log-axis ticks: plain decimal labels at ``log_tick_values`` of the axis's
+    final limits, minor ticks unlabelled, so that labels never run together."""
     from matplotlib import ticker
 
     lo, hi = (ax.get_xlim() if axis == "x" else ax.get_ylim())
-    decades = math.log10(hi / lo) if lo > 0 and hi > lo else 1.0
-    if decades < 0.6:
-        subs = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
-    elif decades < 1.2:
-        subs = (1.0, 2.0, 3.0, 5.0, 7.0)
-    else:
-        subs = (1.0, 2.0, 5.0) if decades < 2.5 else (1.0,)
     target = ax.xaxis if axis == "x" else ax.yaxis
-    target.set_major_locator(ticker.LogLocator(base=10.0, subs=subs))
+    target.set_major_locator(ticker.FixedLocator(log_tick_values(lo, hi)))
     target.set_major_formatter(ticker.FuncFormatter(lambda v, _pos: f"{v:g}"))
     target.set_minor_locator(ticker.LogLocator(base=10.0, subs=tuple(range(1, 10))))
     target.set_minor_formatter(ticker.NullFormatter())
+    (ax.set_xlim if axis == "x" else ax.set_ylim)(lo, hi)
 
 
 def label_points(ax, points, labels, fontsize=7) -> int:
