@@ -22,8 +22,8 @@ position) and the systems' time settings (simulation frequency and step cap; tho
 in a snapshot). The team clocks (``TeamTimeState``) hold times in seconds, not step counts, so
 they carry over to another frequency as they are: the candidate's next step comes ``1/f``
 after the last step the snapshot's run took (``now_update_time``), and its planned step count
-is ``trunc((time + frame delta - now_update_time) * f)``; the phase of its step grid is the
-snapshot's. Another frame rate continues from the snapshot's game time with its own frame
+is ``trunc((time + frame delta - now_update_time) * f)`` (+ 1e-6 in exact timing): the phase
+of its step grid is the snapshot's. Another frame rate continues from the snapshot's game time with its own frame
 delta, so the snapshot must be taken at a time on the candidate's frame grid (the bench's
 windows are 0.25 s: a whole number of frames at 30, 60, 144 and 240 fps).
 
