@@ -73,13 +73,15 @@ def skin_team(m, ps, local_to_world, team):
 
     Vectorised over the team's vertices (``kernels.rows.load_input``: the loop only reads the
     model and the bone matrices and only writes position and rotation)."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_team_particle_count = m.team_particle_count
     l2w = flat(local_to_world)          # (nodes * 16,) bone matrices, gathered per vertex
     bind = flat(m.skin_bind_pose)       # (N * 16,)
     node_of = m.transform_index
     local_position, local_normal, local_tangent = flat(m.local_position), flat(m.local_normal), flat(m.local_tangent)
     position, rotation = flat(ps.position), flat(ps.rotation)
     start = np.uint64(m.team_particle_start[team])
-    for j in range(m.team_particle_count[team]):
+    for j in range(m_team_particle_count[team]):
         p = start + np.uint64(j)
         node = np.uint64(16) * np.uint64(node_of[p])
         b = np.uint64(16) * p
@@ -194,6 +196,11 @@ def component_pose_team(m, ts, team, world_position, world_rotation, lossy_scale
 def center_pose_team(m, ps, team, cpos, crot):
     """C.2 center of one team from its skinned pose in the team rows (the component pose when
     the team has no center-fixed vertex)."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_bind_rotation = m.bind_rotation
+    m_center_fixed = m.center_fixed
+    ps_position = ps.position
+    ps_rotation = ps.rotation
     c0 = m.team_center_start[team]
     cn = m.team_center_count[team]
     if cn == 0:
@@ -202,8 +209,8 @@ def center_pose_team(m, ps, team, cpos, crot):
     sn = (0.0, 0.0, 0.0)
     st = (0.0, 0.0, 0.0)
     for k in range(c0, c0 + cn):
-        f = m.center_fixed[k]
-        pos, nor, tan = center_fixed_terms(load3(ps.position, f), load4(ps.rotation, f), load4(m.bind_rotation, f))
+        f = m_center_fixed[k]
+        pos, nor, tan = center_fixed_terms(load3(ps_position, f), load4(ps_rotation, f), load4(m_bind_rotation, f))
         sp = v_add(sp, pos)
         sn = v_add(sn, nor)
         st = v_add(st, tan)
@@ -229,6 +236,14 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
                  frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step):
     """C.4 for one team once its component pose and center (C.2) are known: anchor, teleport,
     smoothing, world inertia, speed limits, the frame shift (see ``center_and_inertia_team``)."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    prm_time_based_smoothing = prm.time_based_smoothing
+    ts_frame_shift_vector = ts.frame_shift_vector
+    ts_now_world_pos = ts.now_world_pos
+    ts_old_frame_world_pos = ts.old_frame_world_pos
+    ts_old_frame_world_scale = ts.old_frame_world_scale
+    ts_old_world_pos = ts.old_world_pos
+    ts_smoothing_velocity = ts.smoothing_velocity
     store3(ts.frame_world_pos, team, center_pos)
     store4(ts.frame_world_rot, team, center_rot)
     store3(ts.frame_world_scale, team, cscl)
@@ -277,13 +292,13 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
     s = prm.movement_smoothing[team]
     limit = prm.movement_speed_limit[team]
     if s >= 1e-6 and not reset and not keep:
-        if prm.time_based_smoothing[team] != 0:
+        if prm_time_based_smoothing[team] != 0:
             felt = time_based_smoothing(ts, team, v_sub(cpos, old_pos), frame_delta_time, s, limit * ratio
                                         if limit >= 0.0 else -1.0)
             smooth_pos = v_sub(cpos, felt)
         else:
-            if math.isnan(ts.smoothing_velocity[team, 0]):  # quality switched off after a reset
-                store3(ts.smoothing_velocity, team, (0.0, 0.0, 0.0))
+            if math.isnan(ts_smoothing_velocity[team, 0]):  # quality switched off after a reset
+                store3(ts_smoothing_velocity, team, (0.0, 0.0, 0.0))
             if running:
                 v = (0.0, 0.0, 0.0)
                 if frame_delta_time > 0.0:
@@ -291,20 +306,20 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
                 if limit >= 0.0:
                     v = clamp_length(v, limit * ratio)
                 a = saturate((1.0 - s) ** 3 * 0.99 + 0.01)
-                store3(ts.smoothing_velocity, team, v_lerp(load3(ts.smoothing_velocity, team), v, a))
-            smooth_pos = v_sub(cpos, v_scale(load3(ts.smoothing_velocity, team), frame_delta_time))
+                store3(ts_smoothing_velocity, team, v_lerp(load3(ts_smoothing_velocity, team), v, a))
+            smooth_pos = v_sub(cpos, v_scale(load3(ts_smoothing_velocity, team), frame_delta_time))
         smooth_delta = v_sub(smooth_pos, old_pos)
         old_pos = smooth_pos
         shift = True
     # 4. reset: every history value becomes the current one
     if reset:
         for c in range(3):
-            ts.old_frame_world_pos[team, c] = center_pos[c]
-            ts.now_world_pos[team, c] = center_pos[c]
-            ts.old_world_pos[team, c] = center_pos[c]
-            ts.old_frame_world_scale[team, c] = cscl[c]
-            ts.smoothing_velocity[team, c] = math.nan if prm.time_based_smoothing[team] != 0 else 0.0
-            ts.frame_shift_vector[team, c] = 0.0
+            ts_old_frame_world_pos[team, c] = center_pos[c]
+            ts_now_world_pos[team, c] = center_pos[c]
+            ts_old_world_pos[team, c] = center_pos[c]
+            ts_old_frame_world_scale[team, c] = cscl[c]
+            ts_smoothing_velocity[team, c] = math.nan if prm_time_based_smoothing[team] != 0 else 0.0
+            ts_frame_shift_vector[team, c] = 0.0
         store4(ts.old_frame_world_rot, team, center_rot)
         store4(ts.now_world_rot, team, center_rot)
         store4(ts.old_world_rot, team, center_rot)
@@ -348,7 +363,7 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
             o = lerp(o, 1.0, saturate(skip_count * dt / (frame_delta_time * now_time_scale)))
         if ts.velocity_weight[team] < 1.0:
             w = ts.velocity_weight[team]
-            if prm.time_based_smoothing[team] != 0:
+            if prm_time_based_smoothing[team] != 0:
                 stab = prm.stabilization_time[team]
                 if stab > 1e-6:  # the ramp in continuous time: it rose since the last step too
                     w = saturate(w + max(since_last_step, 0.0) / stab)
@@ -365,11 +380,11 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
         if shift:
             vec = v_add(v_add(v_scale(shift_vec, ms), anchor_delta), smooth_delta)
             rot = q_mul(anchor_rot, q_slerp(IDENTITY, shift_rot, rs))
-            store3(ts.frame_shift_vector, team, vec)
+            store3(ts_frame_shift_vector, team, vec)
             store4(ts.frame_shift_rotation, team, rot)
-            store3(ts.old_frame_world_pos, team, shift_position(load3(ts.old_frame_world_pos, team), pivot, vec, rot))
+            store3(ts_old_frame_world_pos, team, shift_position(load3(ts_old_frame_world_pos, team), pivot, vec, rot))
             store4(ts.old_frame_world_rot, team, q_mul(rot, load4(ts.old_frame_world_rot, team)))
-            store3(ts.now_world_pos, team, shift_position(load3(ts.now_world_pos, team), pivot, vec, rot))
+            store3(ts_now_world_pos, team, shift_position(load3(ts_now_world_pos, team), pivot, vec, rot))
             store4(ts.now_world_rot, team, q_mul(rot, load4(ts.now_world_rot, team)))
             ts.inertia_shift[team] = 1
         # 6. wind bookkeeping
@@ -387,23 +402,39 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
 def snap_particles_to_base_pose(ps, start, end):
     """C.5 Reset of particles [start, end): every position history at this frame's animated
     pose, velocities, friction and collision normals zero (also used by the guards)."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    ps_base_pos = ps.base_pos
+    ps_base_rot = ps.base_rot
+    ps_collision_normal = ps.collision_normal
+    ps_disp_pos = ps.disp_pos
+    ps_friction = ps.friction
+    ps_next_pos = ps.next_pos
+    ps_old_pos = ps.old_pos
+    ps_old_position = ps.old_position
+    ps_old_rotation = ps.old_rotation
+    ps_position = ps.position
+    ps_real_velocity = ps.real_velocity
+    ps_rotation = ps.rotation
+    ps_static_friction = ps.static_friction
+    ps_velocity = ps.velocity
+    ps_velocity_pos = ps.velocity_pos
     for p in range(start, end):
-        pos = load3(ps.position, p)
-        rot = load4(ps.rotation, p)
+        pos = load3(ps_position, p)
+        rot = load4(ps_rotation, p)
         for c in range(3):
-            ps.next_pos[p, c] = pos[c]
-            ps.old_pos[p, c] = pos[c]
-            ps.base_pos[p, c] = pos[c]
-            ps.old_position[p, c] = pos[c]
-            ps.velocity_pos[p, c] = pos[c]
-            ps.disp_pos[p, c] = pos[c]
-            ps.velocity[p, c] = 0.0
-            ps.real_velocity[p, c] = 0.0
-            ps.collision_normal[p, c] = 0.0
-        store4(ps.base_rot, p, rot)
-        store4(ps.old_rotation, p, rot)
-        ps.friction[p] = 0.0
-        ps.static_friction[p] = 0.0
+            ps_next_pos[p, c] = pos[c]
+            ps_old_pos[p, c] = pos[c]
+            ps_base_pos[p, c] = pos[c]
+            ps_old_position[p, c] = pos[c]
+            ps_velocity_pos[p, c] = pos[c]
+            ps_disp_pos[p, c] = pos[c]
+            ps_velocity[p, c] = 0.0
+            ps_real_velocity[p, c] = 0.0
+            ps_collision_normal[p, c] = 0.0
+        store4(ps_base_rot, p, rot)
+        store4(ps_old_rotation, p, rot)
+        ps_friction[p] = 0.0
+        ps_static_friction[p] = 0.0
 
 
 @kernel
@@ -473,17 +504,31 @@ def distance_culling_team(prm, ts, team, world_position, component_transform):
 @kernel
 def end_frame_team(ts, team, running):
     """A.7: remember this frame's component and center, clear the per-frame flags."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    ts_component_pos = ts.component_pos
+    ts_component_rot = ts.component_rot
+    ts_component_scale = ts.component_scale
+    ts_external_force = ts.external_force
+    ts_frame_world_pos = ts.frame_world_pos
+    ts_frame_world_rot = ts.frame_world_rot
+    ts_frame_world_scale = ts.frame_world_scale
+    ts_old_component_pos = ts.old_component_pos
+    ts_old_component_rot = ts.old_component_rot
+    ts_old_component_scale = ts.old_component_scale
+    ts_old_frame_world_pos = ts.old_frame_world_pos
+    ts_old_frame_world_rot = ts.old_frame_world_rot
+    ts_old_frame_world_scale = ts.old_frame_world_scale
     for c in range(3):
-        ts.old_component_pos[team, c] = ts.component_pos[team, c]
-        ts.old_component_scale[team, c] = ts.component_scale[team, c]
+        ts_old_component_pos[team, c] = ts_component_pos[team, c]
+        ts_old_component_scale[team, c] = ts_component_scale[team, c]
         if running:
-            ts.old_frame_world_pos[team, c] = ts.frame_world_pos[team, c]
-            ts.old_frame_world_scale[team, c] = ts.frame_world_scale[team, c]
-            ts.external_force[team, c] = 0.0
+            ts_old_frame_world_pos[team, c] = ts_frame_world_pos[team, c]
+            ts_old_frame_world_scale[team, c] = ts_frame_world_scale[team, c]
+            ts_external_force[team, c] = 0.0
     for c in range(4):
-        ts.old_component_rot[team, c] = ts.component_rot[team, c]
+        ts_old_component_rot[team, c] = ts_component_rot[team, c]
         if running:
-            ts.old_frame_world_rot[team, c] = ts.frame_world_rot[team, c]
+            ts_old_frame_world_rot[team, c] = ts_frame_world_rot[team, c]
     if running:
         ts.external_force_mode[team] = 0
     ts.reset[team] = 0

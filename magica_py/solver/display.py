@@ -43,6 +43,8 @@ def display_clamped(f, root_position, position):
 
 @kernel
 def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, running):
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_team_particle_count = m.team_particle_count
     blend = ts.blend_weight[team]
     t = display_fraction(dt, time, old_time, now_update_time)
     time_based = prm.time_based_smoothing[team] != 0
@@ -58,7 +60,7 @@ def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, runn
     old_position, old_rotation = flat(ps.old_position), flat(ps.old_rotation)
     base_pos_buffer, base_rot_buffer = flat(ps.base_pos_buffer), flat(ps.base_rot_buffer)
     first = np.uint64(m.team_particle_start[team])
-    for j in range(m.team_particle_count[team]):
+    for j in range(m_team_particle_count[team]):
         p = first + np.uint64(j)
         v = np.uint64(3) * p
         q = np.uint64(4) * p

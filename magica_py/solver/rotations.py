@@ -177,6 +177,12 @@ def line_blend(bq, q, bw):
 @kernel
 def line_rotations_team(m, ps, prm, ts, team):
     """E.2 over the IncludeLine baselines of one team."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_baseline_count = m.baseline_count
+    m_baseline_data = m.baseline_data
+    m_baseline_flags = m.baseline_flags
+    m_baseline_start = m.baseline_start
+    m_team_baseline_count = m.team_baseline_count
     if m.team_has_lines[team] == 0:
         return
     ri = prm.rotational_interpolation[team]
@@ -191,12 +197,12 @@ def line_rotations_team(m, ps, prm, ts, team):
     position, rotation = flat(ps.position), flat(ps.rotation)
     base_pos_buffer, base_rot_buffer = flat(ps.base_pos_buffer), flat(ps.base_rot_buffer)
     b0 = m.team_baseline_start[team]
-    for b in range(b0, b0 + m.team_baseline_count[team]):
-        if (m.baseline_flags[b] & INCLUDE_LINE) == 0:
+    for b in range(b0, b0 + m_team_baseline_count[team]):
+        if (m_baseline_flags[b] & INCLUDE_LINE) == 0:
             continue
-        e0 = m.baseline_start[b]
-        for e in range(e0, e0 + m.baseline_count[b]):
-            x = np.uint64(m.baseline_data[e])
+        e0 = m_baseline_start[b]
+        for e in range(e0, e0 + m_baseline_count[b]):
+            x = np.uint64(m_baseline_data[e])
             attr = attribute[x]
             pos = row3(position, np.uint64(3) * x)
             q = row4(rotation, np.uint64(4) * x)
@@ -289,6 +295,8 @@ def triangle_rotations_team(m, ps, team):
     Both loops vectorise (``load_input``: each only reads what it does not write). The
     per-vertex sums run over ``TRIANGLES_PER_VERTEX`` slots, the unused ones selected away
     (same additions in the same order); a vertex with more triangles is left to a scalar pass."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_vertex_triangle_count = m.vertex_triangle_count
     t0 = m.team_triangle_start[team]
     tn_count = m.team_triangle_count[team]
     if tn_count == 0:
@@ -314,7 +322,7 @@ def triangle_rotations_team(m, ps, team):
         set_row3(triangle_tangent, np.uint64(3) * tri, tt)
     start = m.team_particle_start[team]
     count = m.team_particle_count[team]
-    vt_start, vt_count, vt_data, vt_flip = (m.vertex_triangle_start, m.vertex_triangle_count,
+    vt_start, vt_count, vt_data, vt_flip = (m.vertex_triangle_start, m_vertex_triangle_count,
                                             m.vertex_triangle_data, m.vertex_triangle_flip)
     rotation = flat(ps.rotation)
     crowded = 0
@@ -342,21 +350,27 @@ def triangle_rotations_team(m, ps, team):
             set_row4(rotation, np.uint64(4) * p, q)
     if crowded > 0:
         for p in range(start, start + count):
-            if m.vertex_triangle_count[p] > TRIANGLES_PER_VERTEX:
+            if m_vertex_triangle_count[p] > TRIANGLES_PER_VERTEX:
                 crowded_vertex_rotation(m, ps, p)
 
 
 @kernel
 def crowded_vertex_rotation(m, ps, p):
     """E.3 for a vertex with more than ``TRIANGLES_PER_VERTEX`` triangles (scalar)."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_vertex_triangle_count = m.vertex_triangle_count
+    m_vertex_triangle_data = m.vertex_triangle_data
+    m_vertex_triangle_flip = m.vertex_triangle_flip
+    ps_triangle_normal = ps.triangle_normal
+    ps_triangle_tangent = ps.triangle_tangent
     ns = (0.0, 0.0, 0.0)
     ts_ = (0.0, 0.0, 0.0)
     k0 = m.vertex_triangle_start[p]
-    for k in range(k0, k0 + m.vertex_triangle_count[p]):
-        tri = m.vertex_triangle_data[k]
-        flip = m.vertex_triangle_flip[k]
-        ns = add_flipped(ns, load3(ps.triangle_normal, tri), (flip & 1) != 0)
-        ts_ = add_flipped(ts_, load3(ps.triangle_tangent, tri), (flip & 2) != 0)
+    for k in range(k0, k0 + m_vertex_triangle_count[p]):
+        tri = m_vertex_triangle_data[k]
+        flip = m_vertex_triangle_flip[k]
+        ns = add_flipped(ns, load3(ps_triangle_normal, tri), (flip & 1) != 0)
+        ts_ = add_flipped(ts_, load3(ps_triangle_tangent, tri), (flip & 2) != 0)
     valid, q = vertex_frame_rotation(ns, ts_)
     if valid:
         store4(ps.rotation, p, q)

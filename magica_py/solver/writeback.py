@@ -42,11 +42,13 @@ def transform_data_team(m, ps, team):
     """World transform data of every bone of one team; returns False if any value is non-finite.
 
     Vectorised over the team's bones (flat rows, selects, the verdict AND-ed)."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_team_particle_count = m.team_particle_count
     position, rotation, v2t = flat(ps.position), flat(ps.rotation), flat(m.vertex_to_transform_rotation)
     transform_position, transform_rotation = flat(ps.transform_position), flat(ps.transform_rotation)
     ok = True
     first = np.uint64(m.team_particle_start[team])
-    for j in range(m.team_particle_count[team]):
+    for j in range(m_team_particle_count[team]):
         p = first + np.uint64(j)
         v = np.uint64(3) * p
         q = np.uint64(4) * p
@@ -85,6 +87,8 @@ def write_transforms_team(m, ps, team, parent_node, world_rotation, lossy_scale,
     Scalar: the writes are scatters (through transform_index) of 3- and 4-value rows, which
     LLVM's vectoriser cannot check for overlap (measured: "cannot identify array bounds" even
     with every access alias-tagged, ``kernels.rows.load_input``), so the branches stay."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_team_particle_count = m.team_particle_count
     # arrays as locals and flat rows: through the tables their pointers would be reloaded
     # after every store (the stores may alias the tables as far as LLVM knows)
     attribute, node_of, parent_of = m.attribute, m.transform_index, m.parent
@@ -92,7 +96,7 @@ def write_transforms_team(m, ps, team, parent_node, world_rotation, lossy_scale,
     world_rot, scale = flat(world_rotation), flat(lossy_scale)
     out_position, out_rotation = flat(local_position), flat(local_rotation)
     first = np.uint64(m.team_particle_start[team])
-    for j in range(m.team_particle_count[team]):
+    for j in range(m_team_particle_count[team]):
         p = first + np.uint64(j)
         attr = attribute[p]
         node = np.uint64(node_of[p])

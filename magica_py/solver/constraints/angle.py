@@ -266,6 +266,30 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
     (curve, rate conversion, gravity factor) and the rest direction (length, unit vector) of
     each particle are computed once per step in the buffering pass
     rather than in each of the 3 iterations (same operations on the same values: same bits)."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_attribute = m.attribute
+    m_baseline_count = m.baseline_count
+    m_baseline_data = m.baseline_data
+    m_baseline_start = m.baseline_start
+    m_depth = m.depth
+    m_parent = m.parent
+    m_team_baseline_count = m.team_baseline_count
+    ps_angle_inverse_mass = ps.angle_inverse_mass
+    ps_angle_length = ps.angle_length
+    ps_angle_limit = ps.angle_limit
+    ps_angle_limit_cos = ps.angle_limit_cos
+    ps_angle_local_pos = ps.angle_local_pos
+    ps_angle_local_rot = ps.angle_local_rot
+    ps_angle_rest_direction = ps.angle_rest_direction
+    ps_angle_rest_length = ps.angle_rest_length
+    ps_angle_rest_vector = ps.angle_rest_vector
+    ps_angle_restoration_k = ps.angle_restoration_k
+    ps_angle_rotation = ps.angle_rotation
+    ps_friction = ps.friction
+    ps_next_pos = ps.next_pos
+    ps_step_basic_pos = ps.step_basic_pos
+    ps_step_basic_rot = ps.step_basic_rot
+    ps_velocity_pos = ps.velocity_pos
     use_limit = prm.use_angle_limit[team] != 0
     use_restoration = prm.use_restoration[team] != 0
     if not use_limit and not use_restoration:
@@ -273,74 +297,74 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
     limit_stiffness = prm.limit_stiffness[team]
     gravity_factor = restoration_gravity_factor(prm.restoration_gravity_falloff[team], ts.gravity_dot[team])
     b0 = m.team_baseline_start[team]
-    for b in range(b0, b0 + m.team_baseline_count[team]):
-        e0 = m.baseline_start[b]
-        e1 = e0 + m.baseline_count[b]
+    for b in range(b0, b0 + m_team_baseline_count[team]):
+        e0 = m_baseline_start[b]
+        e1 = e0 + m_baseline_count[b]
         # buffering pass
         for e in range(e0, e1):
-            c = m.baseline_data[e]
-            store4(ps.angle_rotation, c, load4(ps.step_basic_rot, c))
+            c = m_baseline_data[e]
+            store4(ps_angle_rotation, c, load4(ps_step_basic_rot, c))
             # parents come first in a baseline (B.6), so wp below is always this step's value
-            ps.angle_inverse_mass[c] = inverse_mass_friction(ps.friction[c])
+            ps_angle_inverse_mass[c] = inverse_mass_friction(ps_friction[c])
             if e == e0:
                 continue
-            p = m.parent[c]
+            p = m_parent[c]
             length, local_pos, local_rot, rest_vector, rest_length, rest_direction = angle_buffer_entry(
-                load3(ps.next_pos, c), load3(ps.next_pos, p), load3(ps.step_basic_pos, c),
-                load3(ps.step_basic_pos, p), load4(ps.step_basic_rot, c), load4(ps.step_basic_rot, p),
-                load3(ps.angle_rest_direction, c))
-            ps.angle_length[c] = length
-            store3(ps.angle_local_pos, c, local_pos)
-            store4(ps.angle_local_rot, c, local_rot)
-            store3(ps.angle_rest_vector, c, rest_vector)
+                load3(ps_next_pos, c), load3(ps_next_pos, p), load3(ps_step_basic_pos, c),
+                load3(ps_step_basic_pos, p), load4(ps_step_basic_rot, c), load4(ps_step_basic_rot, p),
+                load3(ps_angle_rest_direction, c))
+            ps_angle_length[c] = length
+            store3(ps_angle_local_pos, c, local_pos)
+            store4(ps_angle_local_rot, c, local_rot)
+            store3(ps_angle_rest_vector, c, rest_vector)
             if use_restoration:  # the rest direction does not change over the iterations
-                ps.angle_rest_length[c] = rest_length
-                store3(ps.angle_rest_direction, c, rest_direction)
-                ps.angle_restoration_k[c] = restoration_rate_at(prm, team, m.depth[c], frequency_ratio,
+                ps_angle_rest_length[c] = rest_length
+                store3(ps_angle_rest_direction, c, rest_direction)
+                ps_angle_restoration_k[c] = restoration_rate_at(prm, team, m_depth[c], frequency_ratio,
                                                                 power_w) * gravity_factor
             if use_limit:
-                max_angle = limit_angle_at(prm, team, m.depth[c])
-                ps.angle_limit[c] = max_angle
-                ps.angle_limit_cos[c] = trig.cos(max_angle)
+                max_angle = limit_angle_at(prm, team, m_depth[c])
+                ps_angle_limit[c] = max_angle
+                ps_angle_limit_cos[c] = trig.cos(max_angle)
         for k in range(ITERATIONS):
             rest_pivot = lerp(0.1, 0.5, k / 2.0)
             for e in range(e0 + 1, e1):
-                c = m.baseline_data[e]
-                if (m.attribute[c] & MOVE) == 0:
+                c = m_baseline_data[e]
+                if (m_attribute[c] & MOVE) == 0:
                     continue
-                p = m.parent[c]
-                p_move = (m.attribute[p] & MOVE) != 0
-                cp = load3(ps.next_pos, c)
-                pp = load3(ps.next_pos, p)
+                p = m_parent[c]
+                p_move = (m_attribute[p] & MOVE) != 0
+                cp = load3(ps_next_pos, c)
+                pp = load3(ps_next_pos, p)
                 next_c = cp
-                vel_c = load3(ps.velocity_pos, c)
-                vel_p = load3(ps.velocity_pos, p)
-                wc = ps.angle_inverse_mass[c]
-                wp = ps.angle_inverse_mass[p]
+                vel_c = load3(ps_velocity_pos, c)
+                vel_p = load3(ps_velocity_pos, p)
+                wc = ps_angle_inverse_mass[c]
+                wp = ps_angle_inverse_mass[p]
                 if use_limit:
                     cp, pp, next_c, vel_c, vel_p, rot_c, edge, _rare = angle_limit_entry(
-                        cp, pp, vel_c, vel_p, load4(ps.angle_rotation, c), load4(ps.angle_rotation, p),
-                        load3(ps.angle_local_pos, c), load4(ps.angle_local_rot, c), ps.angle_length[c],
-                        ps.angle_limit[c], ps.angle_limit_cos[c], wc, wp, p_move, limit_stiffness,
+                        cp, pp, vel_c, vel_p, load4(ps_angle_rotation, c), load4(ps_angle_rotation, p),
+                        load3(ps_angle_local_pos, c), load4(ps_angle_local_rot, c), ps_angle_length[c],
+                        ps_angle_limit[c], ps_angle_limit_cos[c], wc, wp, p_move, limit_stiffness,
                         limit_attenuation, True)
-                    store4(ps.angle_rotation, c, rot_c)
+                    store4(ps_angle_rotation, c, rot_c)
                 else:
                     edge = edge_of(cp, pp)
                 next_p = pp
                 if use_restoration:
                     next_c, vel_c, next_p, vel_p, _rare = angle_restoration_entry(
-                        cp, pp, edge, next_c, vel_c, next_p, vel_p, ps.angle_rest_length[c],
-                        load3(ps.angle_rest_direction, c), ps.angle_restoration_k[c], rest_pivot, wc, wp,
+                        cp, pp, edge, next_c, vel_c, next_p, vel_p, ps_angle_rest_length[c],
+                        load3(ps_angle_rest_direction, c), ps_angle_restoration_k[c], rest_pivot, wc, wp,
                         p_move, restoration_attenuation, True)
-                store3(ps.next_pos, c, next_c)
-                store3(ps.velocity_pos, c, vel_c)
-                store3(ps.next_pos, p, next_p)
-                store3(ps.velocity_pos, p, vel_p)
+                store3(ps_next_pos, c, next_c)
+                store3(ps_velocity_pos, c, vel_c)
+                store3(ps_next_pos, p, next_p)
+                store3(ps_velocity_pos, p, vel_p)
         # clear the buffers
         for e in range(e0, e1):
-            c = m.baseline_data[e]
-            ps.angle_length[c] = 0.0
-            store3(ps.angle_local_pos, c, ZERO3)
-            store3(ps.angle_rest_vector, c, ZERO3)
+            c = m_baseline_data[e]
+            ps_angle_length[c] = 0.0
+            store3(ps_angle_local_pos, c, ZERO3)
+            store3(ps_angle_rest_vector, c, ZERO3)
 
 

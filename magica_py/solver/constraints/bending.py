@@ -153,22 +153,33 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
     The inverse mass of each particle is computed once per call into ``ps.bend_inverse_mass``
     (friction and depth do not change during the routine): a mesh vertex belongs to several
     bend pairs, so per-pair evaluation repeated the same division ~8 times per vertex."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_bend_rest_angle = m.bend_rest_angle
+    m_bend_sign = m.bend_sign
+    m_bend_vertices = m.bend_vertices
+    m_team_bend_count = m.team_bend_count
+    m_team_particle_count = m.team_particle_count
+    m_team_volume_count = m.team_volume_count
+    m_volume_rest = m.volume_rest
+    m_volume_vertices = m.volume_vertices
+    ps_bend_inverse_mass = ps.bend_inverse_mass
+    ps_next_pos = ps.next_pos
     k = bending_rate(prm, team, frequency_ratio, power_y)
     if k < 0.0:
         return
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        ps.bend_inverse_mass[p] = inverse_mass(m, ps, p)
-    w = ps.bend_inverse_mass
+    for p in range(start, start + m_team_particle_count[team]):
+        ps_bend_inverse_mass[p] = inverse_mass(m, ps, p)
+    w = ps_bend_inverse_mass
     b0 = m.team_bend_start[team]
-    for b in range(b0, b0 + m.team_bend_count[team]):
-        v0 = m.bend_vertices[b, 0]
-        v1 = m.bend_vertices[b, 1]
-        v2 = m.bend_vertices[b, 2]
-        v3 = m.bend_vertices[b, 3]
+    for b in range(b0, b0 + m_team_bend_count[team]):
+        v0 = m_bend_vertices[b, 0]
+        v1 = m_bend_vertices[b, 1]
+        v2 = m_bend_vertices[b, 2]
+        v3 = m_bend_vertices[b, 3]
         ok, c0, c1, c2, c3 = solve_dihedral(
-            load3(ps.next_pos, v0), load3(ps.next_pos, v1), load3(ps.next_pos, v2), load3(ps.next_pos, v3),
-            w[v0], w[v1], w[v2], w[v3], m.bend_rest_angle[b], m.bend_sign[b], k)
+            load3(ps_next_pos, v0), load3(ps_next_pos, v1), load3(ps_next_pos, v2), load3(ps_next_pos, v3),
+            w[v0], w[v1], w[v2], w[v3], m_bend_rest_angle[b], m_bend_sign[b], k)
         if ok:
             accumulate(ps, v0, c0)
             accumulate(ps, v1, c1)
@@ -176,14 +187,14 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
             accumulate(ps, v3, c3)
     scale = ts.scale_ratio[team]
     b0 = m.team_volume_start[team]
-    for b in range(b0, b0 + m.team_volume_count[team]):
-        v0 = m.volume_vertices[b, 0]
-        v1 = m.volume_vertices[b, 1]
-        v2 = m.volume_vertices[b, 2]
-        v3 = m.volume_vertices[b, 3]
+    for b in range(b0, b0 + m_team_volume_count[team]):
+        v0 = m_volume_vertices[b, 0]
+        v1 = m_volume_vertices[b, 1]
+        v2 = m_volume_vertices[b, 2]
+        v3 = m_volume_vertices[b, 3]
         ok, c0, c1, c2, c3 = solve_volume(
-            load3(ps.next_pos, v0), load3(ps.next_pos, v1), load3(ps.next_pos, v2), load3(ps.next_pos, v3),
-            w[v0], w[v1], w[v2], w[v3], m.volume_rest[b] * scale, k)
+            load3(ps_next_pos, v0), load3(ps_next_pos, v1), load3(ps_next_pos, v2), load3(ps_next_pos, v3),
+            w[v0], w[v1], w[v2], w[v3], m_volume_rest[b] * scale, k)
         if ok:
             accumulate(ps, v0, c0)
             accumulate(ps, v1, c1)
@@ -194,11 +205,17 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
 @kernel
 def apply_accumulated(m, ps, team, move_only):
     """Add the averaged accumulator to next_pos (moving particles only when ``move_only``) and clear it."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_attribute = m.attribute
+    m_team_particle_count = m.team_particle_count
+    ps_accum_count = ps.accum_count
+    ps_accum_vector = ps.accum_vector
+    ps_next_pos = ps.next_pos
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        if not move_only or (m.attribute[p] & MOVE) != 0:
-            store3(ps.next_pos, p, averaged(load3(ps.next_pos, p), load3(ps.accum_vector, p), ps.accum_count[p]))
-        store3(ps.accum_vector, p, ZERO3)
-        ps.accum_count[p] = 0
+    for p in range(start, start + m_team_particle_count[team]):
+        if not move_only or (m_attribute[p] & MOVE) != 0:
+            store3(ps_next_pos, p, averaged(load3(ps_next_pos, p), load3(ps_accum_vector, p), ps_accum_count[p]))
+        store3(ps_accum_vector, p, ZERO3)
+        ps_accum_count[p] = 0
 
 

@@ -73,6 +73,8 @@ def distance_stiffness(prm, team, depth, frequency_ratio, power_y):
 def distance_team(m, ps, prm, ts, team, frequency_ratio, power_y, attenuation):
     """D.4 over one team (Gauss-Seidel in particle order). The tables' arrays are read into
     locals once (a table field read in the loop would take and release a reference each time)."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_team_particle_count = m.team_particle_count
     start = m.team_particle_start[team]
     a = prm.animation_pose_ratio[team]
     s = m.team_init_scale[team, 0] * ts.scale_ratio[team]
@@ -80,7 +82,7 @@ def distance_team(m, ps, prm, ts, team, frequency_ratio, power_y, attenuation):
     distance_start, distance_count, distance_target, distance_rest = (
         m.distance_start, m.distance_count, m.distance_target, m.distance_rest)
     next_pos_a, base_pos_a, velocity_pos_a = ps.next_pos, ps.base_pos, ps.velocity_pos
-    for p in range(start, start + m.team_particle_count[team]):
+    for p in range(start, start + m_team_particle_count[team]):
         if (attribute[p] & MOVE) == 0:
             continue
         depth = depth_of[p]

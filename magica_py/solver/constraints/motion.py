@@ -62,25 +62,38 @@ def solve_motion(x, base_pos, direction, max_distance, use_max, use_backstop,
 @kernel
 def motion_team(m, ps, prm, team, attenuation):
     """D.9 over one team's moving particles (skipped when the team uses neither limit)."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_attribute = m.attribute
+    m_depth = m.depth
+    m_team_particle_count = m.team_particle_count
+    prm_backstop_distance_curve = prm.backstop_distance_curve
+    prm_backstop_radius = prm.backstop_radius
+    prm_max_distance_curve = prm.max_distance_curve
+    prm_motion_stiffness = prm.motion_stiffness
+    prm_radius_curve = prm.radius_curve
+    ps_base_pos = ps.base_pos
+    ps_base_rot = ps.base_rot
+    ps_next_pos = ps.next_pos
+    ps_velocity_pos = ps.velocity_pos
     use_max = prm.use_max_distance[team] != 0
     use_backstop = prm.use_backstop[team] != 0
     if not use_max and not use_backstop:
         return
     axis = normal_axis_vector(prm.normal_axis[team])
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        attr = m.attribute[p]
+    for p in range(start, start + m_team_particle_count[team]):
+        attr = m_attribute[p]
         if (attr & MOVE) == 0 or (attr & INVALID_MOTION) != 0:
             continue
-        d2 = m.depth[p] * m.depth[p]
-        r = max(curve_at(prm.radius_curve, team, m.depth[p]), 1e-4)
-        direction = q_rotate(load4(ps.base_rot, p), axis)
-        o = load3(ps.next_pos, p)
-        x = solve_motion(o, load3(ps.base_pos, p), direction,
-                         curve_at(prm.max_distance_curve, team, d2), use_max, use_backstop,
-                         curve_at(prm.backstop_distance_curve, team, d2), prm.backstop_radius[team],
-                         r, prm.motion_stiffness[team])
-        store3(ps.next_pos, p, x)
-        store3(ps.velocity_pos, p, v_add(load3(ps.velocity_pos, p), v_scale(v_sub(x, o), attenuation)))
+        d2 = m_depth[p] * m_depth[p]
+        r = max(curve_at(prm_radius_curve, team, m_depth[p]), 1e-4)
+        direction = q_rotate(load4(ps_base_rot, p), axis)
+        o = load3(ps_next_pos, p)
+        x = solve_motion(o, load3(ps_base_pos, p), direction,
+                         curve_at(prm_max_distance_curve, team, d2), use_max, use_backstop,
+                         curve_at(prm_backstop_distance_curve, team, d2), prm_backstop_radius[team],
+                         r, prm_motion_stiffness[team])
+        store3(ps_next_pos, p, x)
+        store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(v_sub(x, o), attenuation)))
 
 

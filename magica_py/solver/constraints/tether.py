@@ -43,17 +43,24 @@ def solve_tether(position, root_position, rest_length, compression_limit):
 @kernel
 def tether_team(m, ps, prm, team, attenuation):
     """D.3 over one team's moving particles; ``attenuation`` is the per-step velocity attenuation."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_attribute = m.attribute
+    m_root_index = m.root_index
+    m_team_particle_count = m.team_particle_count
+    ps_next_pos = ps.next_pos
+    ps_step_basic_pos = ps.step_basic_pos
+    ps_velocity_pos = ps.velocity_pos
     start = m.team_particle_start[team]
     compression_limit = 1.0 - prm.tether_compression[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        if (m.attribute[p] & MOVE) == 0:
+    for p in range(start, start + m_team_particle_count[team]):
+        if (m_attribute[p] & MOVE) == 0:
             continue
-        r = m.root_index[p]
+        r = m_root_index[p]
         if r < 0:
             continue
-        rest = v_length(v_sub(load3(ps.step_basic_pos, p), load3(ps.step_basic_pos, r)))
-        delta = solve_tether(load3(ps.next_pos, p), load3(ps.next_pos, r), rest, compression_limit)
-        store3(ps.next_pos, p, v_add(load3(ps.next_pos, p), delta))
-        store3(ps.velocity_pos, p, v_add(load3(ps.velocity_pos, p), v_scale(delta, attenuation)))
+        rest = v_length(v_sub(load3(ps_step_basic_pos, p), load3(ps_step_basic_pos, r)))
+        delta = solve_tether(load3(ps_next_pos, p), load3(ps_next_pos, r), rest, compression_limit)
+        store3(ps_next_pos, p, v_add(load3(ps_next_pos, p), delta))
+        store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(delta, attenuation)))
 
 
