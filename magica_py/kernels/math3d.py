@@ -265,7 +265,7 @@ def slerp_is_near(q1, q2):
 @kernel
 def slerp_near(q1, q2, t):
     """``q_slerp(q1, q2, t)`` where ``slerp_is_near(q1, q2)``: its lerp path alone (the same
-    bits; a lane loop whose lanes are all near takes it without the trigonometry)."""
+    bits without the trigonometry)."""
     b = (-q2[0], -q2[1], -q2[2], -q2[3]) if q_dot(q1, q2) < 0.0 else q2
     return q_normalize((
         q1[0] + (b[0] - q1[0]) * t,

@@ -32,8 +32,7 @@ TELEPORT_KEEP = 2
 @kernel
 def bind_point(b0, b1, b2, b3, v, w):
     """``B @ (v, w)`` with ``B`` the bind pose (rows b0..b3, 4-tuples): the 4-vector C.1 then
-    takes to world space with the bone's matrix (``world_point``). Constant per vertex: the
-    block form computes it once, when the blocks are formed (``batched/frame_begin``)."""
+    takes to world space with the bone's matrix (``world_point``)."""
     return (b0[0] * v[0] + b0[1] * v[1] + b0[2] * v[2] + b0[3] * w,
             b1[0] * v[0] + b1[1] * v[1] + b1[2] * v[2] + b1[3] * w,
             b2[0] * v[0] + b2[1] * v[1] + b2[2] * v[2] + b2[3] * w,
@@ -163,8 +162,7 @@ def mean_velocity_weight(w0, stabilization_time, span):
 @kernel
 def center_fixed_terms(position, rotation, bind_rotation):
     """C.2 terms of one center-fixed vertex: its position and the normal and tangent axes of
-    ``rotation * bind_rotation`` (summed over the fixed list by ``center_pose_team`` and, lanes
-    innermost, by ``batched/frame_begin.center_sums_block``). Branch-free."""
+    ``rotation * bind_rotation`` (summed over the fixed list by ``center_pose_team``). Branch-free."""
     q = q_mul(rotation, bind_rotation)
     return position, q_normal_axis(q), q_tangent_axis(q)
 

@@ -117,7 +117,7 @@ def capsule_ends(pos, rot, direction, reverse, aligned, size, s):
     return (v_add(pos, q_rotate(rot, v_scale(axis, a))), v_sub(pos, q_rotate(rot, v_scale(axis, b))), rs, re)
 
 
-@kernel(inline="always")  # numba-level: too big for LLVM's inliner, and a call stops vectorisation
+@kernel
 def collider_step_pose(old_frame_pos, frame_pos, old_frame_rot, frame_rot, old_pos, old_rot, t, mv, rv):
     """G.3 pose of one slot: (now_pos, now_rot, old_pos, old_rot, inverse old_rot) at frame
     interpolation t, the old pose pulled towards the new one by the team's local inertia ratios
@@ -150,7 +150,7 @@ def sphere_bounds(old_pos, now_pos, r):
 @kernel
 def collider_step_team(cs, ts, team, frame_interpolation):
     """G.3 at the start of a step: step pose, local-inertia shift of the old pose, work data
-    (block form: ``collider_step_block``, the same per-slot functions)."""
+    (per slot: ``collider_step_pose``, ``capsule_ends``, ``swept_bounds``)."""
     # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
     cs_aabb_max = cs.aabb_max
     cs_aabb_min = cs.aabb_min

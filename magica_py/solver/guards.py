@@ -26,8 +26,7 @@ def speed_limit_sq(scale_ratio):
 
 @kernel(inline="always")
 def particle_verdict(old_pos, real_velocity, velocity, disp_pos, limit_sq):
-    """(non-finite, too fast) of one particle after the steps (branch-free: the per-team and
-    the lane loops vectorise)."""
+    """(non-finite, too fast) of one particle after the steps (branch-free)."""
     finite = True
     s = 0.0
     for c in range(3):

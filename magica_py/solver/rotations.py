@@ -15,41 +15,16 @@ import numpy as np
 from magica_py.jit import kernel
 from magica_py.kernels.rows import flat, row3, row4, set_row3, set_row4
 from magica_py.kernels.math3d import (
-    from_to_rotation, from_to_rotation_unit, load3, orthogonal_axis, q_axis_angle, q_inverse, q_mul,
+    from_to_rotation, from_to_rotation_unit, load3, q_inverse, q_mul,
     q_rotate, q_slerp, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp, v_normalize, v_scale,
     v_sub,
 )
-from magica_py.kernels import trig
-from magica_py.solver.constraints.angle import swing_rotation
 
 FIXED = 0x01
 MOVE = 0x02
 ZERO_DISTANCE = 0x20
 INCLUDE_LINE = 0x01
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
-
-
-@kernel(inline="always")
-def from_to_rotation_fraction(a, b, t, full):
-    """``from_to_rotation_unit(a, b, t)`` (unit a, b), the same bits on every path, with one
-    sincos for both the opposite and the general case (the axis and angle are selected
-    first): a lane loop computes every branch, so two q_axis_angle would cost two sincos.
-    E.2's turn towards the children.
-
-    Returns (rotation, opposite); ``full`` False (a literal) leaves the opposite case out."""
-    c = v_dot(a, b)
-    c = 1.0 if c > 1.0 else c
-    c = -1.0 if c < -1.0 else c
-    opposite = abs(1.0 + c) < 1e-6
-    parallel = abs(1.0 - c) < 1e-6
-    axis = v_normalize(v_cross(a, b))
-    angle = trig.acos(c) * t
-    if full:
-        fallback_axis = orthogonal_axis(a)
-        axis = fallback_axis if opposite else axis
-        angle = math.pi * t if opposite else angle
-    q = q_axis_angle(axis, angle)
-    return (IDENTITY if (not opposite) & parallel else q), opposite
 
 
 @kernel
@@ -136,36 +111,22 @@ def line_child_pose(ibq, bp, rest_position, rest_rotation, base_pos_c, base_rot_
 
 
 @kernel(inline="always")
-def line_child_rotation(q, lq, tv, cur, zero, vector):
+def line_child_rotation(q, lq, tv, cur, zero):
     """E.2: rotation of a moving child: its rest rotation carried by x's rotation q, swung so
-    the rest edge ``tv`` matches the simulated edge ``cur`` (not for a zero-distance child).
-
-    Returns (rotation, rare). ``vector`` (a literal) True: branch-free (``angle.swing_rotation``
-    without its opposite case), ``rare`` True where that case was left out; False: ``full_swing``
-    (the same bits on every path, rare always False)."""
+    the rest edge ``tv`` matches the simulated edge ``cur`` (not for a zero-distance child)."""
     qc = q_mul(q, lq)
-    if vector:
-        swing, opposite = swing_rotation(v_normalize(tv), v_normalize(cur), False)
-        return (qc if zero else q_mul(swing, qc)), opposite & (not zero)
     if not zero:
         qc = q_mul(full_swing(v_normalize(tv), v_normalize(cur)), qc)
-    return qc, False
+    return qc
 
 
 @kernel(inline="always")
-def line_turn(q, ctv, cv, t, vector):
+def line_turn(q, ctv, cv, t):
     """E.2: x's rotation q turned by fraction t from its children's rest directions ``ctv``
-    towards their simulated ones ``cv`` (left as is when either sum is (near) zero).
-
-    Returns (rotation, rare); ``vector`` as in ``line_child_rotation`` (``from_to_rotation``
-    with its opposite case left out; rare where it was needed)."""
-    turn = (v_length(ctv) >= 1e-8) & (v_length(cv) >= 1e-8)
-    if vector:
-        r, opposite = from_to_rotation_fraction(v_normalize(ctv), v_normalize(cv), t, False)
-        return (q_mul(r, q) if turn else q), turn & opposite
-    if turn:
+    towards their simulated ones ``cv`` (left as is when either sum is (near) zero)."""
+    if (v_length(ctv) >= 1e-8) & (v_length(cv) >= 1e-8):
         q = q_mul(from_to_rotation(ctv, cv, t), q)
-    return q, False
+    return q
 
 
 @kernel(inline="always")
@@ -230,12 +191,12 @@ def line_rotations_team(m, ps, prm, ts, team):
                     if (attribute[c] & MOVE) != 0:
                         cur = v_sub(row3(position, c3), pos)
                         cv = v_add(cv, cur)
-                        qc, _rare = line_child_rotation(q, lq, tv, cur, zero, False)
+                        qc = line_child_rotation(q, lq, tv, cur, zero)
                         set_row4(rotation, c4, qc)
                     else:
                         cv = v_add(cv, tv)
                 t = ri if (attr & MOVE) != 0 else rr
-                q, _rare = line_turn(q, ctv, cv, t, False)
+                q = line_turn(q, ctv, cv, t)
             set_row4(rotation, np.uint64(4) * x, line_blend(bq, q, bw))
 
 
@@ -292,8 +253,7 @@ def triangle_rotations_team(m, ps, team):
     frame per (vertex, triangle) pair did the same work ~3 times. Positions do not change in
     E.3, so the frames and sums are bit-identical either way.
 
-    Both loops vectorise (``load_input``: each only reads what it does not write). The
-    per-vertex sums run over ``TRIANGLES_PER_VERTEX`` slots, the unused ones selected away
+    The per-vertex sums run over ``TRIANGLES_PER_VERTEX`` slots, the unused ones selected away
     (same additions in the same order); a vertex with more triangles is left to a scalar pass."""
     # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
     m_vertex_triangle_count = m.vertex_triangle_count

@@ -85,8 +85,7 @@ def write_transforms_team(m, ps, team, parent_node, world_rotation, lossy_scale,
     """Write one team's bones into the hierarchy's local pose arrays.
 
     Scalar: the writes are scatters (through transform_index) of 3- and 4-value rows, which
-    LLVM's vectoriser cannot check for overlap (measured: "cannot identify array bounds" even
-    with every access alias-tagged, ``kernels.rows.load_input``), so the branches stay."""
+    LLVM's vectoriser cannot check for overlap, so the branches stay."""
     # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
     m_team_particle_count = m.team_particle_count
     # arrays as locals and flat rows: through the tables their pointers would be reloaded

@@ -5,12 +5,9 @@ contribution truncated toward zero, §0.2), averaged by count and added to the m
 particles' ``next_pos`` (Jacobi, not Gauss-Seidel). ``velocity_pos`` is untouched, so the whole
 correction becomes velocity. The rest volume scales with scaleRatio, not its cube (Appendix 2.6).
 
-Two forms (``solver/batched``): ``bending_team`` / ``apply_accumulated`` run one team,
-``bending_block`` / ``apply_accumulated_block`` every lane of a block. Both call the same
-array-free per-element functions (``particle_inverse_mass``, ``solve_dihedral``,
-``solve_volume``, ``accumulated``, ``averaged``), which are branch-free (degenerate pairs
-are computed through and selected away), so the block's lane loops vectorise and give
-exactly the per-team bits.
+``bending_team`` / ``apply_accumulated`` run one team through array-free per-element
+functions (``particle_inverse_mass``, ``solve_dihedral``, ``solve_volume``, ``accumulated``,
+``averaged``), branch-free (degenerate pairs are computed through and selected away).
 """
 from __future__ import annotations
 

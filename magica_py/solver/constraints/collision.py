@@ -7,10 +7,8 @@ and averages (Jacobi). Neither touches ``velocity_pos``: the push becomes veloci
 Edge-mode friction is quantised to {0, 1} as MagicaCloth2's fixed-point max does (§0.2,
 Appendix 2.5): we reproduce it deliberately.
 
-Point mode has a block form (``point_collision_block``, lanes innermost, ``solver/batched``)
-calling the same array-free per-element functions (``point_sphere``, ``point_capsule``,
-``point_plane``, ``point_contact_add``, ``point_contact_result``) as ``point_collision_team``,
-so that both give the same bits.
+``point_collision_team`` calls array-free per-element functions (``point_sphere``,
+``point_capsule``, ``point_plane``, ``point_contact_add``, ``point_contact_result``).
 """
 from __future__ import annotations
 
@@ -36,7 +34,7 @@ FAR = 1e30
 @kernel
 def plane_push(c, n, p):
     """``IntersectPointPlaneDist``: push p onto the plane (c, n) when behind it; signed distance.
-    Both answers are computed and one selected (branch-free: a lane loop over it vectorises)."""
+    Both answers are computed and one selected (branch-free)."""
     v = v_sub(p, c)
     d = v_dot(v, n)
     g = v_scale(n, d)
@@ -61,7 +59,7 @@ def aabb_overlap(min_a, max_a, min_b, max_b):
             and max_a[1] >= min_b[1] and min_a[2] <= max_b[2] and max_a[2] >= min_b[2])
 
 
-# -- point mode, per element (array-free: the per-team and the block stage call the same maths)
+# -- point mode, per element (array-free)
 @kernel
 def point_bounds(x, r):
     """AABB of a particle sphere grown by the contact range (cfr = r): (min, max)."""

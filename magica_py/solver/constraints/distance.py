@@ -2,9 +2,8 @@
 links' corrections. Vertical links (parent/child) use the stiffness curve, horizontal and
 shear links half of it; a zero-rest link *overwrites* the accumulated correction (Appendix 2.1).
 
-``distance_team`` runs one team; ``distance_block`` runs every lane of a block
-(``solver/batched``) with the same per-element functions (``distance_link``,
-``distance_rest_length``, ``distance_apply``) in the same order, so both give the same bits.
+``distance_team`` runs one team through the per-element functions ``distance_link``,
+``distance_rest_length`` and ``distance_apply``.
 """
 from __future__ import annotations
 
@@ -28,7 +27,7 @@ ZERO3 = (0.0, 0.0, 0.0)
 def distance_link(p_pos, q_pos, rest, w_p, w_q, stiffness):
     """One link's correction of p, ``(L - L0) k (v/L) w_p/(w_p + w_q)``, and whether it counts
     (False, with a zero correction, when the link is degenerate: L < 1e-8). Branch-free: the
-    correction is computed either way and selected, so a lane loop over it vectorises.
+    correction is computed either way and selected.
     One division, by ``L (w_p + w_q)``, for the reference's two (docs/distance_bending_maths.md)."""
     v = v_sub(q_pos, p_pos)
     length = v_length(v)

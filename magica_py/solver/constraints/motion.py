@@ -2,9 +2,7 @@
 behind it. The reference is always the animated ``base_pos``; distances are not scaled and the
 curves are evaluated at depth^2.
 
-``motion_team`` runs one team; ``motion_block`` runs every lane of a block
-(``solver/batched``) with the same per-element function ``solve_motion``, so both give the
-same bits."""
+``motion_team`` runs one team through the per-element function ``solve_motion``."""
 from __future__ import annotations
 
 
@@ -35,7 +33,7 @@ def normal_axis_vector(axis):
 @kernel
 def clamp_length_selected(v, max_length):
     """``math3d.clamp_length`` (``clamp_len`` of §0.2) with the same bits, branch-free: the
-    shortened vector is computed either way and selected, so a lane loop over it vectorises."""
+    shortened vector is computed either way and selected."""
     n = v_length(v)
     shortened = v_scale(v, max_length / n)
     return shortened if (n > 1e-9) & (n > max_length) else v

@@ -1,9 +1,6 @@
 """Tether (docs/solver.md §D.3): keep each moving particle between (1 - compression) and 1.03 times its
 rest distance to its root. Only the particle moves; the root is infinitely heavy.
-
-``tether_team`` runs one team; ``tether_block`` runs every lane of a block
-(``solver/batched``) with the same per-element function ``solve_tether``, so both give the
-same bits."""
+``tether_team`` runs one team through the per-element function ``solve_tether``."""
 from __future__ import annotations
 
 
@@ -23,7 +20,7 @@ ZERO3 = (0.0, 0.0, 0.0)
 def solve_tether(position, root_position, rest_length, compression_limit):
     """Correction of ``position`` towards the allowed band around ``rest_length``: zero inside
     the band, when the particle sits on its root (< 1e-8) or when the rest length is zero.
-    Branch-free (selects, no branches) so that a lane loop over it vectorises."""
+    Branch-free (selects, no branches)."""
     v = v_sub(root_position, position)
     length = v_length(v)
     ratio = length / rest_length
