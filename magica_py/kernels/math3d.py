@@ -493,3 +493,9 @@ def inverse_mass_friction(friction):
 def inverse_mass_friction_depth(friction, depth):
     """``w_fd(f, depth) = 1 / (1 + 3 f + 5 (1 - depth)^2)``."""
     return 1.0 / (1.0 + FRICTION_MASS * friction + DEPTH_MASS * (1.0 - depth) * (1.0 - depth))
+
+
+@kernel
+def matrix_row(a, i, k):
+    """Row k of matrix i of a ``(n, 4, 4)`` array, as a tuple."""
+    return (a[i, k, 0], a[i, k, 1], a[i, k, 2], a[i, k, 3])

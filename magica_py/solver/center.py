@@ -9,16 +9,13 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
+    matrix_row,
     clamp_length, lerp, load3, load4, q_angle, q_from_to, q_inverse, q_mul, q_normal_axis,
     q_rotate, q_slerp, q_tangent_axis, rot_from_normal_tangent, saturate, shift_position,
     store3, store4, unlerp, v_add, v_length, v_lerp, v_normalize, v_scale, v_sub,
-)
-from magica_py.kernels.rows import (
-    flat, row3, row4, set_row3, set_row4,
 )
 from magica_py.solver.rotations import normalize_or_zero, rot_from_normal_tangent_select
 from magica_py.kernels import portable
@@ -68,31 +65,21 @@ def skin_vertex(l0, l1, l2, b0, b1, b2, b3, local_position, local_normal, local_
 
 @kernel
 def skin_team(m, ps, local_to_world, team):
-    """C.1: one-bone skinning of every vertex with this frame's bone matrices.
-
-    Vectorised over the team's vertices (``kernels.rows.load_input``: the loop only reads the
-    model and the bone matrices and only writes position and rotation)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_team_particle_count = m.team_particle_count
-    l2w = flat(local_to_world)          # (nodes * 16,) bone matrices, gathered per vertex
-    bind = flat(m.skin_bind_pose)       # (N * 16,)
-    node_of = m.transform_index
-    local_position, local_normal, local_tangent = flat(m.local_position), flat(m.local_normal), flat(m.local_tangent)
-    position, rotation = flat(ps.position), flat(ps.rotation)
-    start = np.uint64(m.team_particle_start[team])
-    for j in range(m_team_particle_count[team]):
-        p = start + np.uint64(j)
-        node = np.uint64(16) * np.uint64(node_of[p])
-        b = np.uint64(16) * p
-        v = np.uint64(3) * p
-        pos, rot = skin_vertex(row4(l2w, node), row4(l2w, node + np.uint64(4)),
-                               row4(l2w, node + np.uint64(8)),
-                               row4(bind, b), row4(bind, b + np.uint64(4)),
-                               row4(bind, b + np.uint64(8)), row4(bind, b + np.uint64(12)),
-                               row3(local_position, v), row3(local_normal, v),
-                               row3(local_tangent, v))
-        set_row3(position, v, pos)
-        set_row4(rotation, np.uint64(4) * p, rot)
+    """C.1: one-bone skinning of every vertex with this frame's bone matrices (a read-only pass
+    over the model and the bone matrices, writing position and rotation)."""
+    node_of, bind = m.transform_index, m.skin_bind_pose
+    local_position, local_normal, local_tangent = m.local_position, m.local_normal, m.local_tangent
+    position, rotation = ps.position, ps.rotation
+    start = m.team_particle_start[team]
+    for p in range(start, start + m.team_particle_count[team]):
+        node = node_of[p]
+        pos, rot = skin_vertex(matrix_row(local_to_world, node, 0), matrix_row(local_to_world, node, 1),
+                               matrix_row(local_to_world, node, 2),
+                               matrix_row(bind, p, 0), matrix_row(bind, p, 1), matrix_row(bind, p, 2),
+                               matrix_row(bind, p, 3),
+                               load3(local_position, p), load3(local_normal, p), load3(local_tangent, p))
+        store3(position, p, pos)
+        store4(rotation, p, rot)
 
 
 SMOOTHING_REFERENCE_RATE = 90.0   # 1/s: the frame rate at which the C.4 ratio is taken as is
@@ -461,24 +448,18 @@ def reset_or_shift_team(m, ps, ts, team):
         pivot = load3(ts.old_component_pos, team)
         vec = load3(ts.frame_shift_vector, team)
         rot = load4(ts.frame_shift_rotation, team)
-        # flat rows and unsigned indices: the loop vectorises (in-place updates of distinct
-        # arrays, which LLVM checks for overlap at run time)
-        old_pos, old_position, disp_pos = flat(ps.old_pos), flat(ps.old_position), flat(ps.disp_pos)
-        old_rotation, velocity, real_velocity = flat(ps.old_rotation), flat(ps.velocity), flat(ps.real_velocity)
-        first = np.uint64(start)
-        for j in range(end - start):
-            p = first + np.uint64(j)
-            v = np.uint64(3) * p
-            q = np.uint64(4) * p
-            a, b, c, r, u, w = shift_particle(row3(old_pos, v), row3(old_position, v), row3(disp_pos, v),
-                                              row4(old_rotation, q), row3(velocity, v), row3(real_velocity, v),
+        old_pos, old_position, disp_pos = ps.old_pos, ps.old_position, ps.disp_pos
+        old_rotation, velocity, real_velocity = ps.old_rotation, ps.velocity, ps.real_velocity
+        for p in range(start, end):
+            a, b, c, r, u, w = shift_particle(load3(old_pos, p), load3(old_position, p), load3(disp_pos, p),
+                                              load4(old_rotation, p), load3(velocity, p), load3(real_velocity, p),
                                               pivot, vec, rot)
-            set_row3(old_pos, v, a)
-            set_row3(old_position, v, b)
-            set_row3(disp_pos, v, c)
-            set_row4(old_rotation, q, r)
-            set_row3(velocity, v, u)
-            set_row3(real_velocity, v, w)
+            store3(old_pos, p, a)
+            store3(old_position, p, b)
+            store3(disp_pos, p, c)
+            store4(old_rotation, p, r)
+            store3(velocity, p, u)
+            store3(real_velocity, p, w)
 
 
 @kernel

@@ -5,12 +5,10 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, store3, store4
 from magica_py.solver.center import snap_particles_to_base_pose
-from magica_py.kernels.rows import flat, row3
 
 GUARD_OK = 0
 GUARD_NON_FINITE = 1
@@ -46,14 +44,13 @@ def check_team(m, ps, ts, team):
     # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
     m_team_particle_count = m.team_particle_count
     limit_sq = speed_limit_sq(ts.scale_ratio[team])
-    old_pos, real_velocity, velocity, disp_pos = flat(ps.old_pos), flat(ps.real_velocity), flat(ps.velocity), flat(ps.disp_pos)
-    first = np.uint64(3) * np.uint64(m.team_particle_start[team])
+    old_pos, real_velocity, velocity, disp_pos = ps.old_pos, ps.real_velocity, ps.velocity, ps.disp_pos
+    start = m.team_particle_start[team]
     non_finite = False
     too_fast = False
-    for j in range(m_team_particle_count[team]):
-        i = first + np.uint64(3) * np.uint64(j)
-        bad, fast = particle_verdict(row3(old_pos, i), row3(real_velocity, i), row3(velocity, i),
-                                     row3(disp_pos, i), limit_sq)
+    for p in range(start, start + m_team_particle_count[team]):
+        bad, fast = particle_verdict(load3(old_pos, p), load3(real_velocity, p), load3(velocity, p),
+                                     load3(disp_pos, p), limit_sq)
         non_finite = non_finite | bad
         too_fast = too_fast | fast
     return guard_code(non_finite, too_fast)
