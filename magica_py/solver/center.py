@@ -181,10 +181,8 @@ def component_pose_team(m, ts, team, world_position, world_rotation, lossy_scale
 def center_pose_team(m, ps, team, cpos, crot):
     """C.2 center of one team from its skinned pose in the team rows (the component pose when
     the team has no center-fixed vertex)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_bind_rotation = m.bind_rotation
-    m_center_fixed = m.center_fixed
-    ps_position = ps.position
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_bind_rotation, m_center_fixed, ps_position = m.bind_rotation, m.center_fixed, ps.position
     ps_rotation = ps.rotation
     c0 = m.team_center_start[team]
     cn = m.team_center_count[team]
@@ -221,13 +219,10 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
                  frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step):
     """C.4 for one team once its component pose and center (C.2) are known: anchor, teleport,
     smoothing, world inertia, speed limits, the frame shift (see ``center_and_inertia_team``)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    prm_time_based_smoothing = prm.time_based_smoothing
-    ts_frame_shift_vector = ts.frame_shift_vector
-    ts_now_world_pos = ts.now_world_pos
-    ts_old_frame_world_pos = ts.old_frame_world_pos
-    ts_old_frame_world_scale = ts.old_frame_world_scale
-    ts_old_world_pos = ts.old_world_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    prm_time_based_smoothing, ts_frame_shift_vector = prm.time_based_smoothing, ts.frame_shift_vector
+    ts_now_world_pos, ts_old_frame_world_pos = ts.now_world_pos, ts.old_frame_world_pos
+    ts_old_frame_world_scale, ts_old_world_pos = ts.old_frame_world_scale, ts.old_world_pos
     ts_smoothing_velocity = ts.smoothing_velocity
     store3(ts.frame_world_pos, team, center_pos)
     store4(ts.frame_world_rot, team, center_rot)
@@ -387,22 +382,12 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
 def snap_particles_to_base_pose(ps, start, end):
     """C.5 Reset of particles [start, end): every position history at this frame's animated
     pose, velocities, friction and collision normals zero (also used by the guards)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    ps_base_pos = ps.base_pos
-    ps_base_rot = ps.base_rot
-    ps_collision_normal = ps.collision_normal
-    ps_disp_pos = ps.disp_pos
-    ps_friction = ps.friction
-    ps_next_pos = ps.next_pos
-    ps_old_pos = ps.old_pos
-    ps_old_position = ps.old_position
-    ps_old_rotation = ps.old_rotation
-    ps_position = ps.position
-    ps_real_velocity = ps.real_velocity
-    ps_rotation = ps.rotation
-    ps_static_friction = ps.static_friction
-    ps_velocity = ps.velocity
-    ps_velocity_pos = ps.velocity_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    ps_base_pos, ps_base_rot, ps_collision_normal = ps.base_pos, ps.base_rot, ps.collision_normal
+    ps_disp_pos, ps_friction, ps_next_pos, ps_old_pos = ps.disp_pos, ps.friction, ps.next_pos, ps.old_pos
+    ps_old_position, ps_old_rotation, ps_position = ps.old_position, ps.old_rotation, ps.position
+    ps_real_velocity, ps_rotation, ps_static_friction = ps.real_velocity, ps.rotation, ps.static_friction
+    ps_velocity, ps_velocity_pos = ps.velocity, ps.velocity_pos
     for p in range(start, end):
         pos = load3(ps_position, p)
         rot = load4(ps_rotation, p)
@@ -483,19 +468,13 @@ def distance_culling_team(prm, ts, team, world_position, component_transform):
 @kernel
 def end_frame_team(ts, team, running):
     """A.7: remember this frame's component and center, clear the per-frame flags."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    ts_component_pos = ts.component_pos
-    ts_component_rot = ts.component_rot
-    ts_component_scale = ts.component_scale
-    ts_external_force = ts.external_force
-    ts_frame_world_pos = ts.frame_world_pos
-    ts_frame_world_rot = ts.frame_world_rot
-    ts_frame_world_scale = ts.frame_world_scale
-    ts_old_component_pos = ts.old_component_pos
-    ts_old_component_rot = ts.old_component_rot
-    ts_old_component_scale = ts.old_component_scale
-    ts_old_frame_world_pos = ts.old_frame_world_pos
-    ts_old_frame_world_rot = ts.old_frame_world_rot
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    ts_component_pos, ts_component_rot = ts.component_pos, ts.component_rot
+    ts_component_scale, ts_external_force = ts.component_scale, ts.external_force
+    ts_frame_world_pos, ts_frame_world_rot = ts.frame_world_pos, ts.frame_world_rot
+    ts_frame_world_scale, ts_old_component_pos = ts.frame_world_scale, ts.old_component_pos
+    ts_old_component_rot, ts_old_component_scale = ts.old_component_rot, ts.old_component_scale
+    ts_old_frame_world_pos, ts_old_frame_world_rot = ts.old_frame_world_pos, ts.old_frame_world_rot
     ts_old_frame_world_scale = ts.old_frame_world_scale
     for c in range(3):
         ts_old_component_pos[team, c] = ts_component_pos[team, c]

@@ -29,21 +29,12 @@ def _sign(x):
 @kernel
 def collider_frame_team(cs, ts, team, world_position, world_rotation, lossy_scale):
     """G.2 for the slots of one team: this frame's pose and the history update."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    cs_first_frame = cs.first_frame
-    cs_frame_pos = cs.frame_pos
-    cs_frame_rot = cs.frame_rot
-    cs_frame_scale = cs.frame_scale
-    cs_local_center = cs.local_center
-    cs_now_pos = cs.now_pos
-    cs_now_rot = cs.now_rot
-    cs_old_frame_pos = cs.old_frame_pos
-    cs_old_frame_rot = cs.old_frame_rot
-    cs_old_pos = cs.old_pos
-    cs_old_rot = cs.old_rot
-    cs_scale_suspend = cs.scale_suspend
-    cs_transform = cs.transform
-    ts_collider_count = ts.collider_count
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    cs_first_frame, cs_frame_pos, cs_frame_rot = cs.first_frame, cs.frame_pos, cs.frame_rot
+    cs_frame_scale, cs_local_center, cs_now_pos = cs.frame_scale, cs.local_center, cs.now_pos
+    cs_now_rot, cs_old_frame_pos, cs_old_frame_rot = cs.now_rot, cs.old_frame_pos, cs.old_frame_rot
+    cs_old_pos, cs_old_rot, cs_scale_suspend = cs.old_pos, cs.old_rot, cs.scale_suspend
+    cs_transform, ts_collider_count = cs.transform, ts.collider_count
     reset = ts.reset[team] != 0
     shift = ts.inertia_shift[team] != 0
     pivot = load3(ts.old_component_pos, team)
@@ -151,32 +142,15 @@ def sphere_bounds(old_pos, now_pos, r):
 def collider_step_team(cs, ts, team, frame_interpolation):
     """G.3 at the start of a step: step pose, local-inertia shift of the old pose, work data
     (per slot: ``collider_step_pose``, ``capsule_ends``, ``swept_bounds``)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    cs_aabb_max = cs.aabb_max
-    cs_aabb_min = cs.aabb_min
-    cs_aligned_on_center = cs.aligned_on_center
-    cs_direction = cs.direction
-    cs_end_new = cs.end_new
-    cs_end_old = cs.end_old
-    cs_frame_pos = cs.frame_pos
-    cs_frame_rot = cs.frame_rot
-    cs_frame_scale = cs.frame_scale
-    cs_inverse_old_rot = cs.inverse_old_rot
-    cs_now_pos = cs.now_pos
-    cs_now_rot = cs.now_rot
-    cs_old_frame_pos = cs.old_frame_pos
-    cs_old_frame_rot = cs.old_frame_rot
-    cs_old_pos = cs.old_pos
-    cs_old_rot = cs.old_rot
-    cs_plane_normal = cs.plane_normal
-    cs_radius_end = cs.radius_end
-    cs_radius_start = cs.radius_start
-    cs_reverse_direction = cs.reverse_direction
-    cs_shape = cs.shape
-    cs_size = cs.size
-    cs_start_new = cs.start_new
-    cs_start_old = cs.start_old
-    ts_collider_count = ts.collider_count
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    cs_aabb_max, cs_aabb_min, cs_aligned_on_center = cs.aabb_max, cs.aabb_min, cs.aligned_on_center
+    cs_direction, cs_end_new, cs_end_old, cs_frame_pos = cs.direction, cs.end_new, cs.end_old, cs.frame_pos
+    cs_frame_rot, cs_frame_scale, cs_inverse_old_rot = cs.frame_rot, cs.frame_scale, cs.inverse_old_rot
+    cs_now_pos, cs_now_rot, cs_old_frame_pos = cs.now_pos, cs.now_rot, cs.old_frame_pos
+    cs_old_frame_rot, cs_old_pos, cs_old_rot = cs.old_frame_rot, cs.old_pos, cs.old_rot
+    cs_plane_normal, cs_radius_end, cs_radius_start = cs.plane_normal, cs.radius_end, cs.radius_start
+    cs_reverse_direction, cs_shape, cs_size = cs.reverse_direction, cs.shape, cs.size
+    cs_start_new, cs_start_old, ts_collider_count = cs.start_new, cs.start_old, ts.collider_count
     t = frame_interpolation
     mv = ts.step_move_inertia_ratio[team]
     rv = ts.step_rotation_inertia_ratio[team]
@@ -228,11 +202,8 @@ def collider_step_team(cs, ts, team, frame_interpolation):
 @kernel
 def collider_end_step_team(cs, ts, team):
     """G.3 end of step: old = now."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    cs_now_pos = cs.now_pos
-    cs_now_rot = cs.now_rot
-    cs_old_pos = cs.old_pos
-    cs_old_rot = cs.old_rot
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    cs_now_pos, cs_now_rot, cs_old_pos, cs_old_rot = cs.now_pos, cs.now_rot, cs.old_pos, cs.old_rot
     ts_collider_count = ts.collider_count
     c0 = ts.collider_start[team]
     for k in range(c0, c0 + ts_collider_count[team]):
@@ -245,12 +216,9 @@ def collider_end_step_team(cs, ts, team):
 @kernel
 def collider_end_frame_team(cs, ts, team, running):
     """End of frame: if the team ran, the frame pose becomes the old frame pose."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    cs_frame_pos = cs.frame_pos
-    cs_frame_rot = cs.frame_rot
-    cs_old_frame_pos = cs.old_frame_pos
-    cs_old_frame_rot = cs.old_frame_rot
-    ts_collider_count = ts.collider_count
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    cs_frame_pos, cs_frame_rot, cs_old_frame_pos = cs.frame_pos, cs.frame_rot, cs.old_frame_pos
+    cs_old_frame_rot, ts_collider_count = cs.old_frame_rot, ts.collider_count
     if not running:
         return
     c0 = ts.collider_start[team]
@@ -264,16 +232,10 @@ def collider_end_frame_team(cs, ts, team, running):
 def fill_slots(cs, team_slots: list[tuple[int, list[int]]], collider_set) -> None:
     """Copy the static collider description into slots: ``team_slots`` is
     ``[(team, [collider indices]), ...]`` in slot order."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    cs_aligned_on_center = cs.aligned_on_center
-    cs_collider_index = cs.collider_index
-    cs_direction = cs.direction
-    cs_first_frame = cs.first_frame
-    cs_local_center = cs.local_center
-    cs_reverse_direction = cs.reverse_direction
-    cs_shape = cs.shape
-    cs_size = cs.size
-    cs_team = cs.team
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    cs_aligned_on_center, cs_collider_index = cs.aligned_on_center, cs.collider_index
+    cs_direction, cs_first_frame, cs_local_center = cs.direction, cs.first_frame, cs.local_center
+    cs_reverse_direction, cs_shape, cs_size, cs_team = cs.reverse_direction, cs.shape, cs.size, cs.team
     cs_transform = cs.transform
     k = 0
     for team, indices in team_slots:

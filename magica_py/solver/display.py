@@ -42,7 +42,7 @@ def display_clamped(f, root_position, position):
 
 @kernel
 def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, running):
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     m_team_particle_count = m.team_particle_count
     blend = ts.blend_weight[team]
     t = display_fraction(dt, time, old_time, now_update_time)

@@ -41,7 +41,7 @@ def check_team(m, ps, ts, team):
 
     One read-only pass with the verdicts OR-ed (no early exit: the loop vectorises); any
     non-finite value wins over a speed excess, as with the early return it replaces."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     m_team_particle_count = m.team_particle_count
     limit_sq = speed_limit_sq(ts.scale_ratio[team])
     old_pos, real_velocity, velocity, disp_pos = ps.old_pos, ps.real_velocity, ps.velocity, ps.disp_pos
@@ -66,10 +66,8 @@ def guard_code(non_finite, too_fast):
 @kernel
 def reset_team_to_base(m, ps, ts, team):
     """Snap a team's particles to this frame's animated pose with zero velocity (docs/solver.md §C.5 Reset)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    ps_position = ps.position
-    ps_rotation = ps.rotation
-    ps_step_basic_pos = ps.step_basic_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    ps_position, ps_rotation, ps_step_basic_pos = ps.position, ps.rotation, ps.step_basic_pos
     ps_step_basic_rot = ps.step_basic_rot
     start = m.team_particle_start[team]
     end = start + m.team_particle_count[team]

@@ -63,12 +63,9 @@ def clamp_to_sphere(x, center, radius):
 def tight_tether_team(m, ps, prm, team):
     """Root distance of every moving particle <= step-basic rest x (1 + tether_limit).
     The correction becomes velocity in full (plain PBD)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_attribute = m.attribute
-    m_root_index = m.root_index
-    m_team_particle_count = m.team_particle_count
-    ps_next_pos = ps.next_pos
-    ps_step_basic_pos = ps.step_basic_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_root_index, m_team_particle_count = m.attribute, m.root_index, m.team_particle_count
+    ps_next_pos, ps_step_basic_pos = ps.next_pos, ps.step_basic_pos
     limit = 1.0 + prm.tether_limit[team]
     start = m.team_particle_start[team]
     for p in range(start, start + m_team_particle_count[team]):
@@ -87,16 +84,10 @@ def ftl_team(m, ps, prm, team):
     """Follow-the-leader along each baseline (parents before children): every edge is at
     most its step-basic rest length. DFTL: the parent's velocity gets ``-s_damp`` x the
     child's correction (velocity_pos += s_damp x correction)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_attribute = m.attribute
-    m_baseline_count = m.baseline_count
-    m_baseline_data = m.baseline_data
-    m_baseline_start = m.baseline_start
-    m_parent = m.parent
-    m_team_baseline_count = m.team_baseline_count
-    ps_next_pos = ps.next_pos
-    ps_step_basic_pos = ps.step_basic_pos
-    ps_velocity_pos = ps.velocity_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
+    m_baseline_start, m_parent, m_team_baseline_count = m.baseline_start, m.parent, m.team_baseline_count
+    ps_next_pos, ps_step_basic_pos, ps_velocity_pos = ps.next_pos, ps.step_basic_pos, ps.velocity_pos
     damping = prm.ftl_damping[team]
     b0 = m.team_baseline_start[team]
     for b in range(b0, b0 + m_team_baseline_count[team]):
@@ -121,14 +112,9 @@ def edge_pass_team(m, ps, team):
     an edge longer than its step-basic rest length is shortened, both ends moving in
     proportion to their inverse masses (D.4's depth masses; fixed ends do not move).
     Corrections become velocity in full."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_attribute = m.attribute
-    m_depth = m.depth
-    m_edges = m.edges
-    m_team_edge_count = m.team_edge_count
-    ps_friction = ps.friction
-    ps_next_pos = ps.next_pos
-    ps_step_basic_pos = ps.step_basic_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_depth, m_edges, m_team_edge_count = m.attribute, m.depth, m.edges, m.team_edge_count
+    ps_friction, ps_next_pos, ps_step_basic_pos = ps.friction, ps.next_pos, ps.step_basic_pos
     e0 = m.team_edge_start[team]
     for e in range(e0, e0 + m_team_edge_count[team]):
         a = m_edges[e, 0]
@@ -156,15 +142,10 @@ def display_ftl_team(m, ps, ts, team):
     the edges the step kept. Rest length: the larger of the last step's (step-basic pose)
     and the build rest length at the current scale (the step-basic pose is not set before
     the first step, e.g. a first frame at 240 fps runs no 90 Hz step)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_attribute = m.attribute
-    m_baseline_count = m.baseline_count
-    m_baseline_data = m.baseline_data
-    m_baseline_local_position = m.baseline_local_position
-    m_baseline_start = m.baseline_start
-    m_parent = m.parent
-    m_team_baseline_count = m.team_baseline_count
-    ps_position = ps.position
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
+    m_baseline_local_position, m_baseline_start = m.baseline_local_position, m.baseline_start
+    m_parent, m_team_baseline_count, ps_position = m.parent, m.team_baseline_count, ps.position
     ps_step_basic_pos = ps.step_basic_pos
     s = v_scale(load3(m.team_init_scale, team), ts.scale_ratio[team])
     b0 = m.team_baseline_start[team]
@@ -221,12 +202,9 @@ def project_out_of_colliders(m, prm, ts, cs, team, positions, ps_old_pos):
     pass: projecting every such particle to the surface at once would tear the chain across
     the collider (81 % edge stretch in the engulfing case, 0 % this way). Once out, a
     particle is kept out."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    cs_scale_suspend = cs.scale_suspend
-    m_attribute = m.attribute
-    m_depth = m.depth
-    m_team_particle_count = m.team_particle_count
-    prm_radius_curve = prm.radius_curve
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    cs_scale_suspend, m_attribute, m_depth = cs.scale_suspend, m.attribute, m.depth
+    m_team_particle_count, prm_radius_curve = m.team_particle_count, prm.radius_curve
     scale = ts.scale_ratio[team]
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
@@ -286,7 +264,7 @@ def quality_restoration_attenuation(prm, team, frequency_ratio, converted):
 @kernel
 def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, distance_attenuation):
     """The quality passes of one team after D.9 (see the module docstring)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     prm_distance_iterations = prm.distance_iterations
     mode = prm.inextensibility[team]
     if mode == INEXT_FTL_EDGES:

@@ -137,12 +137,9 @@ def line_blend(bq, q, bw):
 @kernel
 def line_rotations_team(m, ps, prm, ts, team):
     """E.2 over the IncludeLine baselines of one team."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_baseline_count = m.baseline_count
-    m_baseline_data = m.baseline_data
-    m_baseline_flags = m.baseline_flags
-    m_baseline_start = m.baseline_start
-    m_team_baseline_count = m.team_baseline_count
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_baseline_count, m_baseline_data, m_baseline_flags = m.baseline_count, m.baseline_data, m.baseline_flags
+    m_baseline_start, m_team_baseline_count = m.baseline_start, m.team_baseline_count
     if m.team_has_lines[team] == 0:
         return
     ri = prm.rotational_interpolation[team]
@@ -252,7 +249,7 @@ def triangle_rotations_team(m, ps, team):
 
     The per-vertex sums run over ``TRIANGLES_PER_VERTEX`` slots, the unused ones selected away
     (same additions in the same order); a vertex with more triangles is left to a scalar pass."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     m_vertex_triangle_count = m.vertex_triangle_count
     t0 = m.team_triangle_start[team]
     tn_count = m.team_triangle_count[team]
@@ -306,11 +303,9 @@ def triangle_rotations_team(m, ps, team):
 @kernel
 def crowded_vertex_rotation(m, ps, p):
     """E.3 for a vertex with more than ``TRIANGLES_PER_VERTEX`` triangles (scalar)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_vertex_triangle_count = m.vertex_triangle_count
-    m_vertex_triangle_data = m.vertex_triangle_data
-    m_vertex_triangle_flip = m.vertex_triangle_flip
-    ps_triangle_normal = ps.triangle_normal
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_vertex_triangle_count, m_vertex_triangle_data = m.vertex_triangle_count, m.vertex_triangle_data
+    m_vertex_triangle_flip, ps_triangle_normal = m.vertex_triangle_flip, ps.triangle_normal
     ps_triangle_tangent = ps.triangle_tangent
     ns = (0.0, 0.0, 0.0)
     ts_ = (0.0, 0.0, 0.0)

@@ -172,22 +172,12 @@ def damping_keep_at(prm, team, depth, frequency_ratio, power_z):
 @kernel
 def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio, power_z):
     """D.1: animated pose at this step, inertia shift, damping, forces, prediction."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_attribute = m.attribute
-    m_depth = m.depth
-    m_team_particle_count = m.team_particle_count
-    ps_base_pos = ps.base_pos
-    ps_base_rot = ps.base_rot
-    ps_next_pos = ps.next_pos
-    ps_old_pos = ps.old_pos
-    ps_old_position = ps.old_position
-    ps_old_rotation = ps.old_rotation
-    ps_position = ps.position
-    ps_rotation = ps.rotation
-    ps_step_basic_pos = ps.step_basic_pos
-    ps_step_basic_rot = ps.step_basic_rot
-    ps_velocity = ps.velocity
-    ps_velocity_pos = ps.velocity_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_depth, m_team_particle_count = m.attribute, m.depth, m.team_particle_count
+    ps_base_pos, ps_base_rot, ps_next_pos, ps_old_pos = ps.base_pos, ps.base_rot, ps.next_pos, ps.old_pos
+    ps_old_position, ps_old_rotation, ps_position = ps.old_position, ps.old_rotation, ps.position
+    ps_rotation, ps_step_basic_pos, ps_step_basic_rot = ps.rotation, ps.step_basic_pos, ps.step_basic_rot
+    ps_velocity, ps_velocity_pos = ps.velocity, ps.velocity_pos
     t = frame_interpolation
     old_world_pos = load3(ts.old_world_pos, team)
     inertia_vector = load3(ts.inertia_vector, team)
@@ -249,17 +239,11 @@ def basic_pose_blend(pos, rot, base_pos, base_rot, ratio):
 @kernel
 def step_basic_pose_team(m, ps, prm, ts, team):
     """D.2: rebuild the rest shape along each baseline and blend it to the animated pose."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_baseline_count = m.baseline_count
-    m_baseline_data = m.baseline_data
-    m_baseline_local_position = m.baseline_local_position
-    m_baseline_local_rotation = m.baseline_local_rotation
-    m_baseline_start = m.baseline_start
-    m_parent = m.parent
-    m_team_baseline_count = m.team_baseline_count
-    ps_base_pos = ps.base_pos
-    ps_base_rot = ps.base_rot
-    ps_step_basic_pos = ps.step_basic_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_baseline_count, m_baseline_data = m.baseline_count, m.baseline_data
+    m_baseline_local_position, m_baseline_local_rotation = m.baseline_local_position, m.baseline_local_rotation
+    m_baseline_start, m_parent, m_team_baseline_count = m.baseline_start, m.parent, m.team_baseline_count
+    ps_base_pos, ps_base_rot, ps_step_basic_pos = ps.base_pos, ps.base_rot, ps.step_basic_pos
     ps_step_basic_rot = ps.step_basic_rot
     a = prm.animation_pose_ratio[team]
     if a > 0.99:
@@ -338,18 +322,11 @@ def centrifugal_velocity(vel, next_pos, direction, moving, depth, angular_veloci
 @kernel
 def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
     """D.10: velocity from positions, static and dynamic friction, speed limit, centrifugal term."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_attribute = m.attribute
-    m_depth = m.depth
-    m_team_particle_count = m.team_particle_count
-    ps_collision_normal = ps.collision_normal
-    ps_friction = ps.friction
-    ps_next_pos = ps.next_pos
-    ps_old_pos = ps.old_pos
-    ps_real_velocity = ps.real_velocity
-    ps_static_friction = ps.static_friction
-    ps_velocity = ps.velocity
-    ps_velocity_pos = ps.velocity_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_depth, m_team_particle_count = m.attribute, m.depth, m.team_particle_count
+    ps_collision_normal, ps_friction, ps_next_pos = ps.collision_normal, ps.friction, ps.next_pos
+    ps_old_pos, ps_real_velocity, ps_static_friction = ps.old_pos, ps.real_velocity, ps.static_friction
+    ps_velocity, ps_velocity_pos = ps.velocity, ps.velocity_pos
     mode = prm.rate_mode[team]
     scale = ts.scale_ratio[team]
     static_threshold = prm.friction[team] * scale

@@ -41,7 +41,7 @@ def transform_data_team(m, ps, team):
     """World transform data of every bone of one team; returns False if any value is non-finite.
 
     Vectorised over the team's bones (flat rows, selects, the verdict AND-ed)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     m_team_particle_count = m.team_particle_count
     position, rotation, v2t = ps.position, ps.rotation, m.vertex_to_transform_rotation
     transform_position, transform_rotation = ps.transform_position, ps.transform_rotation
@@ -83,7 +83,7 @@ def write_transforms_team(m, ps, team, parent_node, world_rotation, lossy_scale,
 
     Scalar: the writes are scatters (through transform_index) of 3- and 4-value rows, which
     LLVM's vectoriser cannot check for overlap, so the branches stay."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     m_team_particle_count = m.team_particle_count
     # arrays as locals and flat rows: through the tables their pointers would be reloaded
     # after every store (the stores may alias the tables as far as LLVM knows)

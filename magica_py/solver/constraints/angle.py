@@ -247,29 +247,16 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
     (curve, rate conversion, gravity factor) and the rest direction (length, unit vector) of
     each particle are computed once per step in the buffering pass
     rather than in each of the 3 iterations (same operations on the same values: same bits)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_attribute = m.attribute
-    m_baseline_count = m.baseline_count
-    m_baseline_data = m.baseline_data
-    m_baseline_start = m.baseline_start
-    m_depth = m.depth
-    m_parent = m.parent
-    m_team_baseline_count = m.team_baseline_count
-    ps_angle_inverse_mass = ps.angle_inverse_mass
-    ps_angle_length = ps.angle_length
-    ps_angle_limit = ps.angle_limit
-    ps_angle_limit_cos = ps.angle_limit_cos
-    ps_angle_local_pos = ps.angle_local_pos
-    ps_angle_local_rot = ps.angle_local_rot
-    ps_angle_rest_direction = ps.angle_rest_direction
-    ps_angle_rest_length = ps.angle_rest_length
-    ps_angle_rest_vector = ps.angle_rest_vector
-    ps_angle_restoration_k = ps.angle_restoration_k
-    ps_angle_rotation = ps.angle_rotation
-    ps_friction = ps.friction
-    ps_next_pos = ps.next_pos
-    ps_step_basic_pos = ps.step_basic_pos
-    ps_step_basic_rot = ps.step_basic_rot
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
+    m_baseline_start, m_depth, m_parent = m.baseline_start, m.depth, m.parent
+    m_team_baseline_count, ps_angle_inverse_mass = m.team_baseline_count, ps.angle_inverse_mass
+    ps_angle_length, ps_angle_limit, ps_angle_limit_cos = ps.angle_length, ps.angle_limit, ps.angle_limit_cos
+    ps_angle_local_pos, ps_angle_local_rot = ps.angle_local_pos, ps.angle_local_rot
+    ps_angle_rest_direction, ps_angle_rest_length = ps.angle_rest_direction, ps.angle_rest_length
+    ps_angle_rest_vector, ps_angle_restoration_k = ps.angle_rest_vector, ps.angle_restoration_k
+    ps_angle_rotation, ps_friction, ps_next_pos = ps.angle_rotation, ps.friction, ps.next_pos
+    ps_step_basic_pos, ps_step_basic_rot = ps.step_basic_pos, ps.step_basic_rot
     ps_velocity_pos = ps.velocity_pos
     use_limit = prm.use_angle_limit[team] != 0
     use_restoration = prm.use_restoration[team] != 0

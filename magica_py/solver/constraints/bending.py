@@ -150,17 +150,11 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
     The inverse mass of each particle is computed once per call into ``ps.bend_inverse_mass``
     (friction and depth do not change during the routine): a mesh vertex belongs to several
     bend pairs, so per-pair evaluation repeated the same division ~8 times per vertex."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_bend_rest_angle = m.bend_rest_angle
-    m_bend_sign = m.bend_sign
-    m_bend_vertices = m.bend_vertices
-    m_team_bend_count = m.team_bend_count
-    m_team_particle_count = m.team_particle_count
-    m_team_volume_count = m.team_volume_count
-    m_volume_rest = m.volume_rest
-    m_volume_vertices = m.volume_vertices
-    ps_bend_inverse_mass = ps.bend_inverse_mass
-    ps_next_pos = ps.next_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_bend_rest_angle, m_bend_sign, m_bend_vertices = m.bend_rest_angle, m.bend_sign, m.bend_vertices
+    m_team_bend_count, m_team_particle_count = m.team_bend_count, m.team_particle_count
+    m_team_volume_count, m_volume_rest = m.team_volume_count, m.volume_rest
+    m_volume_vertices, ps_bend_inverse_mass, ps_next_pos = m.volume_vertices, ps.bend_inverse_mass, ps.next_pos
     k = bending_rate(prm, team, frequency_ratio, power_y)
     if k < 0.0:
         return
@@ -202,12 +196,9 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
 @kernel
 def apply_accumulated(m, ps, team, move_only):
     """Add the averaged accumulator to next_pos (moving particles only when ``move_only``) and clear it."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_attribute = m.attribute
-    m_team_particle_count = m.team_particle_count
-    ps_accum_count = ps.accum_count
-    ps_accum_vector = ps.accum_vector
-    ps_next_pos = ps.next_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_team_particle_count, ps_accum_count = m.attribute, m.team_particle_count, ps.accum_count
+    ps_accum_vector, ps_next_pos = ps.accum_vector, ps.next_pos
     start = m.team_particle_start[team]
     for p in range(start, start + m_team_particle_count[team]):
         if not move_only or (m_attribute[p] & MOVE) != 0:

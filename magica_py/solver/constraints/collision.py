@@ -147,15 +147,10 @@ def solve_point_collider(cs, k, x, r, bmin, bmax):
 @kernel
 def point_collision_team(m, ps, prm, ts, cs, team):
     """D.8 point mode over one team's moving particles."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    cs_scale_suspend = cs.scale_suspend
-    m_attribute = m.attribute
-    m_depth = m.depth
-    m_team_particle_count = m.team_particle_count
-    prm_radius_curve = prm.radius_curve
-    ps_collision_normal = ps.collision_normal
-    ps_friction = ps.friction
-    ps_next_pos = ps.next_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    cs_scale_suspend, m_attribute, m_depth = cs.scale_suspend, m.attribute, m.depth
+    m_team_particle_count, prm_radius_curve = m.team_particle_count, prm.radius_curve
+    ps_collision_normal, ps_friction, ps_next_pos = ps.collision_normal, ps.friction, ps.next_pos
     start = m.team_particle_start[team]
     scale = ts.scale_ratio[team]
     c0 = ts.collider_start[team]
@@ -252,21 +247,12 @@ def solve_edge_collider(cs, k, a, b, ra, rb, cfr, bmin, bmax):
 @kernel
 def edge_collision_team(m, ps, prm, ts, cs, team):
     """D.8 edge mode over one team's edges (accumulate), then the sum step."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    cs_scale_suspend = cs.scale_suspend
-    m_attribute = m.attribute
-    m_depth = m.depth
-    m_edges = m.edges
-    m_team_edge_count = m.team_edge_count
-    m_team_particle_count = m.team_particle_count
-    prm_radius_curve = prm.radius_curve
-    ps_accum_count = ps.accum_count
-    ps_accum_friction = ps.accum_friction
-    ps_accum_normal = ps.accum_normal
-    ps_accum_vector = ps.accum_vector
-    ps_collision_normal = ps.collision_normal
-    ps_friction = ps.friction
-    ps_next_pos = ps.next_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    cs_scale_suspend, m_attribute, m_depth, m_edges = cs.scale_suspend, m.attribute, m.depth, m.edges
+    m_team_edge_count, m_team_particle_count = m.team_edge_count, m.team_particle_count
+    prm_radius_curve, ps_accum_count, ps_accum_friction = prm.radius_curve, ps.accum_count, ps.accum_friction
+    ps_accum_normal, ps_accum_vector = ps.accum_normal, ps.accum_vector
+    ps_collision_normal, ps_friction, ps_next_pos = ps.collision_normal, ps.friction, ps.next_pos
     scale = ts.scale_ratio[team]
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]

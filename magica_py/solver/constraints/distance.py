@@ -72,7 +72,7 @@ def distance_stiffness(prm, team, depth, frequency_ratio, power_y):
 def distance_team(m, ps, prm, ts, team, frequency_ratio, power_y, attenuation):
     """D.4 over one team (Gauss-Seidel in particle order). The tables' arrays are read into
     locals once (a table field read in the loop would take and release a reference each time)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     m_team_particle_count = m.team_particle_count
     start = m.team_particle_start[team]
     a = prm.animation_pose_ratio[team]

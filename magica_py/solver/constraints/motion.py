@@ -60,19 +60,12 @@ def solve_motion(x, base_pos, direction, max_distance, use_max, use_backstop,
 @kernel
 def motion_team(m, ps, prm, team, attenuation):
     """D.9 over one team's moving particles (skipped when the team uses neither limit)."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_attribute = m.attribute
-    m_depth = m.depth
-    m_team_particle_count = m.team_particle_count
-    prm_backstop_distance_curve = prm.backstop_distance_curve
-    prm_backstop_radius = prm.backstop_radius
-    prm_max_distance_curve = prm.max_distance_curve
-    prm_motion_stiffness = prm.motion_stiffness
-    prm_radius_curve = prm.radius_curve
-    ps_base_pos = ps.base_pos
-    ps_base_rot = ps.base_rot
-    ps_next_pos = ps.next_pos
-    ps_velocity_pos = ps.velocity_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_depth, m_team_particle_count = m.attribute, m.depth, m.team_particle_count
+    prm_backstop_distance_curve, prm_backstop_radius = prm.backstop_distance_curve, prm.backstop_radius
+    prm_max_distance_curve, prm_motion_stiffness = prm.max_distance_curve, prm.motion_stiffness
+    prm_radius_curve, ps_base_pos, ps_base_rot = prm.radius_curve, ps.base_pos, ps.base_rot
+    ps_next_pos, ps_velocity_pos = ps.next_pos, ps.velocity_pos
     use_max = prm.use_max_distance[team] != 0
     use_backstop = prm.use_backstop[team] != 0
     if not use_max and not use_backstop:

@@ -40,13 +40,9 @@ def solve_tether(position, root_position, rest_length, compression_limit):
 @kernel
 def tether_team(m, ps, prm, team, attenuation):
     """D.3 over one team's moving particles; ``attenuation`` is the per-step velocity attenuation."""
-    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
-    m_attribute = m.attribute
-    m_root_index = m.root_index
-    m_team_particle_count = m.team_particle_count
-    ps_next_pos = ps.next_pos
-    ps_step_basic_pos = ps.step_basic_pos
-    ps_velocity_pos = ps.velocity_pos
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_root_index, m_team_particle_count = m.attribute, m.root_index, m.team_particle_count
+    ps_next_pos, ps_step_basic_pos, ps_velocity_pos = ps.next_pos, ps.step_basic_pos, ps.velocity_pos
     start = m.team_particle_start[team]
     compression_limit = 1.0 - prm.tether_compression[team]
     for p in range(start, start + m_team_particle_count[team]):
