@@ -53,6 +53,7 @@ from magica_py.solver.quality import (
 from magica_py.solver.rotations import line_rotations_team, triangle_rotations_team
 from magica_py.solver.step import end_step_team, predict_team, step_basic_pose_team, team_step_update
 from magica_py.solver.writeback import transform_data_team, write_transforms_team
+from magica_py.wind.force import wind_team
 
 TimeArrays = namedtuple("TimeArrays", TeamTimeState.FIELDS)
 HierarchyArrays = namedtuple("HierarchyArrays", [
@@ -121,6 +122,8 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi):
     team_step_update(m, ts, prm, frac, t, dt)
     collider_step_team(cs, ts, t, frac)
     predict_team(m, ps, prm, ts, t, frac, dt, ratio, fi.power_z)
+    if ts.wind_zone_count[t] > 0 or prm.wind_moving_wind[t] > 0.01:  # wind's share of D.1's force sum
+        wind_team(m, ps, prm, ts, t, dt)
     step_basic_pose_team(m, ps, prm, ts, t)
     tether_team(m, ps, prm, t, tether_attenuation)
     distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)

@@ -72,8 +72,11 @@ class ClothSystem:
     name = "cloth"
 
     def __init__(self, hierarchy, cloth_specs, colliders=None, settings=None, models=None,
-                 parallel: bool = False, batched: bool = True):
+                 parallel: bool = False, batched: bool = True, wind=()):
         from magica_py.build import build_cloth
+        from magica_py.wind.zones import WindField
+
+        self.wind = WindField(wind) if len(wind) else None   # the scene's wind zones (magica_py/wind)
 
         self.hierarchy = hierarchy
         self.specs = list(cloth_specs)
@@ -118,7 +121,8 @@ class ClothSystem:
         self._tables = None
         self.parallel = bool(parallel)
         self._entry_points = {}
-        self.batched = bool(batched)
+        # the block form has no wind stage: teams that feel wind run alone
+        self.batched = bool(batched) and self.wind is None and not (self.parameters.wind_moving_wind > 0.01).any()
         self._block_tables = None
         self._form_blocks()
         if self.parallel:  # the hierarchy propagation spreads over the same threads
@@ -261,6 +265,8 @@ class ClothSystem:
         for kind, payload in list(ctx.events):
             if kind == "set_parameter":
                 self.set_parameter(payload["cloth"], payload["key"], payload["value"])
+            elif kind == "wind" and self.wind is not None:
+                self.wind.apply_event(payload)
         t = ctx.time
         counters = getattr(ctx, "counters", None)
         fixed_count = counters.fixed_update_count if counters is not None else t.fixed_update_count
@@ -279,6 +285,8 @@ class ClothSystem:
                          int(numba.get_num_threads()) if self.parallel else 1)
         clock = _time.perf_counter
         t0 = clock()
+        if self.wind is not None:  # zone poses and each team's zones for this frame (magica_py/wind)
+            self.wind.update(self.hierarchy, self.kernel_tables())
         self._call_frame(fi)
         t1 = clock()
         if self._written_plan.threads != self.hierarchy.threads:
@@ -375,6 +383,7 @@ class ClothSystem:
             "frame_count": self.frame_count,
             "team_parameters": list(self.team_parameters),
             "collision_modes": list(self.collision_modes),
+            "wind": self.wind.capture_state() if self.wind is not None else None,
         }
 
     def restore_state(self, state: dict) -> None:
@@ -393,6 +402,8 @@ class ClothSystem:
         self.frame_count = state["frame_count"]
         self.team_parameters = list(state["team_parameters"])
         self.collision_modes = list(state["collision_modes"])
+        if self.wind is not None and state.get("wind") is not None:
+            self.wind.restore_state(state["wind"])
         self._form_blocks()
 
     def _state_tables(self) -> dict:
