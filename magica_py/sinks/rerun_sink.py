@@ -223,7 +223,7 @@ class RerunSink:
                                         collider_slot if collider_slot is not None else np.zeros(0, np.int64))
             blueprint = default_blueprint(statics.name or "scene", box=statics.view_box,
                                           penetration=self.metrics.has_collision, phases=PHASES,
-                                          follow=open_at_end or self.live)
+                                          follow=open_at_end or self.live, wind=statics.wind_zones is not None)
             self.rec.set_sinks(*sinks, default_blueprint=blueprint)
             self.rec.send_recording_name(recording_name or statics.name or "magica_py")
         except Exception as exc:  # noqa: BLE001 - rerun raises plain RuntimeError
