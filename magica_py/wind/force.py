@@ -151,27 +151,35 @@ def wind_team(m, ps, prm, ts, team, dt):
     sy = 0.0
     sz = 0.0
     moved = 0
+    # the wind depends on the particle only through its root line (windPos): particles of one
+    # line are mostly consecutive, so the line's wind is computed once and reused
+    last_root = -2
+    wx = 0.0
+    wy = 0.0
+    wz = 0.0
     for p in range(start, start + m.team_particle_count[team]):
         if (m.attribute[p] & MOVE) == 0:
             continue
         root = m.root_index[p]
-        wind_pos = team_phase + (root - start if root >= 0 else -1) * root_phase
-        wx = 0.0
-        wy = 0.0
-        wz = 0.0
-        for s in range(count):
-            frame = f0 if s == 0 else (f1 if s == 1 else (f2 if s == 2 else f3))
-            cx, cy, cz = zone_wind(ts.wind_zone_main[team, s], ts.wind_zone_time[team, s], frame,
-                                   ts.wind_zone_turbulence[team, s], turbulence, blend, wind_pos)
-            wx += cx
-            wy += cy
-            wz += cz
-        if moving_main >= WIND_MIN_MAIN:
-            cx, cy, cz = zone_wind(moving_main, ts.moving_wind_time[team], moving_frame, 1.0, turbulence, blend,
-                                   wind_pos)
-            wx += cx
-            wy += cy
-            wz += cz
+        if root != last_root:
+            last_root = root
+            wind_pos = team_phase + (root - start if root >= 0 else -1) * root_phase
+            wx = 0.0
+            wy = 0.0
+            wz = 0.0
+            for s in range(count):
+                frame = f0 if s == 0 else (f1 if s == 1 else (f2 if s == 2 else f3))
+                cx, cy, cz = zone_wind(ts.wind_zone_main[team, s], ts.wind_zone_time[team, s], frame,
+                                       ts.wind_zone_turbulence[team, s], turbulence, blend, wind_pos)
+                wx += cx
+                wy += cy
+                wz += cz
+            if moving_main >= WIND_MIN_MAIN:
+                cx, cy, cz = zone_wind(moving_main, ts.moving_wind_time[team], moving_frame, 1.0, turbulence, blend,
+                                       wind_pos)
+                wx += cx
+                wy += cy
+                wz += cz
         depth = m.depth[p]
         k = influence * (1.0 - ps.friction[p]) * lerp(1.0, depth * depth, depth_weight)
         ax = wx * k * scale
