@@ -11,7 +11,8 @@ batched=False)`` (the block form has no wind stage; teams run alone in both runs
 difference is the wind alone). After a 30-frame warm-up, ``--reps`` alternating runs of
 ``--frames`` frames record the solver's ``cloth.kernel`` (the frame kernel plus the wind's
 per-frame zone selection, which runs inside the same timer); the median per-frame time of
-each is reported and the wind's share ``(wind - calm) / wind``.
+each is reported and the wind's share ``(wind - calm) / wind``, and the per-frame zone
+selection (``WindField.update``: two numba calls from Python) timed alone.
 
 **deflection**: one 6-bone, 0.5 m strand hanging from a fixed root, the ``long_hair`` preset,
 in a steady global wind along +X (5 m/s, turbulence 0: no swing, no gusts), for ``--seconds``;
@@ -30,6 +31,7 @@ import os
 import pathlib
 import statistics
 import sys
+import time
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -69,12 +71,18 @@ def cost(args) -> None:
         for _ in range(args.reps):
             for label, (player, _system_, medians) in runs.items():
                 medians.append(statistics.median(_kernel_times(player, args.frames)))
+        system = runs["wind"][1]
+        tables = system.kernel_tables()
+        t0 = time.perf_counter()
+        for _ in range(args.frames):
+            system.wind.update(system.hierarchy, tables)
+        update = (time.perf_counter() - t0) / args.frames
         calm = statistics.median(runs["calm"][2])
         wind = statistics.median(runs["wind"][2])
         felt = runs["wind"][1].teams.wind_zone_count
         print(f"{name:16s} teams {len(felt):4d} (sphere+global zones felt: {int((felt > 0).sum())} teams) "
               f"kernel calm {calm * 1e3:7.3f} ms  wind {wind * 1e3:7.3f} ms  share {(wind - calm) / wind * 100:5.1f} %"
-              f"  load {os.getloadavg()[0]:.1f}")
+              f" (zone selection {update * 1e3:.3f} ms of it)  load {os.getloadavg()[0]:.1f}")
 
 
 STRAND = """
