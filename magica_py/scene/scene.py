@@ -145,4 +145,4 @@ class Scene:
     def summary(self) -> dict:
         """Counts for ``magica-py info`` and logs."""
         return {"bones": self.hierarchy.count, "rigs": len(self.rigs), "colliders": len(self.collider_names),
-                "cloths": len(self.cloths)}
+                "cloths": len(self.cloths), "wind_zones": len(self.wind)}

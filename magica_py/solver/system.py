@@ -13,6 +13,8 @@ Runtime control (all take effect at the next frame, none resets the simulation u
   KeepTeleport when keep_pose);
 * ``set_enabled(cloth, enabled)`` (disable mode Reset: re-enabling resets), ``set_time_scale``,
   ``add_force(cloth, direction, speed, mode)``;
+* ``wind.set_zone(name, enabled=None, main=None)`` (``wind``: the scene's ``wind.zones.WindField``,
+  None without wind zones) — also the ``("wind", {zone, enabled, main})`` event raised by animation;
 * ``add_cloth(spec) -> team id`` / ``remove_cloth(team)`` — teams at runtime:
   chunks of the global SoA are allocated from freed space first and freed on removal
   (``layout.SolverLayout``); other teams' rows never move or change; the frame kernel visits
