@@ -573,8 +573,10 @@ def check_wind_zone(c: Checker, value, path: tuple) -> dict | None:
     if m.get("attenuation") is not None:
         try:
             zone["attenuation"] = Curve.parse(m["attenuation"], "attenuation")
-        except ValueError as exc:
-            c.error(path + ("attenuation",), str(exc).removeprefix("attenuation: ").removeprefix("attenuation"))
+        except ValueError as exc:   # "attenuation.curve: expected ..." -> path ...attenuation.curve
+            where, _, message = str(exc).partition(": ")
+            inner = where[len("attenuation"):].lstrip(".")
+            c.error(path + ("attenuation",) + ((inner,) if inner else ()), message)
     return zone
 
 
