@@ -24,7 +24,7 @@ from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_inverse, q_rotate, saturate, v_length, v_sub
 from magica_py.params.curves import evaluate_curve_clamp01
 from magica_py.wind.force import WIND_MAX_TIME, WIND_MIN_MAIN
-from magica_py.wind.zones import BOX, FLOAT_MAX, RADIAL, SPHERE
+from magica_py.wind.zones import BOX, FLOAT_MAX, RADIAL, SPHERE, zone_world_poses
 
 MAX_ADDITIONS = 3
 SLOTS = 4
@@ -148,3 +148,10 @@ def select_wind(z, m, prm, ts, world_position):
     """``select_team_wind`` for every live team."""
     for i in range(m.live_teams.shape[0]):
         select_team_wind(z, m, prm, ts, world_position, m.live_teams[i])
+
+
+@kernel
+def update_wind(z, m, prm, ts, world_position, world_rotation, lossy_scale):
+    """The per-frame wind: zone world poses, then every live team's zones."""
+    zone_world_poses(z, world_position, world_rotation, lossy_scale)
+    select_wind(z, m, prm, ts, world_position)

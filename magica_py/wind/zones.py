@@ -139,6 +139,8 @@ class WindField:
         self.specs = tuple(specs)
         self.names = [s.name for s in self.specs]
         self.table = zone_table(self.specs)
+        self._struct = None        # the table as a kernel StructRef (shares its arrays)
+        self._entry = None         # (kernel tables it was typed for, compiled entry point)
 
     def __len__(self) -> int:
         return len(self.specs)
@@ -168,12 +170,24 @@ class WindField:
         self.set_zone(payload["zone"], payload.get("enabled"), payload.get("main"))
 
     def update(self, hierarchy, kernel_tables) -> None:
-        """Zone world poses, then every live team's zone selection (``selection.select_wind``)."""
-        from magica_py.wind.selection import select_wind
+        """Zone world poses, then every live team's zone selection (``selection.update_wind``:
+        one numba call, through its compiled entry point after the first: the argument typing
+        of a dispatcher call cost more than the work on a small scene)."""
+        from magica_py.solver.frame import as_kernel_table
+        from magica_py.wind.selection import update_wind
 
-        zone_world_poses(self.table, hierarchy.world_position, hierarchy.world_rotation, hierarchy.lossy_scale)
         m, _ps, prm, ts = kernel_tables[:4]
-        select_wind(self.table, m, prm, ts, hierarchy.world_position)
+        if self._struct is None:
+            self._struct = as_kernel_table(self.table)
+        args = (self._struct, m, prm, ts, hierarchy.world_position, hierarchy.world_rotation, hierarchy.lossy_scale)
+        if self._entry is None or self._entry[0] is not kernel_tables:
+            update_wind(*args)
+            from numba import typeof
+
+            key = tuple(typeof(a) for a in args)
+            self._entry = (kernel_tables, update_wind.overloads[key].entry_point)
+            return
+        self._entry[1](*args)
 
     def capture_state(self) -> dict:
         return {"enabled": self.table.enabled.copy(), "main": self.table.main.copy()}
