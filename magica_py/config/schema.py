@@ -199,7 +199,7 @@ OUTPUT_LOG_FIELDS = {
     "base_pose": F("bool", False, doc="the animated base pose the solver reads"),
     "colliders": F("bool", True, doc="collider shapes"),
     "metrics": F("bool", True, doc="time series: steps, phase wall times, stretch, speed"),
-    "events": F("bool", True, doc="teleports, time-scale changes, parameter changes"),
+    "events": F("bool", True, doc="teleports, time-scale changes, parameter changes, wind changes"),
     "replay": F("bool", True, doc="animated local poses and frame times, what `magica-py resim` needs"),
 }
 
