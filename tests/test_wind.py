@@ -280,3 +280,17 @@ wind:
     frames, felt = rec.scalars("/metrics/wind/tail/felt_m_per_s2")
     expected = float(np.linalg.norm(system.teams.wind_felt[0]))
     assert len(frames) == 6 and felt[-1] == pytest.approx(expected, rel=1e-6) and expected > 0.9
+
+
+def test_a_free_strand_in_a_steady_wind_hangs_along_wind_plus_gravity():
+    """MagicaCloth2's wind is an acceleration main x influence beside gravity: with restoration
+    and the angle limit off, a strand settles along (a, -g), at atan(a / g) from the vertical
+    (long_hair: g = 5, influence 0.2, 5 m/s: 11.3 degrees)."""
+    system = run(scene_text("""
+wind:
+  - {name: steady, main: 5, turbulence: 0, direction: [1, 0, 0]}
+""", parameters="{angle_restoration.use: false, angle_limit.use: false}"), frames=300)
+    tip = system.positions("tail")[-1]
+    angle = math.degrees(math.atan2(tip[0], 2.0 - tip[1]))
+    assert angle == pytest.approx(math.degrees(math.atan2(5.0 * 0.2, 5.0)), abs=0.3)
+    assert abs(tip[2]) < 1e-9
