@@ -1,6 +1,6 @@
 """Solver benchmark: per-frame wall time by phase and particle-steps per second.
 
-    python benchmarks/bench_solver.py [--frames N] [--scenes tail_orbit crowd ...] [--parallel] [--stages] [--no-batched]
+    python benchmarks/bench_solver.py [--frames N] [--scenes tail_orbit crowd ...] [--parallel] [--stages]
                                       [--set rigs.0.instances.count=200 ...]
 
 For each scene (``configs/<name>.yaml``): load, build the ``ClothSystem``, attach it to a
@@ -22,7 +22,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 
 def bench(name: str, frames: int, warmup: int = 30, parallel: bool = False, stages: bool = False,
-          batched: bool = True, overrides: tuple = ()) -> dict:
+          overrides: tuple = ()) -> dict:
     from magica_py.config import load_scene
     from magica_py.runtime.player import Player
     from magica_py.solver.system import ClothSystem
@@ -31,7 +31,7 @@ def bench(name: str, frames: int, warmup: int = 30, parallel: bool = False, stag
     player = Player.for_scene(scene)
     t0 = time.perf_counter()
     system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings,
-                         parallel=parallel, batched=batched).attach(player)
+                         parallel=parallel).attach(player)
     build = time.perf_counter() - t0
     t0 = time.perf_counter()
     player.run(warmup)
@@ -49,9 +49,8 @@ def bench(name: str, frames: int, warmup: int = 30, parallel: bool = False, stag
         from bench_stages import stage_profile
 
         profile = stage_profile(system)
-    blocks = len(system.block_table.block_width)
-    lanes = int(system.block_table.block_width.sum())
-    return {"blocks": blocks, "lanes": lanes, "profile": profile, "scene": name, "teams": len(system.models), "particles": particles, "build_s": build,
+    stages = [name for name, on in system.stages._asdict().items() if on is not None]
+    return {"stages": stages, "profile": profile, "scene": name, "teams": len(system.models), "particles": particles, "build_s": build,
             "warmup_s": warm, "frames": frames, "frame_us": wall / frames * 1e6,
             "phases_us": {k: v / frames * 1e6 for k, v in totals.items() if k.startswith(("time.", "cloth.k", "cloth.p"))},
             "steps_per_frame": totals.get("cloth.steps", 0.0) / frames,
@@ -65,15 +64,14 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", nargs="+", default=["tail_orbit", "character_walk", "crowd"])
     ap.add_argument("--parallel", action="store_true", help="teams spread over numba threads")
     ap.add_argument("--stages", action="store_true", help="also time each stage kernel alone")
-    ap.add_argument("--no-batched", action="store_true", help="every team alone (no blocks, solver/batched)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="scene override, as magica-py run --set (e.g. rigs.0.instances.count=200)")
     args = ap.parse_args(argv)
     for name in args.scenes:
-        r = bench(name, args.frames, parallel=args.parallel, stages=args.stages, batched=not args.no_batched,
+        r = bench(name, args.frames, parallel=args.parallel, stages=args.stages,
                   overrides=tuple(args.set))
         print(f"== {r['scene']}{' (parallel)' if args.parallel else ''}: {r['teams']} teams, {r['particles']} particles, "
-              f"build {r['build_s']:.2f} s, warm-up {r['warmup_s']:.2f} s, {r['blocks']} blocks / {r['lanes']} lanes")
+              f"build {r['build_s']:.2f} s, warm-up {r['warmup_s']:.2f} s, optional stages: {', '.join(r['stages']) or 'none'}")
         print(f"   whole frame {r['frame_us']:9.1f} us   particle-steps/frame {r['steps_per_frame']:.0f}")
         for k, v in sorted(r["phases_us"].items()):
             print(f"   {k:22s} {v:9.1f} us")

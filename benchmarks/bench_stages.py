@@ -4,7 +4,7 @@ Imported by ``bench_solver.py --stages``. After the scene has run its warm-up fr
 stage of one step (and the per-frame stages) is called for every team in one numba call,
 repeated, min of the repeats (machine load spreads over all stages because the repeats are
 interleaved). Stages mutate the state, so the figures are costs on a realistic state, not a
-simulation. The tables are borrowed as in the frame kernel (``batch_tables.borrow``). A
+simulation. A
 stage whose kernel signature no longer matches is reported as ``n/a``.
 """
 from __future__ import annotations
@@ -13,7 +13,6 @@ import time
 
 import numba
 
-from magica_py.solver.batch_tables import borrow
 from magica_py.solver.center import center_and_inertia_team, reset_or_shift_team, skin_team
 from magica_py.solver.colliders import collider_end_step_team, collider_frame_team, collider_step_team
 from magica_py.solver.constraints.angle import angle_team
@@ -33,14 +32,12 @@ DT = 1.0 / 90.0
 
 @numba.njit
 def _team_update(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         team_step_update(m, ts, prm, 1.0, t, DT)
 
 
 @numba.njit
 def _colliders_step(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         collider_step_team(cs, ts, t, 1.0)
         collider_end_step_team(cs, ts, t)
@@ -48,28 +45,24 @@ def _colliders_step(m, ps, prm, ts, cs, h, live):
 
 @numba.njit
 def _predict(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         predict_team(m, ps, prm, ts, t, 1.0, DT, 1.0, 1.0)
 
 
 @numba.njit
 def _basic_pose(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         step_basic_pose_team(m, ps, prm, ts, t)
 
 
 @numba.njit
 def _tether(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         tether_team(m, ps, prm, t, 0.7)
 
 
 @numba.njit
 def _distance_x2(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         distance_team(m, ps, prm, ts, t, 1.0, 1.0, 0.3)
         distance_team(m, ps, prm, ts, t, 1.0, 1.0, 0.3)
@@ -77,14 +70,12 @@ def _distance_x2(m, ps, prm, ts, cs, h, live):
 
 @numba.njit
 def _angle(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         angle_team(m, ps, prm, ts, t, 1.0, 1.0, 0.9, prm.restoration_attenuation[t])
 
 
 @numba.njit
 def _bending(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         if m.team_bend_count[t] > 0 or m.team_volume_count[t] > 0:
             bending_team(m, ps, prm, ts, t, 1.0, 1.0)
@@ -93,7 +84,6 @@ def _bending(m, ps, prm, ts, cs, h, live):
 
 @numba.njit
 def _collision(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         if ts.collider_count[t] > 0:
             if prm.collision_mode[t] == 1:
@@ -104,28 +94,24 @@ def _collision(m, ps, prm, ts, cs, h, live):
 
 @numba.njit
 def _motion(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         motion_team(m, ps, prm, t, 0.95)
 
 
 @numba.njit
 def _end_step(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         end_step_team(m, ps, prm, ts, t, DT, 1.0)
 
 
 @numba.njit
 def _skin(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         skin_team(m, ps, h.local_to_world, t)
 
 
 @numba.njit
 def _center(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         center_and_inertia_team(m, ps, prm, ts, t, h.world_position, h.world_rotation, h.lossy_scale,
                                 1.0 / 60.0, 1.0, 0, True, DT)
@@ -135,7 +121,6 @@ def _center(m, ps, prm, ts, cs, h, live):
 
 @numba.njit
 def _guards_display(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         check_team(m, ps, ts, t)
         display_team(m, ps, prm, ts, t, DT, 1.0, 1.0 - DT, 1.0 - DT, False)
@@ -143,21 +128,18 @@ def _guards_display(m, ps, prm, ts, cs, h, live):
 
 @numba.njit
 def _line_rotations(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         line_rotations_team(m, ps, prm, ts, t)
 
 
 @numba.njit
 def _triangle_rotations(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         triangle_rotations_team(m, ps, t)
 
 
 @numba.njit
 def _write_back(m, ps, prm, ts, cs, h, live):
-    m, ps, prm, ts, cs, h = borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs), borrow(h)
     for t in live:
         if transform_data_team(m, ps, t):
             write_transforms_team(m, ps, t, h.parent, h.world_rotation, h.lossy_scale,

@@ -6,9 +6,8 @@ deflection of a long_hair strand against a hand calculation.
 
 **cost**: each scene is loaded twice, without wind and with one global zone (3 m/s, turbulence
 1) and one area zone (a sphere of radius 6 m at the first character, 4 m/s, additive off:
-the teams inside feel the sphere, the others the global zone), both with ``ClothSystem(
-batched=False)`` (the block form has no wind stage; teams run alone in both runs, so the
-difference is the wind alone). After a 30-frame warm-up, ``--reps`` alternating runs of
+the teams inside feel the sphere, the others the global zone); the difference is the wind
+alone (its stage is compiled in only with wind: ``StageSwitches.wind``). After a 30-frame warm-up, ``--reps`` alternating runs of
 ``--frames`` frames record the solver's ``cloth.kernel`` (the frame kernel plus the wind's
 per-frame zone selection, which runs inside the same timer); the median per-frame time of
 each is reported and the wind's share ``(wind - calm) / wind``, and the per-frame zone
@@ -63,7 +62,7 @@ def _system(path, overrides, frames):
 
     scene = load_scene(path, overrides)
     player = Player.for_scene(scene)
-    system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings, batched=False,
+    system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings,
                          wind=scene.wind).attach(player, scene)
     return player, system
 

@@ -1,11 +1,10 @@
 """Every numba kernel of the package is compiled with the project's options (``jit.py``):
-no fastmath (reproducible bits, NaN checks that work), numpy error model (no exception paths
-in the lane loops), the on-disk cache; and the LLVM options the batched steps rely on are set."""
+no fastmath (reproducible bits, NaN checks that work), numpy error model, the on-disk cache;
+and importing the package changes no LLVM option of the process."""
 import importlib
 import pathlib
 import pkgutil
 
-import llvmlite.binding  # noqa: F401  (the options live in LLVM's table)
 from numba.core.registry import CPUDispatcher
 
 import magica_py
@@ -36,5 +35,14 @@ def test_every_kernel_uses_the_project_jit_options():
     assert not wrong, wrong
 
 
-def test_the_inline_threshold_is_raised_for_the_lane_loops():
-    assert jit.INLINE_THRESHOLD >= 1000
+def test_importing_the_package_sets_no_process_wide_llvm_option():
+    import ast
+
+    root = pathlib.Path(magica_py.__file__).parent
+    offenders = []
+    for path in root.rglob("*.py"):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and node.attr in ("set_option", "entry_point", "overloads"):
+                offenders.append(f"{path.relative_to(root)}:{node.lineno} .{node.attr}")
+    assert not offenders, offenders

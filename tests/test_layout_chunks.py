@@ -147,7 +147,7 @@ def test_random_add_remove_sequences_never_overlap_or_disturb_other_teams():
 
 
 def test_identical_rigs_share_a_topology_key():
-    # the key block formation groups teams by (solver/batched/blocks.py)
+    # the key the build cache (ModelCache) shares models by
     bones = []
     for c in range(3):
         bones += [BoneSpec(f"hips{c}", None, (2.0 * c, 1.0, 0.0))]

@@ -1,11 +1,9 @@
 """Branch-free polynomial acos / sin / cos for the solver's kernels.
 
-Why not ``math.acos`` and ``math.sin``: numba lowers them to scalar libm calls, and a loop
-that calls libm is not vectorised (this machine's numba has no SVML). The solver's batched
-path (``solver/batched``) runs identical topologies side by side and needs its inner loops
-to vectorise; to keep it **bit-identical** to the per-team path, both paths call these
-functions (same operations, same order, no fastmath: same bits in a vector lane as in a
-scalar register).
+Why not ``math.acos`` and ``math.sin``: numba lowers them to libm, whose bits differ between
+CPUs (glibc picks FMA or non-FMA code paths at run time, docs/determinism.md); these
+polynomials give the same bits on every x86-64 machine, and a loop calling them can vectorise
+(no opaque call).
 
 Accuracy (``tests/test_trig.py``, against libm on dense grids): acos within 2 ulp of the
 result plus 1e-16 absolute near x = +-1; sin and cos within 2.3e-16 absolute for |x| <= 1e4 rad.
@@ -20,9 +18,11 @@ result plus 1e-16 absolute near x = +-1; sin and cos within 2.3e-16 absolute for
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
 import numpy as np
 from llvmlite import ir
+from numba import config
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
@@ -149,7 +149,7 @@ def cos(x):
 # (tests/test_trig_fma.py: the same error bounds against libm).
 
 @intrinsic
-def fma(typingctx, a, b, c):
+def _fma_llvm(typingctx, a, b, c):
     """``a * b + c`` rounded once (llvm.fma: one instruction on x86-64 since Haswell and on
     arm64, correctly rounded, so the same bits everywhere; vectorised in lane loops)."""
     if not all(isinstance(x, (types.Float, types.Integer)) for x in (a, b, c)):
@@ -163,6 +163,17 @@ def fma(typingctx, a, b, c):
         return builder.call(fn, values)
 
     return sig, codegen
+
+
+def _fma_exact(a, b, c):
+    """``a * b + c`` rounded once, in Python (exact rational arithmetic): the JIT-off twin."""
+    if not all(math.isfinite(x) for x in (a, b, c)):
+        return float(a) * float(b) + float(c)
+    return float(Fraction(float(a)) * Fraction(float(b)) + Fraction(float(c)))
+
+
+# with NUMBA_DISABLE_JIT=1 the kernels run as Python and call the exact Python form
+fma = _fma_exact if config.DISABLE_JIT else _fma_llvm
 
 
 @kernel

@@ -1,37 +1,34 @@
 """The LATE_UPDATE frame of every team in one numba call (docs/solver.md §A.3, §D.0 order).
 
-``simulate_frame`` runs, for all teams: scale suspension and distance culling, the runtime's
-team time (§A.4), skinning / center / inertia / reset-or-shift / collider frame (§C, §G.2),
-the steps (each: §A.6 time, §C.3 team update, §G.3 colliders, §D.1-§D.10), then guards,
-display (§E.1), rotations (§E.2/§E.3), transform data and write-back (§E.4) and the end of
-frame (§A.7). Within a team everything runs in particle order (Gauss-Seidel, §D.0).
+One recipe for every scene: scale suspension and distance culling, the runtime's team time
+(§A.4); then per team its begin of frame (skinning, center, inertia, reset or shift, collider
+frame: §C, §G.2) and its steps (each: §A.6 time, §C.3 team update, §G.3 colliders,
+§D.1-§D.10); then per team its end of frame (guards, display §E.1, rotations §E.2/§E.3,
+transform data and write-back §E.4, §A.7). Within a team everything runs in particle order
+(Gauss-Seidel, §D.0). Teams are independent until the write-back, so the serial kernel
+(``simulate_frame``) and the parallel one (``simulate_frame_parallel``, teams dealt to
+threads) call the same per-team functions and give the same bits.
+
+**Only the stages a scene uses are compiled.** The optional stages are switched by plain
+arguments (``StageSwitches``: ``None`` or ``1``); numba removes an ``if switch is not None``
+branch whose argument is ``None`` before it types the callee, so a scene whose cloths use no
+angle constraint neither compiles nor calls ``angle_team``. Each combination is its own
+compiled (and disk-cached) signature. Within a compiled stage, the per-team parameters still
+decide at run time (a switch is on when any team may need the stage).
 """
 from __future__ import annotations
 
+import math
 from collections import namedtuple
 
-import math
-
 import numpy as np
-from numba import prange, types
-from numba.core.extending import overload
-from numba.experimental import structref
+from numba import prange
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_angle, v_length, v_sub
+from magica_py.runtime.team_time import TeamTimeState, team_time_begin_step_team, team_time_end_frame, \
+    team_time_frame_update
 from magica_py.solver.attenuations import step_attenuations
-from magica_py.solver.batch_tables import borrow
-from magica_py.solver.batched.run import decide_blocks, run_block_step, team_runs_alone
-from magica_py.solver.batched.frame_begin import (
-    SHIFT_RESET, begin_lane_team, center_sums_block, gather_shift_block, lane_starts_block, skin_block,
-    snap_lane_block, touch_bones_block, touch_history_block,
-)
-from magica_py.solver.batched.frame_end import end_frame_block, write_transforms_block
-from magica_py.solver.batched.transfer import scatter_block, scatter_block_end, scatter_block_end_inputs
-from magica_py.runtime.team_time import (
-    TeamTimeState, team_time_begin_step, team_time_begin_step_team, team_time_end_frame,
-    team_time_frame_update,
-)
 from magica_py.solver.center import (
     center_and_inertia_team, distance_culling_team, end_frame_team, reset_or_shift_team, skin_team,
     snap_particles_to_base_pose,
@@ -47,9 +44,7 @@ from magica_py.solver.constraints.motion import motion_team
 from magica_py.solver.constraints.tether import tether_team
 from magica_py.solver.display import display_team
 from magica_py.solver.guards import check_team, reset_team_to_base
-from magica_py.solver.quality import (
-    display_collision_team, quality_end_of_step,
-)
+from magica_py.solver.quality import display_collision_team, quality_end_of_step
 from magica_py.solver.rotations import line_rotations_team, triangle_rotations_team
 from magica_py.solver.step import end_step_team, predict_team, step_basic_pose_team, team_step_update
 from magica_py.solver.writeback import transform_data_team, write_transforms_team
@@ -70,6 +65,17 @@ FrameInputs = namedtuple("FrameInputs", [
     "global_time_scale", "dt", "max_steps", "timing", "frequency_ratio",
     "power_y", "power_z", "power_w",
     "threads"])   # threads the parallel kernel deals its work to (numba.get_num_threads() at the call)
+# The optional stages (None: not compiled, not called; 1: compiled, run where a team asks):
+# angle (D.5/D.6), bending (D.7 dihedral and volume), point and edge collision (D.8),
+# motion (D.9), quality (quality mode's build reset, end-of-step passes and display collision),
+# lines (E.2 line rotations), triangles (E.3 triangle rotations), wind (the wind's share of
+# D.1, ``wind.force.wind_team``: a scene with wind zones or a cloth with moving wind).
+# ``system.stage_switches`` derives them from the live teams.
+StageSwitches = namedtuple("StageSwitches", [
+    "angle", "bending", "point_collision", "edge_collision", "motion", "quality", "lines", "triangles", "wind"])
+# the per-thread work table of the parallel kernel: team_worker (teams,) int32, worker_load
+# (threads,) int64 particle-steps (written by ``assign_workers`` each frame)
+WorkerTable = namedtuple("WorkerTable", ["team_worker", "worker_load"])
 
 
 def time_arrays(state: TeamTimeState) -> TimeArrays:
@@ -84,6 +90,10 @@ def hierarchy_arrays(h) -> HierarchyArrays:
                            h.world_position.copy(), h.world_rotation.copy(), h.lossy_scale.copy(),
                            h.local_to_world.copy(), np.ones(1, dtype=np.uint8),
                            np.zeros(max(h.parent.shape[0], 1), dtype=np.uint8))
+
+
+def worker_table(team_capacity: int, threads: int) -> WorkerTable:
+    return WorkerTable(np.full(max(team_capacity, 1), -1, dtype=np.int32), np.zeros(max(threads, 1), dtype=np.int64))
 
 
 @kernel
@@ -112,7 +122,7 @@ def prepare_teams(m, ts, prm, tt, h):
 
 
 @kernel
-def run_step(m, ps, prm, ts, cs, tt, t, fi):
+def run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edge_collision, motion, quality, wind):
     """One simulation step of team t (§D.0 order) at frame interpolation fi."""
     dt = fi.dt
     ratio = fi.frequency_ratio
@@ -122,24 +132,31 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi):
     team_step_update(m, ts, prm, frac, t, dt)
     collider_step_team(cs, ts, t, frac)
     predict_team(m, ps, prm, ts, t, frac, dt, ratio, fi.power_z)
-    if ts.wind_zone_count[t] > 0 or prm.wind_moving_wind[t] > 0.01:  # wind's share of D.1's force sum
-        wind_team(m, ps, prm, ts, t, dt)
+    if wind is not None:
+        if ts.wind_zone_count[t] > 0 or prm.wind_moving_wind[t] > 0.01:  # wind's share of D.1's force sum
+            wind_team(m, ps, prm, ts, t, dt)
     step_basic_pose_team(m, ps, prm, ts, t)
     tether_team(m, ps, prm, t, tether_attenuation)
     distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
-    angle_team(m, ps, prm, ts, t, ratio, fi.power_w, limit_attenuation, restoration_attenuation)
-    if m.team_bend_count[t] > 0 or m.team_volume_count[t] > 0:
-        bending_team(m, ps, prm, ts, t, ratio, fi.power_y)
-        apply_accumulated(m, ps, t, True)
+    if angle is not None:
+        angle_team(m, ps, prm, ts, t, ratio, fi.power_w, limit_attenuation, restoration_attenuation)
+    if bending is not None:
+        if m.team_bend_count[t] > 0 or m.team_volume_count[t] > 0:
+            bending_team(m, ps, prm, ts, t, ratio, fi.power_y)
+            apply_accumulated(m, ps, t, True)
     if ts.collider_count[t] > 0:
-        if prm.collision_mode[t] == 1:
-            point_collision_team(m, ps, prm, ts, cs, t)
-        elif prm.collision_mode[t] == 2:
-            edge_collision_team(m, ps, prm, ts, cs, t)
+        if point_collision is not None:
+            if prm.collision_mode[t] == 1:
+                point_collision_team(m, ps, prm, ts, cs, t)
+        if edge_collision is not None:
+            if prm.collision_mode[t] == 2:
+                edge_collision_team(m, ps, prm, ts, cs, t)
     distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
-    motion_team(m, ps, prm, t, motion_attenuation)
-    if prm.inextensibility[t] != 0 or prm.collision_last[t] != 0:  # quality mode (§D.0)
-        quality_end_of_step(m, ps, prm, ts, cs, t, ratio, fi.power_y, distance_attenuation)
+    if motion is not None:
+        motion_team(m, ps, prm, t, motion_attenuation)
+    if quality is not None:
+        if prm.inextensibility[t] != 0 or prm.collision_last[t] != 0:  # quality mode (§D.0)
+            quality_end_of_step(m, ps, prm, ts, cs, t, ratio, fi.power_y, distance_attenuation)
     end_step_team(m, ps, prm, ts, t, dt, ratio)
     collider_end_step_team(cs, ts, t)
 
@@ -179,14 +196,14 @@ def first_frame_continues_build_pose(m, prm, h, t):
 
 
 @kernel
-def begin_frame_prelude_team(m, ps, prm, ts, tt, h, t):
+def begin_frame_prelude_team(m, ps, prm, ts, tt, h, t, quality):
     """The team-level start of team t's frame: running flag, quality mode's first-frame build
     reset. Returns the team time since the last step (``center_and_inertia_team``)."""
     ts.running[t] = 1 if tt.running[t] else 0
     tracked = t < h.ramp_from_build.shape[0]
     if ts.reset[t] != 0 and tracked:
         h.ramp_from_build[t] = 0
-    if (prm.quality[t] != 0 and h.build_pose_pending[0] != 0 and ts.reset[t] != 0 and ts.time_reset[t] != 0
+    if (quality is not None and prm.quality[t] != 0 and h.build_pose_pending[0] != 0 and ts.reset[t] != 0 and ts.time_reset[t] != 0
             and first_frame_continues_build_pose(m, prm, h, t)):
         build_reset_team(m, ps, prm, ts, h, t)
         if tracked:
@@ -200,9 +217,9 @@ def begin_frame_prelude_team(m, ps, prm, ts, tt, h, t):
 
 
 @kernel
-def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t):
+def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t, quality):
     """Per-frame stages of team t before the steps (C.1, C.2/C.4, C.5, G.2)."""
-    since_last_step = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t)
+    since_last_step = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t, quality)
     skin_team(m, ps, h.local_to_world, t)
     center_and_inertia_team(m, ps, prm, ts, t, h.world_position, h.world_rotation, h.lossy_scale,
                             tt.frame_delta_time[t], tt.now_time_scale[t], tt.skip_count[t],
@@ -212,35 +229,24 @@ def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t):
 
 
 @kernel
-def begin_frame_block(m, ps, prm, ts, cs, tt, h, fi, blk, bs, b):
-    """``begin_frame_team`` for every lane of running block b and the gather, with the particle
-    work on the block rows, lanes innermost (``batched/frame_begin``): per lane the prelude,
-    C.1 skinning into the block, C.2 sums, then per lane the team-level stages (center, C.4,
-    G.2), then the history gathered through the C.5 shift (with the plain copies of
-    ``gather_block``), and a Reset lane snapped. The same bits."""
-    lanes = blk.block_lane_base[b]
-    # the prelude first, as in begin_frame_team (a build reset skins and snaps the team rows
-    # with the build pose before this frame's skinning)
-    for i in range(blk.block_width[b]):
-        t = blk.lane_team[lanes + i]
-        bs.lane_since_last_step[lanes + i] = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t)
-    lane_starts_block(m, blk, bs, b)
-    touch_bones_block(m, h.local_to_world, blk, bs, b)   # cold bone matrices, in lane order
-    skin_block(m, h.local_to_world, blk, bs, b)
-    center_sums_block(m, blk, bs, b)
-    for i in range(blk.block_width[b]):
-        begin_lane_team(m, prm, ts, cs, tt, h, fi, bs, lanes + i, blk.lane_team[lanes + i],
-                        bs.lane_since_last_step[lanes + i])
-    touch_history_block(ps, blk, bs, b)   # cold team rows, in lane order
-    gather_shift_block(m, ps, blk, bs, b)   # with gather_block's copies
-    for i in range(blk.block_width[b]):
-        if bs.lane_shift_mode[lanes + i] == SHIFT_RESET:
-            snap_lane_block(blk, bs, b, i)
+def team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, t, angle, bending, point_collision, edge_collision, motion,
+                     quality, wind):
+    """Team t's frame up to the write-back: its begin of frame and its steps (each advancing
+    its own clock, §A.6; the clock of a suspended but enabled team advances too)."""
+    if ts.active[t] != 0:
+        begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t, quality)
+    for step in range(tt.update_count[t]):
+        _begin_step_team(tt, fi, step, t)
+        if ts.active[t] != 0 and tt.step_running[t]:
+            run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edge_collision, motion, quality,
+                     wind)
 
 
 @kernel
-def end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t):
+def team_frame_end(m, ps, prm, ts, cs, tt, h, fi, t, quality, lines, triangles):
     """Per-frame stages of team t after the steps: guards, E.1-E.4, A.7."""
+    if ts.active[t] == 0:
+        return
     code = check_team(m, ps, ts, t)
     if code != 0:
         reset_team_to_base(m, ps, ts, t)
@@ -249,27 +255,17 @@ def end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t):
             h.ramp_from_build[t] = 0
     display_team(m, ps, prm, ts, t, fi.dt, tt.time[t], tt.old_time[t], tt.now_update_time[t],
                  tt.running[t])
-    if prm.collision_last[t] != 0 and prm.time_based_smoothing[t] != 0 and ts.collider_count[t] > 0:
-        display_collision_team(m, ps, prm, ts, cs, t)  # quality mode (§E.1)
-    line_rotations_team(m, ps, prm, ts, t)
-    triangle_rotations_team(m, ps, t)
+    if quality is not None:
+        if prm.collision_last[t] != 0 and prm.time_based_smoothing[t] != 0 and ts.collider_count[t] > 0:
+            display_collision_team(m, ps, prm, ts, cs, t)  # quality mode (§E.1)
+    if lines is not None:
+        line_rotations_team(m, ps, prm, ts, t)
+    if triangles is not None:
+        triangle_rotations_team(m, ps, t)
     if transform_data_team(m, ps, t):
         write_transforms_team(m, ps, t, h.parent, h.world_rotation, h.lossy_scale,
                               h.local_position, h.local_rotation)
     else:
-        reset_team_to_base(m, ps, ts, t)
-        ts.guard_code[t] = 1
-    end_frame_team(ts, t, tt.running[t])
-    collider_end_frame_team(cs, ts, t, tt.running[t])
-
-
-@kernel
-def end_frame_lane(m, ps, ts, cs, tt, h, bs, t, lane):
-    """``end_frame_stages_team`` of a lane's team after its block ran the guards and E.1-E.4
-    (``batched/frame_end``, results scattered) and the write-back of its finite lanes
-    (``frame_end.write_transforms_block``): the guard's reset when a bone value is not
-    finite, then A.7."""
-    if bs.lane_transform_ok[lane] == 0:
         reset_team_to_base(m, ps, ts, t)
         ts.guard_code[t] = 1
     end_frame_team(ts, t, tt.running[t])
@@ -287,35 +283,6 @@ def _time_frame_update(tt, fi):
 
 
 @kernel
-def _max_update_count(m, ts, tt):
-    max_count = 0
-    for i in range(m.live_teams.shape[0]):
-        t = m.live_teams[i]
-        if ts.active[t] != 0 and tt.update_count[t] > max_count:
-            max_count = tt.update_count[t]
-    return max_count
-
-
-@kernel
-def _frame_begin(m, ps, prm, ts, cs, tt, h, fi):
-    prepare_teams(m, ts, prm, tt, h)
-    _time_frame_update(tt, fi)
-    for i in range(m.live_teams.shape[0]):
-        t = m.live_teams[i]
-        if ts.active[t] != 0:
-            begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t)
-
-
-@kernel
-def _frame_end(m, ps, prm, ts, cs, tt, h, fi):
-    for i in range(m.live_teams.shape[0]):
-        t = m.live_teams[i]
-        if ts.active[t] != 0:
-            end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t)
-    _frame_close(tt, h, fi)
-
-
-@kernel
 def _frame_close(tt, h, fi):
     team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
                         tt.now_update_time, tt.old_update_time, tt.frame_update_time,
@@ -324,68 +291,54 @@ def _frame_close(tt, h, fi):
 
 
 @kernel
-def _begin_step(tt, fi, step):
-    team_time_begin_step(step, tt.active, tt.update_count, tt.time, tt.now_update_time,
-                         tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
+def _begin_step_team(tt, fi, step, t):
+    team_time_begin_step_team(step, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
+                              tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
 
 
 @kernel
-def simulate_frame(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
-    """The whole cloth frame for every team, one team after another (see the module
-    docstring). ``blk``/``bs`` are not read: scenes without blocks do not compile the block
-    path (``simulate_frame_blocks``)."""
-    m, ps, prm, ts, cs, tt, h = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
-                                 borrow(tt), borrow(h))  # no refcounting inside (batch_tables.py)
-    _frame_begin(m, ps, prm, ts, cs, tt, h, fi)
-    for step in range(_max_update_count(m, ts, tt)):
-        _begin_step(tt, fi, step)
-        for i in range(m.live_teams.shape[0]):
-            t = m.live_teams[i]
-            if ts.active[t] != 0 and tt.step_running[t]:
-                run_step(m, ps, prm, ts, cs, tt, t, fi)
-    _frame_end(m, ps, prm, ts, cs, tt, h, fi)
-
-
-@kernel
-def simulate_frame_blocks(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
-    """``simulate_frame`` with the teams of a running block (``solver/batched``) stepping side
-    by side: the same bits (tests/test_batched_frame.py). Everything runs as the parallel
-    kernel's one worker (``_worker_steps``, ``_worker_end``)."""
-    m, ps, prm, ts, cs, tt, h, blk, bs = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
-                                          borrow(tt), borrow(h), borrow(blk), borrow(bs))  # batch_tables.py
+def simulate_frame(tables, fi, angle, bending, point_collision, edge_collision, motion, quality, lines, triangles,
+                   wind):
+    """The whole cloth frame, one team after another (see the module docstring): every team's
+    begin and steps, then every team's end (all reads of this frame's transforms come before
+    any write-back). ``tables``: ``tables.SolverTables``."""
+    m, ps, prm, ts, cs, tt, h = (tables.model, tables.particles, tables.parameters, tables.teams,
+                                 tables.colliders, tables.time, tables.hierarchy)
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
-    decide_blocks(m, ts, tt, blk)
-    assign_workers(m, ts, tt, blk, 1)
-    _worker_steps(m, ps, prm, ts, cs, tt, h, blk, bs, fi, 0)
-    _worker_end(m, ps, prm, ts, cs, tt, h, blk, bs, fi, 0)
+    for i in range(m.live_teams.shape[0]):
+        team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, m.live_teams[i], angle, bending, point_collision,
+                         edge_collision, motion, quality, wind)
+    for i in range(m.live_teams.shape[0]):
+        team_frame_end(m, ps, prm, ts, cs, tt, h, fi, m.live_teams[i], quality, lines, triangles)
     _frame_close(tt, h, fi)
 
 
 @kernel(parallel=True)
-def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, blk, bs, fi):
-    """``simulate_frame_blocks`` over threads (opt-in: ``ClothSystem(parallel=True)``; also
-    for scenes without blocks, whose teams all take the per-team path).
-
-    Work units (a running block with all its lanes, or a team stepping alone) are dealt to
-    the threads each frame (``assign_workers``: greedy, largest first); each thread then runs
-    the whole frame of its units up to the write-back (begin, gather, every step, scatter) in
-    one parallel region, and their end-of-frame stages in a second. Two thread launches per
-    frame, and a balance that does not depend on team order. Units are independent and each
-    runs in its own order, so the results are bit-identical to the serial kernels
-    (element-wise, no reductions). The barrier between the regions keeps the serial order
-    of begin-of-frame reads (transforms) before any write-back."""
-    m, ps, prm, ts, cs, tt, h, blk, bs = (borrow(m), borrow(ps), borrow(prm), borrow(ts), borrow(cs),
-                                          borrow(tt), borrow(h), borrow(blk), borrow(bs))  # batch_tables.py
+def simulate_frame_parallel(tables, fi, wt, angle, bending, point_collision, edge_collision, motion, quality, lines,
+                            triangles, wind):
+    """``simulate_frame`` with the teams dealt to ``fi.threads`` threads (opt-in:
+    ``ClothSystem(parallel=True)``). ``assign_workers`` deals the teams each frame (greedy,
+    largest first); each thread runs its teams' begin and steps in one parallel region and
+    their ends in a second: two thread launches per frame. Teams are independent and each
+    runs in its own order, so the results are the serial kernel's bits."""
+    m, ps, prm, ts, cs, tt, h = (tables.model, tables.particles, tables.parameters, tables.teams,
+                                 tables.colliders, tables.time, tables.hierarchy)
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
-    decide_blocks(m, ts, tt, blk)
-    workers = max(1, min(fi.threads, blk.worker_load.shape[0]))
-    assign_workers(m, ts, tt, blk, workers)
+    workers = max(1, min(fi.threads, wt.worker_load.shape[0]))
+    assign_workers(m, ts, tt, wt, workers)
     for w in prange(workers):
-        _worker_steps(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w)
+        for i in range(m.live_teams.shape[0]):
+            t = m.live_teams[i]
+            if wt.team_worker[t] == w:
+                team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, t, angle, bending, point_collision,
+                                 edge_collision, motion, quality, wind)
     for w in prange(workers):
-        _worker_end(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w)
+        for i in range(m.live_teams.shape[0]):
+            t = m.live_teams[i]
+            if wt.team_worker[t] == w:
+                team_frame_end(m, ps, prm, ts, cs, tt, h, fi, t, quality, lines, triangles)
     _frame_close(tt, h, fi)
 
 
@@ -396,144 +349,24 @@ def _unit_cost(particles, steps):
 
 
 @kernel
-def _least_loaded(blk, workers):
+def _least_loaded(wt, workers):
     best = 0
     for w in range(1, workers):
-        if blk.worker_load[w] < blk.worker_load[best]:
+        if wt.worker_load[w] < wt.worker_load[best]:
             best = w
     return best
 
 
 @kernel
-def assign_workers(m, ts, tt, blk, workers):
-    """``blk.block_worker`` / ``blk.team_worker`` for this frame: running blocks (largest
-    first), then the teams outside them, each to the least loaded of ``workers`` threads."""
+def assign_workers(m, ts, tt, wt, workers):
+    """``wt.team_worker`` for this frame: the live teams in order, each to the least loaded of
+    ``workers`` threads (ties to the lower thread). Suspended teams cost nothing but still go
+    to a thread (their clocks advance)."""
     for w in range(workers):
-        blk.worker_load[w] = 0
-    for j in range(blk.block_width.shape[0]):
-        b = blk.block_order[j]
-        if blk.block_run[b] == 0:
-            blk.block_worker[b] = -1
-            continue
-        w = _least_loaded(blk, workers)
-        blk.block_worker[b] = w
-        first = blk.lane_team[blk.block_lane_base[b]]
-        blk.worker_load[w] += _unit_cost(blk.block_width[b] * blk.block_particle_count[b], tt.update_count[first])
+        wt.worker_load[w] = 0
     for i in range(m.live_teams.shape[0]):
         t = m.live_teams[i]
-        if not team_runs_alone(blk, t):
-            blk.team_worker[t] = -1
-            continue
-        w = _least_loaded(blk, workers)
-        blk.team_worker[t] = w
+        w = _least_loaded(wt, workers)
+        wt.team_worker[t] = w
         if ts.active[t] != 0:
-            blk.worker_load[w] += _unit_cost(m.team_particle_count[t], tt.update_count[t])
-
-
-@kernel
-def _begin_step_team(tt, fi, step, t):
-    team_time_begin_step_team(step, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
-                              tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
-
-
-@kernel
-def _worker_steps(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w):
-    """Thread w's units up to the write-back: begin of frame, the steps (each team advancing
-    its own clock, A.6), and for a block the gather before them, then the guards and E.1-E.4 in
-    block form (``batched/frame_end``; the write-back itself waits for the barrier) and the
-    scatter."""
-    for b in range(blk.block_width.shape[0]):
-        if blk.block_worker[b] != w:
-            continue
-        lanes = blk.block_lane_base[b]
-        width = blk.block_width[b]
-        # the begin of frame and the gather (disp_pos included: the end stages read it)
-        begin_frame_block(m, ps, prm, ts, cs, tt, h, fi, blk, bs, b)
-        for step in range(tt.update_count[blk.lane_team[lanes]]):
-            for i in range(width):
-                _begin_step_team(tt, fi, step, blk.lane_team[lanes + i])
-            run_block_step(m, prm, ts, cs, tt, blk, bs, b, fi)
-        # guards and E.1-E.4 in block form (the write-back waits for the barrier), unless
-        # the block's end of frame takes the per-team path this frame
-        end_in_block = end_frame_block(m, ps, prm, ts, tt, h, blk, bs, b, fi)
-        blk.block_end[b] = 1 if end_in_block else 0
-        scatter_block(m, ps, blk, bs, b)
-        if end_in_block:
-            scatter_block_end(m, ps, blk, bs, b)
-        else:
-            scatter_block_end_inputs(m, ps, blk, bs, b)
-    for i in range(m.live_teams.shape[0]):
-        t = m.live_teams[i]
-        if blk.team_worker[t] != w:
-            continue
-        if ts.active[t] != 0:
-            begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t)
-        # the clock of a suspended (but enabled) team advances too, as in simulate_frame
-        for step in range(tt.update_count[t]):
-            _begin_step_team(tt, fi, step, t)
-            if ts.active[t] != 0 and tt.step_running[t]:
-                run_step(m, ps, prm, ts, cs, tt, t, fi)
-
-
-@kernel
-def _worker_end(m, ps, prm, ts, cs, tt, h, blk, bs, fi, w):
-    """Thread w's end-of-frame stages (guards, E.1-E.4, A.7) of the teams of its units: for
-    a block whose guards and E.1-E.4 ran in block form, the rest (``end_frame_lane``)."""
-    for b in range(blk.block_width.shape[0]):
-        if blk.block_worker[b] != w:
-            continue
-        lanes = blk.block_lane_base[b]
-        if blk.block_end[b] != 0:
-            write_transforms_block(m, blk, bs, b, h.local_position, h.local_rotation)
-        for i in range(blk.block_width[b]):
-            if blk.block_end[b] != 0:
-                end_frame_lane(m, ps, ts, cs, tt, h, bs, blk.lane_team[lanes + i], lanes + i)
-            else:
-                end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, blk.lane_team[lanes + i])
-    for i in range(m.live_teams.shape[0]):
-        t = m.live_teams[i]
-        if blk.team_worker[t] == w and ts.active[t] != 0:
-            end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t)
-
-
-# ----------------------------------------------------------------------------- kernel tables
-# A namedtuple of arrays passed to a compiled function that LLVM does not inline is passed
-# by value: ~60 array structs per table, ~12 us per call for five tables (measured), paid by
-# every stage call. The kernels therefore receive each table as a numba StructRef with the
-# same field names (one pointer; attribute access is unchanged), sharing the numpy arrays.
-@structref.register
-class TableStructType(types.StructRef):
-    def preprocess_fields(self, fields):
-        return tuple((name, types.unliteral(typ)) for name, typ in fields)
-
-
-class TableStruct(structref.StructRefProxy):
-    """A solver table (namedtuple of arrays) as one numba object; see ``as_kernel_table``."""
-
-
-structref.define_boxing(TableStructType, TableStruct)
-
-
-def _to_struct(table):  # typed by the overload below, never run in Python
-    raise NotImplementedError
-
-
-@overload(_to_struct)
-def _to_struct_overload(table):
-    if not isinstance(table, types.BaseNamedTuple):
-        return None
-    names = tuple(table.fields)
-    struct_type = TableStructType(list(zip(names, table.types)))
-    # field-by-field stores, generated from the field names (compiled inside the cached caller)
-    source = "def impl(table):\n    s = structref.new(struct_type)\n"
-    source += "".join(f"    s.{name} = table.{name}\n" for name in names)
-    source += "    return s\n"
-    namespace = {"structref": structref, "struct_type": struct_type}
-    exec(source, namespace)  # noqa: S102 (trusted, generated from field names)
-    return namespace["impl"]
-
-
-@kernel
-def as_kernel_table(table):
-    """The StructRef twin of a solver table (shares its arrays)."""
-    return _to_struct(table)
+            wt.worker_load[w] += _unit_cost(m.team_particle_count[t], tt.update_count[t])

@@ -11,7 +11,6 @@ rate k with ``1 - (1 - k)^(90/f)`` instead (``step_rate`` below).
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 

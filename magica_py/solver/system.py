@@ -37,9 +37,9 @@ from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, u
 from magica_py.solver.colliders import fill_slots
 from magica_py.solver.fields import F64
 from magica_py.solver.frame import (
-    FrameInputs, as_kernel_table, hierarchy_arrays, simulate_frame, simulate_frame_blocks, simulate_frame_parallel,
-    time_arrays,
+    FrameInputs, StageSwitches, hierarchy_arrays, simulate_frame, simulate_frame_parallel, time_arrays, worker_table,
 )
+from magica_py.solver.tables import kernel_tables
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
 from magica_py.solver.fields import grow
 from magica_py.solver.layout import ChunkAllocator, SolverLayout
@@ -63,10 +63,8 @@ class ClothSystem:
     ``models`` may be given (prebuilt ``build.ClothModel`` in the same order); otherwise each
     spec is built with ``build.build_cloth`` from the hierarchy's current (rest) pose.
     ``parallel=True`` spreads teams over numba threads (same results bit for bit; worth it
-    for crowds on idle cores only, docs/tech-notes.md §8: off by default). ``batched=True`` (default)
-    runs the steps of teams with identical topology and parameters side by side in blocks
-    (``solver/batched``: same results bit for bit, several times faster for crowds);
-    ``batched=False`` runs every team alone (benchmarks, debugging). After the write-back the
+    for crowds on idle cores only, docs/tech-notes.md §8: off by default). Only the stages
+    the live teams use are compiled and called (``stage_switches``). After the write-back the
     hierarchy is propagated over the subtrees of the cloth bones only (a plan rebuilt when teams
     change); with ``parallel=True`` over the numba threads too (``hierarchy.threads``).
     """
@@ -74,7 +72,7 @@ class ClothSystem:
     name = "cloth"
 
     def __init__(self, hierarchy, cloth_specs, colliders=None, settings=None, models=None,
-                 parallel: bool = False, batched: bool = True, wind=()):
+                 parallel: bool = False, wind=()):
         from magica_py.build import build_cloth
         from magica_py.wind.zones import WindField
 
@@ -122,11 +120,8 @@ class ClothSystem:
         self._player = None
         self._tables = None
         self.parallel = bool(parallel)
-        self._entry_points = {}
-        # the block form has no wind stage: teams that feel wind run alone
-        self.batched = bool(batched) and self.wind is None and not (self.parameters.wind_moving_wind > 0.01).any()
-        self._block_tables = None
-        self._form_blocks()
+        self._workers = worker_table(self.layout.team_count, int(numba.get_num_threads()))
+        self.stages = self.stage_switches()
         if self.parallel:  # the hierarchy propagation spreads over the same threads
             hierarchy.threads = max(hierarchy.threads, int(numba.get_num_threads()))
         self._written_plan = hierarchy.plan(self.restored_bones())
@@ -224,18 +219,28 @@ class ClothSystem:
                 or self.models[int(team)] is None:
             raise KeyError(f"no cloth team {team} (teams in use: {self.live_teams})")
 
-    def _form_blocks(self) -> None:
-        """Teams that run side by side (``solver/batched``); formed again after any change of
-        teams or parameters (outside the frame path; same table types)."""
-        from magica_py.solver.batched.blocks import form_blocks
+    def stage_switches(self) -> StageSwitches:
+        """Which optional stages the live teams may run (``frame.StageSwitches``: 1 compiled and
+        called where a team asks, None neither): from the teams' models, parameters and
+        colliders. Recomputed after any change of teams or parameters; a stage that becomes
+        needed at run time compiles then (once per machine: the kernels are cached)."""
+        m, prm, live = self.model, self.parameters, np.asarray(self.live_teams, dtype=np.int64)
 
-        self.block_table, self.block_state = form_blocks(self, enabled=self.batched)
-        self._block_tables = None
-        # a serial scene without blocks runs (and compiles) the per-team kernel only
-        if self.parallel:
-            self._kernel = simulate_frame_parallel
-        else:
-            self._kernel = simulate_frame_blocks if len(self.block_table.block_width) else simulate_frame
+        def any_of(values) -> int | None:
+            return 1 if live.size and bool(np.any(np.asarray(values)[live])) else None
+
+        colliding = self.teams.collider_count[live] > 0 if live.size else np.zeros(0, bool)
+        mode = prm.collision_mode[live] if live.size else np.zeros(0, np.int32)
+        return StageSwitches(
+            angle=any_of((prm.use_angle_limit != 0) | (prm.use_restoration != 0)),
+            bending=any_of((m.team_bend_count > 0) | (m.team_volume_count > 0)),
+            point_collision=1 if bool(np.any(colliding & (mode == 1))) else None,
+            edge_collision=1 if bool(np.any(colliding & (mode == 2))) else None,
+            motion=any_of((prm.use_max_distance != 0) | (prm.use_backstop != 0)),
+            quality=any_of((prm.quality != 0) | (prm.inextensibility != 0) | (prm.collision_last != 0)),
+            lines=any_of(m.team_has_lines != 0),
+            triangles=any_of(m.team_triangle_count > 0),
+            wind=1 if self.wind is not None else any_of(prm.wind_moving_wind > 0.01))
 
     def _tables_changed(self) -> None:
         """After add/remove: new model, new kernel tables (same types: the compiled entry point
@@ -243,7 +248,9 @@ class ClothSystem:
         self.model = self.layout.model()
         self._time = time_arrays(self.time_state)
         self._tables = None
-        self._form_blocks()
+        if self._workers.team_worker.shape[0] < self.layout.team_count:
+            self._workers = worker_table(self.layout.team_count, int(numba.get_num_threads()))
+        self.stages = self.stage_switches()
         self._written_plan = self.hierarchy.plan(self.restored_bones())
         if self._player is not None:
             self._player.unregister_restored_bones(self)
@@ -337,7 +344,7 @@ class ClothSystem:
             if key == "collider_collision.mode":
                 self.collision_modes[t] = str(value)
             self._write_parameters(t)
-        self._form_blocks()  # a changed team may leave (or join) a block
+        self.stages = self.stage_switches()  # a changed parameter may need another stage
 
     def reset_cloth(self, cloth, keep_pose: bool = False) -> None:
         for t in self.teams_of(cloth):
@@ -373,8 +380,7 @@ class ClothSystem:
     def capture_state(self) -> dict:
         """Copies of everything the next frame reads (``runtime/snapshot.py``): the particle,
         team, collider, parameter and team-clock tables, the build pose and first-frame flags,
-        and the runtime parameter overrides. Block tables are not state: the block rows are
-        gathered from the team rows every frame, and blocks are formed again on restore."""
+        and the runtime parameter overrides."""
         from magica_py.runtime.snapshot import table_state
 
         h = self._hierarchy
@@ -406,7 +412,7 @@ class ClothSystem:
         self.collision_modes = list(state["collision_modes"])
         if self.wind is not None and state.get("wind") is not None:
             self.wind.restore_state(state["wind"])
-        self._form_blocks()
+        self.stages = self.stage_switches()
 
     def _state_tables(self) -> dict:
         return {"particles": self.particles, "teams": self.teams, "colliders": self.collider_state,
@@ -427,32 +433,24 @@ class ClothSystem:
 
     # ------------------------------------------------------------------ internals
     def kernel_tables(self) -> tuple:
-        """The seven tables as the StructRefs the kernels take (built on first use): model,
-        particles, parameters, teams, colliders, team time, hierarchy."""
+        """The seven tables (model, particles, parameters, teams, colliders, team time,
+        hierarchy) as the stage kernels take them (``solver/tables.py``; built on first use and
+        after any change of teams)."""
+        return self._kernel_tables()[1]
+
+    def _kernel_tables(self) -> tuple:
         if self._tables is None:
-            self._tables = tuple(as_kernel_table(t) for t in (
-                self.model, self.particles, self.parameters, self.teams, self.collider_state,
-                self._time, self._hierarchy))
+            self._tables = kernel_tables(self.model, self.particles, self.parameters, self.teams,
+                                         self.collider_state, self._time, self._hierarchy)
         return self._tables
 
-    def block_kernel_tables(self) -> tuple:
-        """The block table and block state (``solver/batched``) as kernel StructRefs."""
-        if self._block_tables is None:
-            self._block_tables = (as_kernel_table(self.block_table), as_kernel_table(self.block_state))
-        return self._block_tables
-
     def _call_frame(self, fi) -> None:
-        """One numba call per frame; after the first, through the compiled entry point of its
-        signature (skips numba's argument typing; the table types never change)."""
-        tables = self.kernel_tables() + self.block_kernel_tables()
-        entry = self._entry_points.get(self._kernel)
-        if entry is None:
-            self._kernel(*tables, fi)
-            from numba import typeof
-            key = tuple(typeof(a) for a in tables) + (typeof(fi),)
-            self._entry_points[self._kernel] = self._kernel.overloads[key].entry_point
-            return
-        entry(*tables, fi)
+        """One numba call per frame: the serial or the parallel kernel, with the stage switches."""
+        tables = self._kernel_tables()[0]
+        if self.parallel:
+            simulate_frame_parallel(tables, fi, self._workers, *self.stages)
+        else:
+            simulate_frame(tables, fi, *self.stages)
 
     def _parameter(self, team, key, default):
         params = self.team_parameters[team]

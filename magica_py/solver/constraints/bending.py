@@ -5,28 +5,21 @@ contribution truncated toward zero, §0.2), averaged by count and added to the m
 particles' ``next_pos`` (Jacobi, not Gauss-Seidel). ``velocity_pos`` is untouched, so the whole
 correction becomes velocity. The rest volume scales with scaleRatio, not its cube (Appendix 2.6).
 
-Two forms (``solver/batched``): ``bending_team`` / ``apply_accumulated`` run one team,
-``bending_block`` / ``apply_accumulated_block`` every lane of a block. Both call the same
-array-free per-element functions (``particle_inverse_mass``, ``solve_dihedral``,
-``solve_volume``, ``accumulated``, ``averaged``), which are branch-free (degenerate pairs
-are computed through and selected away), so the block's lane loops vectorise and give
-exactly the per-team bits.
+``bending_team`` / ``apply_accumulated`` run one team through array-free per-element
+functions (``particle_inverse_mass``, ``solve_dihedral``, ``solve_volume``, ``accumulated``,
+``averaged``), branch-free (degenerate pairs are computed through and selected away).
 """
 from __future__ import annotations
 
 import math
 
-import numpy as np
-from numba import literally
 
 from magica_py.jit import kernel
 from magica_py.kernels import trig
-from magica_py.kernels.streams import READ, open_streams, sload, sload3, sstore, sstore3
 from magica_py.kernels.math3d import (
     inverse_mass_friction_depth, load3, saturate, store3, v_cross, v_dot, v_length, v_length_sq,
     v_scale, v_sub,
 )
-from magica_py.solver.batched.transfer import bload3, bstore3
 from magica_py.solver.parameters import step_rate
 
 MOVE = 0x02
@@ -157,22 +150,33 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
     The inverse mass of each particle is computed once per call into ``ps.bend_inverse_mass``
     (friction and depth do not change during the routine): a mesh vertex belongs to several
     bend pairs, so per-pair evaluation repeated the same division ~8 times per vertex."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_bend_rest_angle = m.bend_rest_angle
+    m_bend_sign = m.bend_sign
+    m_bend_vertices = m.bend_vertices
+    m_team_bend_count = m.team_bend_count
+    m_team_particle_count = m.team_particle_count
+    m_team_volume_count = m.team_volume_count
+    m_volume_rest = m.volume_rest
+    m_volume_vertices = m.volume_vertices
+    ps_bend_inverse_mass = ps.bend_inverse_mass
+    ps_next_pos = ps.next_pos
     k = bending_rate(prm, team, frequency_ratio, power_y)
     if k < 0.0:
         return
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        ps.bend_inverse_mass[p] = inverse_mass(m, ps, p)
-    w = ps.bend_inverse_mass
+    for p in range(start, start + m_team_particle_count[team]):
+        ps_bend_inverse_mass[p] = inverse_mass(m, ps, p)
+    w = ps_bend_inverse_mass
     b0 = m.team_bend_start[team]
-    for b in range(b0, b0 + m.team_bend_count[team]):
-        v0 = m.bend_vertices[b, 0]
-        v1 = m.bend_vertices[b, 1]
-        v2 = m.bend_vertices[b, 2]
-        v3 = m.bend_vertices[b, 3]
+    for b in range(b0, b0 + m_team_bend_count[team]):
+        v0 = m_bend_vertices[b, 0]
+        v1 = m_bend_vertices[b, 1]
+        v2 = m_bend_vertices[b, 2]
+        v3 = m_bend_vertices[b, 3]
         ok, c0, c1, c2, c3 = solve_dihedral(
-            load3(ps.next_pos, v0), load3(ps.next_pos, v1), load3(ps.next_pos, v2), load3(ps.next_pos, v3),
-            w[v0], w[v1], w[v2], w[v3], m.bend_rest_angle[b], m.bend_sign[b], k)
+            load3(ps_next_pos, v0), load3(ps_next_pos, v1), load3(ps_next_pos, v2), load3(ps_next_pos, v3),
+            w[v0], w[v1], w[v2], w[v3], m_bend_rest_angle[b], m_bend_sign[b], k)
         if ok:
             accumulate(ps, v0, c0)
             accumulate(ps, v1, c1)
@@ -180,14 +184,14 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
             accumulate(ps, v3, c3)
     scale = ts.scale_ratio[team]
     b0 = m.team_volume_start[team]
-    for b in range(b0, b0 + m.team_volume_count[team]):
-        v0 = m.volume_vertices[b, 0]
-        v1 = m.volume_vertices[b, 1]
-        v2 = m.volume_vertices[b, 2]
-        v3 = m.volume_vertices[b, 3]
+    for b in range(b0, b0 + m_team_volume_count[team]):
+        v0 = m_volume_vertices[b, 0]
+        v1 = m_volume_vertices[b, 1]
+        v2 = m_volume_vertices[b, 2]
+        v3 = m_volume_vertices[b, 3]
         ok, c0, c1, c2, c3 = solve_volume(
-            load3(ps.next_pos, v0), load3(ps.next_pos, v1), load3(ps.next_pos, v2), load3(ps.next_pos, v3),
-            w[v0], w[v1], w[v2], w[v3], m.volume_rest[b] * scale, k)
+            load3(ps_next_pos, v0), load3(ps_next_pos, v1), load3(ps_next_pos, v2), load3(ps_next_pos, v3),
+            w[v0], w[v1], w[v2], w[v3], m_volume_rest[b] * scale, k)
         if ok:
             accumulate(ps, v0, c0)
             accumulate(ps, v1, c1)
@@ -198,187 +202,17 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
 @kernel
 def apply_accumulated(m, ps, team, move_only):
     """Add the averaged accumulator to next_pos (moving particles only when ``move_only``) and clear it."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_attribute = m.attribute
+    m_team_particle_count = m.team_particle_count
+    ps_accum_count = ps.accum_count
+    ps_accum_vector = ps.accum_vector
+    ps_next_pos = ps.next_pos
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        if not move_only or (m.attribute[p] & MOVE) != 0:
-            store3(ps.next_pos, p, averaged(load3(ps.next_pos, p), load3(ps.accum_vector, p), ps.accum_count[p]))
-        store3(ps.accum_vector, p, ZERO3)
-        ps.accum_count[p] = 0
+    for p in range(start, start + m_team_particle_count[team]):
+        if not move_only or (m_attribute[p] & MOVE) != 0:
+            store3(ps_next_pos, p, averaged(load3(ps_next_pos, p), load3(ps_accum_vector, p), ps_accum_count[p]))
+        store3(ps_accum_vector, p, ZERO3)
+        ps_accum_count[p] = 0
 
 
-# ----------------------------------------------------------------------------- per block
-@kernel
-def _accumulate_row(accum_vector, accum_count, k, v, ok):
-    acc, n = accumulated(bload3(accum_vector, k), accum_count[k], v, ok)
-    bstore3(accum_vector, k, acc)
-    accum_count[k] = n
-
-
-@kernel
-def _inverse_mass_rows(m, bs, blk, b):
-    """bs.bend_inverse_mass of every row of block b."""
-    ex = blk.block_exemplar[b]
-    width = blk.block_width[b]
-    row_base = blk.block_row_base[b]
-    p0 = m.team_particle_start[ex]
-    friction, w = bs.friction, bs.bend_inverse_mass
-    for p in range(blk.block_particle_count[b]):
-        k0 = np.uint64(row_base + p * width)
-        move = (m.attribute[p0 + p] & MOVE) != 0
-        depth = m.depth[p0 + p]
-        open_streams()
-        for i in range(width):
-            r = k0 + np.uint64(i)
-            sstore(w, r, particle_inverse_mass(move, sload(friction, r, READ), depth), 1)
-
-
-# ----------------------------------------------------------------------------- pair streams
-# A block's pair loop reads next_pos and the inverse masses of four vertices and updates their
-# accumulators (x, y, z, count): 16 read-modify-write streams at row offsets LLVM cannot
-# relate. Left to runtime overlap checks (hundreds of them) the vectorised loop only paid off
-# from 40 lanes. ``kernels/streams`` states what is true of one pair: the reads never touch an
-# accumulator (other arrays), and the accumulator streams of its four distinct vertices are
-# disjoint in every lane (rows differ by multiples of the width). ``open_streams`` at each
-# pair: nothing is claimed across pairs, which share vertices. Only the memory model changes,
-# not the arithmetic: the bits are the same.
-@kernel
-def _accumulate_scoped(accum_vector, accum_count, r, v, ok, scope, count_scope):
-    """``_accumulate_row`` with the accumulator scopes of one vertex (x, y, z: scope + 0..2,
-    count: count_scope = scope + 3)."""
-    literally(scope)
-    literally(count_scope)
-    acc, n = accumulated(sload3(accum_vector, r, scope), sload(accum_count, r, count_scope), v, ok)
-    sstore3(accum_vector, r, acc, scope)
-    sstore(accum_count, r, n, count_scope)
-
-
-@kernel
-def _pair_rows(blk, b, p0, vertices, c):
-    """First block rows of the four vertices of pair c (unsigned: see step.predict_block)."""
-    width = blk.block_width[b]
-    row_base = blk.block_row_base[b]
-    return (np.uint64(row_base + (vertices[c, 0] - p0) * width), np.uint64(row_base + (vertices[c, 1] - p0) * width),
-            np.uint64(row_base + (vertices[c, 2] - p0) * width), np.uint64(row_base + (vertices[c, 3] - p0) * width))
-
-
-@kernel
-def _distinct(r0, r1, r2, r3):
-    """The scopes' premise: four distinct vertices (true of every built pair)."""
-    return r0 != r1 and r0 != r2 and r0 != r3 and r1 != r2 and r1 != r3 and r2 != r3
-
-
-@kernel
-def _dihedral_rows(m, bs, blk, b, k):
-    ex = blk.block_exemplar[b]
-    width = blk.block_width[b]
-    p0 = m.team_particle_start[ex]
-    # arrays as locals (through the table their pointers are reloaded after every store)
-    next_pos, w, accum_vector, accum_count = bs.next_pos, bs.bend_inverse_mass, bs.accum_vector, bs.accum_count
-    c0_ = m.team_bend_start[ex]
-    for c in range(c0_, c0_ + m.team_bend_count[ex]):
-        r0, r1, r2, r3 = _pair_rows(blk, b, p0, m.bend_vertices, c)
-        rest_angle = m.bend_rest_angle[c]
-        sign = m.bend_sign[c]
-        if _distinct(r0, r1, r2, r3):
-            open_streams()
-            for i in range(width):
-                u = np.uint64(i)
-                ok, c0, c1, c2, c3 = solve_dihedral(
-                    sload3(next_pos, r0 + u, READ), sload3(next_pos, r1 + u, READ),
-                    sload3(next_pos, r2 + u, READ), sload3(next_pos, r3 + u, READ),
-                    sload(w, r0 + u, READ), sload(w, r1 + u, READ), sload(w, r2 + u, READ),
-                    sload(w, r3 + u, READ), rest_angle, sign, k)
-                _accumulate_scoped(accum_vector, accum_count, r0 + u, c0, ok, 1, 4)
-                _accumulate_scoped(accum_vector, accum_count, r1 + u, c1, ok, 5, 8)
-                _accumulate_scoped(accum_vector, accum_count, r2 + u, c2, ok, 9, 12)
-                _accumulate_scoped(accum_vector, accum_count, r3 + u, c3, ok, 13, 16)
-            continue
-        for i in range(width):
-            u = np.uint64(i)
-            ok, c0, c1, c2, c3 = solve_dihedral(
-                bload3(next_pos, r0 + u), bload3(next_pos, r1 + u), bload3(next_pos, r2 + u),
-                bload3(next_pos, r3 + u), w[r0 + u], w[r1 + u], w[r2 + u], w[r3 + u], rest_angle, sign, k)
-            _accumulate_row(accum_vector, accum_count, r0 + u, c0, ok)
-            _accumulate_row(accum_vector, accum_count, r1 + u, c1, ok)
-            _accumulate_row(accum_vector, accum_count, r2 + u, c2, ok)
-            _accumulate_row(accum_vector, accum_count, r3 + u, c3, ok)
-
-
-@kernel
-def _volume_rows(m, bs, blk, b, k):
-    ex = blk.block_exemplar[b]
-    width = blk.block_width[b]
-    lanes = np.uint64(blk.block_lane_base[b])
-    p0 = m.team_particle_start[ex]
-    next_pos, w, accum_vector, accum_count = bs.next_pos, bs.bend_inverse_mass, bs.accum_vector, bs.accum_count
-    scale_ratio = bs.lane_scale_ratio
-    c0_ = m.team_volume_start[ex]
-    for c in range(c0_, c0_ + m.team_volume_count[ex]):
-        r0, r1, r2, r3 = _pair_rows(blk, b, p0, m.volume_vertices, c)
-        rest_volume = m.volume_rest[c]
-        if _distinct(r0, r1, r2, r3):
-            open_streams()
-            for i in range(width):
-                u = np.uint64(i)
-                ok, c0, c1, c2, c3 = solve_volume(
-                    sload3(next_pos, r0 + u, READ), sload3(next_pos, r1 + u, READ),
-                    sload3(next_pos, r2 + u, READ), sload3(next_pos, r3 + u, READ),
-                    sload(w, r0 + u, READ), sload(w, r1 + u, READ), sload(w, r2 + u, READ),
-                    sload(w, r3 + u, READ), rest_volume * sload(scale_ratio, lanes + u, READ), k)
-                _accumulate_scoped(accum_vector, accum_count, r0 + u, c0, ok, 1, 4)
-                _accumulate_scoped(accum_vector, accum_count, r1 + u, c1, ok, 5, 8)
-                _accumulate_scoped(accum_vector, accum_count, r2 + u, c2, ok, 9, 12)
-                _accumulate_scoped(accum_vector, accum_count, r3 + u, c3, ok, 13, 16)
-            continue
-        for i in range(width):
-            u = np.uint64(i)
-            ok, c0, c1, c2, c3 = solve_volume(
-                bload3(next_pos, r0 + u), bload3(next_pos, r1 + u), bload3(next_pos, r2 + u),
-                bload3(next_pos, r3 + u), w[r0 + u], w[r1 + u], w[r2 + u], w[r3 + u],
-                rest_volume * scale_ratio[lanes + u], k)
-            _accumulate_row(accum_vector, accum_count, r0 + u, c0, ok)
-            _accumulate_row(accum_vector, accum_count, r1 + u, c1, ok)
-            _accumulate_row(accum_vector, accum_count, r2 + u, c2, ok)
-            _accumulate_row(accum_vector, accum_count, r3 + u, c3, ok)
-
-
-@kernel
-def bending_block(m, bs, prm, blk, b, frequency_ratio, power_y):
-    """``bending_team`` for every lane of block b (``solver/batched``): the same pair order
-    within each lane, lanes innermost; a pair degenerate in some lanes is selected away
-    (``ok``) there rather than skipped."""
-    ex = blk.block_exemplar[b]
-    if m.team_bend_count[ex] == 0 and m.team_volume_count[ex] == 0:
-        return
-    k = bending_rate(prm, ex, frequency_ratio, power_y)
-    if k < 0.0:
-        return
-    _inverse_mass_rows(m, bs, blk, b)
-    _dihedral_rows(m, bs, blk, b, k)
-    _volume_rows(m, bs, blk, b, k)
-
-
-@kernel
-def apply_accumulated_block(m, bs, blk, b, move_only):
-    """``apply_accumulated`` for every lane of block b."""
-    ex = blk.block_exemplar[b]
-    width = blk.block_width[b]
-    row_base = blk.block_row_base[b]
-    p0 = m.team_particle_start[ex]
-    next_pos, accum_vector, accum_count = bs.next_pos, bs.accum_vector, bs.accum_count
-    for p in range(blk.block_particle_count[b]):
-        k0 = np.uint64(row_base + p * width)
-        # streams: next_pos 1-3, accumulator 4-6, count 7
-        open_streams()
-        if not move_only or (m.attribute[p0 + p] & MOVE) != 0:
-            for i in range(width):
-                r = k0 + np.uint64(i)
-                sstore3(next_pos, r, averaged(sload3(next_pos, r, 1), sload3(accum_vector, r, 4),
-                                              sload(accum_count, r, 7)), 1)
-                sstore3(accum_vector, r, ZERO3, 4)
-                sstore(accum_count, r, 0, 7)
-            continue
-        for i in range(width):
-            r = k0 + np.uint64(i)
-            sstore3(accum_vector, r, ZERO3, 4)
-            sstore(accum_count, r, 0, 7)

@@ -7,24 +7,19 @@ and averages (Jacobi). Neither touches ``velocity_pos``: the push becomes veloci
 Edge-mode friction is quantised to {0, 1} as MagicaCloth2's fixed-point max does (§0.2,
 Appendix 2.5): we reproduce it deliberately.
 
-Point mode has a block form (``point_collision_block``, lanes innermost, ``solver/batched``)
-calling the same array-free per-element functions (``point_sphere``, ``point_capsule``,
-``point_plane``, ``point_contact_add``, ``point_contact_result``) as ``point_collision_team``,
-so that both give the same bits.
+``point_collision_team`` calls array-free per-element functions (``point_sphere``,
+``point_capsule``, ``point_plane``, ``point_contact_add``, ``point_contact_result``).
 """
 from __future__ import annotations
 
 import math
 
-import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     closest_segment_segment, load3, load4, q_rotate, saturate, store3, v_add, v_dot, v_length, v_length_sq, v_lerp,
     v_normalize, v_scale, v_sub,
 )
-from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3
-from magica_py.solver.batched.transfer import bload3
 from magica_py.solver.constraints.bending import FIXED_POINT
 from magica_py.solver.parameters import curve_at
 
@@ -39,7 +34,7 @@ FAR = 1e30
 @kernel
 def plane_push(c, n, p):
     """``IntersectPointPlaneDist``: push p onto the plane (c, n) when behind it; signed distance.
-    Both answers are computed and one selected (branch-free: a lane loop over it vectorises)."""
+    Both answers are computed and one selected (branch-free)."""
     v = v_sub(p, c)
     d = v_dot(v, n)
     g = v_scale(n, d)
@@ -64,7 +59,7 @@ def aabb_overlap(min_a, max_a, min_b, max_b):
             and max_a[1] >= min_b[1] and min_a[2] <= max_b[2] and max_a[2] >= min_b[2])
 
 
-# -- point mode, per element (array-free: the per-team and the block stage call the same maths)
+# -- point mode, per element (array-free)
 @kernel
 def point_bounds(x, r):
     """AABB of a particle sphere grown by the contact range (cfr = r): (min, max)."""
@@ -152,21 +147,30 @@ def solve_point_collider(cs, k, x, r, bmin, bmax):
 @kernel
 def point_collision_team(m, ps, prm, ts, cs, team):
     """D.8 point mode over one team's moving particles."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    cs_scale_suspend = cs.scale_suspend
+    m_attribute = m.attribute
+    m_depth = m.depth
+    m_team_particle_count = m.team_particle_count
+    prm_radius_curve = prm.radius_curve
+    ps_collision_normal = ps.collision_normal
+    ps_friction = ps.friction
+    ps_next_pos = ps.next_pos
     start = m.team_particle_start[team]
     scale = ts.scale_ratio[team]
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
     z = (0.0, 0.0, 0.0)
-    for p in range(start, start + m.team_particle_count[team]):
-        attr = m.attribute[p]
+    for p in range(start, start + m_team_particle_count[team]):
+        attr = m_attribute[p]
         if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
             continue
-        r = max(curve_at(prm.radius_curve, team, m.depth[p]), 0.0001) * scale
-        x = load3(ps.next_pos, p)
+        r = max(curve_at(prm_radius_curve, team, m_depth[p]), 0.0001) * scale
+        x = load3(ps_next_pos, p)
         bmin, bmax = point_bounds(x, r)
         sum_push, sum_n, n_acc, count, min_dist = z, z, z, 0, FAR
         for k in range(c0, c1):
-            if cs.scale_suspend[k] != 0:
+            if cs_scale_suspend[k] != 0:
                 continue
             d, n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
             if d <= r:  # otherwise (out of range, or missed) the sums stay as they are: skip the work
@@ -174,167 +178,10 @@ def point_collision_team(m, ps, prm, ts, cs, team):
                                                                             x, r, d, n, x2)
         if count > 0 or min_dist <= r:  # otherwise the result is (x, friction, n_acc): skip the work
             new_x, friction, n_acc = point_contact_result(x, sum_push, sum_n, count, n_acc, min_dist, r,
-                                                          ps.friction[p])
-            store3(ps.next_pos, p, new_x)
-            ps.friction[p] = friction
-        store3(ps.collision_normal, p, n_acc)
-
-
-@kernel
-def _add_lane(sum_push_a, sum_n_a, n_acc_a, count_a, min_dist_a, k, x, r, d, n, x2, suspended, first):
-    """point_contact_add on the sums a block keeps in its scratch rows (row k); a suspended
-    collider (scale_suspend) leaves them as they are. ``first`` (the same in every lane): the
-    sums start from their initial values (``point_collision_team``'s) instead of the scratch.
-    Lane streams: the five sums are updated in place, push 1-3, normals 4-6, near normals 7-9,
-    count 10, closest distance 11 (see ``point_collision_block``)."""
-    z = (0.0, 0.0, 0.0)
-    loaded = (sload3(sum_push_a, k, 1), sload3(sum_n_a, k, 4), sload3(n_acc_a, k, 7), sload(count_a, k, 10),
-              sload(min_dist_a, k, 11))
-    old_push, old_n, old_near, old_count, old_min = (z, z, z, 0, FAR) if first else loaded
-    sum_push, sum_n, n_acc, count, min_dist = point_contact_add(old_push, old_n, old_near, old_count, old_min,
-                                                                x, r, d, n, x2)
-    keep = suspended != 0
-    sstore3(sum_push_a, k, old_push if keep else sum_push, 1)
-    sstore3(sum_n_a, k, old_n if keep else sum_n, 4)
-    sstore3(n_acc_a, k, old_near if keep else n_acc, 7)
-    sstore(count_a, k, old_count if keep else count, 10)
-    sstore(min_dist_a, k, old_min if keep else min_dist, 11)
-
-
-@kernel
-def _lanes_in_bounds(next_pos, scale, aabb_min, aabb_max, k0, c0, lanes, width, radius):
-    """How many lanes' particle bounds overlap their collider's AABB (a sphere or capsule slot
-    whose count is 0 changes nothing in any lane: the block skips it, as the per-team stage
-    skips each missed collider)."""
-    hits = 0
-    for i in range(width):
-        x = bload3(next_pos, k0 + np.uint64(i))
-        bmin, bmax = point_bounds(x, radius * scale[lanes + np.uint64(i)])
-        c = c0 + np.uint64(i)
-        hits += 1 if aabb_overlap(bmin, bmax, bload3(aabb_min, c), bload3(aabb_max, c)) else 0
-    return hits
-
-
-@kernel
-def point_collision_block(m, bs, prm, blk, b):
-    """D.8 point mode for every lane of block b (``solver/batched``): ``point_collision_team``'s
-    maths, lanes innermost. Per particle, collider slot after slot (the per-team order), a
-    particle's sums live in block scratch between slots: push in ``accum_vector``, penetrating
-    normals in ``accum_normal``, near normals in ``collision_normal`` (its final value is built
-    from them), count in ``accum_count``, closest distance in ``accum_friction``; the first slot
-    near any lane starts them from their initial values, the scratch is cleared again at the
-    end. A slot's shape is the same in every lane (block formation), so
-    the shape branch is outside the lane loop; AABB early-outs and suspension are selects.
-
-    Lane streams (``kernels/streams``): every lane loop writes only the particle's own rows
-    (k0 + lane) of the arrays it writes, each of which is either read at those rows in the same
-    stream (an in-place update) or not read; the collider rows and next_pos (except in the last
-    loop, where it is updated in place) are only read."""
-    ex = blk.block_exemplar[b]
-    width = blk.block_width[b]
-    lanes = np.uint64(blk.block_lane_base[b])
-    p0 = m.team_particle_start[ex]
-    slots = blk.block_collider_count[b]
-    if slots == 0:
-        return
-    z = (0.0, 0.0, 0.0)
-    next_pos, friction, normal_a = bs.next_pos, bs.friction, bs.collision_normal
-    sum_push_a, sum_n_a, count_a, min_dist_a = bs.accum_vector, bs.accum_normal, bs.accum_count, bs.accum_friction
-    scale = bs.lane_scale_ratio
-    shape_a, suspend_a = bs.col_shape, bs.col_scale_suspend
-    start_old, end_old, start_new, end_new = bs.col_start_old, bs.col_end_old, bs.col_start_new, bs.col_end_new
-    radius_start, radius_end, plane_normal = bs.col_radius_start, bs.col_radius_end, bs.col_plane_normal
-    inverse_old_rot, now_rot, aabb_min, aabb_max = bs.col_inverse_old_rot, bs.col_now_rot, bs.col_aabb_min, bs.col_aabb_max
-    for p in range(blk.block_particle_count[b]):
-        attr = m.attribute[p0 + p]
-        if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
-            continue
-        radius = max(curve_at(prm.radius_curve, ex, m.depth[p0 + p]), 0.0001)
-        k0 = np.uint64(blk.block_row_base[b] + p * width)
-        first_near = slots  # the first slot that is a plane or in some lane's bounds
-        for j in range(slots):
-            c0 = np.uint64(blk.block_collider_base[b] + j * width)
-            if (shape_a[c0] == PLANE
-                    or _lanes_in_bounds(next_pos, scale, aabb_min, aabb_max, k0, c0, lanes, width, radius) > 0):
-                first_near = j
-                break
-        if first_near == slots:  # no collider near in any lane: no push, friction kept, no contact normal
-            open_streams()
-            for i in range(width):
-                sstore3(normal_a, k0 + np.uint64(i), z, 1)
-            continue
-        # the slots before first_near reach no lane (their sums stay as initialised), first_near
-        # is known near and starts the sums; next_pos does not change before the result loop,
-        # so the bounds tests stand
-        for j in range(first_near, slots):
-            first = j == first_near
-            c0 = np.uint64(blk.block_collider_base[b] + j * width)
-            shape = shape_a[c0]
-            if shape != PLANE and j != first_near and _lanes_in_bounds(next_pos, scale, aabb_min, aabb_max, k0, c0,
-                                                                       lanes, width, radius) == 0:
-                continue  # no lane's particle near this slot's collider: every lane keeps its sums
-            open_streams()
-            if shape == PLANE:
-                for i in range(width):
-                    k = k0 + np.uint64(i)
-                    c = c0 + np.uint64(i)
-                    x = sload3(next_pos, k, READ)
-                    r = radius * sload(scale, lanes + np.uint64(i), READ)
-                    d, n, x2 = point_plane(x, r, sload3(start_new, c, READ), sload3(plane_normal, c, READ))
-                    _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d, n, x2,
-                              sload(suspend_a, c, READ), first)
-            elif shape == SPHERE:
-                for i in range(width):
-                    k = k0 + np.uint64(i)
-                    c = c0 + np.uint64(i)
-                    x = sload3(next_pos, k, READ)
-                    r = radius * sload(scale, lanes + np.uint64(i), READ)
-                    bmin, bmax = point_bounds(x, r)
-                    hit = aabb_overlap(bmin, bmax, sload3(aabb_min, c, READ), sload3(aabb_max, c, READ))
-                    d, n, x2 = point_sphere(x, r, sload3(start_old, c, READ), sload3(start_new, c, READ),
-                                            sload(radius_start, c, READ))
-                    _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d if hit else FAR,
-                              n if hit else z, x2 if hit else x, sload(suspend_a, c, READ), first)
-            else:
-                for i in range(width):
-                    k = k0 + np.uint64(i)
-                    c = c0 + np.uint64(i)
-                    x = sload3(next_pos, k, READ)
-                    r = radius * sload(scale, lanes + np.uint64(i), READ)
-                    bmin, bmax = point_bounds(x, r)
-                    hit = aabb_overlap(bmin, bmax, sload3(aabb_min, c, READ), sload3(aabb_max, c, READ))
-                    d, n, x2 = point_capsule(x, r, sload3(start_old, c, READ), sload3(end_old, c, READ),
-                                             sload3(start_new, c, READ), sload3(end_new, c, READ),
-                                             sload(radius_start, c, READ), sload(radius_end, c, READ),
-                                             sload4(inverse_old_rot, c, READ), sload4(now_rot, c, READ))
-                    _add_lane(sum_push_a, sum_n_a, normal_a, count_a, min_dist_a, k, x, r, d if hit else FAR,
-                              n if hit else z, x2 if hit else x, sload(suspend_a, c, READ), first)
-        touching = 0
-        for i in range(width):
-            k = k0 + np.uint64(i)
-            hit = (count_a[k] > 0) | (min_dist_a[k] <= radius * scale[lanes + np.uint64(i)])
-            touching += 1 if hit else 0
-        if touching == 0:  # no lane pushed or in range: the sums are as initialised, the normal 0
-            open_streams()
-            for i in range(width):
-                sstore(min_dist_a, k0 + np.uint64(i), 0.0, 1)
-            continue
-        # streams: next_pos 1-3, push 4-6, normals 7-9, count 10, near normals 11-13, closest
-        # distance 14, friction 15 (each read and written at the particle's rows)
-        open_streams()
-        for i in range(width):
-            k = k0 + np.uint64(i)
-            r = radius * sload(scale, lanes + np.uint64(i), READ)
-            new_x, f, normal = point_contact_result(
-                sload3(next_pos, k, 1), sload3(sum_push_a, k, 4), sload3(sum_n_a, k, 7), sload(count_a, k, 10),
-                sload3(normal_a, k, 11), sload(min_dist_a, k, 14), r, sload(friction, k, 15))
-            sstore3(next_pos, k, new_x, 1)
-            sstore(friction, k, f, 15)
-            sstore3(normal_a, k, normal, 11)
-            sstore3(sum_push_a, k, z, 4)
-            sstore3(sum_n_a, k, z, 7)
-            sstore(count_a, k, 0, 10)
-            sstore(min_dist_a, k, 0.0, 14)
+                                                          ps_friction[p])
+            store3(ps_next_pos, p, new_x)
+            ps_friction[p] = friction
+        store3(ps_collision_normal, p, n_acc)
 
 
 @kernel
@@ -405,22 +252,37 @@ def solve_edge_collider(cs, k, a, b, ra, rb, cfr, bmin, bmax):
 @kernel
 def edge_collision_team(m, ps, prm, ts, cs, team):
     """D.8 edge mode over one team's edges (accumulate), then the sum step."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    cs_scale_suspend = cs.scale_suspend
+    m_attribute = m.attribute
+    m_depth = m.depth
+    m_edges = m.edges
+    m_team_edge_count = m.team_edge_count
+    m_team_particle_count = m.team_particle_count
+    prm_radius_curve = prm.radius_curve
+    ps_accum_count = ps.accum_count
+    ps_accum_friction = ps.accum_friction
+    ps_accum_normal = ps.accum_normal
+    ps_accum_vector = ps.accum_vector
+    ps_collision_normal = ps.collision_normal
+    ps_friction = ps.friction
+    ps_next_pos = ps.next_pos
     scale = ts.scale_ratio[team]
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
     e0 = m.team_edge_start[team]
-    for e in range(e0, e0 + m.team_edge_count[team]):
-        ia = m.edges[e, 0]
-        ib = m.edges[e, 1]
-        a_move = (m.attribute[ia] & MOVE) != 0
-        b_move = (m.attribute[ib] & MOVE) != 0
+    for e in range(e0, e0 + m_team_edge_count[team]):
+        ia = m_edges[e, 0]
+        ib = m_edges[e, 1]
+        a_move = (m_attribute[ia] & MOVE) != 0
+        b_move = (m_attribute[ib] & MOVE) != 0
         if not a_move and not b_move:
             continue
-        ra = curve_at(prm.radius_curve, team, m.depth[ia]) * scale
-        rb = curve_at(prm.radius_curve, team, m.depth[ib]) * scale
+        ra = curve_at(prm_radius_curve, team, m_depth[ia]) * scale
+        rb = curve_at(prm_radius_curve, team, m_depth[ib]) * scale
         cfr = (ra + rb) * 0.5
-        a = load3(ps.next_pos, ia)
-        b = load3(ps.next_pos, ib)
+        a = load3(ps_next_pos, ia)
+        b = load3(ps_next_pos, ib)
         bmin = (min(a[0] - ra, b[0] - rb) - cfr, min(a[1] - ra, b[1] - rb) - cfr, min(a[2] - ra, b[2] - rb) - cfr)
         bmax = (max(a[0] + ra, b[0] + rb) + cfr, max(a[1] + ra, b[1] + rb) + cfr, max(a[2] + ra, b[2] + rb) + cfr)
         push_a = (0.0, 0.0, 0.0)
@@ -431,7 +293,7 @@ def edge_collision_team(m, ps, prm, ts, cs, team):
         min_dist = FAR
         touched = False
         for k in range(c0, c1):
-            if cs.scale_suspend[k] != 0:
+            if cs_scale_suspend[k] != 0:
                 continue
             d, n, a2, b2 = solve_edge_collider(cs, k, a, b, ra, rb, cfr, bmin, bmax)
             if d <= 0.0:
@@ -453,31 +315,31 @@ def edge_collision_team(m, ps, prm, ts, cs, team):
             # fixed-point max: the value is cast to an integer before scaling (quirk, §0.2)
             recorded = float(math.trunc(1.0 - saturate(min_dist / cfr)))
             if a_move:
-                ps.accum_friction[ia] = max(ps.accum_friction[ia], recorded)
-                store3(ps.accum_normal, ia, v_add(load3(ps.accum_normal, ia), n_acc))
+                ps_accum_friction[ia] = max(ps_accum_friction[ia], recorded)
+                store3(ps_accum_normal, ia, v_add(load3(ps_accum_normal, ia), n_acc))
             if b_move:
-                ps.accum_friction[ib] = max(ps.accum_friction[ib], recorded)
-                store3(ps.accum_normal, ib, v_add(load3(ps.accum_normal, ib), n_acc))
+                ps_accum_friction[ib] = max(ps_accum_friction[ib], recorded)
+                store3(ps_accum_normal, ib, v_add(load3(ps_accum_normal, ib), n_acc))
     # sum step
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        n = ps.accum_count[p]
+    for p in range(start, start + m_team_particle_count[team]):
+        n = ps_accum_count[p]
         if n > 0:
             s = 1.0 / (n * FIXED_POINT)
-            ps.next_pos[p, 0] += ps.accum_vector[p, 0] * s
-            ps.next_pos[p, 1] += ps.accum_vector[p, 1] * s
-            ps.next_pos[p, 2] += ps.accum_vector[p, 2] * s
-        if ps.accum_friction[p] > 0.0:
-            ps.friction[p] = max(ps.friction[p], ps.accum_friction[p])
-        nsum = load3(ps.accum_normal, p)
+            ps_next_pos[p, 0] += ps_accum_vector[p, 0] * s
+            ps_next_pos[p, 1] += ps_accum_vector[p, 1] * s
+            ps_next_pos[p, 2] += ps_accum_vector[p, 2] * s
+        if ps_accum_friction[p] > 0.0:
+            ps_friction[p] = max(ps_friction[p], ps_accum_friction[p])
+        nsum = load3(ps_accum_normal, p)
         if v_length_sq(nsum) > 0.0:
-            store3(ps.collision_normal, p, v_normalize(nsum))
-        ps.accum_vector[p, 0] = 0.0
-        ps.accum_vector[p, 1] = 0.0
-        ps.accum_vector[p, 2] = 0.0
-        ps.accum_count[p] = 0
-        ps.accum_friction[p] = 0.0
-        store3(ps.accum_normal, p, (0.0, 0.0, 0.0))
+            store3(ps_collision_normal, p, v_normalize(nsum))
+        ps_accum_vector[p, 0] = 0.0
+        ps_accum_vector[p, 1] = 0.0
+        ps_accum_vector[p, 2] = 0.0
+        ps_accum_count[p] = 0
+        ps_accum_friction[p] = 0.0
+        store3(ps_accum_normal, p, (0.0, 0.0, 0.0))
 
 
 @kernel

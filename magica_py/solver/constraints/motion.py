@@ -2,16 +2,12 @@
 behind it. The reference is always the animated ``base_pos``; distances are not scaled and the
 curves are evaluated at depth^2.
 
-``motion_team`` runs one team; ``motion_block`` runs every lane of a block
-(``solver/batched``) with the same per-element function ``solve_motion``, so both give the
-same bits."""
+``motion_team`` runs one team through the per-element function ``solve_motion``."""
 from __future__ import annotations
 
-import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_rotate, store3, v_add, v_length, v_lerp, v_scale, v_sub
-from magica_py.kernels.streams import READ, open_streams, sload3, sload4, sstore3
 from magica_py.solver.parameters import curve_at
 
 MOVE = 0x02
@@ -37,7 +33,7 @@ def normal_axis_vector(axis):
 @kernel
 def clamp_length_selected(v, max_length):
     """``math3d.clamp_length`` (``clamp_len`` of §0.2) with the same bits, branch-free: the
-    shortened vector is computed either way and selected, so a lane loop over it vectorises."""
+    shortened vector is computed either way and selected."""
     n = v_length(v)
     shortened = v_scale(v, max_length / n)
     return shortened if (n > 1e-9) & (n > max_length) else v
@@ -64,63 +60,38 @@ def solve_motion(x, base_pos, direction, max_distance, use_max, use_backstop,
 @kernel
 def motion_team(m, ps, prm, team, attenuation):
     """D.9 over one team's moving particles (skipped when the team uses neither limit)."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_attribute = m.attribute
+    m_depth = m.depth
+    m_team_particle_count = m.team_particle_count
+    prm_backstop_distance_curve = prm.backstop_distance_curve
+    prm_backstop_radius = prm.backstop_radius
+    prm_max_distance_curve = prm.max_distance_curve
+    prm_motion_stiffness = prm.motion_stiffness
+    prm_radius_curve = prm.radius_curve
+    ps_base_pos = ps.base_pos
+    ps_base_rot = ps.base_rot
+    ps_next_pos = ps.next_pos
+    ps_velocity_pos = ps.velocity_pos
     use_max = prm.use_max_distance[team] != 0
     use_backstop = prm.use_backstop[team] != 0
     if not use_max and not use_backstop:
         return
     axis = normal_axis_vector(prm.normal_axis[team])
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        attr = m.attribute[p]
+    for p in range(start, start + m_team_particle_count[team]):
+        attr = m_attribute[p]
         if (attr & MOVE) == 0 or (attr & INVALID_MOTION) != 0:
             continue
-        d2 = m.depth[p] * m.depth[p]
-        r = max(curve_at(prm.radius_curve, team, m.depth[p]), 1e-4)
-        direction = q_rotate(load4(ps.base_rot, p), axis)
-        o = load3(ps.next_pos, p)
-        x = solve_motion(o, load3(ps.base_pos, p), direction,
-                         curve_at(prm.max_distance_curve, team, d2), use_max, use_backstop,
-                         curve_at(prm.backstop_distance_curve, team, d2), prm.backstop_radius[team],
-                         r, prm.motion_stiffness[team])
-        store3(ps.next_pos, p, x)
-        store3(ps.velocity_pos, p, v_add(load3(ps.velocity_pos, p), v_scale(v_sub(x, o), attenuation)))
+        d2 = m_depth[p] * m_depth[p]
+        r = max(curve_at(prm_radius_curve, team, m_depth[p]), 1e-4)
+        direction = q_rotate(load4(ps_base_rot, p), axis)
+        o = load3(ps_next_pos, p)
+        x = solve_motion(o, load3(ps_base_pos, p), direction,
+                         curve_at(prm_max_distance_curve, team, d2), use_max, use_backstop,
+                         curve_at(prm_backstop_distance_curve, team, d2), prm_backstop_radius[team],
+                         r, prm_motion_stiffness[team])
+        store3(ps_next_pos, p, x)
+        store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(v_sub(x, o), attenuation)))
 
 
-@kernel
-def motion_block(m, bs, prm, blk, b, attenuation):
-    """D.9 for every lane of block b: ``motion_team``'s maths, lanes innermost (the curves
-    are read per particle, outside the lane loop).
-
-    Lane streams (``kernels/streams``): the loop updates next_pos (1-3) and velocity_pos (4-6)
-    of the particle's rows in place; the animated pose is only read."""
-    ex = blk.block_exemplar[b]
-    use_max = prm.use_max_distance[ex] != 0
-    use_backstop = prm.use_backstop[ex] != 0
-    if not use_max and not use_backstop:
-        return
-    axis = normal_axis_vector(prm.normal_axis[ex])
-    width = blk.block_width[b]
-    row_base = blk.block_row_base[b]
-    p0 = m.team_particle_start[ex]
-    backstop_radius = prm.backstop_radius[ex]
-    stiffness = prm.motion_stiffness[ex]
-    next_pos_a, velocity_pos_a, base_pos_a, base_rot_a = bs.next_pos, bs.velocity_pos, bs.base_pos, bs.base_rot
-    for p in range(blk.block_particle_count[b]):
-        attr = m.attribute[p0 + p]
-        if (attr & MOVE) == 0 or (attr & INVALID_MOTION) != 0:
-            continue
-        depth = m.depth[p0 + p]
-        d2 = depth * depth
-        r = max(curve_at(prm.radius_curve, ex, depth), 1e-4)
-        max_distance = curve_at(prm.max_distance_curve, ex, d2)
-        backstop_distance = curve_at(prm.backstop_distance_curve, ex, d2)
-        k0 = np.uint64(row_base + p * width)
-        open_streams()
-        for i in range(width):
-            k = k0 + np.uint64(i)
-            direction = q_rotate(sload4(base_rot_a, k, READ), axis)
-            o = sload3(next_pos_a, k, 1)
-            x = solve_motion(o, sload3(base_pos_a, k, READ), direction, max_distance, use_max, use_backstop,
-                             backstop_distance, backstop_radius, r, stiffness)
-            sstore3(next_pos_a, k, x, 1)
-            sstore3(velocity_pos_a, k, v_add(sload3(velocity_pos_a, k, 4), v_scale(v_sub(x, o), attenuation)), 4)

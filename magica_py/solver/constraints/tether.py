@@ -1,16 +1,11 @@
 """Tether (docs/solver.md §D.3): keep each moving particle between (1 - compression) and 1.03 times its
 rest distance to its root. Only the particle moves; the root is infinitely heavy.
-
-``tether_team`` runs one team; ``tether_block`` runs every lane of a block
-(``solver/batched``) with the same per-element function ``solve_tether``, so both give the
-same bits."""
+``tether_team`` runs one team through the per-element function ``solve_tether``."""
 from __future__ import annotations
 
-import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, saturate, store3, v_add, v_length, v_scale, v_sub
-from magica_py.kernels.streams import READ, open_streams, sload3, sstore3
 
 MOVE = 0x02
 STRETCH_LIMIT = 0.03          # TetherStretchLimit
@@ -25,7 +20,7 @@ ZERO3 = (0.0, 0.0, 0.0)
 def solve_tether(position, root_position, rest_length, compression_limit):
     """Correction of ``position`` towards the allowed band around ``rest_length``: zero inside
     the band, when the particle sits on its root (< 1e-8) or when the rest length is zero.
-    Branch-free (selects, no branches) so that a lane loop over it vectorises."""
+    Branch-free (selects, no branches)."""
     v = v_sub(root_position, position)
     length = v_length(v)
     ratio = length / rest_length
@@ -45,61 +40,24 @@ def solve_tether(position, root_position, rest_length, compression_limit):
 @kernel
 def tether_team(m, ps, prm, team, attenuation):
     """D.3 over one team's moving particles; ``attenuation`` is the per-step velocity attenuation."""
+    # the tables' arrays read once (a table field read inside a loop takes and releases a reference each time)
+    m_attribute = m.attribute
+    m_root_index = m.root_index
+    m_team_particle_count = m.team_particle_count
+    ps_next_pos = ps.next_pos
+    ps_step_basic_pos = ps.step_basic_pos
+    ps_velocity_pos = ps.velocity_pos
     start = m.team_particle_start[team]
     compression_limit = 1.0 - prm.tether_compression[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        if (m.attribute[p] & MOVE) == 0:
+    for p in range(start, start + m_team_particle_count[team]):
+        if (m_attribute[p] & MOVE) == 0:
             continue
-        r = m.root_index[p]
+        r = m_root_index[p]
         if r < 0:
             continue
-        rest = v_length(v_sub(load3(ps.step_basic_pos, p), load3(ps.step_basic_pos, r)))
-        delta = solve_tether(load3(ps.next_pos, p), load3(ps.next_pos, r), rest, compression_limit)
-        store3(ps.next_pos, p, v_add(load3(ps.next_pos, p), delta))
-        store3(ps.velocity_pos, p, v_add(load3(ps.velocity_pos, p), v_scale(delta, attenuation)))
+        rest = v_length(v_sub(load3(ps_step_basic_pos, p), load3(ps_step_basic_pos, r)))
+        delta = solve_tether(load3(ps_next_pos, p), load3(ps_next_pos, r), rest, compression_limit)
+        store3(ps_next_pos, p, v_add(load3(ps_next_pos, p), delta))
+        store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(delta, attenuation)))
 
 
-@kernel
-def tether_block(m, bs, prm, blk, b, attenuation):
-    """D.3 for every lane of block b: ``tether_team``'s maths, lanes innermost (the root of
-    each particle is topology, the same in every lane).
-
-    Lane streams (``kernels/streams``): the loop updates next_pos (1-3) and velocity_pos (4-6)
-    at the particle's rows in place and reads the root's next_pos and both step basic poses.
-    The claim needs the root to be another particle (rows of distinct particles never meet in
-    any lane). A built model's root is a strict ancestor, but a particle that is its own root
-    costs one compare to handle: its loop reads the particle's own row once for both roles
-    (the same values the per-team stage loads twice)."""
-    ex = blk.block_exemplar[b]
-    width = blk.block_width[b]
-    row_base = blk.block_row_base[b]
-    p0 = m.team_particle_start[ex]
-    compression_limit = 1.0 - prm.tether_compression[ex]
-    next_pos_a, velocity_pos_a, step_basic_pos_a = bs.next_pos, bs.velocity_pos, bs.step_basic_pos
-    for p in range(blk.block_particle_count[b]):
-        if (m.attribute[p0 + p] & MOVE) == 0:
-            continue
-        r = m.root_index[p0 + p]
-        if r < 0:
-            continue
-        k0 = np.uint64(row_base + p * width)
-        r0 = np.uint64(row_base + (r - p0) * width)
-        if r0 == k0:
-            open_streams()
-            for i in range(width):
-                k = k0 + np.uint64(i)
-                basic = sload3(step_basic_pos_a, k, READ)
-                position = sload3(next_pos_a, k, 1)
-                delta = solve_tether(position, position, v_length(v_sub(basic, basic)), compression_limit)
-                sstore3(next_pos_a, k, v_add(position, delta), 1)
-                sstore3(velocity_pos_a, k, v_add(sload3(velocity_pos_a, k, 4), v_scale(delta, attenuation)), 4)
-            continue
-        open_streams()
-        for i in range(width):
-            k = k0 + np.uint64(i)
-            kr = r0 + np.uint64(i)
-            rest = v_length(v_sub(sload3(step_basic_pos_a, k, READ), sload3(step_basic_pos_a, kr, READ)))
-            position = sload3(next_pos_a, k, 1)
-            delta = solve_tether(position, sload3(next_pos_a, kr, READ), rest, compression_limit)
-            sstore3(next_pos_a, k, v_add(position, delta), 1)
-            sstore3(velocity_pos_a, k, v_add(sload3(velocity_pos_a, k, 4), v_scale(delta, attenuation)), 4)
