@@ -90,7 +90,7 @@ def cost(args) -> None:
         tables = system.kernel_tables()
         t0 = time.perf_counter()
         for _ in range(args.frames):
-            system.wind.update(system.hierarchy, tables)
+            system.select_wind()
         update = (time.perf_counter() - t0) / args.frames
         m, ps, prm, ts = tables[:4]
         _wind_steps(m, ps, prm, ts, 1, 1.0 / 90.0)     # compile

@@ -102,7 +102,7 @@ wind:
 def _selected(system):
     from magica_py.solver.system import ClothSystem  # noqa: F401 (the system is already built)
 
-    system.wind.update(system.hierarchy, system.kernel_tables())
+    system.select_wind()
     ts = system.teams
     n = int(ts.wind_zone_count[0])
     return {system.wind.names[ts.wind_zone_id[0, s]]: (ts.wind_zone_main[0, s], ts.wind_zone_direction[0, s].copy(),
@@ -152,7 +152,7 @@ def test_influence_friction_and_depth_weight_scale_the_push_per_particle():
 wind:
   - {name: breeze, main: 5, turbulence: 0, direction: [1, 0, 0]}
 """, parameters="{wind: {influence: 0.5, depth_weight: 1.0}}"))
-    system.wind.update(system.hierarchy, system.kernel_tables())
+    system.select_wind()
     m, ps, prm, ts = system.kernel_tables()[:4]
     p = system.particles
     p.velocity[:] = 0.0

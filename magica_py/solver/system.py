@@ -294,8 +294,7 @@ class ClothSystem:
                          int(numba.get_num_threads()) if self.parallel else 1)
         clock = _time.perf_counter
         t0 = clock()
-        if self.wind is not None:  # zone poses and each team's zones for this frame (magica_py/wind)
-            self.wind.update(self.hierarchy, self.kernel_tables())
+        self.select_wind()
         self._call_frame(fi)
         t1 = clock()
         if self._written_plan.threads != self.hierarchy.threads:
@@ -443,6 +442,13 @@ class ClothSystem:
             self._tables = kernel_tables(self.model, self.particles, self.parameters, self.teams,
                                          self.collider_state, self._time, self._hierarchy)
         return self._tables
+
+    def select_wind(self) -> None:
+        """The wind zones' poses and the zones each team feels from this frame's transforms
+        (``wind.zones.WindField.update``; nothing without wind zones). ``step_frame`` calls it
+        before the frame kernel."""
+        if self.wind is not None:
+            self.wind.update(self._kernel_tables()[0])
 
     def _call_frame(self, fi) -> None:
         """One numba call per frame: the serial or the parallel kernel, with the stage switches."""

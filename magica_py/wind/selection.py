@@ -151,7 +151,9 @@ def select_wind(z, m, prm, ts, world_position):
 
 
 @kernel
-def update_wind(z, m, prm, ts, world_position, world_rotation, lossy_scale):
-    """The per-frame wind: zone world poses, then every live team's zones."""
-    zone_world_poses(z, world_position, world_rotation, lossy_scale)
-    select_wind(z, m, prm, ts, world_position)
+def update_wind(z, tables):
+    """The per-frame wind: zone world poses, then every live team's zones (``tables``: the
+    solver's ``SolverTables``)."""
+    h = tables.hierarchy
+    zone_world_poses(z, h.world_position, h.world_rotation, h.lossy_scale)
+    select_wind(z, tables.model, tables.parameters, tables.teams, h.world_position)

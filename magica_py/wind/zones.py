@@ -18,6 +18,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import config, types
+from numba.experimental import structref
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_mul, q_rotate, store3, store4, v_add, v_mul
@@ -49,6 +51,31 @@ WIND_ZONE_FIELDS = [
 ]
 WindZoneTable = make_soa("WindZoneTable", WIND_ZONE_FIELDS)
 __doc__ += WindZoneTable.__doc__
+
+
+# the zone table as the kernels take it: a StructRef sharing the arrays (one pointer to type
+# per call instead of 16 arrays; the same pattern as ``solver/tables.py``)
+@structref.register
+class WindZoneTableType(types.StructRef):
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class WindZones(structref.StructRefProxy):
+    """``WindZoneTable`` for the kernels."""
+
+
+structref.define_proxy(WindZones, WindZoneTableType, list(WindZoneTable._fields))
+
+
+@kernel
+def new_wind_zones(*fields):
+    return WindZones(*fields)
+
+
+def zone_kernel_table(table: WindZoneTable):
+    """The zone table as the kernels take it (the namedtuple itself with the JIT off)."""
+    return table if config.DISABLE_JIT else new_wind_zones(*table)
 
 
 @dataclass(frozen=True)
@@ -140,7 +167,6 @@ class WindField:
         self.names = [s.name for s in self.specs]
         self.table = zone_table(self.specs)
         self._struct = None        # the table as a kernel StructRef (shares its arrays)
-        self._entry = None         # (kernel tables it was typed for, compiled entry point)
 
     def __len__(self) -> int:
         return len(self.specs)
@@ -169,25 +195,14 @@ class WindField:
     def apply_event(self, payload: dict) -> None:
         self.set_zone(payload["zone"], payload.get("enabled"), payload.get("main"))
 
-    def update(self, hierarchy, kernel_tables) -> None:
-        """Zone world poses, then every live team's zone selection (``selection.update_wind``:
-        one numba call, through its compiled entry point after the first: the argument typing
-        of a dispatcher call cost more than the work on a small scene)."""
-        from magica_py.solver.frame import as_kernel_table
+    def update(self, solver_tables) -> None:
+        """Zone world poses, then every live team's zone selection (``selection.update_wind``,
+        one numba call; ``solver_tables``: the frame kernel's ``solver.tables.SolverTables``)."""
         from magica_py.wind.selection import update_wind
 
-        m, _ps, prm, ts = kernel_tables[:4]
         if self._struct is None:
-            self._struct = as_kernel_table(self.table)
-        args = (self._struct, m, prm, ts, hierarchy.world_position, hierarchy.world_rotation, hierarchy.lossy_scale)
-        if self._entry is None or self._entry[0] is not kernel_tables:
-            update_wind(*args)
-            from numba import typeof
-
-            key = tuple(typeof(a) for a in args)
-            self._entry = (kernel_tables, update_wind.overloads[key].entry_point)
-            return
-        self._entry[1](*args)
+            self._struct = zone_kernel_table(self.table)
+        update_wind(self._struct, solver_tables)
 
     def capture_state(self) -> dict:
         return {"enabled": self.table.enabled.copy(), "main": self.table.main.copy()}
