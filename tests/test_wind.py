@@ -100,8 +100,6 @@ wind:
 
 
 def _selected(system):
-    from magica_py.solver.system import ClothSystem  # noqa: F401 (the system is already built)
-
     system.select_wind()
     ts = system.teams
     n = int(ts.wind_zone_count[0])
