@@ -107,6 +107,11 @@ def zone_wind(main, time, frame, zone_turbulence, turbulence, blend, wind_pos):
 @kernel
 def wind_team(m, ps, prm, ts, team, dt):
     """§D.1 wind of team ``team`` at this step, after ``predict_team`` (module docstring)."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_depth, m_root_index = m.attribute, m.depth, m.root_index
+    m_team_particle_count, ps_friction, ps_next_pos = m.team_particle_count, ps.friction, ps.next_pos
+    ps_velocity, ts_moving_wind_time, ts_wind_zone_main = ps.velocity, ts.moving_wind_time, ts.wind_zone_main
+    ts_wind_zone_time, ts_wind_zone_turbulence = ts.wind_zone_time, ts.wind_zone_turbulence
     influence = prm.wind_influence[team]
     ts.wind_felt[team, 0] = 0.0
     ts.wind_felt[team, 1] = 0.0
@@ -116,13 +121,13 @@ def wind_team(m, ps, prm, ts, team, dt):
     frequency = prm.wind_frequency[team]
     count = ts.wind_zone_count[team]
     for s in range(count):
-        ts.wind_zone_time[team, s] = advance_wind_time(ts.wind_zone_time[team, s], ts.wind_zone_main[team, s],
+        ts_wind_zone_time[team, s] = advance_wind_time(ts_wind_zone_time[team, s], ts_wind_zone_main[team, s],
                                                        frequency, dt)
     moving_main = 0.0
     moving_frame = (1.0, 0.0, 1.0, 0.0)
     if prm.wind_moving_wind[team] > 0.01:
         moving_main = ts.frame_moving_speed[team] * prm.wind_moving_wind[team] / ts.scale_ratio[team]
-        ts.moving_wind_time[team] = advance_wind_time(ts.moving_wind_time[team], moving_main, frequency, dt)
+        ts_moving_wind_time[team] = advance_wind_time(ts_moving_wind_time[team], moving_main, frequency, dt)
         d = load3(ts.frame_moving_direction, team)
         moving_frame = direction_angles((-d[0], -d[1], -d[2]))
     ts.moving_wind_main[team] = moving_main
@@ -157,10 +162,10 @@ def wind_team(m, ps, prm, ts, team, dt):
     wx = 0.0
     wy = 0.0
     wz = 0.0
-    for p in range(start, start + m.team_particle_count[team]):
-        if (m.attribute[p] & MOVE) == 0:
+    for p in range(start, start + m_team_particle_count[team]):
+        if (m_attribute[p] & MOVE) == 0:
             continue
-        root = m.root_index[p]
+        root = m_root_index[p]
         if root != last_root:
             last_root = root
             wind_pos = team_phase + (root - start if root >= 0 else -1) * root_phase
@@ -169,19 +174,19 @@ def wind_team(m, ps, prm, ts, team, dt):
             wz = 0.0
             for s in range(count):
                 frame = f0 if s == 0 else (f1 if s == 1 else (f2 if s == 2 else f3))
-                cx, cy, cz = zone_wind(ts.wind_zone_main[team, s], ts.wind_zone_time[team, s], frame,
-                                       ts.wind_zone_turbulence[team, s], turbulence, blend, wind_pos)
+                cx, cy, cz = zone_wind(ts_wind_zone_main[team, s], ts_wind_zone_time[team, s], frame,
+                                       ts_wind_zone_turbulence[team, s], turbulence, blend, wind_pos)
                 wx += cx
                 wy += cy
                 wz += cz
             if moving_main >= WIND_MIN_MAIN:
-                cx, cy, cz = zone_wind(moving_main, ts.moving_wind_time[team], moving_frame, 1.0, turbulence, blend,
+                cx, cy, cz = zone_wind(moving_main, ts_moving_wind_time[team], moving_frame, 1.0, turbulence, blend,
                                        wind_pos)
                 wx += cx
                 wy += cy
                 wz += cz
-        depth = m.depth[p]
-        k = influence * (1.0 - ps.friction[p]) * lerp(1.0, depth * depth, depth_weight)
+        depth = m_depth[p]
+        k = influence * (1.0 - ps_friction[p]) * lerp(1.0, depth * depth, depth_weight)
         ax = wx * k * scale
         ay = wy * k * scale
         az = wz * k * scale
@@ -192,11 +197,11 @@ def wind_team(m, ps, prm, ts, team, dt):
         dvx = ax * dt
         dvy = ay * dt
         dvz = az * dt
-        ps.velocity[p, 0] += dvx
-        ps.velocity[p, 1] += dvy
-        ps.velocity[p, 2] += dvz
-        ps.next_pos[p, 0] += dvx * dt
-        ps.next_pos[p, 1] += dvy * dt
-        ps.next_pos[p, 2] += dvz * dt
+        ps_velocity[p, 0] += dvx
+        ps_velocity[p, 1] += dvy
+        ps_velocity[p, 2] += dvz
+        ps_next_pos[p, 0] += dvx * dt
+        ps_next_pos[p, 1] += dvy * dt
+        ps_next_pos[p, 2] += dvz * dt
     if moved > 0:
         store3(ts.wind_felt, team, (sx / moved, sy / moved, sz / moved))
