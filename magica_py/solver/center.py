@@ -404,6 +404,7 @@ def snap_particles_to_base_pose(ps, start, end):
         store4(ps.old_rotation, p, rot)
         ps.friction[p] = 0.0
         ps.static_friction[p] = 0.0
+        ps.display_history[p] = 0   # quality display: no step state since the reset
 
 
 @kernel

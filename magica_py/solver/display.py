@@ -5,16 +5,29 @@ interpolation), clamps it to 1.3x the root distance of the animated pose, and bl
 the animated pose by ``blend_weight``. Positions are updated in place in particle order: a
 Move root reads its already blended display (a quirk kept on purpose, §E.1).
 
-With ``solver.time_based_smoothing`` on (quality mode) the display is the last step's state
-extrapolated by the time elapsed since that step (docs/quality-mode.md).
+With ``solver.time_based_smoothing`` on (quality mode) the display interpolates between the
+last two step states with one step of latency, each state carried in its *display frame* (the
+particle's fixed root at that step, or the team center for a particle without one) and shown
+in that frame's pose of this frame (docs/quality-mode.md, *Display*):
+
+    shown(p) = root_pos + root_rot * lerp(L_{k-1}(p), L_k(p), (time - t_k) / dt)
+
+where ``L_k(p) = root_rot_k^-1 (x_k(p) - root_pos_k)`` is recorded at the end of step k
+(``record_display_state_team``). A rotation keeps lengths and a lerp of two vectors is no
+longer than the longer of them, so an edge between two particles of the same root is never
+shown longer than it was in one of the two states: the display shows no stretch the state
+does not have, at any render rate, and it is a function of time only. Then, along every
+baseline (parents first), the particle is projected out of the colliders at this frame's
+pose and kept within its edge bound from its parent (``display_constraints_team``).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import clamp_length, v_add, v_length, v_lerp, v_scale, v_sub
-from magica_py.solver.quality import display_ftl_team
+from magica_py.kernels.math3d import (
+    clamp_length, load3, load4, q_inverse, q_rotate, store3, v_add, v_length, v_lerp, v_scale, v_sub,
+)
 from magica_py.kernels.rows import flat, row3, row4, set_row3, set_row4
 
 MOVE = 0x02
@@ -42,14 +55,71 @@ def display_clamped(f, root_position, position):
 
 
 @kernel
+def display_frame_index(m, p):
+    """The particle whose pose is p's display frame: its root when that is fixed, else -1
+    (the team center)."""
+    r = m.root_index[p]
+    if r >= 0 and (m.attribute[r] & MOVE) == 0:
+        return r
+    return -1
+
+
+@kernel
+def record_display_state_team(m, ps, ts, team):
+    """Quality display, at the end of a step (after D.10): each particle's new state
+    (``old_pos``) in its display frame at this step (the fixed root's step pose ``next_pos`` /
+    ``base_rot``, or the team center ``now_world_pos`` / ``now_world_rot``); the previous one
+    kept as ``display_prev_local``."""
+    center_pos = load3(ts.now_world_pos, team)
+    center_inv = q_inverse(load4(ts.now_world_rot, team))
+    start = m.team_particle_start[team]
+    for p in range(start, start + m.team_particle_count[team]):
+        r = display_frame_index(m, p)
+        if r >= 0:
+            local = q_rotate(q_inverse(load4(ps.base_rot, r)), v_sub(load3(ps.old_pos, p), load3(ps.next_pos, r)))
+        else:
+            local = q_rotate(center_inv, v_sub(load3(ps.old_pos, p), center_pos))
+        store3(ps.display_prev_local, p, load3(ps.display_local, p))
+        store3(ps.display_local, p, local)
+        ps.display_history[p] = min(ps.display_history[p] + 1, 2)
+
+
+@kernel
+def display_interpolated(m, ps, ts, team, p, alpha):
+    """Quality display of Move particle p: its state interpolated between the last two steps
+    at ``alpha`` (in [0, 1): one step of latency) in its display frame at this frame's pose;
+    its last state as is when no step ran since a reset."""
+    history = ps.display_history[p]
+    if history == 0:
+        return load3(ps.old_pos, p)
+    local = load3(ps.display_local, p)
+    if history >= 2:
+        local = v_lerp(load3(ps.display_prev_local, p), local, alpha)
+    r = display_frame_index(m, p)
+    if r >= 0:
+        return v_add(load3(ps.position, r), q_rotate(load4(ps.rotation, r), local))
+    return v_add(load3(ts.frame_world_pos, team), q_rotate(load4(ts.frame_world_rot, team), local))
+
+
+@kernel
 def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, running):
+    """E.1 for one team (module docstring); quality mode's collider and edge pass follows in
+    ``quality.display_constraints_team``."""
     blend = ts.blend_weight[team]
     t = display_fraction(dt, time, old_time, now_update_time)
     time_based = prm.time_based_smoothing[team] != 0
-    # quality mode: the state extrapolated by the time since the last step (in [0, dt) with
-    # exact timing), a function of time only; E.1's lerp from the last display is a
-    # per-frame filter whose strength depends on the frame rate
-    ahead = min(max(time - now_update_time, 0.0), dt)
+    # quality mode: the last two states interpolated with one step of latency, at the time
+    # since the last step (in [0, dt) with exact timing): a function of time only, where
+    # E.1's lerp from the last display is a per-frame filter whose strength depends on the
+    # frame rate, and extrapolation along each particle's velocity stretches edges
+    alpha = min(max(time - now_update_time, 0.0), dt) / dt if dt > 0.0 else 0.0
+    if time_based:
+        # the roots' poses are read below: compute every Move display first (a Move root is
+        # not a display frame, so the order does not matter here)
+        first_q = m.team_particle_start[team]
+        for p in range(first_q, first_q + m.team_particle_count[team]):
+            if (m.attribute[p] & MOVE) != 0:
+                store3(ps.disp_pos, p, display_interpolated(m, ps, ts, team, p, alpha))
     # arrays as locals, flat rows, unsigned indices: through the tables the array pointers
     # are reloaded after every store. One pass in particle order (the root read below)
     attribute, root_index = m.attribute, m.root_index
@@ -66,12 +136,12 @@ def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, runn
         rot0 = row4(rotation, q)
         if (attribute[p] & MOVE) != 0:
             if time_based:
-                f = v_add(row3(old_pos, v), v_scale(row3(real_velocity, v), ahead))
+                f = row3(disp_pos, v)   # no E.1 clamp: the interpolation is bounded by the states
             else:
                 f = display_extrapolated(row3(old_pos, v), row3(real_velocity, v), row3(disp_pos, v), dt, t)
-            r = root_index[p]
-            if r >= 0:
-                f = display_clamped(f, row3(position, np.uint64(3) * np.uint64(r)), pos0)
+                r = root_index[p]
+                if r >= 0:
+                    f = display_clamped(f, row3(position, np.uint64(3) * np.uint64(r)), pos0)
             set_row3(disp_pos, v, f)
             set_row3(position, v, v_lerp(pos0, f, blend))
         else:
@@ -81,6 +151,3 @@ def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, runn
             set_row4(old_rotation, q, rot0)
         set_row3(base_pos_buffer, v, pos0)
         set_row4(base_rot_buffer, q, rot0)
-    mode = prm.inextensibility[team]
-    if time_based and (mode == 2 or mode == 3 or mode == 5):  # the FTL options
-        display_ftl_team(m, ps, ts, team)

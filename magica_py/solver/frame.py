@@ -48,7 +48,7 @@ from magica_py.solver.constraints.tether import tether_team
 from magica_py.solver.display import display_team
 from magica_py.solver.guards import check_team, reset_team_to_base
 from magica_py.solver.quality import (
-    display_collision_team, quality_end_of_step,
+    display_constraints_team, quality_end_of_step,
 )
 from magica_py.solver.rotations import line_rotations_team, triangle_rotations_team
 from magica_py.solver.step import end_step_team, predict_team, step_basic_pose_team, team_step_update
@@ -246,8 +246,8 @@ def end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t):
             h.ramp_from_build[t] = 0
     display_team(m, ps, prm, ts, t, fi.dt, tt.time[t], tt.old_time[t], tt.now_update_time[t],
                  tt.running[t])
-    if prm.collision_last[t] != 0 and prm.time_based_smoothing[t] != 0 and ts.collider_count[t] > 0:
-        display_collision_team(m, ps, prm, ts, cs, t)  # quality mode (§E.1)
+    if prm.time_based_smoothing[t] != 0:
+        display_constraints_team(m, ps, prm, ts, cs, t, fi.dt, tt.time[t], tt.now_update_time[t])  # §E.1
     line_rotations_team(m, ps, prm, ts, t)
     triangle_rotations_team(m, ps, t)
     if transform_data_team(m, ps, t):

@@ -35,6 +35,11 @@ PARTICLE_FIELDS = [
     ("old_position", "particle", V3, F64, "m; animated pose of the last frame that ran steps (E.1)"),
     ("old_rotation", "particle", Q4, F64, "xyzw; same, rotation (E.1)"),
     ("disp_pos", "particle", V3, F64, "m; display position (E.1)"),
+    # quality display (display.py): the last two step states in their display frame (the
+    # particle's fixed root, or the team center), written at the end of each step (D.10)
+    ("display_local", "particle", V3, F64, "m; state of the last step in its display frame (D.10)"),
+    ("display_prev_local", "particle", V3, F64, "m; state of the step before it, same frame (D.10)"),
+    ("display_history", "particle", (), U8, "0-2: step states recorded since the last reset (C.5 sets 0)"),
     ("friction", "particle", (), F64, "[0,1]; collision friction, decays x0.6 per step (D.8, D.10)"),
     ("static_friction", "particle", (), F64, "[0,1]; static friction ramp (D.10)"),
     ("collision_normal", "particle", V3, F64, "unit or 0; contact normal of the last step (D.8)"),

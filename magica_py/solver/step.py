@@ -24,6 +24,7 @@ from magica_py.kernels.math3d import (
 )
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
 from magica_py.solver.batched.transfer import bload3, bload4, bstore3, bstore4
+from magica_py.solver.display import record_display_state_team
 from magica_py.solver.parameters import curve_at_clamp01, step_keep, step_rate
 from magica_py.solver.team_step import LANES_NEAR, SCALAR, slerp_in_mode, team_step_values
 
@@ -569,6 +570,8 @@ def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
             store3(ps.velocity, p, v_scale(vel, velocity_weight))
         store3(ps.real_velocity, p, v_scale(v_sub(next_pos, old_pos), 1.0 / dt))
         store3(ps.old_pos, p, next_pos)
+    if prm.time_based_smoothing[team] != 0:   # quality display: keep this state (display.py)
+        record_display_state_team(m, ps, ts, team)
 
 
 @kernel
