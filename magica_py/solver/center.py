@@ -22,6 +22,7 @@ from magica_py.kernels.rows import (
 )
 from magica_py.solver.rotations import normalize_or_zero, rot_from_normal_tangent_select
 from magica_py.kernels import portable
+from magica_py.solver.parameters import length_unit
 
 MOVE = 0x02
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -265,7 +266,7 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
     if mode != 0 and not reset:
         delta = v_length(v_sub(cpos, old_pos))
         angle = math.degrees(q_angle(old_rot, crot))
-        if delta >= prm.teleport_distance[team] * ratio or angle >= prm.teleport_rotation[team]:
+        if delta >= prm.teleport_distance[team] * ratio * length_unit(m, prm, team) or angle >= prm.teleport_rotation[team]:
             if mode == TELEPORT_RESET:
                 reset = True
                 ts.reset[team] = 1
@@ -278,8 +279,8 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
     limit = prm.movement_speed_limit[team]
     if s >= 1e-6 and not reset and not keep:
         if prm.time_based_smoothing[team] != 0:
-            felt = time_based_smoothing(ts, team, v_sub(cpos, old_pos), frame_delta_time, s, limit * ratio
-                                        if limit >= 0.0 else -1.0)
+            felt = time_based_smoothing(ts, team, v_sub(cpos, old_pos), frame_delta_time, s,
+                                        limit * ratio * length_unit(m, prm, team) if limit >= 0.0 else -1.0)
             smooth_pos = v_sub(cpos, felt)
         else:
             if math.isnan(ts.smoothing_velocity[team, 0]):  # quality switched off after a reset
@@ -329,7 +330,7 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
         if frame_delta_time > 0.0:
             if limit >= 0.0:
                 speed = v_length(v_sub(cpos, work_pos)) / frame_delta_time
-                limit_s = limit * ratio
+                limit_s = limit * ratio * length_unit(m, prm, team)
                 if speed > limit_s:
                     k = saturate((speed - limit_s) / speed)
                     ms = lerp(ms, 1.0, k)

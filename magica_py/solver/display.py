@@ -5,20 +5,21 @@ interpolation), clamps it to 1.3x the root distance of the animated pose, and bl
 the animated pose by ``blend_weight``. Positions are updated in place in particle order: a
 Move root reads its already blended display (a quirk kept on purpose, §E.1).
 
-With ``solver.time_based_smoothing`` on (quality mode) the display interpolates between the
-last two step states with one step of latency, each state carried in its *display frame* (the
-particle's fixed root at that step, or the team center for a particle without one) and shown
-in that frame's pose of this frame (docs/quality-mode.md, *Display*):
+With ``solver.time_based_smoothing`` on (quality mode) the display is built from the last two
+step states, each carried in its *display frame* (the particle's fixed root at that step, or
+the team center for a particle without one) and shown in that frame's pose of this frame
+(docs/quality-mode.md, *Display*). ``L_k(p) = root_rot_k^-1 (x_k(p) - root_pos_k)`` is
+recorded at the end of step k (``record_display_state_team``), and
 
-    shown(p) = root_pos + root_rot * lerp(L_{k-1}(p), L_k(p), (time - t_k) / dt)
+    shown(p, s) = root_pos + root_rot * lerp(L_{k-1}(p), L_k(p), s)
 
-where ``L_k(p) = root_rot_k^-1 (x_k(p) - root_pos_k)`` is recorded at the end of step k
-(``record_display_state_team``). A rotation keeps lengths and a lerp of two vectors is no
-longer than the longer of them, so an edge between two particles of the same root is never
-shown longer than it was in one of the two states: the display shows no stretch the state
-does not have, at any render rate, and it is a function of time only. Then, along every
-baseline (parents first), the particle is projected out of the colliders at this frame's
-pose and kept within its edge bound from its parent (``display_constraints_team``).
+is the display at s = (time - t_k) / dt in [0, 1): the states interpolated with one step of
+latency. A rotation keeps lengths and a lerp of two vectors is no longer
+than the longer of them, so in the interpolated display an edge between two particles of the
+same root (or of roots moving rigidly together) is never longer than in one of the two
+states: it shows no stretch the state does not have, at any render rate, and it is a function
+of time only. ``display_team`` writes it; ``quality.display_constraints_team`` then moves it out of
+the colliders at this frame's pose as far as the edge bounds allow.
 """
 from __future__ import annotations
 
@@ -109,9 +110,9 @@ def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, runn
     t = display_fraction(dt, time, old_time, now_update_time)
     time_based = prm.time_based_smoothing[team] != 0
     # quality mode: the last two states interpolated with one step of latency, at the time
-    # since the last step (in [0, dt) with exact timing): a function of time only, where
-    # E.1's lerp from the last display is a per-frame filter whose strength depends on the
-    # frame rate, and extrapolation along each particle's velocity stretches edges
+    # since the last step (in [0, dt) with exact timing): a function of time only (E.1's lerp
+    # from the last display is a per-frame filter whose strength depends on the frame rate),
+    # within the states' edge lengths (extrapolating along each particle's velocity is not)
     alpha = min(max(time - now_update_time, 0.0), dt) / dt if dt > 0.0 else 0.0
     if time_based:
         # the roots' poses are read below: compute every Move display first (a Move root is

@@ -247,7 +247,7 @@ def end_frame_stages_team(m, ps, prm, ts, cs, tt, h, fi, t):
     display_team(m, ps, prm, ts, t, fi.dt, tt.time[t], tt.old_time[t], tt.now_update_time[t],
                  tt.running[t])
     if prm.time_based_smoothing[t] != 0:
-        display_constraints_team(m, ps, prm, ts, cs, t, fi.dt, tt.time[t], tt.now_update_time[t])  # §E.1
+        display_constraints_team(m, ps, prm, ts, cs, t, fi.dt)  # quality mode (§E.1)
     line_rotations_team(m, ps, prm, ts, t)
     triangle_rotations_team(m, ps, t)
     if transform_data_team(m, ps, t):

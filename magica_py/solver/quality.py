@@ -19,7 +19,12 @@ and the motion constraint (D.9), before the end of the step (D.10):
      D.4, fixed ends immovable), then the tether and FTL;
 
 2. ``collision_last``: a final point projection of every colliding particle against each
-   collider in turn, so that no particle ends the step inside one.
+   collider in turn (two rounds), so that no particle ends the step inside one; a particle
+   that started the step inside a collider is carried out with it without the starting depth
+   becoming velocity (``collision_last_push``).
+
+The quality display (``display.py``) ends with ``display_constraints_team``: collider push at
+this frame's pose and edge bounds taken from the step states.
 
 Every pass is unilateral (only stretch is removed) and uses the step-basic pose (D.2) as the
 rest reference, like the tether of D.3. Faithful mode never calls this module.
@@ -38,8 +43,7 @@ from magica_py.solver.constraints.collision import (
     INVALID_OR_NO_COLLISION, PLANE, SPHERE, plane_push, segment_parameter, solve_point_collider,
 )
 from magica_py.solver.constraints.distance import distance_team
-from magica_py.solver.parameters import curve_at
-from magica_py.solver.display import display_interpolated
+from magica_py.solver.parameters import curve_at, length_unit
 from magica_py.kernels import portable
 
 MOVE = 0x02
@@ -138,7 +142,7 @@ def collision_last_team(m, ps, prm, ts, cs, team):
     """Project every colliding moving particle out of each collider (``collision_last_push``),
     ``COLLISION_LAST_ROUNDS`` rounds over the colliders so that a push out of one collider
     into another is undone. Friction and normals are left to D.8."""
-    scale = ts.scale_ratio[team]
+    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
     start = m.team_particle_start[team]
@@ -153,16 +157,18 @@ def collision_last_team(m, ps, prm, ts, cs, team):
         for _ in range(COLLISION_LAST_ROUNDS):
             for k in range(c0, c1):
                 if cs.scale_suspend[k] == 0:
-                    x, velocity_pos = collision_last_push(cs, k, x, start_x, velocity_pos, r)
+                    x, velocity_pos = collision_last_push(cs, k, x, start_x, velocity_pos, r,
+                                                          INSIDE_TOLERANCE * scale)
         store3(ps.next_pos, p, x)
         store3(ps.velocity_pos, p, velocity_pos)
 
 
 @kernel
-def collision_last_push(cs, k, x, start_x, velocity_pos, r):
+def collision_last_push(cs, k, x, start_x, velocity_pos, r, tolerance):
     """One particle (end-of-step position x, radius r, start-of-step position ``start_x``)
     against collider slot k moving from its previous-step to its current pose within the step:
-    (x, velocity_pos) after the push.
+    (x, velocity_pos) after the push. ``tolerance`` (m): the depth below which it counts as
+    having started outside (a particle projected by the last step lies on the surface).
 
     A particle that started the step outside is pushed by D.8's moving plane (normal from the
     previous pose, surface at the current one): it ends on the supporting plane of the surface
@@ -178,7 +184,7 @@ def collision_last_push(cs, k, x, start_x, velocity_pos, r):
     the depth it was found at."""
     shape = cs.shape[k]
     depth = start_depth(cs, k, start_x, r)
-    if depth <= INSIDE_TOLERANCE or shape == PLANE:
+    if depth <= tolerance or shape == PLANE:
         bmin = (x[0] - 2.0 * r, x[1] - 2.0 * r, x[2] - 2.0 * r)
         bmax = (x[0] + 2.0 * r, x[1] + 2.0 * r, x[2] + 2.0 * r)
         d, n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
@@ -290,7 +296,7 @@ def safe_fraction(e0, de, bound):
 
 
 @kernel
-def display_constraints_team(m, ps, prm, ts, cs, team, dt, time, now_update_time):
+def display_constraints_team(m, ps, prm, ts, cs, team, dt):
     """Quality display after E.1 (``display.display_team``): the interpolated display in
     ``ps.position`` (every edge within its bound, ``display_edge_bound``) moved towards a
     target that is out of the colliders at this frame's pose, never past the bounds.
@@ -315,14 +321,8 @@ def display_constraints_team(m, ps, prm, ts, cs, team, dt, time, now_update_time
         store3(ps.disp_pos, p, load3(ps.position, p))
     if blend <= 0.0:
         return
-    # the target starts from the states extrapolated to this frame's time (no latency)
-    ahead = 1.0 + (min(max(time - now_update_time, 0.0), dt) / dt if dt > 0.0 else 0.0)
-    for p in range(start, end):
-        if (m.attribute[p] & MOVE) != 0:
-            store3(ps.position, p, v_lerp(load3(ps.base_pos_buffer, p),
-                                          display_interpolated(m, ps, ts, team, p, ahead), blend))
     collide = prm.collision_mode[team] != 0 and prm.collision_last[team] != 0 and ts.collider_count[team] > 0
-    scale = ts.scale_ratio[team]
+    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
     b0 = m.team_baseline_start[team]

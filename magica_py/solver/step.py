@@ -25,7 +25,7 @@ from magica_py.kernels.math3d import (
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3, sstore4
 from magica_py.solver.batched.transfer import bload3, bload4, bstore3, bstore4
 from magica_py.solver.display import record_display_state_team
-from magica_py.solver.parameters import curve_at_clamp01, step_keep, step_rate
+from magica_py.solver.parameters import curve_at_clamp01, length_unit, step_keep, step_rate
 from magica_py.solver.team_step import LANES_NEAR, SCALAR, slerp_in_mode, team_step_values
 
 MOVE = 0x02
@@ -49,7 +49,8 @@ def team_step_update(m, ts, prm, frame_interpolation, team, dt):
         old_pos, old_rot, load3(ts.old_frame_world_pos, team), load3(ts.frame_world_pos, team),
         load4(ts.old_frame_world_rot, team), load4(ts.frame_world_rot, team),
         load3(ts.old_frame_world_scale, team), load3(ts.frame_world_scale, team), frame_interpolation, dt,
-        prm.local_inertia[team], prm.local_movement_speed_limit[team], prm.local_rotation_speed_limit[team],
+        prm.local_inertia[team], prm.local_movement_speed_limit[team] * length_unit(m, prm, team),
+        prm.local_rotation_speed_limit[team],
         v_length(load3(m.team_init_scale, team)), load3(prm.gravity_direction, team),
         load3(m.team_init_local_gravity, team), prm.gravity[team], prm.gravity_falloff[team],
         prm.stabilization_time[team], ts.velocity_weight[team], prm.blend_weight[team], ts.distance_weight[team],
@@ -147,7 +148,7 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
     gravity = v_scale(load3(prm.gravity_direction, team), prm.gravity[team] * ts.gravity_ratio[team])
     force_mode = ts.external_force_mode[team]
     impact = load3(ts.external_force, team)
-    scale = ts.scale_ratio[team]
+    scale = ts.scale_ratio[team] * length_unit(m, prm, team)   # forces follow the cloth's scale
     start = m.team_particle_start[team]
     for p in range(start, start + m.team_particle_count[team]):
         if t == 1.0:  # the last step of a frame: predict_base_pose's select, without the slerp
@@ -529,7 +530,7 @@ def centrifugal_velocity(vel, next_pos, direction, moving, depth, angular_veloci
 def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
     """D.10: velocity from positions, static and dynamic friction, speed limit, centrifugal term."""
     mode = prm.rate_mode[team]
-    scale = ts.scale_ratio[team]
+    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
     static_threshold = prm.friction[team] * scale
     dynamic = prm.friction[team]
     speed_limit = prm.particle_speed_limit[team]

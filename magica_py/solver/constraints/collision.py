@@ -26,7 +26,7 @@ from magica_py.kernels.math3d import (
 from magica_py.kernels.streams import READ, open_streams, sload, sload3, sload4, sstore, sstore3
 from magica_py.solver.batched.transfer import bload3
 from magica_py.solver.constraints.bending import FIXED_POINT
-from magica_py.solver.parameters import curve_at
+from magica_py.solver.parameters import curve_at, length_unit
 
 MOVE = 0x02
 INVALID_OR_NO_COLLISION = 0x10
@@ -153,7 +153,7 @@ def solve_point_collider(cs, k, x, r, bmin, bmax):
 def point_collision_team(m, ps, prm, ts, cs, team):
     """D.8 point mode over one team's moving particles."""
     start = m.team_particle_start[team]
-    scale = ts.scale_ratio[team]
+    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
     z = (0.0, 0.0, 0.0)
@@ -405,7 +405,7 @@ def solve_edge_collider(cs, k, a, b, ra, rb, cfr, bmin, bmax):
 @kernel
 def edge_collision_team(m, ps, prm, ts, cs, team):
     """D.8 edge mode over one team's edges (accumulate), then the sum step."""
-    scale = ts.scale_ratio[team]
+    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
     e0 = m.team_edge_start[team]
