@@ -91,7 +91,13 @@ def main(argv=None) -> int:
     ap.add_argument("--param", action="append", default=[], help="key=value parameter of every cloth")
     ap.add_argument("--set", action="append", default=[], help="scene override (as magica-py run --set)")
     args = ap.parse_args(argv)
-    params = dict(kv.split("=", 1) for kv in args.param)
+    params = {}
+    for kv in args.param:
+        key, value = kv.split("=", 1)
+        try:
+            params[key] = float(value)
+        except ValueError:
+            params[key] = value
     r = measure(args.scene, args.fps, args.mode, args.duration, params, args.set)
     print(f"{args.scene} {args.mode} {args.fps:g} fps, {r['frames']} frames {' '.join(args.param)}")
     print(f"{'cloth / edges':<30} {'shown max %':>12} {'state max %':>12} {'shown-state max %':>18}")

@@ -221,6 +221,7 @@ def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation
     time (the ramp at the frame's start, not at the last step before it)."""
     cpos, crot, cscl, ratio = component_pose_team(m, ts, team, world_position, world_rotation, lossy_scale)
     center_pos, center_rot = center_pose_team(m, ps, team, cpos, crot)
+    ts.length_unit[team] = length_unit(m, prm, team)
     inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot, world_position, world_rotation,
                  frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step)
 
@@ -266,7 +267,7 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
     if mode != 0 and not reset:
         delta = v_length(v_sub(cpos, old_pos))
         angle = math.degrees(q_angle(old_rot, crot))
-        if delta >= prm.teleport_distance[team] * ratio * length_unit(m, prm, team) or angle >= prm.teleport_rotation[team]:
+        if delta >= prm.teleport_distance[team] * ratio * ts.length_unit[team] or angle >= prm.teleport_rotation[team]:
             if mode == TELEPORT_RESET:
                 reset = True
                 ts.reset[team] = 1
@@ -280,7 +281,7 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
     if s >= 1e-6 and not reset and not keep:
         if prm.time_based_smoothing[team] != 0:
             felt = time_based_smoothing(ts, team, v_sub(cpos, old_pos), frame_delta_time, s,
-                                        limit * ratio * length_unit(m, prm, team) if limit >= 0.0 else -1.0)
+                                        limit * ratio * ts.length_unit[team] if limit >= 0.0 else -1.0)
             smooth_pos = v_sub(cpos, felt)
         else:
             if math.isnan(ts.smoothing_velocity[team, 0]):  # quality switched off after a reset
@@ -330,7 +331,7 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
         if frame_delta_time > 0.0:
             if limit >= 0.0:
                 speed = v_length(v_sub(cpos, work_pos)) / frame_delta_time
-                limit_s = limit * ratio * length_unit(m, prm, team)
+                limit_s = limit * ratio * ts.length_unit[team]
                 if speed > limit_s:
                     k = saturate((speed - limit_s) / speed)
                     ms = lerp(ms, 1.0, k)

@@ -114,6 +114,7 @@ TEAM_FIELDS = [
     ("angular_velocity", "team", (), F64, "rad/s of the center this step"),
     ("rotation_axis", "team", V3, F64, "unit axis of the center rotation this step, or 0"),
     ("scale_ratio", "team", (), F64, "max(|scale|/|init scale|, 1e-6) at this step"),
+    ("length_unit", "team", (), F64, "m; the cloth's length unit (parameters.length_unit; C.2 writes it; 1 faithful)"),
     ("gravity_dot", "team", (), F64, "C.3"),
     ("gravity_ratio", "team", (), F64, "C.3"),
     ("velocity_weight", "team", (), F64, "stabilisation ramp after a reset [0,1]"),
@@ -172,7 +173,7 @@ ColliderState = make_soa("ColliderState", COLLIDER_FIELDS)
 
 
 # initial values besides zero / identity (a team starts with Reset and TimeReset)
-TEAM_FILL = {"reset": 1, "time_reset": 1, "scale_ratio": 1.0, "gravity_ratio": 1.0,
+TEAM_FILL = {"reset": 1, "time_reset": 1, "scale_ratio": 1.0, "length_unit": 1.0, "gravity_ratio": 1.0,
              "gravity_dot": 1.0, "distance_weight": 1.0, "component_scale_ratio": 1.0,
              "component_scale": 1.0, "old_component_scale": 1.0,
              "frame_world_scale": 1.0, "old_frame_world_scale": 1.0}
