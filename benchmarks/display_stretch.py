@@ -28,7 +28,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from magica_py.bench import metrics as M  # noqa: E402
-from magica_py.bench.variants import Variant, prepare  # noqa: E402
+from magica_py.bench.variants import Variant, colliding_pairs, prepare  # noqa: E402
 
 
 def measure(scene: str, fps: float, mode: str, duration: float | None, parameters: dict, overrides=()) -> dict:
@@ -45,12 +45,7 @@ def measure(scene: str, fps: float, mode: str, duration: float | None, parameter
     geometry = M.chain_geometry(model, h.world_position[nodes].copy())
     n = nodes.shape[0]
     radius = M.particle_radius(model, system.parameters)
-    team_cols = [list(getattr(spec, "colliders", ()) or ()) if getattr(spec, "collision_mode", "none") != "none"
-                 else [] for spec in system.specs]
-    pairs = M.particle_collider_pairs(geometry.team, team_cols)
-    collides = geometry.moving & ((np.asarray(model.attribute) & 0x10) == 0)
-    keep = collides[pairs[0]]
-    pairs = (pairs[0][keep], pairs[1][keep])
+    pairs = colliding_pairs(system, geometry)
     edge_team = geometry.team[geometry.edges[:, 0]] if geometry.edges.size else np.zeros(0, dtype=np.int64)
     parent = np.asarray(model.parent, dtype=np.int64)
     e = geometry.edges
