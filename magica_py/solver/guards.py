@@ -44,7 +44,8 @@ def check_team(m, ps, ts, team):
 
     One read-only pass with the verdicts OR-ed (no early exit: the loop vectorises); any
     non-finite value wins over a speed excess, as with the early return it replaces."""
-    limit_sq = speed_limit_sq(ts.scale_ratio[team])
+    # quality mode: the bound follows the cloth's length unit too (1.0 in faithful mode)
+    limit_sq = speed_limit_sq(ts.scale_ratio[team] * ts.length_unit[team])
     old_pos, real_velocity, velocity, disp_pos = flat(ps.old_pos), flat(ps.real_velocity), flat(ps.velocity), flat(ps.disp_pos)
     first = np.uint64(3) * np.uint64(m.team_particle_start[team])
     non_finite = False
