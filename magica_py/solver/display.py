@@ -117,8 +117,8 @@ def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, runn
     if time_based:
         # the roots' poses are read below: compute every Move display first (a Move root is
         # not a display frame, so the order does not matter here)
-        first_q = m.team_particle_start[team]
-        for p in range(first_q, first_q + m.team_particle_count[team]):
+        start = m.team_particle_start[team]
+        for p in range(start, start + m.team_particle_count[team]):
             if (m.attribute[p] & MOVE) != 0:
                 store3(ps.disp_pos, p, display_interpolated(m, ps, ts, team, p, alpha))
     # arrays as locals, flat rows, unsigned indices: through the tables the array pointers
