@@ -4,7 +4,6 @@ reset; faithful mode stretches it by hundreds of percent (the oracle's other sid
 """
 import pathlib
 
-import numpy as np
 import pytest
 import yaml
 

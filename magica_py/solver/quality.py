@@ -36,7 +36,7 @@ import math
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     inverse_mass_friction_depth, load3, load4, q_rotate, store3, v_add, v_dot, v_length, v_length_sq, v_lerp,
-    v_mul, v_normalize, v_scale, v_sub,
+    v_normalize, v_scale, v_sub,
 )
 from magica_py.solver.colliders import capsule_ends
 from magica_py.solver.constraints.collision import (
