@@ -8,8 +8,8 @@ For every frame the script records, over every proxy edge of the scene's cloths:
 * the displayed edge stretch (parent links and the other proxy edges, e.g. a skirt's rings,
   apart): the bones' world positions after the write-back (what a user
   sees), ``|p1 - p0| / rest - 1``;
-* the simulated edge stretch: the same of the solver state at the end of the last step
-  (``ClothSystem.particles.old_pos``);
+* the simulated edge stretch: the same of the solver states the display interpolates, the
+  last step's (``ClothSystem.particles.old_pos``) and the one before it;
 * the displayed penetration: depth of a moving bone inside a collider of its cloth plus its
   particle radius, at this frame's collider pose (m).
 
@@ -58,11 +58,16 @@ def measure(scene: str, fps: float, mode: str, duration: float | None, parameter
     state_other = np.zeros((p.frames, len(teams)))
     depth = np.zeros(p.frames)
     ps = system.particles
+    dt = 1.0 / p.frequency
     for i in range(p.frames):
         player.step()
         now = h.world_position[nodes]
         es_shown = M.edge_stretch(now, geometry)
-        es_state = M.edge_stretch(np.asarray(ps.old_pos[:n]), geometry)
+        # the two step states the display interpolates: the last (old_pos) and the one before
+        # (old_pos - real_velocity dt, D.10's definition), which at render rates below the
+        # frequency ends inside the frame
+        es_state = np.maximum(M.edge_stretch(np.asarray(ps.old_pos[:n]), geometry),
+                              M.edge_stretch(np.asarray(ps.old_pos[:n] - ps.real_velocity[:n] * dt), geometry))
         for j, t in enumerate(teams):
             sel = (edge_team == t) & vertical
             shown[i, j] = es_shown[sel].max(initial=0.0)
