@@ -66,7 +66,7 @@ print(json.dumps({"positions": result.cloths["tail"].positions.tolist(), "compil
 # the optional stages tail_orbit (line mode, angle restoration, no collider, no motion
 # constraint, faithful mode) does not use: never compiled
 UNUSED_BY_TAIL_ORBIT = ("bending_team", "apply_accumulated", "point_collision_team", "edge_collision_team",
-                        "motion_team", "quality_end_of_step", "build_reset_team", "display_collision_team",
+                        "motion_team", "quality_end_of_step", "build_reset_team", "display_constraints_team",
                         "triangle_rotations_team", "wind_team")
 
 

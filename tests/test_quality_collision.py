@@ -2,6 +2,7 @@
 step inside a collider. A tail whipping at 1 rev/s through a sphere (point and edge modes):
 after every frame, the last step's positions are checked against the collider's pose of that
 step (``ColliderState.start_new``), and the displayed bones against the scene's sphere.
+Particles that start a step inside a moving collider: tests/test_quality_collision_moving.py.
 """
 import importlib.util
 import pathlib
@@ -55,14 +56,16 @@ def test_collision_last_leaves_no_particle_inside_the_sphere_at_the_end_of_a_ste
     assert off_step > 1e-3 and faithful_step > 1e-3     # measured 14-42 mm and 10-19 mm
 
 
-def test_display_stays_outside_a_static_sphere_without_smoothing(bq):
-    """The display is the last step extrapolated and projected out again; the sphere is
-    static and, with movement smoothing 0, not shifted in the cloth's frame: depth 0."""
+def test_display_enters_a_static_sphere_less_than_faithful_where_leaving_it_would_stretch(bq):
+    """The root passes inside the sphere: the state keeps its first edges stretched (18.8 %)
+    to stay out of it. The quality display keeps every edge within the lengths of the states
+    it interpolates (tests/test_quality_display.py) and moves out of the sphere at this
+    frame's pose only as far as that allows: between two steps the root has moved on and the
+    display stays partly inside, less than the faithful display."""
     params = {"inertia.movement_inertia_smoothing": 0.0}
     _step, display = penetrations(bq, "tail_sphere", {**bq.QUALITY, **params})
     _s, faithful_display = penetrations(bq, "tail_sphere", params)
-    assert display <= 1e-9
-    assert faithful_display > 5e-3                      # measured 15.7 mm
+    assert display < 0.8 * faithful_display            # measured 10.3 mm against 15.7 mm
 
 
 def test_inside_old_pose_oracle():

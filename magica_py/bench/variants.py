@@ -196,6 +196,18 @@ def _frames_for(settings, duration: float) -> int:
     return max(1, int(math.ceil(duration / settings.nominal_frame_time() - 1e-9)))
 
 
+def colliding_pairs(system, geometry: M.ChainGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """(particle, collider) index pairs the solver checks: the moving particles (fixed bones
+    follow the animation; DisableCollision 0x10 excluded) of each cloth whose collision mode
+    is not none, against that cloth's colliders."""
+    team_cols = [list(getattr(spec, "colliders", ()) or ()) if getattr(spec, "collision_mode", "none") != "none"
+                 else [] for spec in system.specs]
+    pairs = M.particle_collider_pairs(geometry.team, team_cols)
+    collides = geometry.moving & ((np.asarray(system.model.attribute) & 0x10) == 0)
+    keep = collides[pairs[0]]
+    return pairs[0][keep], pairs[1][keep]
+
+
 # ----------------------------------------------------------------------------- the run
 def run_variant(variant: Variant, record_positions: bool = True, progress=None,
                 prepared: Prepared | None = None, before_frame=None) -> RunResult:
@@ -211,13 +223,7 @@ def run_variant(variant: Variant, record_positions: bool = True, progress=None,
     nodes = np.asarray(model.transform_index, dtype=np.int64)
     geometry = M.chain_geometry(model, h.world_position[nodes].copy())
     radius_base = M.particle_radius(model, system.parameters)
-    team_cols = [list(getattr(spec, "colliders", ()) or ()) if getattr(spec, "collision_mode", "none") != "none"
-                 else [] for spec in system.specs]
-    pairs = M.particle_collider_pairs(geometry.team, team_cols)
-    # only moving particles collide (fixed bones follow the animation; DisableCollision 0x10)
-    collides = geometry.moving & ((np.asarray(model.attribute) & 0x10) == 0)
-    keep = collides[pairs[0]]
-    pairs = (pairs[0][keep], pairs[1][keep])
+    pairs = colliding_pairs(system, geometry)
     has_colliders = pairs[0].shape[0] > 0
     children = np.asarray(model.child_count)
     tips = np.nonzero(geometry.moving & (children == 0))[0]

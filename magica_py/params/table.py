@@ -111,7 +111,7 @@ PARAMETER_DEFS: tuple[ParameterDef, ...] = (
        doc="faithful: MagicaCloth2's BoneCloth as specified (what its users tune against); quality: frequency-consistent rates, time-based smoothing and display, inextensibility and collision last (each switch below set to auto takes its quality default).",
        choices=("faithful", "quality")),
     _p("solver.time_based_smoothing", "enum", "auto", ref="docs/quality-mode.md",
-       doc="enabled: movement smoothing is a time constant (exact exponential filter of the component velocity, tuned at 90 fps) and the display extrapolates by the time since the last step, so the motion does not depend on the frame rate.",
+       doc="enabled: movement smoothing is a time constant (exact exponential filter of the component velocity, tuned at 90 fps) and the display interpolates the last two steps in their roots' frames (one step of latency, never more stretch than the state), so the motion does not depend on the frame rate.",
        choices=("auto", "enabled", "disabled")),
     _p("solver.inextensibility", "enum", "auto", ref="docs/quality-mode.md",
        doc="End-of-step pass against stretch: none; tether (root distance clamped to rest x (1 + tether_limit)); ftl (follow-the-leader: each edge clamped to its rest length, root to tip, with the DFTL velocity correction); ftl_tether (both); iterations (distance_iterations extra distance passes); ftl_edges (distance_iterations unilateral projections of every proxy edge, horizontal ones too, then tether and FTL).",
@@ -123,7 +123,7 @@ PARAMETER_DEFS: tuple[ParameterDef, ...] = (
        doc="attenuated: 70 % of each distance correction becomes velocity (MagicaCloth2); full: all of it (plain PBD, no artificial damping).",
        choices=("auto", "attenuated", "full")),
     _p("solver.collision_last", "enum", "auto", ref="docs/quality-mode.md",
-       doc="enabled: a final collider projection after the second distance pass and the inextensibility pass, so no particle ends a step inside a collider.",
+       doc="enabled: a final collider projection after the second distance pass and the inextensibility pass, so no particle ends a step inside a collider (a particle that started inside is carried out without its depth becoming velocity); with the time-based display, the display's push out of the colliders at this frame's pose.",
        choices=("auto", "enabled", "disabled")),
 )
 

@@ -19,6 +19,7 @@ from magica_py.kernels.math3d import (
 )
 from magica_py.solver.rotations import normalize_or_zero, rot_from_normal_tangent_select
 from magica_py.kernels import portable
+from magica_py.solver.parameters import length_unit
 
 MOVE = 0x02
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -210,6 +211,7 @@ def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation
     time (the ramp at the frame's start, not at the last step before it)."""
     cpos, crot, cscl, ratio = component_pose_team(m, ts, team, world_position, world_rotation, lossy_scale)
     center_pos, center_rot = center_pose_team(m, ps, team, cpos, crot)
+    ts.length_unit[team] = length_unit(m, prm, team)
     inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot, world_position, world_rotation,
                  frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step)
 
@@ -260,7 +262,7 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
     if mode != 0 and not reset:
         delta = v_length(v_sub(cpos, old_pos))
         angle = math.degrees(q_angle(old_rot, crot))
-        if delta >= prm.teleport_distance[team] * ratio or angle >= prm.teleport_rotation[team]:
+        if delta >= prm.teleport_distance[team] * ratio * ts.length_unit[team] or angle >= prm.teleport_rotation[team]:
             if mode == TELEPORT_RESET:
                 reset = True
                 ts.reset[team] = 1
@@ -273,8 +275,8 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
     limit = prm.movement_speed_limit[team]
     if s >= 1e-6 and not reset and not keep:
         if prm_time_based_smoothing[team] != 0:
-            felt = time_based_smoothing(ts, team, v_sub(cpos, old_pos), frame_delta_time, s, limit * ratio
-                                        if limit >= 0.0 else -1.0)
+            felt = time_based_smoothing(ts, team, v_sub(cpos, old_pos), frame_delta_time, s,
+                                        limit * ratio * ts.length_unit[team] if limit >= 0.0 else -1.0)
             smooth_pos = v_sub(cpos, felt)
         else:
             if math.isnan(ts_smoothing_velocity[team, 0]):  # quality switched off after a reset
@@ -325,7 +327,7 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
         if frame_delta_time > 0.0:
             if limit >= 0.0:
                 speed = v_length(v_sub(cpos, work_pos)) / frame_delta_time
-                limit_s = limit * ratio
+                limit_s = limit * ratio * ts.length_unit[team]
                 if speed > limit_s:
                     k = saturate((speed - limit_s) / speed)
                     ms = lerp(ms, 1.0, k)
@@ -392,7 +394,7 @@ def snap_particles_to_base_pose(ps, start, end):
     ps_disp_pos, ps_friction, ps_next_pos, ps_old_pos = ps.disp_pos, ps.friction, ps.next_pos, ps.old_pos
     ps_old_position, ps_old_rotation, ps_position = ps.old_position, ps.old_rotation, ps.position
     ps_real_velocity, ps_rotation, ps_static_friction = ps.real_velocity, ps.rotation, ps.static_friction
-    ps_velocity, ps_velocity_pos = ps.velocity, ps.velocity_pos
+    ps_velocity, ps_velocity_pos, ps_display_history = ps.velocity, ps.velocity_pos, ps.display_history
     for p in range(start, end):
         pos = load3(ps_position, p)
         rot = load4(ps_rotation, p)
@@ -410,6 +412,7 @@ def snap_particles_to_base_pose(ps, start, end):
         store4(ps_old_rotation, p, rot)
         ps_friction[p] = 0.0
         ps_static_friction[p] = 0.0
+        ps_display_history[p] = 0   # quality display: no step state since the reset
 
 
 @kernel

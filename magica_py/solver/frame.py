@@ -44,7 +44,7 @@ from magica_py.solver.constraints.motion import motion_team
 from magica_py.solver.constraints.tether import tether_team
 from magica_py.solver.display import display_team
 from magica_py.solver.guards import check_team, reset_team_to_base
-from magica_py.solver.quality import display_collision_team, quality_end_of_step
+from magica_py.solver.quality import display_constraints_team, quality_end_of_step
 from magica_py.solver.rotations import line_rotations_team, triangle_rotations_team
 from magica_py.solver.step import end_step_team, predict_team, step_basic_pose_team, team_step_update
 from magica_py.solver.writeback import transform_data_team, write_transforms_team
@@ -256,8 +256,8 @@ def team_frame_end(m, ps, prm, ts, cs, tt, h, fi, t, quality, lines, triangles):
     display_team(m, ps, prm, ts, t, fi.dt, tt.time[t], tt.old_time[t], tt.now_update_time[t],
                  tt.running[t])
     if quality is not None:
-        if prm.collision_last[t] != 0 and prm.time_based_smoothing[t] != 0 and ts.collider_count[t] > 0:
-            display_collision_team(m, ps, prm, ts, cs, t)  # quality mode (§E.1)
+        if prm.time_based_smoothing[t] != 0:
+            display_constraints_team(m, ps, prm, ts, cs, t, fi.dt)  # quality mode (§E.1)
     if lines is not None:
         line_rotations_team(m, ps, prm, ts, t)
     if triangles is not None:

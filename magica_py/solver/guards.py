@@ -43,7 +43,8 @@ def check_team(m, ps, ts, team):
     non-finite value wins over a speed excess, as with the early return it replaces."""
     # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     m_team_particle_count = m.team_particle_count
-    limit_sq = speed_limit_sq(ts.scale_ratio[team])
+    # quality mode: the bound follows the cloth's length unit too (1.0 in faithful mode)
+    limit_sq = speed_limit_sq(ts.scale_ratio[team] * ts.length_unit[team])
     old_pos, real_velocity, velocity, disp_pos = ps.old_pos, ps.real_velocity, ps.velocity, ps.disp_pos
     start = m.team_particle_start[team]
     non_finite = False

@@ -12,6 +12,8 @@ rate k with ``1 - (1 - k)^(90/f)`` instead (``step_rate`` below).
 from __future__ import annotations
 
 
+import math
+
 import numpy as np
 
 from magica_py.jit import kernel
@@ -233,6 +235,24 @@ def allocate_parameters(team_count: int):
 
 
 # ----------------------------------------------------------------------------- kernels
+SQRT3 = math.sqrt(3.0)   # |(1, 1, 1)|: the length of a unit lossy scale
+
+
+@kernel
+def length_unit(m, prm, team):
+    """The cloth's own length unit (m): 1.0 in faithful mode (MagicaCloth2's lengths are world
+    metres at the build scale); in quality mode the component's build scale, |lossy scale| /
+    sqrt(3) (exactly 1.0 at scale 1), so that every length-like parameter (particle radius,
+    speed limits, friction threshold, gravity, motion distances, teleport distance) follows
+    the cloth's scale: a rig built at 0.01 behaves as the rig at 1 seen at 0.01
+    (docs/parameters.md, *Scale*)."""
+    if prm.quality[team] == 0:
+        return 1.0
+    return math.sqrt(m.team_init_scale[team, 0] * m.team_init_scale[team, 0]
+                     + m.team_init_scale[team, 1] * m.team_init_scale[team, 1]
+                     + m.team_init_scale[team, 2] * m.team_init_scale[team, 2]) / SQRT3
+
+
 @kernel
 def curve_at(tables, row, depth):
     """``EvaluateCurve`` of §0.3 on row ``row`` of a (T, 16) table (no clamp)."""

@@ -19,23 +19,31 @@ and the motion constraint (D.9), before the end of the step (D.10):
      D.4, fixed ends immovable), then the tether and FTL;
 
 2. ``collision_last``: a final point projection of every colliding particle against each
-   collider in turn, so that no particle ends the step inside one.
+   collider in turn (two rounds), so that no particle ends the step inside one; a particle
+   that started the step inside a collider is carried out with it without the starting depth
+   becoming velocity (``collision_last_push``).
+
+The quality display (``display.py``) ends with ``display_constraints_team``: collider push at
+this frame's pose and edge bounds taken from the step states.
 
 Every pass is unilateral (only stretch is removed) and uses the step-basic pose (D.2) as the
 rest reference, like the tether of D.3. Faithful mode never calls this module.
 """
 from __future__ import annotations
 
+import math
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    inverse_mass_friction_depth, load3, store3, v_add, v_dot, v_length, v_lerp, v_mul, v_scale, v_sub,
+    inverse_mass_friction_depth, load3, load4, q_rotate, store3, v_add, v_dot, v_length, v_length_sq, v_lerp,
+    v_normalize, v_scale, v_sub,
 )
+from magica_py.solver.colliders import capsule_ends
 from magica_py.solver.constraints.collision import (
-    INVALID_OR_NO_COLLISION, PLANE, SPHERE, segment_parameter, solve_point_collider,
+    INVALID_OR_NO_COLLISION, PLANE, SPHERE, plane_push, segment_parameter, solve_point_collider,
 )
 from magica_py.solver.constraints.distance import distance_team
-from magica_py.solver.parameters import curve_at
+from magica_py.solver.parameters import curve_at, length_unit
 from magica_py.kernels import portable
 
 MOVE = 0x02
@@ -46,6 +54,10 @@ INEXT_FTL_TETHER = 3
 INEXT_ITERATIONS = 4
 INEXT_FTL_EDGES = 5
 INSIDE_TOLERANCE = 1e-6   # m
+DISPLAY_PASSES = 2        # collider push + edge clamp passes of the quality display
+COLLISION_LAST_ROUNDS = 2  # rounds over the colliders of collision last
+DISPLAY_EDGE_PASSES = 2    # edge passes of the quality display's target after its collider push
+DISPLAY_MOVE_PASSES = 3    # bounded moves of the quality display towards its target
 
 
 @kernel
@@ -136,76 +148,15 @@ def edge_pass_team(m, ps, team):
 
 
 @kernel
-def display_ftl_team(m, ps, ts, team):
-    """Quality display: the extrapolated display positions (``ps.position``) go through one
-    FTL pass so that extrapolating each particle along its own velocity does not stretch
-    the edges the step kept. Rest length: the larger of the last step's (step-basic pose)
-    and the build rest length at the current scale (the step-basic pose is not set before
-    the first step, e.g. a first frame at 240 fps runs no 90 Hz step)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
-    m_baseline_local_position, m_baseline_start = m.baseline_local_position, m.baseline_start
-    m_parent, m_team_baseline_count, ps_position = m.parent, m.team_baseline_count, ps.position
-    ps_step_basic_pos = ps.step_basic_pos
-    s = v_scale(load3(m.team_init_scale, team), ts.scale_ratio[team])
-    b0 = m.team_baseline_start[team]
-    for b in range(b0, b0 + m_team_baseline_count[team]):
-        e0 = m_baseline_start[b]
-        for e in range(e0 + 1, e0 + m_baseline_count[b]):
-            v = m_baseline_data[e]
-            p = m_parent[v]
-            if (m_attribute[v] & MOVE) == 0 or p < 0:
-                continue
-            rest = max(v_length(v_sub(load3(ps_step_basic_pos, v), load3(ps_step_basic_pos, p))),
-                       v_length(v_mul(load3(m_baseline_local_position, v), s)))
-            x, _move = clamp_to_sphere(load3(ps_position, v), load3(ps_position, p), rest)
-            store3(ps_position, v, x)
-
-
-@kernel
 def collision_last_team(m, ps, prm, ts, cs, team):
-    """Project every colliding moving particle out of each collider in turn (point test of
-    D.8 with the particle radius; friction and normals are left to D.8)."""
-    project_out_of_colliders(m, prm, ts, cs, team, ps.next_pos, ps.old_pos)
-
-
-@kernel
-def display_collision_team(m, ps, prm, ts, cs, team):
-    """Quality display: the extrapolated display positions projected out of the colliders
-    (at their pose of the last step), so that extrapolating does not show a particle inside."""
-    project_out_of_colliders(m, prm, ts, cs, team, ps.position, ps.old_pos)
-
-
-@kernel
-def inside_old_pose(cs, k, x, r):
-    """Is x (with radius r) deeper than ``INSIDE_TOLERANCE`` inside collider slot k at its
-    previous-step pose? (A particle projected by the last step lies on the surface.)"""
-    shape = cs.shape[k]
-    so = load3(cs.start_old, k)
-    reach = r - INSIDE_TOLERANCE
-    if shape == PLANE:
-        return v_dot(v_sub(x, so), load3(cs.plane_normal, k)) < reach
-    if shape == SPHERE:
-        return v_length(v_sub(x, so)) < cs.radius_start[k] + reach
-    eo = load3(cs.end_old, k)
-    t = segment_parameter(x, so, eo)
-    radius = cs.radius_start[k] + (cs.radius_end[k] - cs.radius_start[k]) * t
-    return v_length(v_sub(x, v_lerp(so, eo, t))) < radius + reach
-
-
-@kernel
-def project_out_of_colliders(m, prm, ts, cs, team, positions, ps_old_pos):
-    """Point projection of ``positions`` (N, 3) of the team's colliding moving particles.
-
-    A particle whose last step ended inside the collider too (``old_pos``: a collider that
-    appeared around the cloth, e.g. the engulfing hard case) is left to D.8 and the distance
-    pass: projecting every such particle to the surface at once would tear the chain across
-    the collider (81 % edge stretch in the engulfing case, 0 % this way). Once out, a
-    particle is kept out."""
+    """Project every colliding moving particle out of each collider (``collision_last_push``),
+    ``COLLISION_LAST_ROUNDS`` rounds over the colliders so that a push out of one collider
+    into another is undone. Friction and normals are left to D.8."""
     # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     cs_scale_suspend, m_attribute, m_depth = cs.scale_suspend, m.attribute, m.depth
-    m_team_particle_count, prm_radius_curve = m.team_particle_count, prm.radius_curve
-    scale = ts.scale_ratio[team]
+    m_team_particle_count, prm_radius_curve, ps_next_pos = m.team_particle_count, prm.radius_curve, ps.next_pos
+    ps_old_pos, ps_velocity_pos = ps.old_pos, ps.velocity_pos
+    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
     start = m.team_particle_start[team]
@@ -214,17 +165,252 @@ def project_out_of_colliders(m, prm, ts, cs, team, positions, ps_old_pos):
         if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
             continue
         r = max(curve_at(prm_radius_curve, team, m_depth[p]), 0.0001) * scale
-        x = load3(positions, p)
-        for k in range(c0, c1):
-            if cs_scale_suspend[k] != 0:
-                continue
+        x = load3(ps_next_pos, p)
+        start_x = load3(ps_old_pos, p)
+        velocity_pos = load3(ps_velocity_pos, p)
+        for _ in range(COLLISION_LAST_ROUNDS):
+            for k in range(c0, c1):
+                if cs_scale_suspend[k] == 0:
+                    x, velocity_pos = collision_last_push(cs, k, x, start_x, velocity_pos, r,
+                                                          INSIDE_TOLERANCE * scale)
+        store3(ps_next_pos, p, x)
+        store3(ps_velocity_pos, p, velocity_pos)
+
+
+@kernel
+def collision_last_push(cs, k, x, start_x, velocity_pos, r, tolerance):
+    """One particle (end-of-step position x, radius r, start-of-step position ``start_x``)
+    against collider slot k moving from its previous-step to its current pose within the step:
+    (x, velocity_pos) after the push. ``tolerance`` (m): the depth below which it counts as
+    having started outside (a particle projected by the last step lies on the surface).
+
+    A particle that started the step outside is pushed by D.8's moving plane (normal from the
+    previous pose, surface at the current one): it ends on the supporting plane of the surface
+    point, so outside the collider, and the push becomes velocity (the collider's motion).
+
+    A particle that started the step inside (a collider that appeared, grew or was squeezed
+    into it) is carried with the collider: its side is the direction from the axis to
+    ``start_x`` at the previous pose, turned with the collider to the current pose (not the
+    nearest surface of ``x``, which flips to the far side once a thick collider has moved past
+    its axis), and it is pushed onto the supporting plane there. The share of the push that
+    removes the depth it started with does not become velocity (``velocity_pos`` moves with
+    it): it leaves with the collider's motion along that side and its own, not thrown out by
+    the depth it was found at."""
+    shape = cs.shape[k]
+    depth = start_depth(cs, k, start_x, r)
+    if depth <= tolerance or shape == PLANE:
+        bmin = (x[0] - 2.0 * r, x[1] - 2.0 * r, x[2] - 2.0 * r)
+        bmax = (x[0] + 2.0 * r, x[1] + 2.0 * r, x[2] + 2.0 * r)
+        d, n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
+        if d >= 0.0:
+            return x, velocity_pos
+    else:
+        if shape == SPHERE:
+            t = 0.0
+            n = v_normalize(v_sub(start_x, load3(cs.start_old, k)))
+            surface = v_add(load3(cs.start_new, k), v_scale(n, cs.radius_start[k] + r))
+        else:
+            so = load3(cs.start_old, k)
+            eo = load3(cs.end_old, k)
+            t = segment_parameter(start_x, so, eo)
+            u = q_rotate(load4(cs.inverse_old_rot, k), v_sub(start_x, v_lerp(so, eo, t)))
+            n = v_normalize(q_rotate(load4(cs.now_rot, k), u))
+            radius = cs.radius_start[k] + (cs.radius_end[k] - cs.radius_start[k]) * t
+            surface = v_add(v_lerp(load3(cs.start_new, k), load3(cs.end_new, k), t), v_scale(n, radius + r))
+        if v_length_sq(n) < 0.5:   # started on the axis: no side, the nearest surface
             bmin = (x[0] - 2.0 * r, x[1] - 2.0 * r, x[2] - 2.0 * r)
             bmax = (x[0] + 2.0 * r, x[1] + 2.0 * r, x[2] + 2.0 * r)
-            d, _n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
-            if d < 0.0:
-                if not inside_old_pose(cs, k, load3(ps_old_pos, p), r):
-                    x = x2
-        store3(positions, p, x)
+            d, n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
+        else:
+            d, x2 = plane_push(surface, n, x)
+        if d >= 0.0:
+            return x, velocity_pos
+        along = v_dot(v_sub(x2, x), n)
+        velocity_pos = v_add(velocity_pos, v_scale(n, min(depth, along)))
+    return x2, velocity_pos
+
+
+@kernel
+def start_depth(cs, k, x, r):
+    """How deep the particle sphere (x, r) lay inside collider slot k at its previous-step
+    pose (m; <= 0 outside)."""
+    shape = cs.shape[k]
+    so = load3(cs.start_old, k)
+    if shape == PLANE:
+        return r - v_dot(v_sub(x, so), load3(cs.plane_normal, k))
+    if shape == SPHERE:
+        return cs.radius_start[k] + r - v_length(v_sub(x, so))
+    eo = load3(cs.end_old, k)
+    t = segment_parameter(x, so, eo)
+    radius = cs.radius_start[k] + (cs.radius_end[k] - cs.radius_start[k]) * t
+    return radius + r - v_length(v_sub(x, v_lerp(so, eo, t)))
+
+
+@kernel
+def frame_collider_push(cs, k, x, r):
+    """``x`` (a sphere of radius r) moved onto the surface of collider slot k at this frame's
+    pose (G.2: ``frame_pos`` / ``frame_rot`` / ``frame_scale``) when it lies inside it, along
+    the shortest way out; unchanged otherwise (or when its centre is on the capsule's axis)."""
+    shape = cs.shape[k]
+    pos = load3(cs.frame_pos, k)
+    rot = load4(cs.frame_rot, k)
+    if shape == PLANE:
+        n = q_rotate(rot, (0.0, -1.0 if cs.frame_scale[k, 1] < 0.0 else 1.0, 0.0))
+        d = v_dot(v_sub(x, pos), n) - r
+        return v_sub(x, v_scale(n, d)) if d < 0.0 else x
+    if shape == SPHERE:
+        a = pos
+        b = pos
+        ra = cs.size[k, 0] * abs(cs.frame_scale[k, 0])
+        rb = ra
+    else:
+        d = cs.direction[k]
+        size = (cs.size[k, 0], cs.size[k, 1], cs.size[k, 2])
+        a, b, ra, rb = capsule_ends(pos, rot, d, cs.reverse_direction[k] != 0, cs.aligned_on_center[k] != 0,
+                                    size, cs.frame_scale[k, d])
+    t = segment_parameter(x, a, b)
+    c = v_lerp(a, b, t)
+    reach = ra + (rb - ra) * t + r
+    v = v_sub(x, c)
+    length = v_length(v)
+    if length >= reach or length < 1e-12:
+        return x
+    return v_add(c, v_scale(v, reach / length))
+
+
+@kernel
+def display_edge_bound(ps, a, b, dt):
+    """The longest the displayed edge (a, b) may be: the larger of its step-basic rest length
+    and its length in the two step states the display interpolates, the last one
+    (``old_pos``) and the one before (``old_pos - real_velocity dt``, D.10's definition of the
+    real velocity; the C.5 shift moves and turns both together)."""
+    old_a = load3(ps.old_pos, a)
+    old_b = load3(ps.old_pos, b)
+    before = v_sub(v_sub(old_a, v_scale(load3(ps.real_velocity, a), dt)),
+                   v_sub(old_b, v_scale(load3(ps.real_velocity, b), dt)))
+    rest = v_length(v_sub(load3(ps.step_basic_pos, a), load3(ps.step_basic_pos, b)))
+    return max(rest, max(v_length(v_sub(old_a, old_b)), v_length(before)))
+
+
+@kernel
+def safe_fraction(e0, de, bound):
+    """The largest s in [0, 1] with |e0 + s de| <= max(bound, |e0|) (|.| is convex in s, so
+    every s below it keeps the edge within the bound too)."""
+    limit = max(bound, v_length(e0))
+    end = v_add(e0, de)
+    if v_dot(end, end) <= limit * limit:
+        return 1.0
+    a = v_dot(de, de)
+    half_b = v_dot(e0, de)
+    c = v_dot(e0, e0) - limit * limit
+    disc = half_b * half_b - a * c
+    if a <= 0.0 or disc <= 0.0:
+        return 0.0
+    return min(max((-half_b + math.sqrt(disc)) / a, 0.0), 1.0)
+
+
+@kernel
+def display_constraints_team(m, ps, prm, ts, cs, team, dt):
+    """Quality display after E.1 (``display.display_team``): the interpolated display in
+    ``ps.position`` (every edge within its bound, ``display_edge_bound``) moved towards a
+    target that is out of the colliders at this frame's pose, never past the bounds.
+
+    1. The target, in ``ps.position``: along every baseline, parents first, each Move
+       particle is pushed out of the team's colliders at this frame's pose
+       (``frame_collider_push``; only when the cloth collides: ``collision_mode`` not none and
+       ``collision_last`` on) and kept within its parent link's bound (follow-the-leader),
+       ``DISPLAY_PASSES`` times; then ``DISPLAY_EDGE_PASSES`` Gauss-Seidel passes shorten the
+       other edges (a skirt's rings) longer than their bound, both ends moving.
+    2. The display, in ``ps.disp_pos``: starting from the interpolated display, each Move
+       particle in turn moves towards its target by the largest fraction that keeps each of
+       its links (D.4's partners, every proxy edge) within its bound with its neighbours'
+       current display (``safe_fraction``), ``DISPLAY_MOVE_PASSES`` times. Every move keeps
+       the display within the bounds, so none is ever shown longer than the state allows;
+       where a push would need more stretch than the state has, the particle is shown
+       partly inside the collider. Then copied to ``ps.position``."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    cs_scale_suspend, m_attribute, m_baseline_count = cs.scale_suspend, m.attribute, m.baseline_count
+    m_baseline_data, m_baseline_start, m_depth = m.baseline_data, m.baseline_start, m.depth
+    m_distance_count, m_distance_start = m.distance_count, m.distance_start
+    m_distance_target, m_edges, m_parent = m.distance_target, m.edges, m.parent
+    m_team_baseline_count, prm_radius_curve, ps_disp_pos = m.team_baseline_count, prm.radius_curve, ps.disp_pos
+    ps_position = ps.position
+    blend = ts.blend_weight[team]
+    start = m.team_particle_start[team]
+    end = start + m.team_particle_count[team]
+    for p in range(start, end):   # the interpolated display, blended (E.1)
+        store3(ps_disp_pos, p, load3(ps_position, p))
+    if blend <= 0.0:
+        return
+    collide = prm.collision_mode[team] != 0 and prm.collision_last[team] != 0 and ts.collider_count[team] > 0
+    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
+    c0 = ts.collider_start[team]
+    c1 = c0 + ts.collider_count[team]
+    b0 = m.team_baseline_start[team]
+    for bl in range(b0, b0 + m_team_baseline_count[team]):
+        e0 = m_baseline_start[bl]
+        for e in range(e0 + 1, e0 + m_baseline_count[bl]):
+            v = m_baseline_data[e]
+            p = m_parent[v]
+            attr = m_attribute[v]
+            if (attr & MOVE) == 0 or p < 0:
+                continue
+            bound = display_edge_bound(ps, v, p, dt)
+            parent_pos = load3(ps_position, p)
+            x0 = load3(ps_position, v)
+            x = x0
+            hits = collide and (attr & INVALID_OR_NO_COLLISION) == 0
+            r = max(curve_at(prm_radius_curve, team, m_depth[v]), 0.0001) * scale
+            for _ in range(DISPLAY_PASSES):
+                if hits:
+                    for k in range(c0, c1):
+                        if cs_scale_suspend[k] == 0:
+                            x = frame_collider_push(cs, k, x, r)
+                x, _move = clamp_to_sphere(x, parent_pos, bound)
+            store3(ps_position, v, x)
+    f0 = m.team_edge_start[team]
+    f1 = f0 + m.team_edge_count[team]
+    for _ in range(DISPLAY_EDGE_PASSES):
+        for f in range(f0, f1):
+            a = m_edges[f, 0]
+            b = m_edges[f, 1]
+            wa = 1.0 if (m_attribute[a] & MOVE) != 0 else 0.0
+            wb = 1.0 if (m_attribute[b] & MOVE) != 0 else 0.0
+            if wa + wb <= 0.0:
+                continue
+            pa = load3(ps_position, a)
+            pb = load3(ps_position, b)
+            d = v_sub(pb, pa)
+            length = v_length(d)
+            bound = display_edge_bound(ps, a, b, dt)
+            if length <= bound or length < 1e-12:
+                continue
+            c = v_scale(d, (length - bound) / (length * (wa + wb)))
+            store3(ps_position, a, v_add(pa, v_scale(c, wa)))
+            store3(ps_position, b, v_sub(pb, v_scale(c, wb)))
+    for _ in range(DISPLAY_MOVE_PASSES):
+        for v in range(start, end):
+            if (m_attribute[v] & MOVE) == 0:
+                continue
+            shown = load3(ps_disp_pos, v)
+            move = v_sub(load3(ps_position, v), shown)
+            if v_dot(move, move) == 0.0:
+                continue
+            fraction = 1.0
+            for link in range(m_distance_start[v], m_distance_start[v] + m_distance_count[v]):
+                u = m_distance_target[link]
+                fraction = min(fraction, safe_fraction(v_sub(shown, load3(ps_disp_pos, u)), move,
+                                                       display_edge_bound(ps, v, u, dt)))
+            store3(ps_disp_pos, v, v_add(shown, v_scale(move, fraction)))
+    for p in range(start, end):
+        store3(ps_position, p, load3(ps_disp_pos, p))
+
+
+@kernel
+def inside_old_pose(cs, k, x, r):
+    """Is x (with radius r) deeper than ``INSIDE_TOLERANCE`` inside collider slot k at its
+    previous-step pose? (A particle projected by the last step lies on the surface.)"""
+    return start_depth(cs, k, x, r) > INSIDE_TOLERANCE
 
 
 @kernel

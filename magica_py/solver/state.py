@@ -36,6 +36,11 @@ PARTICLE_FIELDS = [
     ("old_position", "particle", V3, F64, "m; animated pose of the last frame that ran steps (E.1)"),
     ("old_rotation", "particle", Q4, F64, "xyzw; same, rotation (E.1)"),
     ("disp_pos", "particle", V3, F64, "m; display position (E.1)"),
+    # quality display (display.py): the last two step states in their display frame (the
+    # particle's fixed root, or the team center), written at the end of each step (D.10)
+    ("display_local", "particle", V3, F64, "m; state of the last step in its display frame (D.10)"),
+    ("display_prev_local", "particle", V3, F64, "m; state of the step before it, same frame (D.10)"),
+    ("display_history", "particle", (), U8, "0-2: step states recorded since the last reset (C.5 sets 0)"),
     ("friction", "particle", (), F64, "[0,1]; collision friction, decays x0.6 per step (D.8, D.10)"),
     ("static_friction", "particle", (), F64, "[0,1]; static friction ramp (D.10)"),
     ("collision_normal", "particle", V3, F64, "unit or 0; contact normal of the last step (D.8)"),
@@ -110,6 +115,7 @@ TEAM_FIELDS = [
     ("angular_velocity", "team", (), F64, "rad/s of the center this step"),
     ("rotation_axis", "team", V3, F64, "unit axis of the center rotation this step, or 0"),
     ("scale_ratio", "team", (), F64, "max(|scale|/|init scale|, 1e-6) at this step"),
+    ("length_unit", "team", (), F64, "m; the cloth's length unit (parameters.length_unit; C.2 writes it; 1 faithful)"),
     ("gravity_dot", "team", (), F64, "C.3"),
     ("gravity_ratio", "team", (), F64, "C.3"),
     ("velocity_weight", "team", (), F64, "stabilisation ramp after a reset [0,1]"),
@@ -180,7 +186,7 @@ ColliderState = make_soa("ColliderState", COLLIDER_FIELDS)
 
 
 # initial values besides zero / identity (a team starts with Reset and TimeReset)
-TEAM_FILL = {"reset": 1, "time_reset": 1, "scale_ratio": 1.0, "gravity_ratio": 1.0,
+TEAM_FILL = {"reset": 1, "time_reset": 1, "scale_ratio": 1.0, "length_unit": 1.0, "gravity_ratio": 1.0,
              "gravity_dot": 1.0, "distance_weight": 1.0, "component_scale_ratio": 1.0,
              "component_scale": 1.0, "old_component_scale": 1.0,
              "frame_world_scale": 1.0, "old_frame_world_scale": 1.0, "wind_zone_id": -1}

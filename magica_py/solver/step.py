@@ -19,7 +19,8 @@ from magica_py.kernels.math3d import (
     q_normalize, q_rotate, q_slerp, saturate, store3, store4, v_add, v_cross,
     v_dot, v_length, v_length_sq, v_lerp, v_mul, v_normalize, v_scale, v_sub,
 )
-from magica_py.solver.parameters import curve_at_clamp01, step_keep, step_rate
+from magica_py.solver.display import record_display_state_team
+from magica_py.solver.parameters import curve_at_clamp01, length_unit, step_keep, step_rate
 
 MOVE = 0x02
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -93,7 +94,8 @@ def team_step_update(m, ts, prm, frame_interpolation, team, dt):
         old_pos, old_rot, load3(ts.old_frame_world_pos, team), load3(ts.frame_world_pos, team),
         load4(ts.old_frame_world_rot, team), load4(ts.frame_world_rot, team),
         load3(ts.old_frame_world_scale, team), load3(ts.frame_world_scale, team), frame_interpolation, dt,
-        prm.local_inertia[team], prm.local_movement_speed_limit[team], prm.local_rotation_speed_limit[team],
+        prm.local_inertia[team], prm.local_movement_speed_limit[team] * length_unit(m, prm, team),
+        prm.local_rotation_speed_limit[team],
         v_length(load3(m.team_init_scale, team)), load3(prm.gravity_direction, team),
         load3(m.team_init_local_gravity, team), prm.gravity[team], prm.gravity_falloff[team],
         prm.stabilization_time[team], ts.velocity_weight[team], prm.blend_weight[team], ts.distance_weight[team])
@@ -189,7 +191,7 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
     gravity = v_scale(load3(prm.gravity_direction, team), prm.gravity[team] * ts.gravity_ratio[team])
     force_mode = ts.external_force_mode[team]
     impact = load3(ts.external_force, team)
-    scale = ts.scale_ratio[team]
+    scale = ts.scale_ratio[team] * length_unit(m, prm, team)   # forces follow the cloth's scale
     start = m.team_particle_start[team]
     for p in range(start, start + m_team_particle_count[team]):
         if t == 1.0:  # the last step of a frame: predict_base_pose's select, without the slerp
@@ -328,7 +330,7 @@ def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
     ps_old_pos, ps_real_velocity, ps_static_friction = ps.old_pos, ps.real_velocity, ps.static_friction
     ps_velocity, ps_velocity_pos = ps.velocity, ps.velocity_pos
     mode = prm.rate_mode[team]
-    scale = ts.scale_ratio[team]
+    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
     static_threshold = prm.friction[team] * scale
     dynamic = prm.friction[team]
     speed_limit = prm.particle_speed_limit[team]
@@ -368,5 +370,7 @@ def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
             store3(ps_velocity, p, v_scale(vel, velocity_weight))
         store3(ps_real_velocity, p, v_scale(v_sub(next_pos, old_pos), 1.0 / dt))
         store3(ps_old_pos, p, next_pos)
+    if prm.time_based_smoothing[team] != 0:   # quality display: keep this state (display.py)
+        record_display_state_team(m, ps, ts, team)
 
 

@@ -237,7 +237,8 @@ class ClothSystem:
             point_collision=1 if bool(np.any(colliding & (mode == 1))) else None,
             edge_collision=1 if bool(np.any(colliding & (mode == 2))) else None,
             motion=any_of((prm.use_max_distance != 0) | (prm.use_backstop != 0)),
-            quality=any_of((prm.quality != 0) | (prm.inextensibility != 0) | (prm.collision_last != 0)),
+            quality=any_of((prm.quality != 0) | (prm.inextensibility != 0) | (prm.collision_last != 0)
+                           | (prm.time_based_smoothing != 0)),
             lines=any_of(m.team_has_lines != 0),
             triangles=any_of(m.team_triangle_count > 0),
             wind=1 if self.wind is not None else any_of(prm.wind_moving_wind > 0.01))

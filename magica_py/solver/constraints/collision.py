@@ -21,7 +21,7 @@ from magica_py.kernels.math3d import (
     v_normalize, v_scale, v_sub,
 )
 from magica_py.solver.constraints.bending import FIXED_POINT
-from magica_py.solver.parameters import curve_at
+from magica_py.solver.parameters import curve_at, length_unit
 
 MOVE = 0x02
 INVALID_OR_NO_COLLISION = 0x10
@@ -152,7 +152,7 @@ def point_collision_team(m, ps, prm, ts, cs, team):
     m_team_particle_count, prm_radius_curve = m.team_particle_count, prm.radius_curve
     ps_collision_normal, ps_friction, ps_next_pos = ps.collision_normal, ps.friction, ps.next_pos
     start = m.team_particle_start[team]
-    scale = ts.scale_ratio[team]
+    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
     z = (0.0, 0.0, 0.0)
@@ -253,7 +253,7 @@ def edge_collision_team(m, ps, prm, ts, cs, team):
     prm_radius_curve, ps_accum_count, ps_accum_friction = prm.radius_curve, ps.accum_count, ps.accum_friction
     ps_accum_normal, ps_accum_vector = ps.accum_normal, ps.accum_vector
     ps_collision_normal, ps_friction, ps_next_pos = ps.collision_normal, ps.friction, ps.next_pos
-    scale = ts.scale_ratio[team]
+    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
     e0 = m.team_edge_start[team]

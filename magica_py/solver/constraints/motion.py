@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_rotate, store3, v_add, v_length, v_lerp, v_scale, v_sub
-from magica_py.solver.parameters import curve_at
+from magica_py.solver.parameters import curve_at, length_unit
 
 MOVE = 0x02
 INVALID_MOTION = 0x08
@@ -71,18 +71,19 @@ def motion_team(m, ps, prm, team, attenuation):
     if not use_max and not use_backstop:
         return
     axis = normal_axis_vector(prm.normal_axis[team])
+    unit = length_unit(m, prm, team)   # 1.0 in faithful mode (the reference does not scale them)
     start = m.team_particle_start[team]
     for p in range(start, start + m_team_particle_count[team]):
         attr = m_attribute[p]
         if (attr & MOVE) == 0 or (attr & INVALID_MOTION) != 0:
             continue
         d2 = m_depth[p] * m_depth[p]
-        r = max(curve_at(prm_radius_curve, team, m_depth[p]), 1e-4)
+        r = max(curve_at(prm_radius_curve, team, m_depth[p]), 1e-4) * unit
         direction = q_rotate(load4(ps_base_rot, p), axis)
         o = load3(ps_next_pos, p)
         x = solve_motion(o, load3(ps_base_pos, p), direction,
-                         curve_at(prm_max_distance_curve, team, d2), use_max, use_backstop,
-                         curve_at(prm_backstop_distance_curve, team, d2), prm_backstop_radius[team],
+                         curve_at(prm_max_distance_curve, team, d2) * unit, use_max, use_backstop,
+                         curve_at(prm_backstop_distance_curve, team, d2) * unit, prm_backstop_radius[team] * unit,
                          r, prm_motion_stiffness[team])
         store3(ps_next_pos, p, x)
         store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(v_sub(x, o), attenuation)))
