@@ -190,15 +190,15 @@ def test_a_plan_is_reused_frame_after_frame_without_allocating_new_arrays():
     rng = np.random.default_rng(9)
     h = random_forest(rng, 400, 8)
     plan = h.plan(np.arange(0, 400, 37))
-    scratch = (plan.lane_input, plan.lane_output)
+    scratch = plan.scratch
     for _ in range(3):
         perturb(rng, h, plan.nodes)
         h.propagate(plan)
         assert_same_bits(world_state(h), reference_propagate(h))
-    assert (plan.lane_input, plan.lane_output) == scratch
+    assert plan.scratch is scratch
 
 
-@pytest.mark.parametrize("threads,width", [(1, 50), (2, 50), (4, 50), (2, SEGMENT_WIDTH), (1, 3000)])
+@pytest.mark.parametrize("threads,width", [(1, 50), (2, 50), (4, 50), (2, SEGMENT_WIDTH), (1, SEGMENT_WIDTH)])
 def test_plan_levels_and_chunks_are_independent(threads, width):
     rng = np.random.default_rng(3)
     h = random_forest(rng, 2000, 30)
@@ -237,8 +237,9 @@ def test_closure_of_no_nodes_is_empty_and_a_bad_index_is_named():
         h.plan([3, 50])
     with pytest.raises(ValueError, match="threads"):
         h.threads = 0
-    with pytest.raises(ValueError, match="width >= 1"):
-        build_plan(h.parent, None, 1, 0)
+    for width in (0, SEGMENT_WIDTH + 1):      # the scratch rows are SEGMENT_WIDTH lanes long
+        with pytest.raises(ValueError, match=f"1 <= width <= {SEGMENT_WIDTH}, got 1, {width}"):
+            build_plan(h.parent, None, 1, width)
 
 
 # ----------------------------------------------------------------------------- inside the frame
