@@ -369,3 +369,85 @@ def test_small_and_lane_paths_give_the_same_reference_bits(small_plan, monkeypat
     perturb(rng, h, np.arange(300))
     h.propagate()
     assert_same_bits(world_state(h), reference_propagate(h))
+
+
+# ----------------------------------------------------------------------------- deferred propagation
+def _count_runs(monkeypatch, plan):
+    """Record how often ``plan`` runs its pass (``plan.execute``)."""
+    runs = []
+    original = plan.execute
+    monkeypatch.setattr(plan, "execute", lambda *a: (runs.append(1), original(*a)))
+    return runs
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_deferred_plan_runs_when_a_world_array_is_read_with_the_reference_bits(seed, monkeypatch):
+    rng = np.random.default_rng(seed)
+    h = random_forest(rng, 600, 9)
+    moved = rng.choice(h.count, 12, replace=False)
+    plan = h.plan(moved)
+    runs = _count_runs(monkeypatch, plan)
+    perturb(rng, h, plan.nodes)
+    h.propagate_later(plan)
+    assert h.deferred and runs == []                   # nothing computed yet
+    for name in ("world_position", "world_rotation", "lossy_scale", "local_to_world"):
+        h.propagate_later(plan)
+        getattr(h, name)                               # any derived array brings it up to date
+        assert not h.deferred
+    assert len(runs) == 4
+    assert_same_bits(world_state(h), reference_propagate(h))
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_a_propagation_covering_the_deferred_nodes_skips_their_stale_pass(seed, monkeypatch):
+    """The cloth defers its written bones; next frame RESTORE rewrites their local poses and
+    UPDATE's plan (a superset) recomputes them: the deferred pass is never run, same bits."""
+    rng = np.random.default_rng(seed)
+    h = random_forest(rng, 800, 12)
+    inner = h.plan(rng.choice(h.count, 10, replace=False))
+    outer = h.plan(np.concatenate([inner.nodes, rng.choice(h.count, 10, replace=False)]))
+    assert outer.covers(inner)
+    runs = _count_runs(monkeypatch, inner)
+    perturb(rng, h, inner.nodes)
+    h.propagate_later(inner)
+    perturb(rng, h, outer.nodes)                       # later writes, before anyone read
+    h.propagate(outer)
+    assert runs == [] and not h.deferred
+    assert_same_bits(world_state(h), reference_propagate(h))
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_a_propagation_not_covering_the_deferred_nodes_runs_them_first(seed):
+    rng = np.random.default_rng(seed)
+    h = random_forest(rng, 500, 20)
+    trees = np.flatnonzero(h.parent < 0)
+    first, second = h.plan(trees[:3]), h.plan(trees[3:6])   # disjoint subtrees
+    assert not first.covers(second) and not second.covers(first)
+    perturb(rng, h, first.nodes)
+    h.propagate_later(first)
+    perturb(rng, h, second.nodes)
+    h.propagate_later(second)                          # runs ``first`` now, defers ``second``
+    assert h.deferred
+    perturb(rng, h, first.nodes[:1])
+    h.propagate(first)                                 # runs ``second`` first, then ``first``
+    assert not h.deferred
+    assert_same_bits(world_state(h), reference_propagate(h))
+
+
+def test_a_snapshot_taken_while_deferred_saves_the_up_to_date_world_poses():
+    from magica_py.runtime.snapshot import capture, restore
+
+    rng = np.random.default_rng(7)
+    h = random_forest(rng, 300, 4)
+    scene = SimpleNamespace(hierarchy=h)
+    player = Player(scene, default_schedule(scene), FixedFrameRate(30), TimeManager())
+    plan = h.plan(rng.choice(h.count, 5, replace=False))
+    perturb(rng, h, plan.nodes)
+    h.propagate_later(plan)
+    snap = capture(player)
+    expected = reference_propagate(h)
+    perturb(rng, h, plan.nodes)
+    h.propagate_later(plan)                            # stale again when restored
+    restore(player, snap)
+    assert not h.deferred                              # the restored arrays agree already
+    assert_same_bits(world_state(h), expected)

@@ -44,6 +44,8 @@ scratch               (c, R * S) float64   per chunk, rows of S = ``LANE_STRIDE`
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 from numba import prange
 
@@ -326,6 +328,7 @@ class PropagationPlan:
         # output slots (the level being computed and the one above it)
         rows = OUTPUT_ROW + LANE_OUTPUT * max(slots, 1)
         self.scratch = np.zeros((chunks, rows * LANE_STRIDE))
+        self._covers = weakref.WeakKeyDictionary()   # other plan -> self.covers(other)
 
     @property
     def chunks(self) -> int:
@@ -335,18 +338,33 @@ class PropagationPlan:
     def size(self) -> int:
         return int(self.nodes.shape[0])
 
+    def covers(self, other: "PropagationPlan") -> bool:
+        """True if every node of ``other`` is a node of this plan (remembered per plan)."""
+        known = self._covers.get(other)
+        if known is None:
+            known = bool(np.isin(other.nodes, self.nodes, assume_unique=True).all())
+            self._covers[other] = known
+        return known
+
     def run(self, h) -> None:
-        """Update the plan's nodes of hierarchy ``h`` (one numba call)."""
+        """Update the plan's nodes of hierarchy ``h``: ``h.propagate(self)``."""
+        h.propagate(self)
+
+    def execute(self, parent, local_position, local_rotation, local_scale, world_position,
+                world_rotation, lossy_scale, local_to_world) -> None:
+        """The plan's pass over these hierarchy arrays (one numba call); ``TransformHierarchy``
+        calls it with its own arrays."""
         if self.size == 0:
             return
         if self.size <= SMALL_PLAN:
-            propagate_listed(self.nodes, h.parent, h.local_position, h.local_rotation, h.local_scale,
-                             h.world_position, h.world_rotation, h.lossy_scale, h.local_to_world)
+            propagate_listed(self.nodes, parent, local_position, local_rotation, local_scale,
+                             world_position, world_rotation, lossy_scale, local_to_world)
             return
         fn = propagate_plan_parallel if self.chunks > 1 else propagate_plan_serial
         fn(self.roots, self.chunk_roots, self.order, self.segment_start, self.chunk_segments,
-           self.segment_slot, self.parent_slot, self.scratch, h.parent, h.local_position, h.local_rotation, h.local_scale,
-           h.world_position, h.world_rotation, h.lossy_scale, h.local_to_world)
+           self.segment_slot, self.parent_slot, self.scratch, parent, local_position,
+           local_rotation, local_scale, world_position, world_rotation, lossy_scale,
+           local_to_world)
 
 
 def subtree_closure(parent: np.ndarray, nodes) -> np.ndarray:
