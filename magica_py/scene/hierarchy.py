@@ -119,6 +119,25 @@ class HierarchyError(ValueError):
     """A hierarchy that cannot be built (duplicate name, missing parent, cycle)."""
 
 
+class _DerivedArray:
+    """A derived pose array of ``TransformHierarchy`` (stored as ``_<name>``): reading the
+    attribute runs a deferred propagation first, so a reader never sees a stale pose."""
+
+    def __set_name__(self, owner, name):
+        self.storage = "_" + name
+
+    def __get__(self, hierarchy, owner=None):
+        if hierarchy is None:
+            return self
+        if hierarchy._stale is not None:
+            hierarchy.flush()
+        return getattr(hierarchy, self.storage)
+
+    def __set__(self, hierarchy, value):
+        raise AttributeError(f"TransformHierarchy.{self.storage[1:]} is derived by propagation; "
+                             "write into the array in place")
+
+
 class TransformHierarchy:
     """All transforms of a scene in one structure-of-arrays (see the module docstring)."""
 
@@ -162,30 +181,11 @@ class TransformHierarchy:
         propagate_world(*self._pose_arrays())
         self.capture_rest_pose()
 
-    # -- derived arrays: reading one runs a deferred propagation first
-    @property
-    def world_position(self) -> np.ndarray:
-        if self._stale is not None:
-            self.flush()
-        return self._world_position
-
-    @property
-    def world_rotation(self) -> np.ndarray:
-        if self._stale is not None:
-            self.flush()
-        return self._world_rotation
-
-    @property
-    def lossy_scale(self) -> np.ndarray:
-        if self._stale is not None:
-            self.flush()
-        return self._lossy_scale
-
-    @property
-    def local_to_world(self) -> np.ndarray:
-        if self._stale is not None:
-            self.flush()
-        return self._local_to_world
+    # -- derived arrays: reading one runs a deferred propagation first (``_DerivedArray``)
+    world_position = _DerivedArray()
+    world_rotation = _DerivedArray()
+    lossy_scale = _DerivedArray()
+    local_to_world = _DerivedArray()
 
     def _pose_arrays(self) -> tuple:
         return (self.parent, self.local_position, self.local_rotation, self.local_scale,
