@@ -3,6 +3,9 @@ on random hierarchies, over node subsets and threads, and inside the player's fr
 from __future__ import annotations
 
 import math
+import os
+import platform
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -451,3 +454,23 @@ def test_a_snapshot_taken_while_deferred_saves_the_up_to_date_world_poses():
     restore(player, snap)
     assert not h.deferred                              # the restored arrays agree already
     assert_same_bits(world_state(h), expected)
+
+
+# ----------------------------------------------------------------------------- vectorisation
+@pytest.mark.skipif(os.environ.get("NUMBA_DISABLE_JIT") == "1", reason="no machine code")
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86 assembly")
+def test_the_lane_loop_compiles_to_packed_double_arithmetic():
+    """``compose_lanes`` is the propagation's hot loop: it vectorises only while its maths is
+    inlined and LLVM can group its rows (once lost silently when process-wide LLVM options
+    went away: the plans fell back to the speed of the plain pass). Compiled afresh (cached
+    code cannot be inspected), its assembly must multiply packed doubles."""
+    import numba
+
+    from magica_py.scene import propagation
+
+    fresh = numba.njit(cache=False, error_model="numpy")(propagation.compose_lanes.py_func)
+    rows = np.zeros((propagation.OUTPUT_ROW + propagation.LANE_OUTPUT) * propagation.LANE_STRIDE)
+    s = propagation.LANE_STRIDE
+    fresh(4, rows[:10 * s], rows[10 * s:26 * s], rows[26 * s:])
+    asm = "\n".join(fresh.inspect_asm().values())
+    assert re.search(r"\bv?mulpd\b", asm), "compose_lanes no longer vectorises"
