@@ -50,7 +50,6 @@ import numpy as np
 from numba import prange
 
 from magica_py.jit import kernel
-from magica_py.kernels.rows import flat
 from magica_py.kernels.math3d import (
     load3, load4, q_inverse, q_mul, q_normalize, q_rotate, q_to_matrix, store4,
 )
@@ -145,16 +144,15 @@ _rotate = _inlined(q_rotate)
 @kernel
 def gather_local(order, k0, k1, local_position, local_rotation, local_scale, inputs):
     """Local poses of nodes order[k0:k1] into the input rows (row r of lane j at
-    ``r * LANE_STRIDE + j``). Flat views and unsigned offsets: no wraparound selects."""
-    position, rotation, scale = flat(local_position), flat(local_rotation), flat(local_scale)
+    ``r * LANE_STRIDE + j``). Unsigned indices: no wraparound selects."""
     for j in range(k1 - k0):
         i = np.uint64(order[k0 + j])
         o = np.uint64(j)
         for c in range(3):
-            inputs[o + np.uint64(c * LANE_STRIDE)] = position[np.uint64(3) * i + np.uint64(c)]
-            inputs[o + np.uint64((7 + c) * LANE_STRIDE)] = scale[np.uint64(3) * i + np.uint64(c)]
+            inputs[o + np.uint64(c * LANE_STRIDE)] = local_position[i, np.uint64(c)]
+            inputs[o + np.uint64((7 + c) * LANE_STRIDE)] = local_scale[i, np.uint64(c)]
         for c in range(4):
-            inputs[o + np.uint64((3 + c) * LANE_STRIDE)] = rotation[np.uint64(4) * i + np.uint64(c)]
+            inputs[o + np.uint64((3 + c) * LANE_STRIDE)] = local_rotation[i, np.uint64(c)]
 
 
 @kernel
@@ -227,19 +225,17 @@ def scatter_lanes(order, k0, k1, world_position, world_rotation, lossy_scale, lo
                   outputs):
     """Results of lanes 0..k1-k0 (the output rows) to nodes order[k0:k1] (the bottom matrix
     row is constant)."""
-    matrix, position = flat(local_to_world), flat(world_position)
-    rotation, scale = flat(world_rotation), flat(lossy_scale)
     for j in range(k1 - k0):
         i = np.uint64(order[k0 + j])
         o = np.uint64(j)
         for row in range(3):
+            r = np.uint64(row)
             for c in range(4):
-                matrix[np.uint64(16) * i + np.uint64(4 * row + c)] = \
-                    outputs[o + np.uint64((4 * row + c) * LANE_STRIDE)]
-            position[np.uint64(3) * i + np.uint64(row)] = outputs[o + np.uint64((4 * row + 3) * LANE_STRIDE)]
-            scale[np.uint64(3) * i + np.uint64(row)] = outputs[o + np.uint64((16 + row) * LANE_STRIDE)]
+                local_to_world[i, r, np.uint64(c)] = outputs[o + np.uint64((4 * row + c) * LANE_STRIDE)]
+            world_position[i, r] = outputs[o + np.uint64((4 * row + 3) * LANE_STRIDE)]
+            lossy_scale[i, r] = outputs[o + np.uint64((16 + row) * LANE_STRIDE)]
         for c in range(4):
-            rotation[np.uint64(4) * i + np.uint64(c)] = outputs[o + np.uint64((12 + c) * LANE_STRIDE)]
+            world_rotation[i, np.uint64(c)] = outputs[o + np.uint64((12 + c) * LANE_STRIDE)]
 
 
 @kernel(inline="always")
