@@ -133,7 +133,7 @@ def _run_restoration(cp, pp, rest_direction, rest_length, t, pivot, wc, wp, p_mo
         rd = (rest_direction[i, 0], rest_direction[i, 1], rest_direction[i, 2])
         vel = (0.01, -0.02, 0.03)
         got = angle_restoration_entry(c, p, edge_of(c, p), c, vel, p, vel, rest_length[i], rd, t[i], pivot[i],
-                                      wc[i], wp[i], p_move[i], 0.8, True)
+                                      wc[i], wp[i], p_move[i], 0.8)
         want = old_restoration(c, p, c, vel, p, vel, rest_length[i], rd, t[i], pivot[i], wc[i], wp[i], p_move[i], 0.8)
         for j in range(3):
             new_out[i, 0, j], old_out[i, 0, j] = got[0][j], want[0][j]
@@ -155,7 +155,7 @@ def _run_limit(cp, pp, rot_c, rot_p, local_pos, local_rot, length, max_angle, st
         vel = (0.01, -0.02, 0.03)
         max_cos = trig.cos(max_angle[i])
         got = angle_limit_entry(c, p, vel, vel, rc, rp, lp, lr, length[i], max_angle[i], max_cos, wc[i], wp[i],
-                                p_move[i], stiffness[i], 0.9, True)
+                                p_move[i], stiffness[i], 0.9)
         want = old_limit(c, p, vel, vel, rc, rp, lp, lr, length[i], max_angle[i], max_cos, wc[i], wp[i],
                          p_move[i], stiffness[i], 0.9)
         for j in range(3):
@@ -253,13 +253,13 @@ def test_restoration_offset_turns_the_edge_by_the_fraction_of_the_angle():
     a = (1.0, 0.0, 0.0)
     b = (0.0, 1.0, 0.0)
     v = (0.2, 0.0, 0.0)
-    d, opposite = restoration_offset(a, v, 0.2, b, 0.5, True)
+    d, opposite = restoration_offset(a, v, 0.2, b, 0.5)
     r = v_add(v, d)
     assert not opposite
     assert np.allclose(r, (0.2 * math.cos(math.pi / 4), 0.2 * math.sin(math.pi / 4), 0.0), rtol=0, atol=1e-16)
-    d, opposite = restoration_offset(a, v, 0.2, (-1.0, 0.0, 0.0), 0.5, True)
+    d, opposite = restoration_offset(a, v, 0.2, (-1.0, 0.0, 0.0), 0.5)
     assert opposite and abs(v_length(v_add(v, d)) - 0.2) < 1e-16 and abs(v_dot(v_add(v, d), a)) < 1e-16
-    d, _ = restoration_offset(a, v, 0.2, a, 0.7, True)
+    d, _ = restoration_offset(a, v, 0.2, a, 0.7)
     assert d == (0.0, 0.0, 0.0)
 
 

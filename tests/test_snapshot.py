@@ -95,3 +95,65 @@ def test_a_snapshot_reports_its_size():
     snapshot = player.capture()
     assert snapshot.frame == 3 and snapshot.time > 0.0
     assert 0 < snapshot.nbytes < 10_000_000
+
+
+def prepared(parameters=None, frequency=None):
+    from magica_py.bench.variants import Variant, prepare, resolve_scene_path
+
+    return prepare(Variant("t", resolve_scene_path("tail_orbit"), parameters=dict(parameters or {}),
+                           frequency=frequency))
+
+
+def test_a_model_keeping_restore_takes_the_state_and_keeps_the_candidates_parameters():
+    reference = prepared({"solver.rate_mode": "frequency_consistent"})
+    reference.player.run(12)
+    snapshot = reference.player.capture()
+    candidate = prepared({"solver.mode": "quality"})
+    candidate.player.run(5)
+    own_parameters = {n: getattr(candidate.system.parameters, n).copy()
+                      for n in candidate.system.parameters._fields}
+    candidate.player.restore(snapshot, keep_model=True)
+    assert candidate.player.frame == 12
+    assert np.array_equal(candidate.system.particles.position, reference.system.particles.position)
+    assert np.array_equal(candidate.system.particles.velocity, reference.system.particles.velocity)
+    assert np.array_equal(candidate.scene.hierarchy.world_position, reference.scene.hierarchy.world_position)
+    for name, value in own_parameters.items():
+        assert np.array_equal(getattr(candidate.system.parameters, name), value), name
+    assert candidate.system.parameters.quality[0] == 1 and reference.system.parameters.quality[0] == 0
+    # and a full restore takes the reference's parameters too
+    candidate.player.restore(snapshot)
+    assert candidate.system.parameters.quality[0] == 0
+
+
+def test_a_candidate_at_another_frequency_continues_on_the_snapshots_clock():
+    """A 1440 Hz snapshot at t = 0.2 s (60 fps, frame 12) restored into a 90 Hz candidate: its
+    team clock is the reference's (its last step at 0.2 s), so it runs the steps a native
+    90 Hz run takes from a frame on its own step grid (frame 12: 0.2 s = 18 steps): 1, 2, 1, 2."""
+    def steps(p, frames):
+        return [p.player.step().metrics["cloth.simulation_steps"] for _ in range(frames)]
+
+    native = prepared(frequency=90)
+    native.player.run(12)
+    expected = steps(native, 6)
+    reference = prepared(frequency=1440)
+    reference.player.run(12)
+    assert reference.system._time.now_update_time[0] == pytest.approx(0.2, abs=1e-12)
+    snapshot = reference.player.capture()
+    candidate = prepared(frequency=90)
+    candidate.player.restore(snapshot, keep_model=True)
+    assert candidate.system.time_settings.frequency == 90
+    assert steps(candidate, 6) == expected == [1, 2, 1, 2, 1, 2]
+
+
+def test_a_snapshot_survives_pickling_into_another_process():
+    """Batch workers (Dask) receive snapshots pickled: the copy restores the same state."""
+    import pickle
+
+    player, system = make_player("character_walk")
+    player.run(6)
+    snapshot = pickle.loads(pickle.dumps(player.capture()))
+    player.run(4)
+    first = state_hash(player, system)
+    player.restore(snapshot)
+    player.run(4)
+    assert state_hash(player, system) == first

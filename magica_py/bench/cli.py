@@ -4,16 +4,23 @@ Both write to the git-ignored ``reports/`` folder and print a progress bar on a 
 
 bench, per showcase scene (``--scenes``, default tail_orbit and character_walk):
 
-1. converged reference: 1440 Hz frequency-consistent, checked against 2880 Hz (residual);
-2. sweep: every frequency (``--frequencies``) x mode (``magica``, ``frequency_consistent``),
-   run as jobs of the batch machinery (``magica_py.batch.Executor``: in this process, or on
-   Dask workers with ``--workers N`` / ``--scheduler ADDRESS``):
-   time per frame (median of ``--repeats`` runs after JIT warm-up), particle-steps/s,
-   RMS / max position error over the frames the reference resolves, stretch, penetration,
-   speed and settling;
-3. frame-rate spread (30 / 60 / 144 / 240 fps at the scene frequency) per mode;
-4. the plain-numpy baseline of the single tail, side by side with the solver;
-5. feature cost on the character (collision point / edge, bending, angle limit, colliders
+1. warm-up: every scene and family runs 0.1 s first, so that no timing includes a compile;
+2. references: each family's own model at 1440 Hz (``--reference-frequency``;
+   frequency-consistent rates, quality mode for quality), its state captured every 0.25 s,
+   checked against twice that frequency;
+3. sweep: every frequency (``--frequencies``) x family (``--families``: faithful,
+   frequency_consistent, quality; more with ``--family``), run as jobs of the batch machinery
+   (``magica_py.batch.Executor``: in this process, or on Dask workers with ``--workers N`` /
+   ``--scheduler ADDRESS``): the short-horizon error (the candidate restarted from the
+   reference's state every 0.25 s, error at each window's end), the long-horizon error over
+   the frames the reference resolves, stretch and penetration; time per frame as the median
+   and quartiles of ``--repeats`` interleaved fresh runs;
+4. the reference check: its own short-horizon residual (against twice its frequency) must be 10x below
+   every error reported against it (a failure is printed, written first in bench.md, and
+   makes the exit status 1);
+5. frame-rate spread (30 / 60 / 144 / 240 fps at the scene frequency) per family;
+6. the plain-numpy baseline of the single tail, side by side with the solver;
+7. feature cost on the character (collision point / edge, bending, angle limit, colliders
    0 / 4 / 16) and the crowd's particle-steps per second.
 
 Outputs: ``bench.md``, ``bench.csv``, ``pareto.png`` in ``--out``.
@@ -28,12 +35,8 @@ import time
 
 import numpy as np
 
-MODES = ("magica", "frequency_consistent")
-FREQUENCIES = (30, 45, 60, 90, 120, 150, 180, 360, 720)
+FREQUENCIES = (30, 45, 60, 90, 120, 180, 360, 720)
 SCENES = ("tail_orbit", "character_walk")
-FPS_SET = (30, 60, 144, 240)
-REST_SPEED = 0.02            # m/s: "at rest" for the settling time
-ENVELOPE_WINDOW = 15         # frames of running maximum for the kinetic-energy envelope
 
 
 class Progress:
@@ -65,24 +68,24 @@ class Progress:
             self.bar.close()
 
 
-def _variant_frames(variant) -> int:
-    from magica_py.bench.variants import prepare
-
-    return prepare(variant).frames
-
-
 # ----------------------------------------------------------------------------- bench
 def main_bench(argv) -> int:
+    from magica_py.bench.sweep import FAMILIES
+
     p = argparse.ArgumentParser(prog="magica-py bench", description=__doc__.replace("``", ""),
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenes", default=",".join(SCENES), help="comma-separated showcase scenes or YAML paths")
     p.add_argument("--frequencies", default=",".join(map(str, FREQUENCIES)), help="simulation Hz to sweep")
-    p.add_argument("--modes", default=",".join(MODES), help="parameter modes (solver.rate_mode values)")
+    p.add_argument("--families", default=",".join(FAMILIES),
+                   help=f"built-in families to sweep (of {', '.join(FAMILIES)}; empty for none)")
     p.add_argument("--family", action="append", default=[], metavar="NAME:KEY=VALUE[,KEY=VALUE...]",
-                   help="an extra series swept like the modes, e.g. a quality-mode candidate: "
-                        "'tight_tether:solver.rate_mode=frequency_consistent,tether.distance_compression=0.1' "
+                   help="an extra series swept like the built-in ones, e.g. a quality-mode candidate: "
+                        "'q_ftl:solver.mode=quality,solver.inextensibility=ftl' "
                         "(values parsed as YAML; repeatable)")
-    p.add_argument("--repeats", type=int, default=9, help="timed runs per variant (median)")
+    p.add_argument("--reference-frequency", type=int, default=None, metavar="HZ",
+                   help="frequency of the references (default 1440; checked at twice that): a finer reference "
+                        "resolves smaller errors, at its cost")
+    p.add_argument("--repeats", type=int, default=7, help="timed runs per variant (median and quartiles)")
     p.add_argument("--duration", type=float, default=None, help="seconds per run (default: the scene's)")
     p.add_argument("--out", default=None, help="report folder (default: reports/ in the current folder)")
     p.add_argument("--skip", default="", help="comma-separated parts to skip: fps,numpy,features,crowd")
@@ -92,125 +95,101 @@ def main_bench(argv) -> int:
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the sweep's runs on an existing Dask cluster")
     p.add_argument("--quiet", "-q", action="store_true")
     args = p.parse_args(argv)
+    if args.reference_frequency is not None and not 30 <= args.reference_frequency <= 11520:
+        raise SystemExit(f"magica-py bench: --reference-frequency {args.reference_frequency}: expected 30-11520 Hz")
+    families = {}
+    for name in filter(None, args.families.split(",")):
+        if name not in FAMILIES:
+            raise SystemExit(f"magica-py bench: --families: unknown family {name!r} (expected some of "
+                             f"{', '.join(FAMILIES)}; define others with --family)")
+        families[name] = dict(FAMILIES[name])
+    for text in args.family:
+        name, params = parse_family(text)
+        families[name] = params
+    if not families:
+        raise SystemExit("magica-py bench: no family to sweep (--families is empty and no --family given)")
     from magica_py.batch.executor import Executor
 
     executor = Executor(workers=None if args.scheduler else args.workers, scheduler=args.scheduler)
     with executor:
-        return _bench(args, executor)
+        return _bench(args, families, executor)
 
 
-def sweep_job(item):
-    """One run of the frequency sweep (a batch job): the variant's trajectory against the
-    reference's; returns (run without positions, RMS error per frame, max error per frame,
-    kinetic-energy envelope error)."""
-    from magica_py.bench import metrics as M
-    from magica_py.bench.variants import run_variant
-
-    variant, ref_positions, length_scale, moving, team, ref_energy = item
-    run = run_variant(variant)
-    err_rms, err_max = M.frame_errors(run.positions, ref_positions, length_scale, moving)
-    energy = M.kinetic_envelope(run.positions, run.times, moving, team, ENVELOPE_WINDOW)
-    run.positions = None                  # keep memory flat over the sweep (and the result small)
-    envelope = float(np.sqrt(np.mean((energy - ref_energy) ** 2))) / max(float(ref_energy.max()), 1e-12)
-    return run, err_rms, err_max, envelope
-
-
-def _bench(args, executor) -> int:
-    from magica_py.bench import metrics as M
+def _bench(args, families: dict, executor) -> int:
+    from magica_py.bench import reference as REF
     from magica_py.bench import report as R
-    from magica_py.bench.reference import CHECK_FREQUENCY, REFERENCE_FREQUENCY, fit_order, resolved_error
-    from magica_py.bench.variants import Variant, resolve_scene_path, run_variant, time_interleaved
+    from magica_py.bench import short_horizon as S
+    from magica_py.bench import sweep as W
+    from magica_py.bench.variants import Variant, prepare, resolve_scene_path, run_variant, time_repeats
 
     out = R.default_report_dir() if args.out is None else __import__("pathlib").Path(args.out)
     scenes = [s for s in args.scenes.split(",") if s]
     freqs = [int(f) for f in args.frequencies.split(",") if f]
-    modes = [m for m in args.modes.split(",") if m]
     skip = set(s for s in args.skip.split(",") if s)
-    families = {m: {"solver.rate_mode": m} for m in modes}
-    for text in args.family:
-        name, params = parse_family(text)
-        families[name] = params
     started = time.perf_counter()
+    load = W.LoadMonitor()
 
     def say(text):
         if not args.quiet:
             print(text, file=sys.stderr, flush=True)
 
-    say("magica-py bench: JIT warm-up (compiles the solver unless the numba cache is warm) ...")
+    say("magica-py bench: warm-up (every scene and family for 0.1 s: compiles the solver unless the numba "
+        "cache is warm) ...")
     t0 = time.perf_counter()
-    run_variant(Variant("warmup", resolve_scene_path("tail_orbit"), duration=0.1), record_positions=False)
+    for scene_name in scenes:
+        for name, params in families.items():
+            run_variant(Variant("warmup", resolve_scene_path(scene_name), parameters=dict(params), duration=0.1,
+                                frequency=freqs[0]), record_positions=False)
     say(f"  warm-up {time.perf_counter() - t0:.1f} s")
 
-    rows, orders, spreads, residuals, extra = [], [], [], [], {}
+    results, extra = [], {}
     for scene_name in scenes:
-        path = resolve_scene_path(scene_name)
-        base = Variant(scene_name, path, duration=args.duration)
-        ref_v = base.with_(label=f"{scene_name}@ref", frequency=REFERENCE_FREQUENCY,
-                           parameters={"solver.rate_mode": "frequency_consistent"}, family="reference")
-        frames = _variant_frames(ref_v)
+        base = Variant(scene_name, resolve_scene_path(scene_name), duration=args.duration)
+        probe = prepare(base)
+        frames, fps = probe.frames, probe.scene.settings.fps
+        scene_frequency = probe.frequency
+        del probe
+        family_refs = {f: W.reference_name(W.reference_parameters(p)) for f, p in families.items()}
+        n_refs = len(set(family_refs.values()))
         sweep = [base.with_(label=f"{scene_name}/{m}/{f}", frequency=f, parameters=dict(params), family=m)
                  for m, params in families.items() for f in freqs]
-        total = frames * (2 + len(sweep) * (1 + args.repeats))
-        say(f"{scene_name}: reference {REFERENCE_FREQUENCY} Hz, check {CHECK_FREQUENCY} Hz, {len(sweep)} variants, "
-            f"{frames} frames each")
+        total = frames * (3 * n_refs + len(sweep) * (2 + args.repeats))
+        ref_hz = args.reference_frequency or REF.REFERENCE_FREQUENCY
+        check_hz = 2 * args.reference_frequency if args.reference_frequency else REF.CHECK_FREQUENCY
+        say(f"{scene_name}: {n_refs} reference(s) at {ref_hz} Hz checked at {check_hz} Hz, "
+            f"{len(sweep)} variants, "
+            f"{frames} frames each, windows of {S.window_frames(fps)} frames")
         progress = Progress(total, args.quiet)
-        ref = run_variant(ref_v, progress=progress.run_callback())
-        check = run_variant(ref_v.with_(label=f"{scene_name}@check", frequency=CHECK_FREQUENCY),
-                            progress=progress.run_callback())
-        g = ref.geometry
-        moving = g.moving
-        ref_energy = M.kinetic_envelope(ref.positions, ref.times, moving, g.team, ENVELOPE_WINDOW)
-        check_energy = M.kinetic_envelope(check.positions, check.times, moving, g.team, ENVELOPE_WINDOW)
-        energy_residual = float(np.sqrt(np.mean((check_energy - ref_energy) ** 2))) / max(float(ref_energy.max()), 1e-12)
-        res_rms, res_max = M.frame_errors(check.positions, ref.positions, g.length_scale, moving)
-        residuals.append({"scene": scene_name, "residual_rms": float(np.sqrt(np.mean(res_rms ** 2))) * 100,
-                          "residual_max": float(res_max.max()) * 100, "chain_length": g.chain_length,
-                          "frames": ref.frames, "ref_stretch": float(ref.edge_stretch.max()) * 100,
-                          "energy_residual": 100 * energy_residual})
+        refs = W.run_references(base, families, S.window_frames(fps), progress=progress.run_callback(),
+                                frequency=args.reference_frequency)
+        progress.add(frames * n_refs)          # the check runs' windows
         # the sweep's runs are jobs of the batch machinery (magica_py.batch.Executor): in this
         # process by default, on a LocalCluster with --workers N or a cluster with --scheduler
+        items = [(v, refs[family_refs[v.family]].windows) for v in sweep]
         runs = [None] * len(sweep)
-        items = [(v, ref.positions, g.length_scale, moving, g.team, ref_energy) for v in sweep]
-        for i, (run, err_rms, err_max, envelope) in executor.map(sweep_job, items, key_prefix="bench-sweep"):
-            runs[i] = (sweep[i], run, err_rms, err_max, envelope)
+        for i, result in executor.map(W.sweep_job, items, key_prefix="bench-sweep"):
+            runs[i] = result
+            progress.add(2 * frames)
+        load.sample()
+        def timed(_variant):           # the load is sampled after every timed run
             progress.add(frames)
-        timings = time_interleaved(sweep, repeats=args.repeats, progress=lambda v: progress.add(frames))
-        for (v, run, err_rms, err_max, envelope), (sec, rate, fastest) in zip(runs, timings):
-            window = resolved_error(err_rms, err_max, res_rms)
-            settle = M.settling_time(run.display_speed, run.times, REST_SPEED)
-            rows.append({
-                "scene": scene_name, "family": v.family, "frequency": run.frequency,
-                "ms_per_frame": 1000 * sec, "particle_steps_per_s": rate, "ms_per_frame_min": 1000 * fastest,
-                "rms_error": 100 * window.rms if window.resolved else None,
-                "max_error": 100 * window.max if window.resolved else None,
-                "coverage": 100 * window.coverage,
-                "rms_error_all": 100 * float(np.sqrt(np.mean(err_rms ** 2))),
-                "max_edge_stretch": 100 * float(run.edge_stretch.max()),
-                "max_root_stretch": 100 * float(run.root_stretch.max()),
-                "max_penetration_mm": 1000 * float(run.penetration.max()),
-                "max_speed": float(run.state_speed.max()),
-                "energy_envelope": 100 * envelope,
-                "settle_s": settle,
-            })
+            load.sample()
+
+        timings = time_repeats(sweep, repeats=args.repeats, progress=timed)
         progress.close()
-        for m in families:
-            sel = [r for r in rows if r["scene"] == scene_name and r["family"] == m]
-            order, r2 = fit_order([r["frequency"] for r in sel],
-                                  [r["rms_error"] if r["rms_error"] is not None else math.nan for r in sel])
-            order_all, r2_all = fit_order([r["frequency"] for r in sel], [r["rms_error_all"] for r in sel])
-            orders.append({"scene": scene_name, "mode": m, "order": order, "r2": r2,
-                           "points": sum(1 for r in sel if r["rms_error"] is not None),
-                           "order_all_frames": order_all, "r2_all": r2_all})
+        rows = [W.sweep_row(scene_name, v, run, err_rms, err_max, short, timing,
+                            refs[family_refs[v.family]].long_residual_rms)
+                for v, (run, err_rms, err_max, short), timing in zip(sweep, runs, timings)]
+        spreads = {}
         if "fps" not in skip:
+            length = next(iter(refs.values())).run.geometry.chain_length
             for m, params in families.items():
-                recs = []
-                for fps in FPS_SET:
-                    v = base.with_(label=f"{scene_name}/{m}/fps{fps}", fps=fps, parameters=dict(params))
-                    run = run_variant(v, record_positions=False)
-                    recs.append((run.times, run.tips))
-                spreads.append({"scene": scene_name, "mode": m,
-                                "spread": 100 * M.frame_rate_spread(recs, g.chain_length)})
-                say(f"  frame-rate spread {scene_name} / {m}: {spreads[-1]['spread']:.2f} % of the chain")
+                spreads[m] = W.frame_rate_spread(base, params, scene_frequency, length)
+                say(f"  frame-rate spread {scene_name} / {m}: {spreads[m]:.2f} % of the chain")
+        result = W.summarise_scene(scene_name, rows, refs, family_refs, spreads, scene_frequency)
+        for check in result.checks:
+            say(("  " if check.ok else "  WARNING: ") + check.message())
+        results.append(result)
 
     if "numpy" not in skip:
         extra["numpy"] = numpy_comparison(args.repeats, say)
@@ -218,15 +197,26 @@ def _bench(args, executor) -> int:
         extra["features"] = feature_costs(args.repeats, say)
     if "crowd" not in skip:
         extra["crowd"] = crowd_speed(say)
+    load.sample()
 
     out.mkdir(parents=True, exist_ok=True)
-    R.write_csv(out / "bench.csv", rows, R.BENCH_COLUMNS + (("ms_per_frame_min", "", ""), ("rms_error_all", "", "")))
-    R.pareto_plot(out / "pareto.png", rows)
-    text = bench_markdown(rows, orders, spreads, residuals, extra, time.perf_counter() - started)
+    rows = [r for res in results for r in res.rows]
+    R.write_csv(out / "bench.csv", rows, R.BENCH_CSV_COLUMNS)
+    R.pareto_plot(out / "pareto.png", results)
+    elapsed = time.perf_counter() - started
+    text = R.bench_markdown(results, extra, f"Machine: {machine_description()}. Wall time of the whole run: "
+                                             f"{elapsed:.0f} s; {load.describe()}.")
     (out / "bench.md").write_text(text)
+    failed = [c for res in results for c in res.checks if not c.ok]
     if not args.quiet:
         print(text)
         print(f"\nwritten: {out / 'bench.md'}, {out / 'bench.csv'}, {out / 'pareto.png'}")
+    if failed:
+        print(f"magica-py bench: {len(failed)} reference(s) do not resolve the errors reported against them "
+              "(bench.md, 'Reference check'):", file=sys.stderr)
+        for c in failed:
+            print(f"  {c.message()}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -337,52 +327,6 @@ def machine_description() -> str:
 
     return (f"{cpu}, {os.cpu_count()} logical cores (shared), Python {platform.python_version()}, "
             f"numpy {np.__version__}, numba {numba.__version__}")
-
-
-def bench_markdown(rows, orders, spreads, residuals, extra, elapsed) -> str:
-    from magica_py.bench import report as R
-
-    lines = [f"# magica-py bench ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())})", "",
-             f"Machine: {machine_description()}. Wall time of the whole run: {elapsed:.0f} s.", "",
-             "Errors are % of the chain length, against the same scene at 1440 Hz (frequency-consistent), over "
-             "the frames where the 1440-vs-2880 Hz residual is under a tenth of the reported error ('window'); "
-             "'-' means no frame qualifies (the reference does not resolve that error). The energy envelope is the "
-             "running maximum over 15 frames of the kinetic energy of each cloth's own swing (team mean velocity "
-             "removed); its error is RMS over frames, % of the reference's peak.", "",
-             "## References", "",
-             "| scene | chain length (m) | frames | residual RMS (% L) | residual max (% L) | ref max edge stretch (%) "
-             "| energy envelope residual (% of peak) |",
-             "|---|---|---|---|---|---|---|"]
-    for r in residuals:
-        lines.append(f"| {r['scene']} | {r['chain_length']:.3f} | {r['frames']} | {r['residual_rms']:.3g} | "
-                     f"{r['residual_max']:.3g} | {r['ref_stretch']:.2f} | {r['energy_residual']:.2g} |")
-    lines += ["", "## Sweep", "", R.markdown_table(rows, R.BENCH_COLUMNS), "",
-              "## Observed convergence order (error ~ h^p, h = 1/frequency)", "",
-              "| scene | mode | p (resolved window) | R^2 | points | p (all frames) | R^2 |", "|---|---|---|---|---|---|---|"]
-    for o in orders:
-        lines.append(f"| {o['scene']} | {o['mode']} | {o['order']:.2f} | {o['r2']:.2f} | {o['points']} | "
-                     f"{o['order_all_frames']:.2f} | {o['r2_all']:.2f} |")
-    if spreads:
-        lines += ["", "## Frame-rate independence (tip spread across 30/60/144/240 fps, % of chain length)", "",
-                  "| scene | mode | spread |", "|---|---|---|"]
-        lines += [f"| {s['scene']} | {s['mode']} | {s['spread']:.2f} |" for s in spreads]
-    if "numpy" in extra:
-        n = extra["numpy"]
-        lines += ["", "## Plain-numpy baseline (tail_orbit, 90 Hz, whole frame loop)", "",
-                  f"magica_py {n['ours_ms']:.3f} ms/frame; numpy {n['numpy_ms']:.3f} ms/frame "
-                  f"(numpy step alone {n['numpy_step_ms']:.3f}); ratio x{n['ratio']:.1f}"]
-    if "features" in extra:
-        lines += ["", "## Feature cost (character_walk, 90 Hz, magica mode)", "",
-                  "| configuration | ms/frame (median) | ms/frame (min) | relative (min) | particle-steps/s |",
-                  "|---|---|---|---|---|"]
-        lines += [f"| {f['feature']} | {f['ms_per_frame']:.3f} | {f['ms_min']:.3f} | {f['relative']:.2f} | "
-                  f"{f['steps_per_s']:.3g} |"
-                  for f in extra["features"]]
-    if "crowd" in extra:
-        c = extra["crowd"]
-        lines += ["", f"Crowd (100 characters, 7,800 particles, 90 Hz): {c['ms_per_frame']:.2f} ms/frame, "
-                      f"{c['steps_per_s']:.3g} particle-steps/s."]
-    return "\n".join(lines) + "\n"
 
 
 # ----------------------------------------------------------------------------- stability

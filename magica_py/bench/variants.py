@@ -309,24 +309,57 @@ def time_once(variant: Variant, frames: int | None = None) -> tuple[float, float
     return elapsed / count, (steps / elapsed if elapsed > 0 else math.nan)
 
 
-def time_interleaved(variants: list, repeats: int = 9, frames: int | None = None, progress=None) -> list:
-    """Median over ``repeats`` of ``time_once`` for each variant, the repeats taken round
-    robin (variant 1, 2, ..., n, then again) so that load from other processes on a shared
-    machine spreads over all variants instead of biasing one. Returns ``[(median s/frame,
-    particle-steps/s of that run, minimum s/frame)]`` in the order of ``variants`` (the
-    minimum is the better estimate of the cost when other processes only add time)."""
+@dataclass(frozen=True)
+class Timing:
+    """Repeated timings of one variant: ``per_frame`` (R,) s per frame of each fresh run and
+    ``rates`` (R,) particle-steps/s of each, in the order they ran."""
+
+    per_frame: np.ndarray
+    rates: np.ndarray
+
+    @property
+    def middle(self) -> int:
+        """Index of the median run (the upper one of the two middle runs for an even count)."""
+        return int(np.argsort(self.per_frame, kind="stable")[len(self.per_frame) // 2])
+
+    @property
+    def median(self) -> float:
+        """Median s/frame of the repeats (the mean of the two middle runs for an even count)."""
+        return float(np.median(self.per_frame))
+
+    @property
+    def minimum(self) -> float:
+        return float(self.per_frame.min())
+
+    @property
+    def quartiles(self) -> tuple[float, float]:
+        """First and third quartile of the repeats (s/frame): the spread shown as error bars."""
+        return float(np.percentile(self.per_frame, 25)), float(np.percentile(self.per_frame, 75))
+
+    @property
+    def median_rate(self) -> float:
+        """Particle-steps/s of the median run."""
+        return float(self.rates[self.middle])
+
+
+def time_repeats(variants: list, repeats: int = 9, frames: int | None = None, progress=None) -> list[Timing]:
+    """``repeats`` fresh runs (``time_once``) of each variant, taken round robin (variant 1,
+    2, ..., n, then again) so that load from other processes on a shared machine spreads over
+    all variants instead of biasing one; one ``Timing`` per variant, in order."""
     samples = [[] for _ in variants]
     for _ in range(max(1, repeats)):
         for i, v in enumerate(variants):
             samples[i].append(time_once(v, frames))
             if progress is not None:
                 progress(v)
-    out = []
-    for s in samples:
-        per_frame = [x[0] for x in s]
-        mid = int(np.argsort(per_frame)[len(per_frame) // 2])
-        out.append((s[mid][0], s[mid][1], min(per_frame)))
-    return out
+    return [Timing(np.array([x[0] for x in s]), np.array([x[1] for x in s])) for s in samples]
+
+
+def time_interleaved(variants: list, repeats: int = 9, frames: int | None = None, progress=None) -> list:
+    """``time_repeats`` as ``[(median s/frame, particle-steps/s of that run, minimum s/frame)]``
+    (the minimum is the better estimate of the cost when other processes only add time)."""
+    return [(t.median, t.median_rate, t.minimum)
+            for t in time_repeats(variants, repeats, frames, progress)]
 
 
 def time_variant(variant: Variant, repeats: int = 3, frames: int | None = None) -> tuple[float, float]:

@@ -17,7 +17,6 @@ Semantics (Biovision BVH as CMU / cgspeed, Mixamo and Blender write it):
 """
 from __future__ import annotations
 
-import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path

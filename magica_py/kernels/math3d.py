@@ -265,7 +265,7 @@ def slerp_is_near(q1, q2):
 @kernel
 def slerp_near(q1, q2, t):
     """``q_slerp(q1, q2, t)`` where ``slerp_is_near(q1, q2)``: its lerp path alone (the same
-    bits; a lane loop whose lanes are all near takes it without the trigonometry)."""
+    bits without the trigonometry)."""
     b = (-q2[0], -q2[1], -q2[2], -q2[3]) if q_dot(q1, q2) < 0.0 else q2
     return q_normalize((
         q1[0] + (b[0] - q1[0]) * t,
@@ -493,3 +493,9 @@ def inverse_mass_friction(friction):
 def inverse_mass_friction_depth(friction, depth):
     """``w_fd(f, depth) = 1 / (1 + 3 f + 5 (1 - depth)^2)``."""
     return 1.0 / (1.0 + FRICTION_MASS * friction + DEPTH_MASS * (1.0 - depth) * (1.0 - depth))
+
+
+@kernel
+def matrix_row(a, i, k):
+    """Row k of matrix i of a ``(n, 4, 4)`` array, as a tuple."""
+    return (a[i, k, 0], a[i, k, 1], a[i, k, 2], a[i, k, 3])

@@ -56,6 +56,11 @@ class ClothParameters(Mapping):
     def __setattr__(self, name, value):
         raise AttributeError("ClothParameters is immutable: use with_changes()")
 
+    def __reduce__(self):
+        # pickled by value (snapshots and batch jobs cross process boundaries); the default
+        # protocol would go through the blocked __setattr__
+        return (ClothParameters, (self._values,))
+
     def __repr__(self):
         return f"ClothParameters({len(self)} keys)"
 

@@ -118,11 +118,12 @@ class Player:
 
         return capture(self)
 
-    def restore(self, snapshot) -> None:
-        """Back to ``snapshot``: the frames that follow give the same bits as after the capture."""
+    def restore(self, snapshot, keep_model: bool = False) -> None:
+        """Back to ``snapshot``: the frames that follow give the same bits as after the capture.
+        ``keep_model=True`` keeps this player's parameters and frame rate (``runtime/snapshot.py``)."""
         from magica_py.runtime.snapshot import restore
 
-        restore(self, snapshot)
+        restore(self, snapshot, keep_model=keep_model)
 
     # -- restore registry (kept on the schedule so systems built before the player see it)
     def register_restored_bones(self, indices, owner: object = None) -> None:

@@ -10,6 +10,23 @@ same frames again gives the same bits (``tests/test_snapshot.py``). Uses: restar
 candidate from a reference's state (``magica-py bench``'s short-horizon error), replays,
 batch jobs that fork from a common warm-up.
 
+``restore(player, snapshot, keep_model=True)`` restores where the simulation *is* and keeps
+what this player *simulates*: a candidate restarted from a reference's state (the bench's
+short-horizon error, ``docs/BENCHMARKS.md``). It writes the clock's position (the time
+manager: frame count, game and unscaled time, fixed-update base), the poses, the animation
+cursor and each system's evolving state (``ClothSystem``: particles, teams, colliders, team
+clocks, build pose, frame count) and keeps this player's model: each system's
+``MODEL_STATE`` parts (``ClothSystem``: its parameter table, runtime parameter overrides and
+collision modes), the player's frame-time source (frame rate or frame-time list, with its
+position) and the systems' time settings (simulation frequency and step cap; those are never
+in a snapshot). The team clocks (``TeamTimeState``) hold times in seconds, not step counts, so
+they carry over to another frequency as they are: the candidate's next step comes ``1/f``
+after the last step the snapshot's run took (``now_update_time``), and its planned step count
+is ``trunc((time + frame delta - now_update_time) * f)`` (+ 1e-6 in exact timing): the phase
+of its step grid is the snapshot's. Another frame rate continues from the snapshot's game time with its own frame
+delta, so the snapshot must be taken at a time on the candidate's frame grid (the bench's
+windows are 0.25 s: a whole number of frames at 30, 60, 144 and 240 fps).
+
 What a snapshot is not: it does not hold structure. Restoring after cloths were added or
 removed, or into another scene, is refused with a clear error. Sinks (recordings) are outside
 the simulation and are not rewound.
@@ -122,8 +139,35 @@ def capture(player) -> Snapshot:
     return Snapshot(frame=player.frame, time=float(player.time_manager.time), parts=parts)
 
 
-def restore(player, snapshot: Snapshot) -> None:
-    """Put ``player`` back to ``snapshot`` (taken from this player or one built the same way)."""
+# parts of a system's ``capture_state`` that say what it simulates (its model), not where the
+# simulation is; ``restore(..., keep_model=True)`` keeps the live system's. ClothSystem's
+# "tables" entry is a dict of tables, of which "parameters" is the model.
+MODEL_STATE = {"tables": ("parameters",), "team_parameters": None, "collision_modes": None}
+
+
+def with_live_model(owner, saved: dict) -> dict:
+    """``saved`` (a system's captured state) with its ``MODEL_STATE`` parts replaced by the
+    live ``owner``'s current ones (arrays copied)."""
+    live = owner.capture_state()
+    merged = dict(saved)
+    for key, sub in MODEL_STATE.items():
+        if key not in saved:
+            continue
+        if sub is None:
+            merged[key] = live[key]
+        else:
+            merged[key] = dict(saved[key])
+            for name in sub:
+                if name in saved[key]:
+                    merged[key][name] = live[key][name]
+    return merged
+
+
+def restore(player, snapshot: Snapshot, keep_model: bool = False) -> None:
+    """Put ``player`` back to ``snapshot`` (taken from this player or one built the same way).
+
+    ``keep_model``: restore the evolving state only and keep this player's parameters and
+    frame-time source (a candidate restarted from a reference's state; module docstring)."""
     scene = player.scene
     systems = _stateful_systems(player)
     expected = {"player"} | {name for name, _ in systems}
@@ -144,12 +188,14 @@ def restore(player, snapshot: Snapshot) -> None:
         restore_arrays("animation", {n: getattr(scene.animation, n) for n in saved["arrays"]}, saved["arrays"])
         scene.animation.next_event = saved["next_event"]
     for name, owner in systems:
-        owner.restore_state(snapshot.parts[name])
+        saved = snapshot.parts[name]
+        owner.restore_state(with_live_model(owner, saved) if keep_model else saved)
     saved = snapshot.parts["player"]
     player.frame = saved["frame"]
     player.counters.fixed_update_count = saved["fixed_update_count"]
     vars(player.time_manager).update(copy.deepcopy(saved["time_manager"]))
-    vars(player.time_source).update(copy.deepcopy(saved["time_source"]))
+    if not keep_model:
+        vars(player.time_source).update(copy.deepcopy(saved["time_source"]))
     player.metric_totals.clear()
     player.metric_totals.update(saved["metric_totals"])
     player.last_context = None

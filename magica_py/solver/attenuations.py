@@ -1,5 +1,5 @@
-"""The velocity attenuations of one step's constraints (docs/solver.md §D.3-§D.9), in one place for the
-per-team step (``frame.run_step``) and the block step (``batched.run.run_block_step``).
+"""The velocity attenuations of one step's constraints (docs/solver.md §D.3-§D.9), read by the
+step (``frame.run_step``).
 
 Each is the 90 Hz value converted to the step size by the team's rate mode
 (``parameters.step_rate``), then by quality mode where it applies (``quality.py``).

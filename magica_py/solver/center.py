@@ -9,16 +9,13 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
+    matrix_row,
     clamp_length, lerp, load3, load4, q_angle, q_from_to, q_inverse, q_mul, q_normal_axis,
     q_rotate, q_slerp, q_tangent_axis, rot_from_normal_tangent, saturate, shift_position,
     store3, store4, unlerp, v_add, v_length, v_lerp, v_normalize, v_scale, v_sub,
-)
-from magica_py.kernels.rows import (
-    flat, row3, row4, set_row3, set_row4,
 )
 from magica_py.solver.rotations import normalize_or_zero, rot_from_normal_tangent_select
 from magica_py.kernels import portable
@@ -32,8 +29,7 @@ TELEPORT_KEEP = 2
 @kernel
 def bind_point(b0, b1, b2, b3, v, w):
     """``B @ (v, w)`` with ``B`` the bind pose (rows b0..b3, 4-tuples): the 4-vector C.1 then
-    takes to world space with the bone's matrix (``world_point``). Constant per vertex: the
-    block form computes it once, when the blocks are formed (``batched/frame_begin``)."""
+    takes to world space with the bone's matrix (``world_point``)."""
     return (b0[0] * v[0] + b0[1] * v[1] + b0[2] * v[2] + b0[3] * w,
             b1[0] * v[0] + b1[1] * v[1] + b1[2] * v[2] + b1[3] * w,
             b2[0] * v[0] + b2[1] * v[1] + b2[2] * v[2] + b2[3] * w,
@@ -69,29 +65,21 @@ def skin_vertex(l0, l1, l2, b0, b1, b2, b3, local_position, local_normal, local_
 
 @kernel
 def skin_team(m, ps, local_to_world, team):
-    """C.1: one-bone skinning of every vertex with this frame's bone matrices.
-
-    Vectorised over the team's vertices (``kernels.rows.load_input``: the loop only reads the
-    model and the bone matrices and only writes position and rotation)."""
-    l2w = flat(local_to_world)          # (nodes * 16,) bone matrices, gathered per vertex
-    bind = flat(m.skin_bind_pose)       # (N * 16,)
-    node_of = m.transform_index
-    local_position, local_normal, local_tangent = flat(m.local_position), flat(m.local_normal), flat(m.local_tangent)
-    position, rotation = flat(ps.position), flat(ps.rotation)
-    start = np.uint64(m.team_particle_start[team])
-    for j in range(m.team_particle_count[team]):
-        p = start + np.uint64(j)
-        node = np.uint64(16) * np.uint64(node_of[p])
-        b = np.uint64(16) * p
-        v = np.uint64(3) * p
-        pos, rot = skin_vertex(row4(l2w, node), row4(l2w, node + np.uint64(4)),
-                               row4(l2w, node + np.uint64(8)),
-                               row4(bind, b), row4(bind, b + np.uint64(4)),
-                               row4(bind, b + np.uint64(8)), row4(bind, b + np.uint64(12)),
-                               row3(local_position, v), row3(local_normal, v),
-                               row3(local_tangent, v))
-        set_row3(position, v, pos)
-        set_row4(rotation, np.uint64(4) * p, rot)
+    """C.1: one-bone skinning of every vertex with this frame's bone matrices (a read-only pass
+    over the model and the bone matrices, writing position and rotation)."""
+    node_of, bind = m.transform_index, m.skin_bind_pose
+    local_position, local_normal, local_tangent = m.local_position, m.local_normal, m.local_tangent
+    position, rotation = ps.position, ps.rotation
+    start = m.team_particle_start[team]
+    for p in range(start, start + m.team_particle_count[team]):
+        node = node_of[p]
+        pos, rot = skin_vertex(matrix_row(local_to_world, node, 0), matrix_row(local_to_world, node, 1),
+                               matrix_row(local_to_world, node, 2),
+                               matrix_row(bind, p, 0), matrix_row(bind, p, 1), matrix_row(bind, p, 2),
+                               matrix_row(bind, p, 3),
+                               load3(local_position, p), load3(local_normal, p), load3(local_tangent, p))
+        store3(position, p, pos)
+        store4(rotation, p, rot)
 
 
 SMOOTHING_REFERENCE_RATE = 90.0   # 1/s: the frame rate at which the C.4 ratio is taken as is
@@ -161,8 +149,7 @@ def mean_velocity_weight(w0, stabilization_time, span):
 @kernel
 def center_fixed_terms(position, rotation, bind_rotation):
     """C.2 terms of one center-fixed vertex: its position and the normal and tangent axes of
-    ``rotation * bind_rotation`` (summed over the fixed list by ``center_pose_team`` and, lanes
-    innermost, by ``batched/frame_begin.center_sums_block``). Branch-free."""
+    ``rotation * bind_rotation`` (summed over the fixed list by ``center_pose_team``). Branch-free."""
     q = q_mul(rotation, bind_rotation)
     return position, q_normal_axis(q), q_tangent_axis(q)
 
@@ -194,6 +181,9 @@ def component_pose_team(m, ts, team, world_position, world_rotation, lossy_scale
 def center_pose_team(m, ps, team, cpos, crot):
     """C.2 center of one team from its skinned pose in the team rows (the component pose when
     the team has no center-fixed vertex)."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_bind_rotation, m_center_fixed, ps_position = m.bind_rotation, m.center_fixed, ps.position
+    ps_rotation = ps.rotation
     c0 = m.team_center_start[team]
     cn = m.team_center_count[team]
     if cn == 0:
@@ -202,8 +192,8 @@ def center_pose_team(m, ps, team, cpos, crot):
     sn = (0.0, 0.0, 0.0)
     st = (0.0, 0.0, 0.0)
     for k in range(c0, c0 + cn):
-        f = m.center_fixed[k]
-        pos, nor, tan = center_fixed_terms(load3(ps.position, f), load4(ps.rotation, f), load4(m.bind_rotation, f))
+        f = m_center_fixed[k]
+        pos, nor, tan = center_fixed_terms(load3(ps_position, f), load4(ps_rotation, f), load4(m_bind_rotation, f))
         sp = v_add(sp, pos)
         sn = v_add(sn, nor)
         st = v_add(st, tan)
@@ -229,6 +219,11 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
                  frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step):
     """C.4 for one team once its component pose and center (C.2) are known: anchor, teleport,
     smoothing, world inertia, speed limits, the frame shift (see ``center_and_inertia_team``)."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    prm_time_based_smoothing, ts_frame_shift_vector = prm.time_based_smoothing, ts.frame_shift_vector
+    ts_now_world_pos, ts_old_frame_world_pos = ts.now_world_pos, ts.old_frame_world_pos
+    ts_old_frame_world_scale, ts_old_world_pos = ts.old_frame_world_scale, ts.old_world_pos
+    ts_smoothing_velocity = ts.smoothing_velocity
     store3(ts.frame_world_pos, team, center_pos)
     store4(ts.frame_world_rot, team, center_rot)
     store3(ts.frame_world_scale, team, cscl)
@@ -277,13 +272,13 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
     s = prm.movement_smoothing[team]
     limit = prm.movement_speed_limit[team]
     if s >= 1e-6 and not reset and not keep:
-        if prm.time_based_smoothing[team] != 0:
+        if prm_time_based_smoothing[team] != 0:
             felt = time_based_smoothing(ts, team, v_sub(cpos, old_pos), frame_delta_time, s, limit * ratio
                                         if limit >= 0.0 else -1.0)
             smooth_pos = v_sub(cpos, felt)
         else:
-            if math.isnan(ts.smoothing_velocity[team, 0]):  # quality switched off after a reset
-                store3(ts.smoothing_velocity, team, (0.0, 0.0, 0.0))
+            if math.isnan(ts_smoothing_velocity[team, 0]):  # quality switched off after a reset
+                store3(ts_smoothing_velocity, team, (0.0, 0.0, 0.0))
             if running:
                 v = (0.0, 0.0, 0.0)
                 if frame_delta_time > 0.0:
@@ -291,20 +286,20 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
                 if limit >= 0.0:
                     v = clamp_length(v, limit * ratio)
                 a = saturate((1.0 - s) ** 3 * 0.99 + 0.01)
-                store3(ts.smoothing_velocity, team, v_lerp(load3(ts.smoothing_velocity, team), v, a))
-            smooth_pos = v_sub(cpos, v_scale(load3(ts.smoothing_velocity, team), frame_delta_time))
+                store3(ts_smoothing_velocity, team, v_lerp(load3(ts_smoothing_velocity, team), v, a))
+            smooth_pos = v_sub(cpos, v_scale(load3(ts_smoothing_velocity, team), frame_delta_time))
         smooth_delta = v_sub(smooth_pos, old_pos)
         old_pos = smooth_pos
         shift = True
     # 4. reset: every history value becomes the current one
     if reset:
         for c in range(3):
-            ts.old_frame_world_pos[team, c] = center_pos[c]
-            ts.now_world_pos[team, c] = center_pos[c]
-            ts.old_world_pos[team, c] = center_pos[c]
-            ts.old_frame_world_scale[team, c] = cscl[c]
-            ts.smoothing_velocity[team, c] = math.nan if prm.time_based_smoothing[team] != 0 else 0.0
-            ts.frame_shift_vector[team, c] = 0.0
+            ts_old_frame_world_pos[team, c] = center_pos[c]
+            ts_now_world_pos[team, c] = center_pos[c]
+            ts_old_world_pos[team, c] = center_pos[c]
+            ts_old_frame_world_scale[team, c] = cscl[c]
+            ts_smoothing_velocity[team, c] = math.nan if prm_time_based_smoothing[team] != 0 else 0.0
+            ts_frame_shift_vector[team, c] = 0.0
         store4(ts.old_frame_world_rot, team, center_rot)
         store4(ts.now_world_rot, team, center_rot)
         store4(ts.old_world_rot, team, center_rot)
@@ -348,7 +343,7 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
             o = lerp(o, 1.0, saturate(skip_count * dt / (frame_delta_time * now_time_scale)))
         if ts.velocity_weight[team] < 1.0:
             w = ts.velocity_weight[team]
-            if prm.time_based_smoothing[team] != 0:
+            if prm_time_based_smoothing[team] != 0:
                 stab = prm.stabilization_time[team]
                 if stab > 1e-6:  # the ramp in continuous time: it rose since the last step too
                     w = saturate(w + max(since_last_step, 0.0) / stab)
@@ -365,11 +360,11 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
         if shift:
             vec = v_add(v_add(v_scale(shift_vec, ms), anchor_delta), smooth_delta)
             rot = q_mul(anchor_rot, q_slerp(IDENTITY, shift_rot, rs))
-            store3(ts.frame_shift_vector, team, vec)
+            store3(ts_frame_shift_vector, team, vec)
             store4(ts.frame_shift_rotation, team, rot)
-            store3(ts.old_frame_world_pos, team, shift_position(load3(ts.old_frame_world_pos, team), pivot, vec, rot))
+            store3(ts_old_frame_world_pos, team, shift_position(load3(ts_old_frame_world_pos, team), pivot, vec, rot))
             store4(ts.old_frame_world_rot, team, q_mul(rot, load4(ts.old_frame_world_rot, team)))
-            store3(ts.now_world_pos, team, shift_position(load3(ts.now_world_pos, team), pivot, vec, rot))
+            store3(ts_now_world_pos, team, shift_position(load3(ts_now_world_pos, team), pivot, vec, rot))
             store4(ts.now_world_rot, team, q_mul(rot, load4(ts.now_world_rot, team)))
             ts.inertia_shift[team] = 1
         # 6. wind bookkeeping
@@ -387,23 +382,29 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
 def snap_particles_to_base_pose(ps, start, end):
     """C.5 Reset of particles [start, end): every position history at this frame's animated
     pose, velocities, friction and collision normals zero (also used by the guards)."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    ps_base_pos, ps_base_rot, ps_collision_normal = ps.base_pos, ps.base_rot, ps.collision_normal
+    ps_disp_pos, ps_friction, ps_next_pos, ps_old_pos = ps.disp_pos, ps.friction, ps.next_pos, ps.old_pos
+    ps_old_position, ps_old_rotation, ps_position = ps.old_position, ps.old_rotation, ps.position
+    ps_real_velocity, ps_rotation, ps_static_friction = ps.real_velocity, ps.rotation, ps.static_friction
+    ps_velocity, ps_velocity_pos = ps.velocity, ps.velocity_pos
     for p in range(start, end):
-        pos = load3(ps.position, p)
-        rot = load4(ps.rotation, p)
+        pos = load3(ps_position, p)
+        rot = load4(ps_rotation, p)
         for c in range(3):
-            ps.next_pos[p, c] = pos[c]
-            ps.old_pos[p, c] = pos[c]
-            ps.base_pos[p, c] = pos[c]
-            ps.old_position[p, c] = pos[c]
-            ps.velocity_pos[p, c] = pos[c]
-            ps.disp_pos[p, c] = pos[c]
-            ps.velocity[p, c] = 0.0
-            ps.real_velocity[p, c] = 0.0
-            ps.collision_normal[p, c] = 0.0
-        store4(ps.base_rot, p, rot)
-        store4(ps.old_rotation, p, rot)
-        ps.friction[p] = 0.0
-        ps.static_friction[p] = 0.0
+            ps_next_pos[p, c] = pos[c]
+            ps_old_pos[p, c] = pos[c]
+            ps_base_pos[p, c] = pos[c]
+            ps_old_position[p, c] = pos[c]
+            ps_velocity_pos[p, c] = pos[c]
+            ps_disp_pos[p, c] = pos[c]
+            ps_velocity[p, c] = 0.0
+            ps_real_velocity[p, c] = 0.0
+            ps_collision_normal[p, c] = 0.0
+        store4(ps_base_rot, p, rot)
+        store4(ps_old_rotation, p, rot)
+        ps_friction[p] = 0.0
+        ps_static_friction[p] = 0.0
 
 
 @kernel
@@ -432,24 +433,18 @@ def reset_or_shift_team(m, ps, ts, team):
         pivot = load3(ts.old_component_pos, team)
         vec = load3(ts.frame_shift_vector, team)
         rot = load4(ts.frame_shift_rotation, team)
-        # flat rows and unsigned indices: the loop vectorises (in-place updates of distinct
-        # arrays, which LLVM checks for overlap at run time)
-        old_pos, old_position, disp_pos = flat(ps.old_pos), flat(ps.old_position), flat(ps.disp_pos)
-        old_rotation, velocity, real_velocity = flat(ps.old_rotation), flat(ps.velocity), flat(ps.real_velocity)
-        first = np.uint64(start)
-        for j in range(end - start):
-            p = first + np.uint64(j)
-            v = np.uint64(3) * p
-            q = np.uint64(4) * p
-            a, b, c, r, u, w = shift_particle(row3(old_pos, v), row3(old_position, v), row3(disp_pos, v),
-                                              row4(old_rotation, q), row3(velocity, v), row3(real_velocity, v),
+        old_pos, old_position, disp_pos = ps.old_pos, ps.old_position, ps.disp_pos
+        old_rotation, velocity, real_velocity = ps.old_rotation, ps.velocity, ps.real_velocity
+        for p in range(start, end):
+            a, b, c, r, u, w = shift_particle(load3(old_pos, p), load3(old_position, p), load3(disp_pos, p),
+                                              load4(old_rotation, p), load3(velocity, p), load3(real_velocity, p),
                                               pivot, vec, rot)
-            set_row3(old_pos, v, a)
-            set_row3(old_position, v, b)
-            set_row3(disp_pos, v, c)
-            set_row4(old_rotation, q, r)
-            set_row3(velocity, v, u)
-            set_row3(real_velocity, v, w)
+            store3(old_pos, p, a)
+            store3(old_position, p, b)
+            store3(disp_pos, p, c)
+            store4(old_rotation, p, r)
+            store3(velocity, p, u)
+            store3(real_velocity, p, w)
 
 
 @kernel
@@ -473,17 +468,25 @@ def distance_culling_team(prm, ts, team, world_position, component_transform):
 @kernel
 def end_frame_team(ts, team, running):
     """A.7: remember this frame's component and center, clear the per-frame flags."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    ts_component_pos, ts_component_rot = ts.component_pos, ts.component_rot
+    ts_component_scale, ts_external_force = ts.component_scale, ts.external_force
+    ts_frame_world_pos, ts_frame_world_rot = ts.frame_world_pos, ts.frame_world_rot
+    ts_frame_world_scale, ts_old_component_pos = ts.frame_world_scale, ts.old_component_pos
+    ts_old_component_rot, ts_old_component_scale = ts.old_component_rot, ts.old_component_scale
+    ts_old_frame_world_pos, ts_old_frame_world_rot = ts.old_frame_world_pos, ts.old_frame_world_rot
+    ts_old_frame_world_scale = ts.old_frame_world_scale
     for c in range(3):
-        ts.old_component_pos[team, c] = ts.component_pos[team, c]
-        ts.old_component_scale[team, c] = ts.component_scale[team, c]
+        ts_old_component_pos[team, c] = ts_component_pos[team, c]
+        ts_old_component_scale[team, c] = ts_component_scale[team, c]
         if running:
-            ts.old_frame_world_pos[team, c] = ts.frame_world_pos[team, c]
-            ts.old_frame_world_scale[team, c] = ts.frame_world_scale[team, c]
-            ts.external_force[team, c] = 0.0
+            ts_old_frame_world_pos[team, c] = ts_frame_world_pos[team, c]
+            ts_old_frame_world_scale[team, c] = ts_frame_world_scale[team, c]
+            ts_external_force[team, c] = 0.0
     for c in range(4):
-        ts.old_component_rot[team, c] = ts.component_rot[team, c]
+        ts_old_component_rot[team, c] = ts_component_rot[team, c]
         if running:
-            ts.old_frame_world_rot[team, c] = ts.frame_world_rot[team, c]
+            ts_old_frame_world_rot[team, c] = ts_frame_world_rot[team, c]
     if running:
         ts.external_force_mode[team] = 0
     ts.reset[team] = 0

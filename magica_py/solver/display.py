@@ -13,9 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import clamp_length, v_add, v_length, v_lerp, v_scale, v_sub
+from magica_py.kernels.math3d import load3, load4, store3, store4, clamp_length, v_add, v_length, v_lerp, v_scale, v_sub
 from magica_py.solver.quality import display_ftl_team
-from magica_py.kernels.rows import flat, row3, row4, set_row3, set_row4
 
 MOVE = 0x02
 MAX_DISTANCE_RATIO = 1.3   # MaxDistanceRatioFutuerPrediction
@@ -43,6 +42,8 @@ def display_clamped(f, root_position, position):
 
 @kernel
 def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, running):
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_team_particle_count = m.team_particle_count
     blend = ts.blend_weight[team]
     t = display_fraction(dt, time, old_time, now_update_time)
     time_based = prm.time_based_smoothing[team] != 0
@@ -53,34 +54,32 @@ def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, runn
     # arrays as locals, flat rows, unsigned indices: through the tables the array pointers
     # are reloaded after every store. One pass in particle order (the root read below)
     attribute, root_index = m.attribute, m.root_index
-    position, rotation, disp_pos = flat(ps.position), flat(ps.rotation), flat(ps.disp_pos)
-    old_pos, real_velocity = flat(ps.old_pos), flat(ps.real_velocity)
-    old_position, old_rotation = flat(ps.old_position), flat(ps.old_rotation)
-    base_pos_buffer, base_rot_buffer = flat(ps.base_pos_buffer), flat(ps.base_rot_buffer)
+    position, rotation, disp_pos = ps.position, ps.rotation, ps.disp_pos
+    old_pos, real_velocity = ps.old_pos, ps.real_velocity
+    old_position, old_rotation = ps.old_position, ps.old_rotation
+    base_pos_buffer, base_rot_buffer = ps.base_pos_buffer, ps.base_rot_buffer
     first = np.uint64(m.team_particle_start[team])
-    for j in range(m.team_particle_count[team]):
+    for j in range(m_team_particle_count[team]):
         p = first + np.uint64(j)
-        v = np.uint64(3) * p
-        q = np.uint64(4) * p
-        pos0 = row3(position, v)
-        rot0 = row4(rotation, q)
+        pos0 = load3(position, p)
+        rot0 = load4(rotation, p)
         if (attribute[p] & MOVE) != 0:
             if time_based:
-                f = v_add(row3(old_pos, v), v_scale(row3(real_velocity, v), ahead))
+                f = v_add(load3(old_pos, p), v_scale(load3(real_velocity, p), ahead))
             else:
-                f = display_extrapolated(row3(old_pos, v), row3(real_velocity, v), row3(disp_pos, v), dt, t)
+                f = display_extrapolated(load3(old_pos, p), load3(real_velocity, p), load3(disp_pos, p), dt, t)
             r = root_index[p]
             if r >= 0:
-                f = display_clamped(f, row3(position, np.uint64(3) * np.uint64(r)), pos0)
-            set_row3(disp_pos, v, f)
-            set_row3(position, v, v_lerp(pos0, f, blend))
+                f = display_clamped(f, load3(position, np.uint64(r)), pos0)
+            store3(disp_pos, p, f)
+            store3(position, p, v_lerp(pos0, f, blend))
         else:
-            set_row3(disp_pos, v, pos0)
+            store3(disp_pos, p, pos0)
         if running:
-            set_row3(old_position, v, pos0)
-            set_row4(old_rotation, q, rot0)
-        set_row3(base_pos_buffer, v, pos0)
-        set_row4(base_rot_buffer, q, rot0)
+            store3(old_position, p, pos0)
+            store4(old_rotation, p, rot0)
+        store3(base_pos_buffer, p, pos0)
+        store4(base_rot_buffer, p, rot0)
     mode = prm.inextensibility[team]
     if time_based and (mode == 2 or mode == 3 or mode == 5):  # the FTL options
         display_ftl_team(m, ps, ts, team)

@@ -291,11 +291,12 @@ def _begin_step_team(tt, fi, step, t):
 
 
 @kernel
-def simulate_frame(m, ps, prm, ts, cs, tt, h, fi, angle, bending, point_collision, edge_collision, motion, quality,
-                   lines, triangles):
+def simulate_frame(tables, fi, angle, bending, point_collision, edge_collision, motion, quality, lines, triangles):
     """The whole cloth frame, one team after another (see the module docstring): every team's
     begin and steps, then every team's end (all reads of this frame's transforms come before
-    any write-back)."""
+    any write-back). ``tables``: ``tables.SolverTables``."""
+    m, ps, prm, ts, cs, tt, h = (tables.model, tables.particles, tables.parameters, tables.teams,
+                                 tables.colliders, tables.time, tables.hierarchy)
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
     for i in range(m.live_teams.shape[0]):
@@ -307,13 +308,15 @@ def simulate_frame(m, ps, prm, ts, cs, tt, h, fi, angle, bending, point_collisio
 
 
 @kernel(parallel=True)
-def simulate_frame_parallel(m, ps, prm, ts, cs, tt, h, fi, wt, angle, bending, point_collision, edge_collision,
-                            motion, quality, lines, triangles):
+def simulate_frame_parallel(tables, fi, wt, angle, bending, point_collision, edge_collision, motion, quality, lines,
+                            triangles):
     """``simulate_frame`` with the teams dealt to ``fi.threads`` threads (opt-in:
     ``ClothSystem(parallel=True)``). ``assign_workers`` deals the teams each frame (greedy,
     largest first); each thread runs its teams' begin and steps in one parallel region and
     their ends in a second: two thread launches per frame. Teams are independent and each
     runs in its own order, so the results are the serial kernel's bits."""
+    m, ps, prm, ts, cs, tt, h = (tables.model, tables.particles, tables.parameters, tables.teams,
+                                 tables.colliders, tables.time, tables.hierarchy)
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
     workers = max(1, min(fi.threads, wt.worker_load.shape[0]))

@@ -5,12 +5,10 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, store3, store4
 from magica_py.solver.center import snap_particles_to_base_pose
-from magica_py.kernels.rows import flat, row3
 
 GUARD_OK = 0
 GUARD_NON_FINITE = 1
@@ -26,8 +24,7 @@ def speed_limit_sq(scale_ratio):
 
 @kernel(inline="always")
 def particle_verdict(old_pos, real_velocity, velocity, disp_pos, limit_sq):
-    """(non-finite, too fast) of one particle after the steps (branch-free: the per-team and
-    the lane loops vectorise)."""
+    """(non-finite, too fast) of one particle after the steps (branch-free)."""
     finite = True
     s = 0.0
     for c in range(3):
@@ -44,15 +41,16 @@ def check_team(m, ps, ts, team):
 
     One read-only pass with the verdicts OR-ed (no early exit: the loop vectorises); any
     non-finite value wins over a speed excess, as with the early return it replaces."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_team_particle_count = m.team_particle_count
     limit_sq = speed_limit_sq(ts.scale_ratio[team])
-    old_pos, real_velocity, velocity, disp_pos = flat(ps.old_pos), flat(ps.real_velocity), flat(ps.velocity), flat(ps.disp_pos)
-    first = np.uint64(3) * np.uint64(m.team_particle_start[team])
+    old_pos, real_velocity, velocity, disp_pos = ps.old_pos, ps.real_velocity, ps.velocity, ps.disp_pos
+    start = m.team_particle_start[team]
     non_finite = False
     too_fast = False
-    for j in range(m.team_particle_count[team]):
-        i = first + np.uint64(3) * np.uint64(j)
-        bad, fast = particle_verdict(row3(old_pos, i), row3(real_velocity, i), row3(velocity, i),
-                                     row3(disp_pos, i), limit_sq)
+    for p in range(start, start + m_team_particle_count[team]):
+        bad, fast = particle_verdict(load3(old_pos, p), load3(real_velocity, p), load3(velocity, p),
+                                     load3(disp_pos, p), limit_sq)
         non_finite = non_finite | bad
         too_fast = too_fast | fast
     return guard_code(non_finite, too_fast)
@@ -68,11 +66,14 @@ def guard_code(non_finite, too_fast):
 @kernel
 def reset_team_to_base(m, ps, ts, team):
     """Snap a team's particles to this frame's animated pose with zero velocity (docs/solver.md §C.5 Reset)."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    ps_position, ps_rotation, ps_step_basic_pos = ps.position, ps.rotation, ps.step_basic_pos
+    ps_step_basic_rot = ps.step_basic_rot
     start = m.team_particle_start[team]
     end = start + m.team_particle_count[team]
     snap_particles_to_base_pose(ps, start, end)
     for p in range(start, end):
-        store3(ps.step_basic_pos, p, load3(ps.position, p))
-        store4(ps.step_basic_rot, p, load4(ps.rotation, p))
+        store3(ps_step_basic_pos, p, load3(ps_position, p))
+        store4(ps_step_basic_rot, p, load4(ps_rotation, p))
     ts.velocity_weight[team] = 0.0
     ts.blend_weight[team] = 0.0

@@ -63,17 +63,20 @@ def clamp_to_sphere(x, center, radius):
 def tight_tether_team(m, ps, prm, team):
     """Root distance of every moving particle <= step-basic rest x (1 + tether_limit).
     The correction becomes velocity in full (plain PBD)."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_root_index, m_team_particle_count = m.attribute, m.root_index, m.team_particle_count
+    ps_next_pos, ps_step_basic_pos = ps.next_pos, ps.step_basic_pos
     limit = 1.0 + prm.tether_limit[team]
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        if (m.attribute[p] & MOVE) == 0:
+    for p in range(start, start + m_team_particle_count[team]):
+        if (m_attribute[p] & MOVE) == 0:
             continue
-        r = m.root_index[p]
+        r = m_root_index[p]
         if r < 0:
             continue
-        rest = v_length(v_sub(load3(ps.step_basic_pos, p), load3(ps.step_basic_pos, r)))
-        x, _move = clamp_to_sphere(load3(ps.next_pos, p), load3(ps.next_pos, r), rest * limit)
-        store3(ps.next_pos, p, x)
+        rest = v_length(v_sub(load3(ps_step_basic_pos, p), load3(ps_step_basic_pos, r)))
+        x, _move = clamp_to_sphere(load3(ps_next_pos, p), load3(ps_next_pos, r), rest * limit)
+        store3(ps_next_pos, p, x)
 
 
 @kernel
@@ -81,22 +84,26 @@ def ftl_team(m, ps, prm, team):
     """Follow-the-leader along each baseline (parents before children): every edge is at
     most its step-basic rest length. DFTL: the parent's velocity gets ``-s_damp`` x the
     child's correction (velocity_pos += s_damp x correction)."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
+    m_baseline_start, m_parent, m_team_baseline_count = m.baseline_start, m.parent, m.team_baseline_count
+    ps_next_pos, ps_step_basic_pos, ps_velocity_pos = ps.next_pos, ps.step_basic_pos, ps.velocity_pos
     damping = prm.ftl_damping[team]
     b0 = m.team_baseline_start[team]
-    for b in range(b0, b0 + m.team_baseline_count[team]):
-        e0 = m.baseline_start[b]
-        for e in range(e0 + 1, e0 + m.baseline_count[b]):
-            v = m.baseline_data[e]
-            if (m.attribute[v] & MOVE) == 0:
+    for b in range(b0, b0 + m_team_baseline_count[team]):
+        e0 = m_baseline_start[b]
+        for e in range(e0 + 1, e0 + m_baseline_count[b]):
+            v = m_baseline_data[e]
+            if (m_attribute[v] & MOVE) == 0:
                 continue
-            p = m.parent[v]
+            p = m_parent[v]
             if p < 0:
                 continue
-            rest = v_length(v_sub(load3(ps.step_basic_pos, v), load3(ps.step_basic_pos, p)))
-            x, move = clamp_to_sphere(load3(ps.next_pos, v), load3(ps.next_pos, p), rest)
-            store3(ps.next_pos, v, x)
-            if damping > 0.0 and (m.attribute[p] & MOVE) != 0:
-                store3(ps.velocity_pos, p, v_add(load3(ps.velocity_pos, p), v_scale(move, damping)))
+            rest = v_length(v_sub(load3(ps_step_basic_pos, v), load3(ps_step_basic_pos, p)))
+            x, move = clamp_to_sphere(load3(ps_next_pos, v), load3(ps_next_pos, p), rest)
+            store3(ps_next_pos, v, x)
+            if damping > 0.0 and (m_attribute[p] & MOVE) != 0:
+                store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(move, damping)))
 
 
 @kernel
@@ -105,24 +112,27 @@ def edge_pass_team(m, ps, team):
     an edge longer than its step-basic rest length is shortened, both ends moving in
     proportion to their inverse masses (D.4's depth masses; fixed ends do not move).
     Corrections become velocity in full."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_depth, m_edges, m_team_edge_count = m.attribute, m.depth, m.edges, m.team_edge_count
+    ps_friction, ps_next_pos, ps_step_basic_pos = ps.friction, ps.next_pos, ps.step_basic_pos
     e0 = m.team_edge_start[team]
-    for e in range(e0, e0 + m.team_edge_count[team]):
-        a = m.edges[e, 0]
-        b = m.edges[e, 1]
-        wa = inverse_mass_friction_depth(ps.friction[a], m.depth[a]) if (m.attribute[a] & MOVE) != 0 else 0.0
-        wb = inverse_mass_friction_depth(ps.friction[b], m.depth[b]) if (m.attribute[b] & MOVE) != 0 else 0.0
+    for e in range(e0, e0 + m_team_edge_count[team]):
+        a = m_edges[e, 0]
+        b = m_edges[e, 1]
+        wa = inverse_mass_friction_depth(ps_friction[a], m_depth[a]) if (m_attribute[a] & MOVE) != 0 else 0.0
+        wb = inverse_mass_friction_depth(ps_friction[b], m_depth[b]) if (m_attribute[b] & MOVE) != 0 else 0.0
         if wa + wb <= 0.0:
             continue
-        rest = v_length(v_sub(load3(ps.step_basic_pos, a), load3(ps.step_basic_pos, b)))
-        pa = load3(ps.next_pos, a)
-        pb = load3(ps.next_pos, b)
+        rest = v_length(v_sub(load3(ps_step_basic_pos, a), load3(ps_step_basic_pos, b)))
+        pa = load3(ps_next_pos, a)
+        pb = load3(ps_next_pos, b)
         d = v_sub(pb, pa)
         length = v_length(d)
         if length <= rest or length < 1e-12:
             continue
         c = v_scale(d, (length - rest) / (length * (wa + wb)))
-        store3(ps.next_pos, a, v_add(pa, v_scale(c, wa)))
-        store3(ps.next_pos, b, v_sub(pb, v_scale(c, wb)))
+        store3(ps_next_pos, a, v_add(pa, v_scale(c, wa)))
+        store3(ps_next_pos, b, v_sub(pb, v_scale(c, wb)))
 
 
 @kernel
@@ -132,19 +142,24 @@ def display_ftl_team(m, ps, ts, team):
     the edges the step kept. Rest length: the larger of the last step's (step-basic pose)
     and the build rest length at the current scale (the step-basic pose is not set before
     the first step, e.g. a first frame at 240 fps runs no 90 Hz step)."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
+    m_baseline_local_position, m_baseline_start = m.baseline_local_position, m.baseline_start
+    m_parent, m_team_baseline_count, ps_position = m.parent, m.team_baseline_count, ps.position
+    ps_step_basic_pos = ps.step_basic_pos
     s = v_scale(load3(m.team_init_scale, team), ts.scale_ratio[team])
     b0 = m.team_baseline_start[team]
-    for b in range(b0, b0 + m.team_baseline_count[team]):
-        e0 = m.baseline_start[b]
-        for e in range(e0 + 1, e0 + m.baseline_count[b]):
-            v = m.baseline_data[e]
-            p = m.parent[v]
-            if (m.attribute[v] & MOVE) == 0 or p < 0:
+    for b in range(b0, b0 + m_team_baseline_count[team]):
+        e0 = m_baseline_start[b]
+        for e in range(e0 + 1, e0 + m_baseline_count[b]):
+            v = m_baseline_data[e]
+            p = m_parent[v]
+            if (m_attribute[v] & MOVE) == 0 or p < 0:
                 continue
-            rest = max(v_length(v_sub(load3(ps.step_basic_pos, v), load3(ps.step_basic_pos, p))),
-                       v_length(v_mul(load3(m.baseline_local_position, v), s)))
-            x, _move = clamp_to_sphere(load3(ps.position, v), load3(ps.position, p), rest)
-            store3(ps.position, v, x)
+            rest = max(v_length(v_sub(load3(ps_step_basic_pos, v), load3(ps_step_basic_pos, p))),
+                       v_length(v_mul(load3(m_baseline_local_position, v), s)))
+            x, _move = clamp_to_sphere(load3(ps_position, v), load3(ps_position, p), rest)
+            store3(ps_position, v, x)
 
 
 @kernel
@@ -187,18 +202,21 @@ def project_out_of_colliders(m, prm, ts, cs, team, positions, ps_old_pos):
     pass: projecting every such particle to the surface at once would tear the chain across
     the collider (81 % edge stretch in the engulfing case, 0 % this way). Once out, a
     particle is kept out."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    cs_scale_suspend, m_attribute, m_depth = cs.scale_suspend, m.attribute, m.depth
+    m_team_particle_count, prm_radius_curve = m.team_particle_count, prm.radius_curve
     scale = ts.scale_ratio[team]
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        attr = m.attribute[p]
+    for p in range(start, start + m_team_particle_count[team]):
+        attr = m_attribute[p]
         if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
             continue
-        r = max(curve_at(prm.radius_curve, team, m.depth[p]), 0.0001) * scale
+        r = max(curve_at(prm_radius_curve, team, m_depth[p]), 0.0001) * scale
         x = load3(positions, p)
         for k in range(c0, c1):
-            if cs.scale_suspend[k] != 0:
+            if cs_scale_suspend[k] != 0:
                 continue
             bmin = (x[0] - 2.0 * r, x[1] - 2.0 * r, x[2] - 2.0 * r)
             bmax = (x[0] + 2.0 * r, x[1] + 2.0 * r, x[2] + 2.0 * r)
@@ -246,16 +264,18 @@ def quality_restoration_attenuation(prm, team, frequency_ratio, converted):
 @kernel
 def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, distance_attenuation):
     """The quality passes of one team after D.9 (see the module docstring)."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    prm_distance_iterations = prm.distance_iterations
     mode = prm.inextensibility[team]
     if mode == INEXT_FTL_EDGES:
-        for _ in range(prm.distance_iterations[team]):
+        for _ in range(prm_distance_iterations[team]):
             edge_pass_team(m, ps, team)
     if mode == INEXT_TETHER or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES:
         tight_tether_team(m, ps, prm, team)
     if mode == INEXT_FTL or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES:
         ftl_team(m, ps, prm, team)
     elif mode == INEXT_ITERATIONS:
-        for _ in range(prm.distance_iterations[team]):
+        for _ in range(prm_distance_iterations[team]):
             distance_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation)
     if prm.collision_last[team] != 0 and ts.collider_count[team] > 0 and prm.collision_mode[team] != 0:
         collision_last_team(m, ps, prm, ts, cs, team)

@@ -13,43 +13,17 @@ import math
 import numpy as np
 
 from magica_py.jit import kernel
-from magica_py.kernels.rows import flat, row3, row4, set_row3, set_row4
 from magica_py.kernels.math3d import (
-    from_to_rotation, from_to_rotation_unit, load3, orthogonal_axis, q_axis_angle, q_inverse, q_mul,
+    from_to_rotation, from_to_rotation_unit, load3, load4, q_inverse, q_mul, store3,
     q_rotate, q_slerp, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp, v_normalize, v_scale,
     v_sub,
 )
-from magica_py.kernels import trig
-from magica_py.solver.constraints.angle import swing_rotation
 
 FIXED = 0x01
 MOVE = 0x02
 ZERO_DISTANCE = 0x20
 INCLUDE_LINE = 0x01
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
-
-
-@kernel(inline="always")
-def from_to_rotation_fraction(a, b, t, full):
-    """``from_to_rotation_unit(a, b, t)`` (unit a, b), the same bits on every path, with one
-    sincos for both the opposite and the general case (the axis and angle are selected
-    first): a lane loop computes every branch, so two q_axis_angle would cost two sincos.
-    E.2's turn towards the children.
-
-    Returns (rotation, opposite); ``full`` False (a literal) leaves the opposite case out."""
-    c = v_dot(a, b)
-    c = 1.0 if c > 1.0 else c
-    c = -1.0 if c < -1.0 else c
-    opposite = abs(1.0 + c) < 1e-6
-    parallel = abs(1.0 - c) < 1e-6
-    axis = v_normalize(v_cross(a, b))
-    angle = trig.acos(c) * t
-    if full:
-        fallback_axis = orthogonal_axis(a)
-        axis = fallback_axis if opposite else axis
-        angle = math.pi * t if opposite else angle
-    q = q_axis_angle(axis, angle)
-    return (IDENTITY if (not opposite) & parallel else q), opposite
 
 
 @kernel
@@ -136,36 +110,22 @@ def line_child_pose(ibq, bp, rest_position, rest_rotation, base_pos_c, base_rot_
 
 
 @kernel(inline="always")
-def line_child_rotation(q, lq, tv, cur, zero, vector):
+def line_child_rotation(q, lq, tv, cur, zero):
     """E.2: rotation of a moving child: its rest rotation carried by x's rotation q, swung so
-    the rest edge ``tv`` matches the simulated edge ``cur`` (not for a zero-distance child).
-
-    Returns (rotation, rare). ``vector`` (a literal) True: branch-free (``angle.swing_rotation``
-    without its opposite case), ``rare`` True where that case was left out; False: ``full_swing``
-    (the same bits on every path, rare always False)."""
+    the rest edge ``tv`` matches the simulated edge ``cur`` (not for a zero-distance child)."""
     qc = q_mul(q, lq)
-    if vector:
-        swing, opposite = swing_rotation(v_normalize(tv), v_normalize(cur), False)
-        return (qc if zero else q_mul(swing, qc)), opposite & (not zero)
     if not zero:
         qc = q_mul(full_swing(v_normalize(tv), v_normalize(cur)), qc)
-    return qc, False
+    return qc
 
 
 @kernel(inline="always")
-def line_turn(q, ctv, cv, t, vector):
+def line_turn(q, ctv, cv, t):
     """E.2: x's rotation q turned by fraction t from its children's rest directions ``ctv``
-    towards their simulated ones ``cv`` (left as is when either sum is (near) zero).
-
-    Returns (rotation, rare); ``vector`` as in ``line_child_rotation`` (``from_to_rotation``
-    with its opposite case left out; rare where it was needed)."""
-    turn = (v_length(ctv) >= 1e-8) & (v_length(cv) >= 1e-8)
-    if vector:
-        r, opposite = from_to_rotation_fraction(v_normalize(ctv), v_normalize(cv), t, False)
-        return (q_mul(r, q) if turn else q), turn & opposite
-    if turn:
+    towards their simulated ones ``cv`` (left as is when either sum is (near) zero)."""
+    if (v_length(ctv) >= 1e-8) & (v_length(cv) >= 1e-8):
         q = q_mul(from_to_rotation(ctv, cv, t), q)
-    return q, False
+    return q
 
 
 @kernel(inline="always")
@@ -177,6 +137,9 @@ def line_blend(bq, q, bw):
 @kernel
 def line_rotations_team(m, ps, prm, ts, team):
     """E.2 over the IncludeLine baselines of one team."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_baseline_count, m_baseline_data, m_baseline_flags = m.baseline_count, m.baseline_data, m.baseline_flags
+    m_baseline_start, m_team_baseline_count = m.baseline_start, m.team_baseline_count
     if m.team_has_lines[team] == 0:
         return
     ri = prm.rotational_interpolation[team]
@@ -187,21 +150,21 @@ def line_rotations_team(m, ps, prm, ts, team):
     # arrays as locals, flat rows, unsigned indices (through the tables the array pointers
     # are reloaded after every store); the walk and the maths are unchanged
     attribute, child_start, child_count, child_data = m.attribute, m.child_start, m.child_count, m.child_data
-    rest_position, rest_rotation = flat(m.baseline_local_position), flat(m.baseline_local_rotation)
-    position, rotation = flat(ps.position), flat(ps.rotation)
-    base_pos_buffer, base_rot_buffer = flat(ps.base_pos_buffer), flat(ps.base_rot_buffer)
+    rest_position, rest_rotation = m.baseline_local_position, m.baseline_local_rotation
+    position, rotation = ps.position, ps.rotation
+    base_pos_buffer, base_rot_buffer = ps.base_pos_buffer, ps.base_rot_buffer
     b0 = m.team_baseline_start[team]
-    for b in range(b0, b0 + m.team_baseline_count[team]):
-        if (m.baseline_flags[b] & INCLUDE_LINE) == 0:
+    for b in range(b0, b0 + m_team_baseline_count[team]):
+        if (m_baseline_flags[b] & INCLUDE_LINE) == 0:
             continue
-        e0 = m.baseline_start[b]
-        for e in range(e0, e0 + m.baseline_count[b]):
-            x = np.uint64(m.baseline_data[e])
+        e0 = m_baseline_start[b]
+        for e in range(e0, e0 + m_baseline_count[b]):
+            x = np.uint64(m_baseline_data[e])
             attr = attribute[x]
-            pos = row3(position, np.uint64(3) * x)
-            q = row4(rotation, np.uint64(4) * x)
-            bp = row3(base_pos_buffer, np.uint64(3) * x)
-            bq = row4(base_rot_buffer, np.uint64(4) * x)
+            pos = load3(position, x)
+            q = load4(rotation, x)
+            bp = load3(base_pos_buffer, x)
+            bq = load4(base_rot_buffer, x)
             cn = child_count[x]
             if cn > 0 and (attr & (FIXED | MOVE)) != 0:
                 ibq = q_inverse(bq)
@@ -210,27 +173,25 @@ def line_rotations_team(m, ps, prm, ts, team):
                 c0 = child_start[x]
                 for k in range(c0, c0 + cn):
                     c = np.uint64(child_data[k])
-                    c3 = np.uint64(3) * c
-                    c4 = np.uint64(4) * c
                     if a_zero:
-                        lp, lq = line_child_pose(ibq, bp, row3(rest_position, c3), row4(rest_rotation, c4),
-                                                 row3(base_pos_buffer, c3), row4(base_rot_buffer, c4), a, True)
+                        lp, lq = line_child_pose(ibq, bp, load3(rest_position, c), load4(rest_rotation, c),
+                                                 load3(base_pos_buffer, c), load4(base_rot_buffer, c), a, True)
                     else:
-                        lp, lq = line_child_pose(ibq, bp, row3(rest_position, c3), row4(rest_rotation, c4),
-                                                 row3(base_pos_buffer, c3), row4(base_rot_buffer, c4), a, False)
+                        lp, lq = line_child_pose(ibq, bp, load3(rest_position, c), load4(rest_rotation, c),
+                                                 load3(base_pos_buffer, c), load4(base_rot_buffer, c), a, False)
                     zero = (attribute[c] & ZERO_DISTANCE) != 0
                     tv = (0.0, 0.0, 0.0) if zero else q_rotate(q, lp)
                     ctv = v_add(ctv, tv)
                     if (attribute[c] & MOVE) != 0:
-                        cur = v_sub(row3(position, c3), pos)
+                        cur = v_sub(load3(position, c), pos)
                         cv = v_add(cv, cur)
-                        qc, _rare = line_child_rotation(q, lq, tv, cur, zero, False)
-                        set_row4(rotation, c4, qc)
+                        qc = line_child_rotation(q, lq, tv, cur, zero)
+                        store4(rotation, c, qc)
                     else:
                         cv = v_add(cv, tv)
                 t = ri if (attr & MOVE) != 0 else rr
-                q, _rare = line_turn(q, ctv, cv, t, False)
-            set_row4(rotation, np.uint64(4) * x, line_blend(bq, q, bw))
+                q = line_turn(q, ctv, cv, t)
+            store4(rotation, x, line_blend(bq, q, bw))
 
 
 TRIANGLES_PER_VERTEX = 6   # E.3's vectorised pass sums up to this many triangles per vertex
@@ -286,37 +247,30 @@ def triangle_rotations_team(m, ps, team):
     frame per (vertex, triangle) pair did the same work ~3 times. Positions do not change in
     E.3, so the frames and sums are bit-identical either way.
 
-    Both loops vectorise (``load_input``: each only reads what it does not write). The
-    per-vertex sums run over ``TRIANGLES_PER_VERTEX`` slots, the unused ones selected away
+    The per-vertex sums run over ``TRIANGLES_PER_VERTEX`` slots, the unused ones selected away
     (same additions in the same order); a vertex with more triangles is left to a scalar pass."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_vertex_triangle_count = m.vertex_triangle_count
     t0 = m.team_triangle_start[team]
     tn_count = m.team_triangle_count[team]
     if tn_count == 0:
         return
-    triangles, triangle_uv = flat(m.triangles), flat(m.triangle_uv)
-    position = flat(ps.position)
-    triangle_normal, triangle_tangent = flat(ps.triangle_normal), flat(ps.triangle_tangent)
-    first_triangle = np.uint64(t0)
-    for j in range(tn_count):
-        tri = first_triangle + np.uint64(j)
-        corners = row3(triangles, np.uint64(3) * tri)
-        uv = np.uint64(6) * tri
+    triangles, triangle_uv = m.triangles, m.triangle_uv
+    position = ps.position
+    triangle_normal, triangle_tangent = ps.triangle_normal, ps.triangle_tangent
+    for tri in range(t0, t0 + tn_count):
         tn, tt = triangle_frame_from(
-            row3(position, np.uint64(3) * np.uint64(corners[0])),
-            row3(position, np.uint64(3) * np.uint64(corners[1])),
-            row3(position, np.uint64(3) * np.uint64(corners[2])),
-            (triangle_uv[uv], triangle_uv[uv + np.uint64(1)]),
-            (triangle_uv[uv + np.uint64(2)],
-             triangle_uv[uv + np.uint64(3)]),
-            (triangle_uv[uv + np.uint64(4)],
-             triangle_uv[uv + np.uint64(5)]))
-        set_row3(triangle_normal, np.uint64(3) * tri, tn)
-        set_row3(triangle_tangent, np.uint64(3) * tri, tt)
+            load3(position, triangles[tri, 0]), load3(position, triangles[tri, 1]), load3(position, triangles[tri, 2]),
+            (triangle_uv[tri, 0, 0], triangle_uv[tri, 0, 1]),
+            (triangle_uv[tri, 1, 0], triangle_uv[tri, 1, 1]),
+            (triangle_uv[tri, 2, 0], triangle_uv[tri, 2, 1]))
+        store3(triangle_normal, tri, tn)
+        store3(triangle_tangent, tri, tt)
     start = m.team_particle_start[team]
     count = m.team_particle_count[team]
-    vt_start, vt_count, vt_data, vt_flip = (m.vertex_triangle_start, m.vertex_triangle_count,
+    vt_start, vt_count, vt_data, vt_flip = (m.vertex_triangle_start, m_vertex_triangle_count,
                                             m.vertex_triangle_data, m.vertex_triangle_flip)
-    rotation = flat(ps.rotation)
+    rotation = ps.rotation
     crowded = 0
     first = np.uint64(start)
     for j in range(count):
@@ -329,34 +283,38 @@ def triangle_rotations_team(m, ps, team):
             used = k < n
             # an unused slot reads entry 0 (always valid) and is selected away
             e = np.uint64(k0 + k) if used else np.uint64(0)
-            tri = np.uint64(3) * np.uint64(vt_data[e])
+            tri = vt_data[e]
             flip = vt_flip[e]
-            ns_k = add_flipped(ns, row3(triangle_normal, tri), (flip & 1) != 0)
-            ts_k = add_flipped(ts_, row3(triangle_tangent, tri), (flip & 2) != 0)
+            ns_k = add_flipped(ns, load3(triangle_normal, tri), (flip & 1) != 0)
+            ts_k = add_flipped(ts_, load3(triangle_tangent, tri), (flip & 2) != 0)
             ns = (ns_k[0] if used else ns[0], ns_k[1] if used else ns[1], ns_k[2] if used else ns[2])
             ts_ = (ts_k[0] if used else ts_[0], ts_k[1] if used else ts_[1], ts_k[2] if used else ts_[2])
         valid, q = vertex_frame_rotation(ns, ts_)
         few = n <= TRIANGLES_PER_VERTEX
         crowded += 0 if few else 1
         if valid & few:
-            set_row4(rotation, np.uint64(4) * p, q)
+            store4(rotation, p, q)
     if crowded > 0:
         for p in range(start, start + count):
-            if m.vertex_triangle_count[p] > TRIANGLES_PER_VERTEX:
+            if m_vertex_triangle_count[p] > TRIANGLES_PER_VERTEX:
                 crowded_vertex_rotation(m, ps, p)
 
 
 @kernel
 def crowded_vertex_rotation(m, ps, p):
     """E.3 for a vertex with more than ``TRIANGLES_PER_VERTEX`` triangles (scalar)."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_vertex_triangle_count, m_vertex_triangle_data = m.vertex_triangle_count, m.vertex_triangle_data
+    m_vertex_triangle_flip, ps_triangle_normal = m.vertex_triangle_flip, ps.triangle_normal
+    ps_triangle_tangent = ps.triangle_tangent
     ns = (0.0, 0.0, 0.0)
     ts_ = (0.0, 0.0, 0.0)
     k0 = m.vertex_triangle_start[p]
-    for k in range(k0, k0 + m.vertex_triangle_count[p]):
-        tri = m.vertex_triangle_data[k]
-        flip = m.vertex_triangle_flip[k]
-        ns = add_flipped(ns, load3(ps.triangle_normal, tri), (flip & 1) != 0)
-        ts_ = add_flipped(ts_, load3(ps.triangle_tangent, tri), (flip & 2) != 0)
+    for k in range(k0, k0 + m_vertex_triangle_count[p]):
+        tri = m_vertex_triangle_data[k]
+        flip = m_vertex_triangle_flip[k]
+        ns = add_flipped(ns, load3(ps_triangle_normal, tri), (flip & 1) != 0)
+        ts_ = add_flipped(ts_, load3(ps_triangle_tangent, tri), (flip & 2) != 0)
     valid, q = vertex_frame_rotation(ns, ts_)
     if valid:
         store4(ps.rotation, p, q)

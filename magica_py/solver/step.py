@@ -172,6 +172,12 @@ def damping_keep_at(prm, team, depth, frequency_ratio, power_z):
 @kernel
 def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio, power_z):
     """D.1: animated pose at this step, inertia shift, damping, forces, prediction."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_depth, m_team_particle_count = m.attribute, m.depth, m.team_particle_count
+    ps_base_pos, ps_base_rot, ps_next_pos, ps_old_pos = ps.base_pos, ps.base_rot, ps.next_pos, ps.old_pos
+    ps_old_position, ps_old_rotation, ps_position = ps.old_position, ps.old_rotation, ps.position
+    ps_rotation, ps_step_basic_pos, ps_step_basic_rot = ps.rotation, ps.step_basic_pos, ps.step_basic_rot
+    ps_velocity, ps_velocity_pos = ps.velocity, ps.velocity_pos
     t = frame_interpolation
     old_world_pos = load3(ts.old_world_pos, team)
     inertia_vector = load3(ts.inertia_vector, team)
@@ -185,35 +191,35 @@ def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio,
     impact = load3(ts.external_force, team)
     scale = ts.scale_ratio[team]
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
+    for p in range(start, start + m_team_particle_count[team]):
         if t == 1.0:  # the last step of a frame: predict_base_pose's select, without the slerp
-            base_pos = v_lerp(load3(ps.old_position, p), load3(ps.position, p), t)
-            base_rot = load4(ps.rotation, p)
+            base_pos = v_lerp(load3(ps_old_position, p), load3(ps_position, p), t)
+            base_rot = load4(ps_rotation, p)
         else:
-            base_pos, base_rot = predict_base_pose(load3(ps.old_position, p), load3(ps.position, p),
-                                                   load4(ps.old_rotation, p), load4(ps.rotation, p), t)
-        store3(ps.base_pos, p, base_pos)
-        store4(ps.base_rot, p, base_rot)
-        store3(ps.step_basic_pos, p, base_pos)
-        store4(ps.step_basic_rot, p, base_rot)
-        if (m.attribute[p] & MOVE) == 0:
-            store3(ps.next_pos, p, base_pos)
-            store3(ps.velocity_pos, p, base_pos)
+            base_pos, base_rot = predict_base_pose(load3(ps_old_position, p), load3(ps_position, p),
+                                                   load4(ps_old_rotation, p), load4(ps_rotation, p), t)
+        store3(ps_base_pos, p, base_pos)
+        store4(ps_base_rot, p, base_rot)
+        store3(ps_step_basic_pos, p, base_pos)
+        store4(ps_step_basic_rot, p, base_rot)
+        if (m_attribute[p] & MOVE) == 0:
+            store3(ps_next_pos, p, base_pos)
+            store3(ps_velocity_pos, p, base_pos)
             continue
-        depth = m.depth[p]
+        depth = m_depth[p]
         damping_keep = damping_keep_at(prm, team, depth, frequency_ratio, power_z)
         if depth_inertia * (1.0 - depth * depth) == 0.0:  # no depth-inertia mix: predict_move's select
             velocity, velocity_pos, next_pos = predict_move_shifted(
-                load3(ps.old_pos, p), load3(ps.velocity, p), depth, old_world_pos, inertia_vector,
+                load3(ps_old_pos, p), load3(ps_velocity, p), depth, old_world_pos, inertia_vector,
                 inertia_rotation, velocity_weight, damping_keep, gravity, force_mode, impact, scale, dt)
         else:
             velocity, velocity_pos, next_pos = predict_move(
-                load3(ps.old_pos, p), load3(ps.velocity, p), depth, old_world_pos, inertia_vector,
+                load3(ps_old_pos, p), load3(ps_velocity, p), depth, old_world_pos, inertia_vector,
                 inertia_rotation, step_vector, step_rotation, depth_inertia, velocity_weight,
                 damping_keep, gravity, force_mode, impact, scale, dt)
-        store3(ps.velocity, p, velocity)
-        store3(ps.velocity_pos, p, velocity_pos)
-        store3(ps.next_pos, p, next_pos)
+        store3(ps_velocity, p, velocity)
+        store3(ps_velocity_pos, p, velocity_pos)
+        store3(ps_next_pos, p, next_pos)
 
 
 
@@ -233,28 +239,34 @@ def basic_pose_blend(pos, rot, base_pos, base_rot, ratio):
 @kernel
 def step_basic_pose_team(m, ps, prm, ts, team):
     """D.2: rebuild the rest shape along each baseline and blend it to the animated pose."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_baseline_count, m_baseline_data = m.baseline_count, m.baseline_data
+    m_baseline_local_position, m_baseline_local_rotation = m.baseline_local_position, m.baseline_local_rotation
+    m_baseline_start, m_parent, m_team_baseline_count = m.baseline_start, m.parent, m.team_baseline_count
+    ps_base_pos, ps_base_rot, ps_step_basic_pos = ps.base_pos, ps.base_rot, ps.step_basic_pos
+    ps_step_basic_rot = ps.step_basic_rot
     a = prm.animation_pose_ratio[team]
     if a > 0.99:
         return
     s = v_scale(load3(m.team_init_scale, team), ts.scale_ratio[team])
     b0 = m.team_baseline_start[team]
-    for b in range(b0, b0 + m.team_baseline_count[team]):
-        e0 = m.baseline_start[b]
-        e1 = e0 + m.baseline_count[b]
+    for b in range(b0, b0 + m_team_baseline_count[team]):
+        e0 = m_baseline_start[b]
+        e1 = e0 + m_baseline_count[b]
         for e in range(e0 + 1, e1):
-            v = m.baseline_data[e]
-            p = m.parent[v]
-            pos, rot = basic_pose_child(load3(ps.step_basic_pos, p), load4(ps.step_basic_rot, p),
-                                        load3(m.baseline_local_position, v), load4(m.baseline_local_rotation, v), s)
-            store3(ps.step_basic_pos, v, pos)
-            store4(ps.step_basic_rot, v, rot)
+            v = m_baseline_data[e]
+            p = m_parent[v]
+            pos, rot = basic_pose_child(load3(ps_step_basic_pos, p), load4(ps_step_basic_rot, p),
+                                        load3(m_baseline_local_position, v), load4(m_baseline_local_rotation, v), s)
+            store3(ps_step_basic_pos, v, pos)
+            store4(ps_step_basic_rot, v, rot)
         if a > 1e-8:
             for e in range(e0, e1):
-                v = m.baseline_data[e]
-                pos, rot = basic_pose_blend(load3(ps.step_basic_pos, v), load4(ps.step_basic_rot, v),
-                                            load3(ps.base_pos, v), load4(ps.base_rot, v), a)
-                store3(ps.step_basic_pos, v, pos)
-                store4(ps.step_basic_rot, v, rot)
+                v = m_baseline_data[e]
+                pos, rot = basic_pose_blend(load3(ps_step_basic_pos, v), load4(ps_step_basic_rot, v),
+                                            load3(ps_base_pos, v), load4(ps_base_rot, v), a)
+                store3(ps_step_basic_pos, v, pos)
+                store4(ps_step_basic_rot, v, rot)
 
 
 @kernel
@@ -310,6 +322,11 @@ def centrifugal_velocity(vel, next_pos, direction, moving, depth, angular_veloci
 @kernel
 def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
     """D.10: velocity from positions, static and dynamic friction, speed limit, centrifugal term."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_depth, m_team_particle_count = m.attribute, m.depth, m.team_particle_count
+    ps_collision_normal, ps_friction, ps_next_pos = ps.collision_normal, ps.friction, ps.next_pos
+    ps_old_pos, ps_real_velocity, ps_static_friction = ps.old_pos, ps.real_velocity, ps.static_friction
+    ps_velocity, ps_velocity_pos = ps.velocity, ps.velocity_pos
     mode = prm.rate_mode[team]
     scale = ts.scale_ratio[team]
     static_threshold = prm.friction[team] * scale
@@ -324,32 +341,32 @@ def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
     friction_keep = step_keep(FRICTION_DAMPING_RATE, frequency_ratio, mode)
     gain = step_rate(STATIC_FRICTION_GAIN, frequency_ratio, 1.0, mode)
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        next_pos = load3(ps.next_pos, p)
-        old_pos = load3(ps.old_pos, p)
-        if (m.attribute[p] & MOVE) != 0:
-            cn = load3(ps.collision_normal, p)
-            f = ps.friction[p]
+    for p in range(start, start + m_team_particle_count[team]):
+        next_pos = load3(ps_next_pos, p)
+        old_pos = load3(ps_old_pos, p)
+        if (m_attribute[p] & MOVE) != 0:
+            cn = load3(ps_collision_normal, p)
+            f = ps_friction[p]
             contact = v_length_sq(cn) > 1e-8 and f > 1e-8
-            velocity_pos = load3(ps.velocity_pos, p)
+            velocity_pos = load3(ps_velocity_pos, p)
             if contact and static_threshold > 0.0:
                 next_pos, velocity_pos, sf = static_friction_step(next_pos, old_pos, velocity_pos, cn,
-                                                                  ps.static_friction[p], dt, static_threshold, gain)
-                store3(ps.next_pos, p, next_pos)
+                                                                  ps_static_friction[p], dt, static_threshold, gain)
+                store3(ps_next_pos, p, next_pos)
             else:
-                sf = saturate(ps.static_friction[p] - STATIC_FRICTION_LOSS)
-            ps.static_friction[p] = sf
+                sf = saturate(ps_static_friction[p] - STATIC_FRICTION_LOSS)
+            ps_static_friction[p] = sf
             vel, direction, moving = end_step_velocity(next_pos, velocity_pos, dt)
             if moving and contact and dynamic > 0.0:
                 vel = dynamic_friction_brake(vel, direction, cn, f, dynamic)
-            ps.friction[p] = f * friction_keep
+            ps_friction[p] = f * friction_keep
             if speed_limit >= 0.0:
                 vel = clamp_length(vel, speed_limit * scale)
             if spinning:
-                vel = centrifugal_velocity(vel, next_pos, direction, moving, m.depth[p], angular_velocity,
+                vel = centrifugal_velocity(vel, next_pos, direction, moving, m_depth[p], angular_velocity,
                                            centrifugal, axis, center)
-            store3(ps.velocity, p, v_scale(vel, velocity_weight))
-        store3(ps.real_velocity, p, v_scale(v_sub(next_pos, old_pos), 1.0 / dt))
-        store3(ps.old_pos, p, next_pos)
+            store3(ps_velocity, p, v_scale(vel, velocity_weight))
+        store3(ps_real_velocity, p, v_scale(v_sub(next_pos, old_pos), 1.0 / dt))
+        store3(ps_old_pos, p, next_pos)
 
 

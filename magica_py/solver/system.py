@@ -422,9 +422,12 @@ class ClothSystem:
 
     # ------------------------------------------------------------------ internals
     def kernel_tables(self) -> tuple:
-        """The seven tables as the kernels take them (``solver/tables.py``; built on first use
-        and after any change of teams): model, particles, parameters, teams, colliders, team
-        time, hierarchy."""
+        """The seven tables (model, particles, parameters, teams, colliders, team time,
+        hierarchy) as the stage kernels take them (``solver/tables.py``; built on first use and
+        after any change of teams)."""
+        return self._kernel_tables()[1]
+
+    def _kernel_tables(self) -> tuple:
         if self._tables is None:
             self._tables = kernel_tables(self.model, self.particles, self.parameters, self.teams,
                                          self.collider_state, self._time, self._hierarchy)
@@ -432,11 +435,11 @@ class ClothSystem:
 
     def _call_frame(self, fi) -> None:
         """One numba call per frame: the serial or the parallel kernel, with the stage switches."""
-        tables = self.kernel_tables()
+        tables = self._kernel_tables()[0]
         if self.parallel:
-            simulate_frame_parallel(*tables, fi, self._workers, *self.stages)
+            simulate_frame_parallel(tables, fi, self._workers, *self.stages)
         else:
-            simulate_frame(*tables, fi, *self.stages)
+            simulate_frame(tables, fi, *self.stages)
 
     def _parameter(self, team, key, default):
         params = self.team_parameters[team]

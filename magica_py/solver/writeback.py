@@ -13,8 +13,7 @@ import math
 import numpy as np
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import q_inverse, q_mul, q_normalize, q_rotate, v_sub
-from magica_py.kernels.rows import flat, row3, row4, set_row3, set_row4
+from magica_py.kernels.math3d import load3, load4, store3, store4, q_inverse, q_mul, q_normalize, q_rotate, v_sub
 from magica_py.solver.rotations import q_normalize_or_identity
 
 FIXED = 0x01
@@ -42,18 +41,18 @@ def transform_data_team(m, ps, team):
     """World transform data of every bone of one team; returns False if any value is non-finite.
 
     Vectorised over the team's bones (flat rows, selects, the verdict AND-ed)."""
-    position, rotation, v2t = flat(ps.position), flat(ps.rotation), flat(m.vertex_to_transform_rotation)
-    transform_position, transform_rotation = flat(ps.transform_position), flat(ps.transform_rotation)
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_team_particle_count = m.team_particle_count
+    position, rotation, v2t = ps.position, ps.rotation, m.vertex_to_transform_rotation
+    transform_position, transform_rotation = ps.transform_position, ps.transform_rotation
     ok = True
     first = np.uint64(m.team_particle_start[team])
-    for j in range(m.team_particle_count[team]):
+    for j in range(m_team_particle_count[team]):
         p = first + np.uint64(j)
-        v = np.uint64(3) * p
-        q = np.uint64(4) * p
-        pos = row3(position, v)
-        rot = bone_rotation(row4(rotation, q), row4(v2t, q))
-        set_row3(transform_position, v, pos)
-        set_row4(transform_rotation, q, rot)
+        pos = load3(position, p)
+        rot = bone_rotation(load4(rotation, p), load4(v2t, p))
+        store3(transform_position, p, pos)
+        store4(transform_rotation, p, rot)
         ok = ok & finite3(pos) & finite4(rot)
     return ok
 
@@ -83,16 +82,17 @@ def write_transforms_team(m, ps, team, parent_node, world_rotation, lossy_scale,
     """Write one team's bones into the hierarchy's local pose arrays.
 
     Scalar: the writes are scatters (through transform_index) of 3- and 4-value rows, which
-    LLVM's vectoriser cannot check for overlap (measured: "cannot identify array bounds" even
-    with every access alias-tagged, ``kernels.rows.load_input``), so the branches stay."""
+    LLVM's vectoriser cannot check for overlap, so the branches stay."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_team_particle_count = m.team_particle_count
     # arrays as locals and flat rows: through the tables their pointers would be reloaded
     # after every store (the stores may alias the tables as far as LLVM knows)
     attribute, node_of, parent_of = m.attribute, m.transform_index, m.parent
-    transform_position, transform_rotation = flat(ps.transform_position), flat(ps.transform_rotation)
-    world_rot, scale = flat(world_rotation), flat(lossy_scale)
-    out_position, out_rotation = flat(local_position), flat(local_rotation)
+    transform_position, transform_rotation = ps.transform_position, ps.transform_rotation
+    world_rot, scale = world_rotation, lossy_scale
+    out_position, out_rotation = local_position, local_rotation
     first = np.uint64(m.team_particle_start[team])
-    for j in range(m.team_particle_count[team]):
+    for j in range(m_team_particle_count[team]):
         p = first + np.uint64(j)
         attr = attribute[p]
         node = np.uint64(node_of[p])
@@ -101,18 +101,18 @@ def write_transforms_team(m, ps, team, parent_node, world_rotation, lossy_scale,
             if pp < 0:
                 continue
             ppu = np.uint64(pp)
-            pnode = np.uint64(3) * np.uint64(node_of[ppu])
-            lp, lq = moving_bone_local(row4(transform_rotation, np.uint64(4) * ppu),
-                                       row3(transform_position, np.uint64(3) * ppu),
-                                       row4(transform_rotation, np.uint64(4) * p),
-                                       row3(transform_position, np.uint64(3) * p), row3(scale, pnode))
-            set_row3(out_position, np.uint64(3) * node, lp)
-            set_row4(out_rotation, np.uint64(4) * node, lq)
+            pnode = np.uint64(node_of[ppu])
+            lp, lq = moving_bone_local(load4(transform_rotation, ppu),
+                                       load3(transform_position, ppu),
+                                       load4(transform_rotation, p),
+                                       load3(transform_position, p), load3(scale, pnode))
+            store3(out_position, node, lp)
+            store4(out_rotation, node, lq)
         elif (attr & FIXED) != 0:
             parent = parent_node[node]
-            rot = row4(transform_rotation, np.uint64(4) * p)
+            rot = load4(transform_rotation, p)
             if parent >= 0:
-                set_row4(out_rotation, np.uint64(4) * node,
-                         fixed_bone_local(rot, row4(world_rot, np.uint64(4) * np.uint64(parent)), True))
+                store4(out_rotation, node,
+               fixed_bone_local(rot, load4(world_rot, np.uint64(parent)), True))
             else:
-                set_row4(out_rotation, np.uint64(4) * node, fixed_bone_local(rot, rot, False))
+                store4(out_rotation, node, fixed_bone_local(rot, rot, False))

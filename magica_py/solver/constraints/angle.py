@@ -4,26 +4,16 @@ Restoration pulls each edge towards its *absolute* world direction in the step b
 (not parent-relative, Appendix 2.2). Masses use friction only (Appendix 2.3). Both parent and
 child move; the restoration pivot grows 0.1 -> 0.3 -> 0.5 over the iterations.
 
-Two forms of the same maths (``solver/batched``): ``angle_team`` (one team, rows of
-``ParticleState``) and ``angle_block`` (every lane of a block, lanes innermost). Both call the
-per-element functions ``angle_buffer_entry`` (buffering pass), ``angle_limit_entry`` (D.5 half of
-an iteration) and ``angle_restoration_entry`` (D.6 half): tuples in and out, no array access,
-every path computed and the taken one selected (the reference's early returns become
-selects), so that a lane loop over them vectorises and gives the per-team bits.
+``angle_team`` runs one team through the per-element functions ``angle_buffer_entry``
+(buffering pass), ``angle_limit_entry`` (D.5 half of an iteration) and
+``angle_restoration_entry`` (D.6 half): tuples in and out, no array access, the reference's
+early returns written as selects.
 
 The solves are written on the edge v = cp - pp rather than on world positions, and the
 restoration's from-to rotation is applied as a turn in the plane of the edge and its rest
 direction (``restoration_offset``) with the fma forms of acos and sincos: the reference's
-results up to round-off, on a short dependency chain (the lane loop is latency-bound);
-docs/angle_maths.md says why each form is the same rotation, tests/test_angle_maths.py measures
+results up to round-off, on a short dependency chain; docs/angle_maths.md says why each form is the same rotation, tests/test_angle_maths.py measures
 the difference per call.
-
-Rare paths (a limit violation: acos and clamp; an edge opposite its target: the fallback
-axis) would cost every lane in a vector loop. The iteration functions take a literal
-``full``: the block's vector pass runs them with ``full=False``, which leaves those paths
-out and flags the lanes that need them; the block leaves those lanes untouched and then runs
-them with ``full=True``, one by one (``_entry_lanes``). The per-team stage always runs
-``full=True`` (its scalar branches keep the acos shortcut of the reference).
 """
 from __future__ import annotations
 
@@ -48,14 +38,11 @@ IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
 
 @kernel(inline="always")
-def swing_rotation(a, b, full):
+def swing_rotation(a, b):
     """``rotations.full_swing(a, b)`` (unit a, b), the same bits on every path, without the
     branch full_swing can never take: its degenerate cases call ``from_to_rotation_unit``
-    whose general (acos, sincos) branch is excluded by the very tests that led there. A lane
-    loop computes every branch of its body, so the dead one would cost an acos and a sincos.
-
-    Returns (rotation, opposite); ``full`` False (a literal) leaves the opposite case (pi
-    about the fallback axis) out: the result is then wrong exactly where ``opposite``."""
+    whose general (acos, sincos) branch is excluded by the very tests that led there.
+    Returns (rotation, opposite)."""
     c = v_dot(a, b)
     c = 1.0 if c > 1.0 else c
     c = -1.0 if c < -1.0 else c
@@ -64,17 +51,14 @@ def swing_rotation(a, b, full):
     inv = 1.0 / math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + w * w)
     half_angle = (x[0] * inv, x[1] * inv, x[2] * inv, w * inv)
     opposite = abs(1.0 + c) < 1e-6
-    flip = IDENTITY
-    if full:
-        flip = q_axis_angle(orthogonal_axis(a), math.pi * 1.0)
+    flip = q_axis_angle(orthogonal_axis(a), math.pi * 1.0)
     return (flip if opposite else (IDENTITY if abs(1.0 - c) < 1e-6 else half_angle)), opposite
 
 
 @kernel(inline="always")
-def restoration_offset(a, v, vl, b, t, full):
+def restoration_offset(a, v, vl, b, t):
     """``r - v`` for ``r = from_to_rotation_unit(a, b, t) · v`` (a = v / vl unit, b unit): the
-    same rotation written for a short dependency chain (the restoration's lane loop is
-    latency-bound). v turns by t times the angle theta = acos(a·b) in the plane of a and b:
+    same rotation written for a short dependency chain. v turns by t times the angle theta = acos(a·b) in the plane of a and b:
     ``r = v cos(t theta) + vl sin(t theta) w / |w|``, w = b - (a·b) a the in-plane
     direction towards b (``(axis x a) |a x b|`` for the reference's axis = normalize(a x b),
     so the rotation about that axis of a vector orthogonal to it). No quaternion, no cross
@@ -83,7 +67,7 @@ def restoration_offset(a, v, vl, b, t, full):
     1e-6) gives 0, opposite (1 + c < 1e-6) turns t pi about ``orthogonal_axis(a)`` (w =
     axis x a).
 
-    Returns (r - v, opposite); ``full`` False (a literal) leaves the opposite case out."""
+    Returns (r - v, opposite)."""
     c = v_dot(a, b)
     c = 1.0 if c > 1.0 else c
     c = -1.0 if c < -1.0 else c
@@ -91,9 +75,8 @@ def restoration_offset(a, v, vl, b, t, full):
     parallel = abs(1.0 - c) < 1e-6
     w = v_sub(b, v_scale(a, c))
     theta = trig.acos_fma(c)
-    if full:
-        w = v_cross(orthogonal_axis(a), a) if opposite else w
-        theta = math.pi if opposite else theta
+    w = v_cross(orthogonal_axis(a), a) if opposite else w
+    theta = math.pi if opposite else theta
     k = vl / v_length(w)   # off the chain: ready before the sincos
     s, co = trig.sincos_fma(theta * t)
     d = v_sub(v_scale(w, s * k), v_scale(v, 1.0 - co))
@@ -154,7 +137,7 @@ def edge_of(cp, pp):
 
 @kernel(inline="always")
 def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, length, max_angle,
-                      max_angle_cos, wc, wp, p_move, stiffness, attenuation, full):
+                      max_angle_cos, wc, wp, p_move, stiffness, attenuation):
     """The angle-limit half of one iteration for child c (positions cp, pp read at its start).
 
     ``vel_*`` velocity_pos, ``rot_*`` angle_rotation, ``local_*`` / ``length`` the buffered
@@ -168,9 +151,7 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     nothing; otherwise the limit is solved about the pivot at 0.4 and c's rotation swung
     (kept when the new segment is degenerate).
 
-    Also returns ``rare``: the solve path met a limit violation or an opposite swing. With
-    ``full`` False (a literal: the block's vector pass) those two cases are left out and the
-    result is exact wherever ``rare`` is False; ``full`` True computes every path."""
+    Also returns ``rare``: the solve path met a limit violation or an opposite swing."""
     v = v_sub(cp, pp)
     vl = v_length(v)
     tv = q_rotate(rot_p, local_pos)
@@ -192,7 +173,7 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     edge = v_scale(v, 1.0 + s)
     edge_length = vl * (1.0 + s)
     edge_unit = vn
-    if full and violated:
+    if violated:
         rescaled = v_scale(vn, lc)
         alpha = angle_between_vectors(rescaled, tn)
         if alpha > max_angle:
@@ -206,7 +187,7 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     solved_vel_c = v_add(vel_c, v_scale(dc, attenuation))
     solved_p = v_add(pp, dp) if p_move else pp
     solved_vel_p = v_add(vel_p, v_scale(dp, attenuation)) if p_move else vel_p
-    swing, opposite = swing_rotation(tn, edge_unit, full)
+    swing, opposite = swing_rotation(tn, edge_unit)
     swung = q_mul(swing, rest_rot)
     solved_rot = rot_c if edge_length < 1e-8 else swung
     # path selection (a NaN compares false everywhere, as the reference's early returns do)
@@ -229,16 +210,16 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
 
 @kernel(inline="always")
 def angle_restoration_entry(cp, pp, edge, next_c, vel_c, next_p, vel_p, rest_length, rest_direction, stiffness,
-                            pivot, wc, wp, p_move, attenuation, full):
+                            pivot, wc, wp, p_move, attenuation):
     """The restoration half of one iteration for child c: the edge cp - pp (as the limit
     pass returned it; ``edge`` = (v, |v|, v / |v|) of it, from ``angle_limit_entry`` or
     ``edge_of``) turned towards ``rest_direction`` by ``stiffness`` about the point at
     ``pivot``, the corrections added to the current next_pos / velocity_pos of c and p.
     A degenerate rest edge snaps c onto pp; a degenerate edge does nothing.
     Returns (next_c, vel_c, next_p, vel_p, rare): ``rare``, the solve path met an opposite
-    edge (left out when ``full`` is a literal False, see ``angle_limit_entry``)."""
+    edge."""
     v, vl, a = edge
-    d, opposite = restoration_offset(a, v, vl, rest_direction, stiffness, full)
+    d, opposite = restoration_offset(a, v, vl, rest_direction, stiffness)
     # solve_pivot_pair(pp, cp, v, v + d, pivot, wp, wc) with cp - pp = v: the pivot cancels
     dp = v_scale(d, -pivot * wp)
     dc = v_scale(d, (1.0 - pivot) * wc)
@@ -266,6 +247,17 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
     (curve, rate conversion, gravity factor) and the rest direction (length, unit vector) of
     each particle are computed once per step in the buffering pass
     rather than in each of the 3 iterations (same operations on the same values: same bits)."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
+    m_baseline_start, m_depth, m_parent = m.baseline_start, m.depth, m.parent
+    m_team_baseline_count, ps_angle_inverse_mass = m.team_baseline_count, ps.angle_inverse_mass
+    ps_angle_length, ps_angle_limit, ps_angle_limit_cos = ps.angle_length, ps.angle_limit, ps.angle_limit_cos
+    ps_angle_local_pos, ps_angle_local_rot = ps.angle_local_pos, ps.angle_local_rot
+    ps_angle_rest_direction, ps_angle_rest_length = ps.angle_rest_direction, ps.angle_rest_length
+    ps_angle_rest_vector, ps_angle_restoration_k = ps.angle_rest_vector, ps.angle_restoration_k
+    ps_angle_rotation, ps_friction, ps_next_pos = ps.angle_rotation, ps.friction, ps.next_pos
+    ps_step_basic_pos, ps_step_basic_rot = ps.step_basic_pos, ps.step_basic_rot
+    ps_velocity_pos = ps.velocity_pos
     use_limit = prm.use_angle_limit[team] != 0
     use_restoration = prm.use_restoration[team] != 0
     if not use_limit and not use_restoration:
@@ -273,74 +265,74 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
     limit_stiffness = prm.limit_stiffness[team]
     gravity_factor = restoration_gravity_factor(prm.restoration_gravity_falloff[team], ts.gravity_dot[team])
     b0 = m.team_baseline_start[team]
-    for b in range(b0, b0 + m.team_baseline_count[team]):
-        e0 = m.baseline_start[b]
-        e1 = e0 + m.baseline_count[b]
+    for b in range(b0, b0 + m_team_baseline_count[team]):
+        e0 = m_baseline_start[b]
+        e1 = e0 + m_baseline_count[b]
         # buffering pass
         for e in range(e0, e1):
-            c = m.baseline_data[e]
-            store4(ps.angle_rotation, c, load4(ps.step_basic_rot, c))
+            c = m_baseline_data[e]
+            store4(ps_angle_rotation, c, load4(ps_step_basic_rot, c))
             # parents come first in a baseline (B.6), so wp below is always this step's value
-            ps.angle_inverse_mass[c] = inverse_mass_friction(ps.friction[c])
+            ps_angle_inverse_mass[c] = inverse_mass_friction(ps_friction[c])
             if e == e0:
                 continue
-            p = m.parent[c]
+            p = m_parent[c]
             length, local_pos, local_rot, rest_vector, rest_length, rest_direction = angle_buffer_entry(
-                load3(ps.next_pos, c), load3(ps.next_pos, p), load3(ps.step_basic_pos, c),
-                load3(ps.step_basic_pos, p), load4(ps.step_basic_rot, c), load4(ps.step_basic_rot, p),
-                load3(ps.angle_rest_direction, c))
-            ps.angle_length[c] = length
-            store3(ps.angle_local_pos, c, local_pos)
-            store4(ps.angle_local_rot, c, local_rot)
-            store3(ps.angle_rest_vector, c, rest_vector)
+                load3(ps_next_pos, c), load3(ps_next_pos, p), load3(ps_step_basic_pos, c),
+                load3(ps_step_basic_pos, p), load4(ps_step_basic_rot, c), load4(ps_step_basic_rot, p),
+                load3(ps_angle_rest_direction, c))
+            ps_angle_length[c] = length
+            store3(ps_angle_local_pos, c, local_pos)
+            store4(ps_angle_local_rot, c, local_rot)
+            store3(ps_angle_rest_vector, c, rest_vector)
             if use_restoration:  # the rest direction does not change over the iterations
-                ps.angle_rest_length[c] = rest_length
-                store3(ps.angle_rest_direction, c, rest_direction)
-                ps.angle_restoration_k[c] = restoration_rate_at(prm, team, m.depth[c], frequency_ratio,
+                ps_angle_rest_length[c] = rest_length
+                store3(ps_angle_rest_direction, c, rest_direction)
+                ps_angle_restoration_k[c] = restoration_rate_at(prm, team, m_depth[c], frequency_ratio,
                                                                 power_w) * gravity_factor
             if use_limit:
-                max_angle = limit_angle_at(prm, team, m.depth[c])
-                ps.angle_limit[c] = max_angle
-                ps.angle_limit_cos[c] = trig.cos(max_angle)
+                max_angle = limit_angle_at(prm, team, m_depth[c])
+                ps_angle_limit[c] = max_angle
+                ps_angle_limit_cos[c] = trig.cos(max_angle)
         for k in range(ITERATIONS):
             rest_pivot = lerp(0.1, 0.5, k / 2.0)
             for e in range(e0 + 1, e1):
-                c = m.baseline_data[e]
-                if (m.attribute[c] & MOVE) == 0:
+                c = m_baseline_data[e]
+                if (m_attribute[c] & MOVE) == 0:
                     continue
-                p = m.parent[c]
-                p_move = (m.attribute[p] & MOVE) != 0
-                cp = load3(ps.next_pos, c)
-                pp = load3(ps.next_pos, p)
+                p = m_parent[c]
+                p_move = (m_attribute[p] & MOVE) != 0
+                cp = load3(ps_next_pos, c)
+                pp = load3(ps_next_pos, p)
                 next_c = cp
-                vel_c = load3(ps.velocity_pos, c)
-                vel_p = load3(ps.velocity_pos, p)
-                wc = ps.angle_inverse_mass[c]
-                wp = ps.angle_inverse_mass[p]
+                vel_c = load3(ps_velocity_pos, c)
+                vel_p = load3(ps_velocity_pos, p)
+                wc = ps_angle_inverse_mass[c]
+                wp = ps_angle_inverse_mass[p]
                 if use_limit:
                     cp, pp, next_c, vel_c, vel_p, rot_c, edge, _rare = angle_limit_entry(
-                        cp, pp, vel_c, vel_p, load4(ps.angle_rotation, c), load4(ps.angle_rotation, p),
-                        load3(ps.angle_local_pos, c), load4(ps.angle_local_rot, c), ps.angle_length[c],
-                        ps.angle_limit[c], ps.angle_limit_cos[c], wc, wp, p_move, limit_stiffness,
-                        limit_attenuation, True)
-                    store4(ps.angle_rotation, c, rot_c)
+                        cp, pp, vel_c, vel_p, load4(ps_angle_rotation, c), load4(ps_angle_rotation, p),
+                        load3(ps_angle_local_pos, c), load4(ps_angle_local_rot, c), ps_angle_length[c],
+                        ps_angle_limit[c], ps_angle_limit_cos[c], wc, wp, p_move, limit_stiffness,
+                        limit_attenuation)
+                    store4(ps_angle_rotation, c, rot_c)
                 else:
                     edge = edge_of(cp, pp)
                 next_p = pp
                 if use_restoration:
                     next_c, vel_c, next_p, vel_p, _rare = angle_restoration_entry(
-                        cp, pp, edge, next_c, vel_c, next_p, vel_p, ps.angle_rest_length[c],
-                        load3(ps.angle_rest_direction, c), ps.angle_restoration_k[c], rest_pivot, wc, wp,
-                        p_move, restoration_attenuation, True)
-                store3(ps.next_pos, c, next_c)
-                store3(ps.velocity_pos, c, vel_c)
-                store3(ps.next_pos, p, next_p)
-                store3(ps.velocity_pos, p, vel_p)
+                        cp, pp, edge, next_c, vel_c, next_p, vel_p, ps_angle_rest_length[c],
+                        load3(ps_angle_rest_direction, c), ps_angle_restoration_k[c], rest_pivot, wc, wp,
+                        p_move, restoration_attenuation)
+                store3(ps_next_pos, c, next_c)
+                store3(ps_velocity_pos, c, vel_c)
+                store3(ps_next_pos, p, next_p)
+                store3(ps_velocity_pos, p, vel_p)
         # clear the buffers
         for e in range(e0, e1):
-            c = m.baseline_data[e]
-            ps.angle_length[c] = 0.0
-            store3(ps.angle_local_pos, c, ZERO3)
-            store3(ps.angle_rest_vector, c, ZERO3)
+            c = m_baseline_data[e]
+            ps_angle_length[c] = 0.0
+            store3(ps_angle_local_pos, c, ZERO3)
+            store3(ps_angle_rest_vector, c, ZERO3)
 
 

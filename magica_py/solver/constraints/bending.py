@@ -5,12 +5,9 @@ contribution truncated toward zero, §0.2), averaged by count and added to the m
 particles' ``next_pos`` (Jacobi, not Gauss-Seidel). ``velocity_pos`` is untouched, so the whole
 correction becomes velocity. The rest volume scales with scaleRatio, not its cube (Appendix 2.6).
 
-Two forms (``solver/batched``): ``bending_team`` / ``apply_accumulated`` run one team,
-``bending_block`` / ``apply_accumulated_block`` every lane of a block. Both call the same
-array-free per-element functions (``particle_inverse_mass``, ``solve_dihedral``,
-``solve_volume``, ``accumulated``, ``averaged``), which are branch-free (degenerate pairs
-are computed through and selected away), so the block's lane loops vectorise and give
-exactly the per-team bits.
+``bending_team`` / ``apply_accumulated`` run one team through array-free per-element
+functions (``particle_inverse_mass``, ``solve_dihedral``, ``solve_volume``, ``accumulated``,
+``averaged``), branch-free (degenerate pairs are computed through and selected away).
 """
 from __future__ import annotations
 
@@ -153,22 +150,27 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
     The inverse mass of each particle is computed once per call into ``ps.bend_inverse_mass``
     (friction and depth do not change during the routine): a mesh vertex belongs to several
     bend pairs, so per-pair evaluation repeated the same division ~8 times per vertex."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_bend_rest_angle, m_bend_sign, m_bend_vertices = m.bend_rest_angle, m.bend_sign, m.bend_vertices
+    m_team_bend_count, m_team_particle_count = m.team_bend_count, m.team_particle_count
+    m_team_volume_count, m_volume_rest = m.team_volume_count, m.volume_rest
+    m_volume_vertices, ps_bend_inverse_mass, ps_next_pos = m.volume_vertices, ps.bend_inverse_mass, ps.next_pos
     k = bending_rate(prm, team, frequency_ratio, power_y)
     if k < 0.0:
         return
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        ps.bend_inverse_mass[p] = inverse_mass(m, ps, p)
-    w = ps.bend_inverse_mass
+    for p in range(start, start + m_team_particle_count[team]):
+        ps_bend_inverse_mass[p] = inverse_mass(m, ps, p)
+    w = ps_bend_inverse_mass
     b0 = m.team_bend_start[team]
-    for b in range(b0, b0 + m.team_bend_count[team]):
-        v0 = m.bend_vertices[b, 0]
-        v1 = m.bend_vertices[b, 1]
-        v2 = m.bend_vertices[b, 2]
-        v3 = m.bend_vertices[b, 3]
+    for b in range(b0, b0 + m_team_bend_count[team]):
+        v0 = m_bend_vertices[b, 0]
+        v1 = m_bend_vertices[b, 1]
+        v2 = m_bend_vertices[b, 2]
+        v3 = m_bend_vertices[b, 3]
         ok, c0, c1, c2, c3 = solve_dihedral(
-            load3(ps.next_pos, v0), load3(ps.next_pos, v1), load3(ps.next_pos, v2), load3(ps.next_pos, v3),
-            w[v0], w[v1], w[v2], w[v3], m.bend_rest_angle[b], m.bend_sign[b], k)
+            load3(ps_next_pos, v0), load3(ps_next_pos, v1), load3(ps_next_pos, v2), load3(ps_next_pos, v3),
+            w[v0], w[v1], w[v2], w[v3], m_bend_rest_angle[b], m_bend_sign[b], k)
         if ok:
             accumulate(ps, v0, c0)
             accumulate(ps, v1, c1)
@@ -176,14 +178,14 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
             accumulate(ps, v3, c3)
     scale = ts.scale_ratio[team]
     b0 = m.team_volume_start[team]
-    for b in range(b0, b0 + m.team_volume_count[team]):
-        v0 = m.volume_vertices[b, 0]
-        v1 = m.volume_vertices[b, 1]
-        v2 = m.volume_vertices[b, 2]
-        v3 = m.volume_vertices[b, 3]
+    for b in range(b0, b0 + m_team_volume_count[team]):
+        v0 = m_volume_vertices[b, 0]
+        v1 = m_volume_vertices[b, 1]
+        v2 = m_volume_vertices[b, 2]
+        v3 = m_volume_vertices[b, 3]
         ok, c0, c1, c2, c3 = solve_volume(
-            load3(ps.next_pos, v0), load3(ps.next_pos, v1), load3(ps.next_pos, v2), load3(ps.next_pos, v3),
-            w[v0], w[v1], w[v2], w[v3], m.volume_rest[b] * scale, k)
+            load3(ps_next_pos, v0), load3(ps_next_pos, v1), load3(ps_next_pos, v2), load3(ps_next_pos, v3),
+            w[v0], w[v1], w[v2], w[v3], m_volume_rest[b] * scale, k)
         if ok:
             accumulate(ps, v0, c0)
             accumulate(ps, v1, c1)
@@ -194,11 +196,14 @@ def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
 @kernel
 def apply_accumulated(m, ps, team, move_only):
     """Add the averaged accumulator to next_pos (moving particles only when ``move_only``) and clear it."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_team_particle_count, ps_accum_count = m.attribute, m.team_particle_count, ps.accum_count
+    ps_accum_vector, ps_next_pos = ps.accum_vector, ps.next_pos
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        if not move_only or (m.attribute[p] & MOVE) != 0:
-            store3(ps.next_pos, p, averaged(load3(ps.next_pos, p), load3(ps.accum_vector, p), ps.accum_count[p]))
-        store3(ps.accum_vector, p, ZERO3)
-        ps.accum_count[p] = 0
+    for p in range(start, start + m_team_particle_count[team]):
+        if not move_only or (m_attribute[p] & MOVE) != 0:
+            store3(ps_next_pos, p, averaged(load3(ps_next_pos, p), load3(ps_accum_vector, p), ps_accum_count[p]))
+        store3(ps_accum_vector, p, ZERO3)
+        ps_accum_count[p] = 0
 
 

@@ -7,10 +7,8 @@ and averages (Jacobi). Neither touches ``velocity_pos``: the push becomes veloci
 Edge-mode friction is quantised to {0, 1} as MagicaCloth2's fixed-point max does (§0.2,
 Appendix 2.5): we reproduce it deliberately.
 
-Point mode has a block form (``point_collision_block``, lanes innermost, ``solver/batched``)
-calling the same array-free per-element functions (``point_sphere``, ``point_capsule``,
-``point_plane``, ``point_contact_add``, ``point_contact_result``) as ``point_collision_team``,
-so that both give the same bits.
+``point_collision_team`` calls array-free per-element functions (``point_sphere``,
+``point_capsule``, ``point_plane``, ``point_contact_add``, ``point_contact_result``).
 """
 from __future__ import annotations
 
@@ -36,7 +34,7 @@ FAR = 1e30
 @kernel
 def plane_push(c, n, p):
     """``IntersectPointPlaneDist``: push p onto the plane (c, n) when behind it; signed distance.
-    Both answers are computed and one selected (branch-free: a lane loop over it vectorises)."""
+    Both answers are computed and one selected (branch-free)."""
     v = v_sub(p, c)
     d = v_dot(v, n)
     g = v_scale(n, d)
@@ -61,7 +59,7 @@ def aabb_overlap(min_a, max_a, min_b, max_b):
             and max_a[1] >= min_b[1] and min_a[2] <= max_b[2] and max_a[2] >= min_b[2])
 
 
-# -- point mode, per element (array-free: the per-team and the block stage call the same maths)
+# -- point mode, per element (array-free)
 @kernel
 def point_bounds(x, r):
     """AABB of a particle sphere grown by the contact range (cfr = r): (min, max)."""
@@ -149,21 +147,25 @@ def solve_point_collider(cs, k, x, r, bmin, bmax):
 @kernel
 def point_collision_team(m, ps, prm, ts, cs, team):
     """D.8 point mode over one team's moving particles."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    cs_scale_suspend, m_attribute, m_depth = cs.scale_suspend, m.attribute, m.depth
+    m_team_particle_count, prm_radius_curve = m.team_particle_count, prm.radius_curve
+    ps_collision_normal, ps_friction, ps_next_pos = ps.collision_normal, ps.friction, ps.next_pos
     start = m.team_particle_start[team]
     scale = ts.scale_ratio[team]
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
     z = (0.0, 0.0, 0.0)
-    for p in range(start, start + m.team_particle_count[team]):
-        attr = m.attribute[p]
+    for p in range(start, start + m_team_particle_count[team]):
+        attr = m_attribute[p]
         if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
             continue
-        r = max(curve_at(prm.radius_curve, team, m.depth[p]), 0.0001) * scale
-        x = load3(ps.next_pos, p)
+        r = max(curve_at(prm_radius_curve, team, m_depth[p]), 0.0001) * scale
+        x = load3(ps_next_pos, p)
         bmin, bmax = point_bounds(x, r)
         sum_push, sum_n, n_acc, count, min_dist = z, z, z, 0, FAR
         for k in range(c0, c1):
-            if cs.scale_suspend[k] != 0:
+            if cs_scale_suspend[k] != 0:
                 continue
             d, n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
             if d <= r:  # otherwise (out of range, or missed) the sums stay as they are: skip the work
@@ -171,10 +173,10 @@ def point_collision_team(m, ps, prm, ts, cs, team):
                                                                             x, r, d, n, x2)
         if count > 0 or min_dist <= r:  # otherwise the result is (x, friction, n_acc): skip the work
             new_x, friction, n_acc = point_contact_result(x, sum_push, sum_n, count, n_acc, min_dist, r,
-                                                          ps.friction[p])
-            store3(ps.next_pos, p, new_x)
-            ps.friction[p] = friction
-        store3(ps.collision_normal, p, n_acc)
+                                                          ps_friction[p])
+            store3(ps_next_pos, p, new_x)
+            ps_friction[p] = friction
+        store3(ps_collision_normal, p, n_acc)
 
 
 @kernel
@@ -245,22 +247,28 @@ def solve_edge_collider(cs, k, a, b, ra, rb, cfr, bmin, bmax):
 @kernel
 def edge_collision_team(m, ps, prm, ts, cs, team):
     """D.8 edge mode over one team's edges (accumulate), then the sum step."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    cs_scale_suspend, m_attribute, m_depth, m_edges = cs.scale_suspend, m.attribute, m.depth, m.edges
+    m_team_edge_count, m_team_particle_count = m.team_edge_count, m.team_particle_count
+    prm_radius_curve, ps_accum_count, ps_accum_friction = prm.radius_curve, ps.accum_count, ps.accum_friction
+    ps_accum_normal, ps_accum_vector = ps.accum_normal, ps.accum_vector
+    ps_collision_normal, ps_friction, ps_next_pos = ps.collision_normal, ps.friction, ps.next_pos
     scale = ts.scale_ratio[team]
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
     e0 = m.team_edge_start[team]
-    for e in range(e0, e0 + m.team_edge_count[team]):
-        ia = m.edges[e, 0]
-        ib = m.edges[e, 1]
-        a_move = (m.attribute[ia] & MOVE) != 0
-        b_move = (m.attribute[ib] & MOVE) != 0
+    for e in range(e0, e0 + m_team_edge_count[team]):
+        ia = m_edges[e, 0]
+        ib = m_edges[e, 1]
+        a_move = (m_attribute[ia] & MOVE) != 0
+        b_move = (m_attribute[ib] & MOVE) != 0
         if not a_move and not b_move:
             continue
-        ra = curve_at(prm.radius_curve, team, m.depth[ia]) * scale
-        rb = curve_at(prm.radius_curve, team, m.depth[ib]) * scale
+        ra = curve_at(prm_radius_curve, team, m_depth[ia]) * scale
+        rb = curve_at(prm_radius_curve, team, m_depth[ib]) * scale
         cfr = (ra + rb) * 0.5
-        a = load3(ps.next_pos, ia)
-        b = load3(ps.next_pos, ib)
+        a = load3(ps_next_pos, ia)
+        b = load3(ps_next_pos, ib)
         bmin = (min(a[0] - ra, b[0] - rb) - cfr, min(a[1] - ra, b[1] - rb) - cfr, min(a[2] - ra, b[2] - rb) - cfr)
         bmax = (max(a[0] + ra, b[0] + rb) + cfr, max(a[1] + ra, b[1] + rb) + cfr, max(a[2] + ra, b[2] + rb) + cfr)
         push_a = (0.0, 0.0, 0.0)
@@ -271,7 +279,7 @@ def edge_collision_team(m, ps, prm, ts, cs, team):
         min_dist = FAR
         touched = False
         for k in range(c0, c1):
-            if cs.scale_suspend[k] != 0:
+            if cs_scale_suspend[k] != 0:
                 continue
             d, n, a2, b2 = solve_edge_collider(cs, k, a, b, ra, rb, cfr, bmin, bmax)
             if d <= 0.0:
@@ -293,31 +301,31 @@ def edge_collision_team(m, ps, prm, ts, cs, team):
             # fixed-point max: the value is cast to an integer before scaling (quirk, §0.2)
             recorded = float(math.trunc(1.0 - saturate(min_dist / cfr)))
             if a_move:
-                ps.accum_friction[ia] = max(ps.accum_friction[ia], recorded)
-                store3(ps.accum_normal, ia, v_add(load3(ps.accum_normal, ia), n_acc))
+                ps_accum_friction[ia] = max(ps_accum_friction[ia], recorded)
+                store3(ps_accum_normal, ia, v_add(load3(ps_accum_normal, ia), n_acc))
             if b_move:
-                ps.accum_friction[ib] = max(ps.accum_friction[ib], recorded)
-                store3(ps.accum_normal, ib, v_add(load3(ps.accum_normal, ib), n_acc))
+                ps_accum_friction[ib] = max(ps_accum_friction[ib], recorded)
+                store3(ps_accum_normal, ib, v_add(load3(ps_accum_normal, ib), n_acc))
     # sum step
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        n = ps.accum_count[p]
+    for p in range(start, start + m_team_particle_count[team]):
+        n = ps_accum_count[p]
         if n > 0:
             s = 1.0 / (n * FIXED_POINT)
-            ps.next_pos[p, 0] += ps.accum_vector[p, 0] * s
-            ps.next_pos[p, 1] += ps.accum_vector[p, 1] * s
-            ps.next_pos[p, 2] += ps.accum_vector[p, 2] * s
-        if ps.accum_friction[p] > 0.0:
-            ps.friction[p] = max(ps.friction[p], ps.accum_friction[p])
-        nsum = load3(ps.accum_normal, p)
+            ps_next_pos[p, 0] += ps_accum_vector[p, 0] * s
+            ps_next_pos[p, 1] += ps_accum_vector[p, 1] * s
+            ps_next_pos[p, 2] += ps_accum_vector[p, 2] * s
+        if ps_accum_friction[p] > 0.0:
+            ps_friction[p] = max(ps_friction[p], ps_accum_friction[p])
+        nsum = load3(ps_accum_normal, p)
         if v_length_sq(nsum) > 0.0:
-            store3(ps.collision_normal, p, v_normalize(nsum))
-        ps.accum_vector[p, 0] = 0.0
-        ps.accum_vector[p, 1] = 0.0
-        ps.accum_vector[p, 2] = 0.0
-        ps.accum_count[p] = 0
-        ps.accum_friction[p] = 0.0
-        store3(ps.accum_normal, p, (0.0, 0.0, 0.0))
+            store3(ps_collision_normal, p, v_normalize(nsum))
+        ps_accum_vector[p, 0] = 0.0
+        ps_accum_vector[p, 1] = 0.0
+        ps_accum_vector[p, 2] = 0.0
+        ps_accum_count[p] = 0
+        ps_accum_friction[p] = 0.0
+        store3(ps_accum_normal, p, (0.0, 0.0, 0.0))
 
 
 @kernel

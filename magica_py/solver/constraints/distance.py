@@ -2,9 +2,8 @@
 links' corrections. Vertical links (parent/child) use the stiffness curve, horizontal and
 shear links half of it; a zero-rest link *overwrites* the accumulated correction (Appendix 2.1).
 
-``distance_team`` runs one team; ``distance_block`` runs every lane of a block
-(``solver/batched``) with the same per-element functions (``distance_link``,
-``distance_rest_length``, ``distance_apply``) in the same order, so both give the same bits.
+``distance_team`` runs one team through the per-element functions ``distance_link``,
+``distance_rest_length`` and ``distance_apply``.
 """
 from __future__ import annotations
 
@@ -28,7 +27,7 @@ ZERO3 = (0.0, 0.0, 0.0)
 def distance_link(p_pos, q_pos, rest, w_p, w_q, stiffness):
     """One link's correction of p, ``(L - L0) k (v/L) w_p/(w_p + w_q)``, and whether it counts
     (False, with a zero correction, when the link is degenerate: L < 1e-8). Branch-free: the
-    correction is computed either way and selected, so a lane loop over it vectorises.
+    correction is computed either way and selected.
     One division, by ``L (w_p + w_q)``, for the reference's two (docs/distance_bending_maths.md)."""
     v = v_sub(q_pos, p_pos)
     length = v_length(v)
@@ -71,39 +70,46 @@ def distance_stiffness(prm, team, depth, frequency_ratio, power_y):
 
 @kernel
 def distance_team(m, ps, prm, ts, team, frequency_ratio, power_y, attenuation):
-    """D.4 over one team (Gauss-Seidel in particle order)."""
+    """D.4 over one team (Gauss-Seidel in particle order). The tables' arrays are read into
+    locals once (a table field read in the loop would take and release a reference each time)."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_team_particle_count = m.team_particle_count
     start = m.team_particle_start[team]
     a = prm.animation_pose_ratio[team]
     s = m.team_init_scale[team, 0] * ts.scale_ratio[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        if (m.attribute[p] & MOVE) == 0:
+    attribute, depth_of, friction = m.attribute, m.depth, ps.friction
+    distance_start, distance_count, distance_target, distance_rest = (
+        m.distance_start, m.distance_count, m.distance_target, m.distance_rest)
+    next_pos_a, base_pos_a, velocity_pos_a = ps.next_pos, ps.base_pos, ps.velocity_pos
+    for p in range(start, start + m_team_particle_count[team]):
+        if (attribute[p] & MOVE) == 0:
             continue
-        depth = m.depth[p]
-        w_p = inverse_mass_friction_depth(ps.friction[p], depth)
+        depth = depth_of[p]
+        w_p = inverse_mass_friction_depth(friction[p], depth)
         k_vertical, k_horizontal = distance_stiffness(prm, team, depth, frequency_ratio, power_y)
-        pp = load3(ps.next_pos, p)
-        bp = load3(ps.base_pos, p)
+        pp = load3(next_pos_a, p)
+        bp = load3(base_pos_a, p)
         acc = ZERO3
         n = 0
-        for link in range(m.distance_start[p], m.distance_start[p] + m.distance_count[p]):
-            q = m.distance_target[link]
-            r = m.distance_rest[link]
-            qp = load3(ps.next_pos, q)
+        for link in range(distance_start[p], distance_start[p] + distance_count[p]):
+            q = distance_target[link]
+            r = distance_rest[link]
+            qp = load3(next_pos_a, q)
             if r == 0.0:  # zero-distance link: assignment, not accumulation (quirk)
                 acc = v_scale(v_sub(qp, pp), 0.5)
                 n += 1
                 continue
-            if (m.attribute[q] & MOVE) == 0:
+            if (attribute[q] & MOVE) == 0:
                 w_q = 1.0 / FIX_MASS
             else:
-                w_q = inverse_mass_friction_depth(ps.friction[q], m.depth[q])
-            rest = distance_rest_length(r, s, bp, load3(ps.base_pos, q), a)
+                w_q = inverse_mass_friction_depth(friction[q], depth_of[q])
+            rest = distance_rest_length(r, s, bp, load3(base_pos_a, q), a)
             corr, ok = distance_link(pp, qp, rest, w_p, w_q, k_vertical if r > 0.0 else k_horizontal)
             if ok:
                 acc = v_add(acc, corr)
                 n += 1
-        next_pos, velocity_pos = distance_apply(pp, load3(ps.velocity_pos, p), acc, n, attenuation)
-        store3(ps.next_pos, p, next_pos)
-        store3(ps.velocity_pos, p, velocity_pos)
+        next_pos, velocity_pos = distance_apply(pp, load3(velocity_pos_a, p), acc, n, attenuation)
+        store3(next_pos_a, p, next_pos)
+        store3(velocity_pos_a, p, velocity_pos)
 
 

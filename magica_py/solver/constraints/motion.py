@@ -2,9 +2,7 @@
 behind it. The reference is always the animated ``base_pos``; distances are not scaled and the
 curves are evaluated at depth^2.
 
-``motion_team`` runs one team; ``motion_block`` runs every lane of a block
-(``solver/batched``) with the same per-element function ``solve_motion``, so both give the
-same bits."""
+``motion_team`` runs one team through the per-element function ``solve_motion``."""
 from __future__ import annotations
 
 
@@ -35,7 +33,7 @@ def normal_axis_vector(axis):
 @kernel
 def clamp_length_selected(v, max_length):
     """``math3d.clamp_length`` (``clamp_len`` of §0.2) with the same bits, branch-free: the
-    shortened vector is computed either way and selected, so a lane loop over it vectorises."""
+    shortened vector is computed either way and selected."""
     n = v_length(v)
     shortened = v_scale(v, max_length / n)
     return shortened if (n > 1e-9) & (n > max_length) else v
@@ -62,25 +60,31 @@ def solve_motion(x, base_pos, direction, max_distance, use_max, use_backstop,
 @kernel
 def motion_team(m, ps, prm, team, attenuation):
     """D.9 over one team's moving particles (skipped when the team uses neither limit)."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_depth, m_team_particle_count = m.attribute, m.depth, m.team_particle_count
+    prm_backstop_distance_curve, prm_backstop_radius = prm.backstop_distance_curve, prm.backstop_radius
+    prm_max_distance_curve, prm_motion_stiffness = prm.max_distance_curve, prm.motion_stiffness
+    prm_radius_curve, ps_base_pos, ps_base_rot = prm.radius_curve, ps.base_pos, ps.base_rot
+    ps_next_pos, ps_velocity_pos = ps.next_pos, ps.velocity_pos
     use_max = prm.use_max_distance[team] != 0
     use_backstop = prm.use_backstop[team] != 0
     if not use_max and not use_backstop:
         return
     axis = normal_axis_vector(prm.normal_axis[team])
     start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        attr = m.attribute[p]
+    for p in range(start, start + m_team_particle_count[team]):
+        attr = m_attribute[p]
         if (attr & MOVE) == 0 or (attr & INVALID_MOTION) != 0:
             continue
-        d2 = m.depth[p] * m.depth[p]
-        r = max(curve_at(prm.radius_curve, team, m.depth[p]), 1e-4)
-        direction = q_rotate(load4(ps.base_rot, p), axis)
-        o = load3(ps.next_pos, p)
-        x = solve_motion(o, load3(ps.base_pos, p), direction,
-                         curve_at(prm.max_distance_curve, team, d2), use_max, use_backstop,
-                         curve_at(prm.backstop_distance_curve, team, d2), prm.backstop_radius[team],
-                         r, prm.motion_stiffness[team])
-        store3(ps.next_pos, p, x)
-        store3(ps.velocity_pos, p, v_add(load3(ps.velocity_pos, p), v_scale(v_sub(x, o), attenuation)))
+        d2 = m_depth[p] * m_depth[p]
+        r = max(curve_at(prm_radius_curve, team, m_depth[p]), 1e-4)
+        direction = q_rotate(load4(ps_base_rot, p), axis)
+        o = load3(ps_next_pos, p)
+        x = solve_motion(o, load3(ps_base_pos, p), direction,
+                         curve_at(prm_max_distance_curve, team, d2), use_max, use_backstop,
+                         curve_at(prm_backstop_distance_curve, team, d2), prm_backstop_radius[team],
+                         r, prm_motion_stiffness[team])
+        store3(ps_next_pos, p, x)
+        store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(v_sub(x, o), attenuation)))
 
 

@@ -1,9 +1,6 @@
 """Tether (docs/solver.md §D.3): keep each moving particle between (1 - compression) and 1.03 times its
 rest distance to its root. Only the particle moves; the root is infinitely heavy.
-
-``tether_team`` runs one team; ``tether_block`` runs every lane of a block
-(``solver/batched``) with the same per-element function ``solve_tether``, so both give the
-same bits."""
+``tether_team`` runs one team through the per-element function ``solve_tether``."""
 from __future__ import annotations
 
 
@@ -23,7 +20,7 @@ ZERO3 = (0.0, 0.0, 0.0)
 def solve_tether(position, root_position, rest_length, compression_limit):
     """Correction of ``position`` towards the allowed band around ``rest_length``: zero inside
     the band, when the particle sits on its root (< 1e-8) or when the rest length is zero.
-    Branch-free (selects, no branches) so that a lane loop over it vectorises."""
+    Branch-free (selects, no branches)."""
     v = v_sub(root_position, position)
     length = v_length(v)
     ratio = length / rest_length
@@ -43,17 +40,20 @@ def solve_tether(position, root_position, rest_length, compression_limit):
 @kernel
 def tether_team(m, ps, prm, team, attenuation):
     """D.3 over one team's moving particles; ``attenuation`` is the per-step velocity attenuation."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_root_index, m_team_particle_count = m.attribute, m.root_index, m.team_particle_count
+    ps_next_pos, ps_step_basic_pos, ps_velocity_pos = ps.next_pos, ps.step_basic_pos, ps.velocity_pos
     start = m.team_particle_start[team]
     compression_limit = 1.0 - prm.tether_compression[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        if (m.attribute[p] & MOVE) == 0:
+    for p in range(start, start + m_team_particle_count[team]):
+        if (m_attribute[p] & MOVE) == 0:
             continue
-        r = m.root_index[p]
+        r = m_root_index[p]
         if r < 0:
             continue
-        rest = v_length(v_sub(load3(ps.step_basic_pos, p), load3(ps.step_basic_pos, r)))
-        delta = solve_tether(load3(ps.next_pos, p), load3(ps.next_pos, r), rest, compression_limit)
-        store3(ps.next_pos, p, v_add(load3(ps.next_pos, p), delta))
-        store3(ps.velocity_pos, p, v_add(load3(ps.velocity_pos, p), v_scale(delta, attenuation)))
+        rest = v_length(v_sub(load3(ps_step_basic_pos, p), load3(ps_step_basic_pos, r)))
+        delta = solve_tether(load3(ps_next_pos, p), load3(ps_next_pos, r), rest, compression_limit)
+        store3(ps_next_pos, p, v_add(load3(ps_next_pos, p), delta))
+        store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(delta, attenuation)))
 
 

@@ -1,0 +1,56 @@
+"""With ``NUMBA_DISABLE_JIT=1`` every kernel runs as Python, so a stage can be stepped in a
+debugger or measured by coverage: the tail showcase runs a few frames that way and gives the
+compiled run's bits (the kernels use no intrinsic without a Python twin, ``kernels/trig.fma``)."""
+import json
+import os
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+SNIPPET = """
+import json, sys
+import numba
+import magica_py
+result = magica_py.simulate("configs/tail_orbit.yaml", frames=4)
+track = result.cloths["tail"]
+print(json.dumps({"jit_off": bool(numba.config.DISABLE_JIT),
+                  "positions": track.positions.tolist(), "rotations": track.rotations.tolist()}))
+"""
+
+
+def _run(disable_jit: bool) -> dict:
+    env = dict(os.environ)
+    env.pop("NUMBA_DISABLE_JIT", None)
+    if disable_jit:
+        env["NUMBA_DISABLE_JIT"] = "1"
+    out = subprocess.run([sys.executable, "-c", SNIPPET], cwd=ROOT, env=env, capture_output=True, text=True,
+                         timeout=1800)
+    assert out.returncode == 0, out.stderr[-3000:]
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_tail_orbit_runs_with_the_jit_off_and_gives_the_compiled_bits():
+    off = _run(True)
+    on = _run(False)
+    assert off["jit_off"] and not on["jit_off"]
+    positions_off, positions_on = np.array(off["positions"]), np.array(on["positions"])
+    assert positions_off.shape == (4, 8, 3) and np.isfinite(positions_off).all()
+    assert np.abs(np.diff(positions_off[:, -1], axis=0)).max() > 1e-4  # the tail moved
+    assert positions_off.tobytes() == positions_on.tobytes()
+    assert np.array(off["rotations"]).tobytes() == np.array(on["rotations"]).tobytes()
+
+
+def test_tail_orbit_runs_with_every_array_access_bounds_checked(tmp_path):
+    """``NUMBA_BOUNDSCHECK=1`` compiles every index with a check (an out-of-range index raises
+    IndexError instead of reading memory); the frame path has no access outside its arrays.
+    A cache of its own: checked and unchecked code must not share cache entries."""
+    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
+    env.pop("NUMBA_DISABLE_JIT", None)
+    out = subprocess.run([sys.executable, "-c", SNIPPET], cwd=ROOT, env=env, capture_output=True, text=True,
+                         timeout=3600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    checked = json.loads(out.stdout.strip().splitlines()[-1])
+    assert np.array(checked["positions"]).tobytes() == np.array(_run(False)["positions"]).tobytes()
