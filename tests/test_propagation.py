@@ -437,6 +437,29 @@ def test_a_propagation_not_covering_the_deferred_nodes_runs_them_first(seed):
     assert_same_bits(world_state(h), reference_propagate(h))
 
 
+def test_in_the_player_an_unread_deferred_write_back_is_covered_by_the_next_update(monkeypatch):
+    """The cloth's pattern: write the restored bones back in LATE_UPDATE and defer their
+    propagation. Nothing reads them, so the deferred pass never runs (the next UPDATE plan
+    covers them) and UPDATE still sees the reference bits; the first read runs it once."""
+    h = character()
+    player, seen = frame_player(h, [{"target": "root", "orbit": {"radius": 0.5, "period": 2.0}}],
+                                restored=["head", "leg"])
+    written = h.plan([h.index("head"), h.index("leg")])
+    runs = _count_runs(monkeypatch, written)
+
+    def write_back(ctx):
+        h.local_rotation[h.index("head")] = (0.3, 0.0, 0.1 * ctx.frame, 1.0)
+        h.local_rotation[h.index("leg")] = (0.0, 0.0, 0.4, 1.0)
+        h.propagate_later(written)
+
+    player.schedule.add(Phase.LATE_UPDATE, System("cloth", write_back))
+    run_and_compare(player, seen)
+    assert runs == [] and h.deferred
+    expected = reference_propagate(h)                  # from the written-back local poses
+    assert_same_bits(world_state(h), expected)         # the read runs the deferred pass
+    assert len(runs) == 1 and not h.deferred
+
+
 def test_a_snapshot_taken_while_deferred_saves_the_up_to_date_world_poses():
     from magica_py.runtime.snapshot import capture, restore
 
