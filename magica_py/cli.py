@@ -565,6 +565,15 @@ def describe_scene(scene, list_bones: bool = False) -> list[str]:
             size = "normal +Y"
         label = f"{base} x{len(members)} (instance 0 shown)" if len(members) > 1 else cols.names[i]
         out.append(f"  {label}: {kind} on {h.names[int(cols.transform[i])]!r}, {size}")
+    zones = getattr(scene, "wind", ()) or ()
+    if zones:
+        out.append(f"wind zones: {len(zones)}")
+        for z in zones:
+            where = f"on {h.names[z.transform]!r}" if z.transform >= 0 else "fixed"
+            area = {"sphere": f"radius {z.radius:g} m", "radial": f"radius {z.radius:g} m",
+                    "box": "size " + " x ".join(f"{v:g}" for v in z.size) + " m"}.get(z.mode, "everywhere")
+            extra = (", additive" if z.addition else "") + ("" if z.enabled else ", off at start")
+            out.append(f"  {z.name}: {z.mode} {where}, {area}, {z.main:g} m/s, turbulence {z.turbulence:g}{extra}")
     out.append(f"cloths: {len(scene.cloths)}")
     for spec in _representative_cloths(scene):
         copies = _copies(scene, spec)

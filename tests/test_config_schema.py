@@ -29,7 +29,8 @@ def test_documented_full_example_loads_and_uses_every_section():
     assert [scene.hierarchy.names[i] for i in scene.cloth("cape").root_bones] == [f"cape_{s}_0" for s in range(5)]
     assert scene.cloth("tail").parameters["angle_limit.use"] is True
     assert len(scene.colliders) == 4
-    assert sorted({e.kind for e in scene.animation.events}) == ["set_parameter", "teleport", "time_scale"]
+    assert sorted({e.kind for e in scene.animation.events}) == ["set_parameter", "teleport", "time_scale", "wind"]
+    assert [(z.name, z.mode) for z in scene.wind] == [("breeze", "global"), ("fan", "sphere")]
     assert set(scene.animation.kind.tolist()) == {0, 1, 2, 3, 4}  # all five driver kinds
 
 
@@ -41,6 +42,7 @@ def all_schema_keys():
         for fields in table.values():
             keys |= set(fields)
     keys |= set(schema.EVENT_KINDS)
+    keys |= set(schema.WIND_ZONE_KEYS) | set(schema.WIND_MODES) | set(schema.WIND_MODE_ALIASES)
     keys |= set(schema.CONNECTION_MODES) | set(schema.COLLISION_MODES) | set(schema.BONE_ATTRIBUTES)
     keys |= set(schema.UPDATE_MODES) | set(schema.TIMING_MODES)
     from magica_py.config import imports

@@ -40,7 +40,7 @@ def test_numba_step_matches_the_numpy_reference(frames, overrides):
     naive_step(M, S, P, T, C, 0, frac, 1.0 / 90.0)
     fi = FrameInputs(1 / 60, 1 / 60, 0.02, 0, 1.0, 1.0 / 90.0, 3, 0, 1.0, 1.0, 1.0, 1.0, 1)
     m, ps, prm, ts, cs, tt, _h = s.kernel_tables()
-    run_step(m, ps, prm, ts, cs, tt, 0, fi, *s.stages[:6])  # angle ... quality
+    run_step(m, ps, prm, ts, cs, tt, 0, fi, *s.stages[:6], s.stages.wind)  # angle ... quality, wind
     for name in ("next_pos", "old_pos", "velocity_pos", "velocity", "real_velocity", "base_pos",
                  "step_basic_pos", "friction", "static_friction", "collision_normal"):
         np.testing.assert_allclose(getattr(s.particles, name), S[name], rtol=0, atol=1e-10, err_msg=name)

@@ -108,10 +108,13 @@ def build_scene(resolved: ResolvedScene, source: pathlib.Path | None, text: str 
     output = OutputSpec(rrd=pathlib.Path(out["rrd"]) if out["rrd"] else None, log=MappingProxyType(dict(out["log"])))
     rigs = [RigInfo(r["name"], tuple(hierarchy.index(roots[0]) for roots in r["roots"] if roots),
                     r["nodes_per_instance"], r["instances"]) for r in resolved.rigs]
+    from magica_py.wind.zones import WindZoneSpec
+
+    wind = tuple(WindZoneSpec.from_resolved(z, hierarchy) for z in resolved.wind)
     return Scene(name=settings.name, source=source, settings=settings, hierarchy=hierarchy,
                  colliders=colliders, animation=animation, cloths=cloths, output=output, rigs=rigs,
                  collider_names=list(colliders.names), source_text=text,
-                 overrides=tuple(str(o) for o in overrides))
+                 overrides=tuple(str(o) for o in overrides), wind=wind)
 
 
 def _issue(path: str, message: str) -> Issue:

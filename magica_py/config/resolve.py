@@ -116,6 +116,7 @@ class ResolvedScene:
     cloths: list[dict]                         # name, root_bones, component, ... (final names)
     output: dict
     normalized: NormalizedScene | None = None
+    wind: list[dict] = field(default_factory=list)   # wind zones (final transform names)
 
 
 # ----------------------------------------------------------------------------- resolution
@@ -134,8 +135,10 @@ def resolve_document(c: Checker, n: NormalizedScene, source: str | None) -> Reso
     colliders, collider_groups = _resolve_colliders(c, n.colliders, table)
     cloths = _resolve_cloths(c, n.cloths, table, colliders, collider_groups, settings)
     declared = {cl["name"] for cl in n.cloths if cl["name"] is not None}
-    animation = _resolve_animation(c, n.animation, table, phases, cloths, declared)
-    return ResolvedScene(source, settings, bones, rigs, colliders, animation, cloths, n.output, n)
+    wind = _resolve_wind(c, n.wind, table)
+    animation = _resolve_animation(c, n.animation, table, phases, cloths, declared,
+                                   {z["name"] for z in n.wind if z["name"] is not None})
+    return ResolvedScene(source, settings, bones, rigs, colliders, animation, cloths, n.output, n, wind)
 
 
 def _expand_rigs(c: Checker, rigs: list[dict], table: NameTable):
@@ -536,9 +539,29 @@ def _resolve_parameters(c: Checker, cloth: dict, settings: dict, table: NameTabl
     return base.with_changes(changes, where)
 
 
+# ----------------------------------------------------------------------------- wind
+def _resolve_wind(c: Checker, zones: list[dict], table: NameTable) -> list[dict]:
+    """Wind zones with their transform resolved (a bone of an instanced rig: its first
+    instance, or name one with ``bone#i``); zone names unique."""
+    out, seen = [], set()
+    for z in zones:
+        if z["name"] in seen:
+            c.error(z["path"] + ("name",), f"duplicate wind zone name {z['name']!r}")
+            continue
+        seen.add(z["name"])
+        transform = None
+        if z["transform"] is not None:
+            ref = _ref(c, table, z["transform"], z["path"] + ("transform",))
+            if ref is None:
+                continue
+            transform = ref.in_instance(0 if ref.rig is not None else None)
+        out.append(dict(z, transform=transform))
+    return out
+
+
 # ----------------------------------------------------------------------------- animation
 def _resolve_animation(c: Checker, entries: list[dict], table: NameTable, phases: dict,
-                       cloths: list[dict], declared: set[str]) -> list[dict]:
+                       cloths: list[dict], declared: set[str], wind_zones: set[str] = frozenset()) -> list[dict]:
     cloth_by_base: dict[str, list[dict]] = {}
     for cl in cloths:  # by YAML name (every instance) and by instance name (skirt#3)
         cloth_by_base.setdefault(cl["base_name"], []).append(cl)
@@ -568,6 +591,12 @@ def _resolve_animation(c: Checker, entries: list[dict], table: NameTable, phases
                 out.append({"at": e["at"], "teleport": body})
         elif kind == "time_scale":
             out.append({"at": e["at"], "time_scale": params["value"]})
+        elif kind == "wind":
+            if params["zone"] not in wind_zones:
+                c.error(path + ("wind", "zone"),
+                        f"unknown wind zone {params['zone']!r}{did_you_mean(params['zone'], sorted(wind_zones))}")
+                continue
+            out.append({"at": e["at"], "wind": {k: params[k] for k in ("zone", "enabled", "main")}})
         else:  # set_parameter
             targets = cloth_by_base.get(params["cloth"])
             if targets is None and params["cloth"] in declared:

@@ -13,10 +13,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from magica_py.config.checker import ANY, NON_NEGATIVE, POSITIVE, REQUIRED, Checker, Range
+from magica_py.config.checker import ANY, NON_NEGATIVE, POSITIVE, REQUIRED, Checker, Range, euler_to_quaternion
 
 FORMAT_VERSION = 1
-TOP_LEVEL_KEYS = ("version", "scene", "rigs", "animation", "colliders", "cloths", "output")
+TOP_LEVEL_KEYS = ("version", "scene", "rigs", "animation", "colliders", "cloths", "wind", "output")
 UPDATE_MODES = ("normal", "unity_physics", "unscaled")
 TIMING_MODES = ("exact", "faithful", "faithful32")  # runtime.team_time
 CONNECTION_MODES = ("line", "automatic_mesh", "sequential_loop_mesh", "sequential_non_loop_mesh")
@@ -161,7 +161,7 @@ DRIVER_COMMON = {
     "phase_offset": F("number", 0.0, doc="time offset added to the driver's clock (s)"),
     "fade": F("number", 0.0, NON_NEGATIVE, doc="periodic drivers fade in/out over this time inside [start, end] (s)"),
 }
-EVENT_KINDS = ("teleport", "time_scale", "set_parameter")
+EVENT_KINDS = ("teleport", "time_scale", "set_parameter", "wind")
 EVENT_FIELDS = {
     "teleport": {"target": F("name", doc="transform moved"),
                  "position": F("vec3", None, doc="new world position (m); null keeps it"),
@@ -169,6 +169,9 @@ EVENT_FIELDS = {
     "set_parameter": {"cloth": F("name", doc="cloth name"),
                       "key": F("text", doc="parameter key (dotted)"),
                       "value": F("any", doc="new value, validated like cloths[].parameters")},
+    "wind": {"zone": F("name", doc="wind zone name (wind[].name)"),
+             "enabled": F("bool", None, doc="switch the zone on (true) or off (false); null keeps it"),
+             "main": F("number", None, Range(0.0, 30.0), doc="new main wind speed (m/s); null keeps it")},
 }
 
 # -- colliders ---------------------------------------------------------------------------
@@ -196,7 +199,7 @@ OUTPUT_LOG_FIELDS = {
     "base_pose": F("bool", False, doc="the animated base pose the solver reads"),
     "colliders": F("bool", True, doc="collider shapes"),
     "metrics": F("bool", True, doc="time series: steps, phase wall times, stretch, speed"),
-    "events": F("bool", True, doc="teleports, time-scale changes, parameter changes"),
+    "events": F("bool", True, doc="teleports, time-scale changes, parameter changes, wind changes"),
     "replay": F("bool", True, doc="animated local poses and frame times, what `magica-py resim` needs"),
 }
 
@@ -210,6 +213,7 @@ class NormalizedScene:
     animation: list = field(default_factory=list)
     colliders: list = field(default_factory=list)
     cloths: list = field(default_factory=list)
+    wind: list = field(default_factory=list)
     output: dict = field(default_factory=dict)
 
 
@@ -273,6 +277,7 @@ def check_document(c: Checker, data) -> NormalizedScene:
         return [check_cloth(c, e, p) for e in cloths]
 
     out.cloths = _section(c, root, "cloths", 0, cloth_entries)
+    out.wind = _section(c, root, "wind", 0, lambda item, p: [check_wind_zone(c, item, p)])
     out.output = check_output(c, root.get("output"), ("output",))
     return out
 
@@ -445,6 +450,13 @@ def check_animation_entry(c: Checker, value, path: tuple) -> dict | None:
                            "rotation": c.rotation(tm, tp) if has_rotation else None}
         if entry["params"]["position"] is None and not has_rotation:
             c.error(tp, "expected a position and/or a rotation (or euler) to teleport to")
+    elif kind == "wind":
+        params = read_fields(c, m["wind"], path + ("wind",), EVENT_FIELDS["wind"])
+        if params is None:
+            return None
+        if params["enabled"] is None and params["main"] is None:
+            c.error(path + ("wind",), "expected 'enabled' and/or 'main' to change on the zone")
+        entry["params"] = params
     else:
         params = read_fields(c, m["set_parameter"], path + ("set_parameter",), EVENT_FIELDS["set_parameter"])
         if params is None:
@@ -494,6 +506,78 @@ def check_collider(c: Checker, value, path: tuple) -> dict | None:
     if shape == "capsule" and col["params"] is not None and col["params"]["end_radius"] is None:
         col["params"]["end_radius"] = col["params"]["radius"]
     return col if col["params"] is not None else None
+
+
+# -- wind --------------------------------------------------------------------------------
+# MagicaCloth2's MagicaWindZone (docs/solver.md §C, §D.1; magica_py/wind). Mode names: ours, or
+# MagicaCloth2's (GlobalDirection, SphereDirection, BoxDirection, SphereRadial).
+WIND_MODES = ("global", "sphere", "box", "radial")
+WIND_MODE_ALIASES = {"global_direction": "global", "sphere_direction": "sphere", "box_direction": "box",
+                     "sphere_radial": "radial"}
+WIND_ZONE_FIELDS = {
+    "name": F("name", doc="unique zone name (wind events refer to it)"),
+    "mode": F("choice", "global", choices=WIND_MODES + tuple(WIND_MODE_ALIASES),
+              doc="global (everywhere, no area), sphere or box (directional wind inside the area), "
+                  "radial (blows away from the sphere's centre)"),
+    "transform": F("name", None, doc="bone the zone follows; position / rotation then offset it in the bone's "
+                                     "space; omitted: a fixed world pose"),
+    "radius": F("number", None, POSITIVE, doc="sphere and radial zones: radius (m), default 10"),
+    "size": F("vec3", None, POSITIVE, doc="box zones: edge lengths along the zone's local x, y, z (m), default [10, 10, 10]"),
+    "main": F("number", 5.0, Range(0.0, 30.0), doc="main wind speed (m/s)"),
+    "turbulence": F("number", 1.0, Range(0.0, 1.0), doc="turbulence: direction swing and speed gusts"),
+    "direction": F("dir3", None, doc="wind direction in the zone's local space (default [0, 0, 1])"),
+    "direction_angles": F("vec2", None, Range(-180.0, 180.0), doc="or MagicaCloth2's directionAngleX / Y (degrees): "
+                                                                  "Euler(x, y, 0) applied to local +Z"),
+    "addition": F("bool", False, doc="additive zone: felt on top of the area zone (at most 3 per cloth)"),
+    "enabled": F("bool", True, doc="whether the zone blows from the start (wind events switch it)"),
+    "attenuation": F("curve", None, doc="radial zones: strength over distance / radius (a depth-curve value, "
+                                        "default MagicaCloth2's ease-in-out from 1 to 0)"),
+}
+WIND_ZONE_KEYS = tuple(WIND_ZONE_FIELDS) + ("position", "rotation", "euler")
+
+
+def check_wind_zone(c: Checker, value, path: tuple) -> dict | None:
+    """One ``wind:`` entry, normalized: mode canonical, local direction a unit vector, the
+    attenuation a ``params.curves.Curve``; keys that do not belong to the mode are errors."""
+    from magica_py.params.curves import Curve
+
+    m = c.mapping(value, path, WIND_ZONE_KEYS)
+    if m is None:
+        return None
+    zone = {key: read_field(c, m, key, path, f) for key, f in WIND_ZONE_FIELDS.items()
+            if f.kind not in ("vec2", "curve")}
+    zone["path"] = path
+    mode = WIND_MODE_ALIASES.get(zone["mode"], zone["mode"])
+    zone["mode"] = mode
+    zone.update(check_pose(c, m, path, scale=False))
+    belongs = {"radius": ("sphere", "radial"), "size": ("box",), "attenuation": ("radial",),
+               "direction": ("global", "sphere", "box"), "direction_angles": ("global", "sphere", "box")}
+    for key, modes in belongs.items():
+        if m.get(key) is not None and mode not in modes:
+            c.error(path + (key,), f"{key!r} is not used by a {mode} zone (it belongs to {' and '.join(modes)} zones)")
+    zone["radius"] = 10.0 if zone["radius"] is None else zone["radius"]
+    zone["size"] = (10.0, 10.0, 10.0) if zone["size"] is None else zone["size"]
+    which = c.exactly_one(m, ("direction", "direction_angles"), path, required=False)
+    if which == "direction_angles":
+        angles = c.vector(m, "direction_angles", path, 2, None, Range(-180.0, 180.0),
+                          what="[x, y] angles in degrees")
+        zone["direction"] = (0.0, 0.0, 1.0)
+        if angles is not None:
+            from magica_py.kernels.math3d import q_rotate
+
+            q = euler_to_quaternion((angles[0], angles[1], 0.0))
+            zone["direction"] = tuple(float(x) for x in q_rotate(q, (0.0, 0.0, 1.0)))
+    elif zone["direction"] is None:
+        zone["direction"] = (0.0, 0.0, 1.0)
+    zone["attenuation"] = Curve.hermite(1.0, (1.0, 0.0), (0.0, 0.0))   # AnimationCurve.EaseInOut(0, 1, 1, 0)
+    if m.get("attenuation") is not None:
+        try:
+            zone["attenuation"] = Curve.parse(m["attenuation"], "attenuation")
+        except ValueError as exc:   # "attenuation.curve: expected ..." -> path ...attenuation.curve
+            where, _, message = str(exc).partition(": ")
+            inner = where[len("attenuation"):].lstrip(".")
+            c.error(path + ("attenuation",) + ((inner,) if inner else ()), message)
+    return zone
 
 
 # ----------------------------------------------------------------------------- cloths

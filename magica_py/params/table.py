@@ -10,8 +10,8 @@ Keys are MagicaCloth2's serialized names in snake_case, grouped as in its inspec
 * ``bool``, ``enum`` (choices), ``vector3``, ``transform`` (a transform name or null).
 
 ``implemented`` is False for parameters that are accepted (so MagicaCloth2 settings carry
-over) but have no effect because the feature does not exist in scene format v1 (wind zones,
-self collision): ``docs/parameters.md`` says so.
+over) but have no effect because the feature does not exist here (self collision):
+``docs/parameters.md`` says so.
 """
 from __future__ import annotations
 
@@ -94,14 +94,14 @@ PARAMETER_DEFS: tuple[ParameterDef, ...] = (
     _p("culling.distance_culling_length", "limit", False, 0, 100, "m", "H.1", "Stop simulating beyond this distance from the reference transform (off by default; default value when enabled 30)."),
     _p("culling.distance_culling_fade_ratio", "float", 0.2, 0, 1, "", "H.1", "Fraction of the culling length over which the cloth fades to the animated pose."),
     _p("culling.distance_culling_reference", "transform", None, ref="H.1", doc="Transform the culling distance is measured from (the main camera in Unity)."),
-    # -- wind (accepted for compatibility; scene format v1 has no wind zones)
-    _p("wind.influence", "float", 1.0, 0, 2, "", "D.1", "Wind influence.", implemented=False),
-    _p("wind.frequency", "float", 1.0, 0, 2, "", "D.1", "Wind frequency.", implemented=False),
-    _p("wind.turbulence", "float", 1.0, 0, 2, "", "D.1", "Wind turbulence.", implemented=False),
-    _p("wind.blend", "float", 0.7, 0, 1, "", "D.1", "Wind noise blend.", implemented=False),
-    _p("wind.synchronization", "float", 0.7, 0, 1, "", "D.1", "Wind synchronization.", implemented=False),
-    _p("wind.depth_weight", "float", 0.0, 0, 1, "", "D.1", "Wind depth weight.", implemented=False),
-    _p("wind.moving_wind", "float", 0.0, 0, 10, "", "D.1", "Wind from the cloth's own movement.", implemented=False),
+    # -- wind (the scene's `wind:` zones, docs/scene-format.md; magica_py/wind)
+    _p("wind.influence", "float", 1.0, 0, 2, "", "D.1", "Scale of every wind this cloth feels (0 switches wind off for it)."),
+    _p("wind.frequency", "float", 1.0, 0, 2, "", "C.3, D.1", "Speed of the wind's phase: each zone's time advances by min((0.2 + 0.5 main/7.5) frequency, 1.5) per second."),
+    _p("wind.turbulence", "float", 1.0, 0, 2, "", "D.1", "Scales the zones' turbulence: the swing of the direction (up to 45 degrees) and the gusting of the speed."),
+    _p("wind.blend", "float", 0.7, 0, 1, "", "D.1", "Wave shape: 0 a sine, 1 Perlin noise (also widens the sideways swing from 0.1 to 0.5 of the vertical one)."),
+    _p("wind.synchronization", "float", 0.7, 0, 1, "", "D.1", "1: every root line of the cloth moves in phase; lower values shift the phase per root line."),
+    _p("wind.depth_weight", "float", 0.0, 0, 1, "", "D.1", "0: uniform along the line; 1: wind scaled by depth^2 (roots feel none)."),
+    _p("wind.moving_wind", "float", 0.0, 0, 10, "", "C.4, D.1", "Wind against the cloth's own movement: speed = frame moving speed x moving_wind / scale ratio (off below 0.01)."),
     # -- beyond MagicaCloth2 (docs/parameters.md, docs/quality-mode.md)
     _p("solver.rate_mode", "enum", "magica", ref="docs/parameters.md",
        doc="magica: per-step rates tuned for 90 Hz and patched by SimulationPower (MagicaCloth2); frequency_consistent: every per-step rate k becomes 1-(1-k)^(90/f), so the same parameters give the same motion at any frequency (identical at 90 Hz).",

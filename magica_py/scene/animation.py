@@ -62,7 +62,8 @@ Events fire once, on the first ``apply`` whose ``ctx.time.time >= at`` (in ``at`
 ``teleport: {target, position?, rotation? | euler?}`` sets the target's world pose with
 ``hierarchy.set_world_pose`` (and appends ``("teleport", {...})``); ``time_scale: value``
 appends ``("time_scale", value)``; ``set_parameter: {cloth, key, value}`` appends
-``("set_parameter", {...})``. ``reset()`` re-arms the events and clears teleport offsets.
+``("set_parameter", {...})``; ``wind: {zone, enabled?, main?}`` appends ``("wind", {...})``
+(applied by the cloth system's wind field). ``reset()`` re-arms the events and clears teleport offsets.
 
 Cost: one numba kernel call per frame evaluates every driver of every target (crowds
 included), writing local poses only (the player's UPDATE system then propagates the driven
@@ -97,7 +98,7 @@ from magica_py.kernels import portable
 KEYFRAMES, ORBIT, OSCILLATE, SPIN, WALK = 0, 1, 2, 3, 4
 DRIVER_KINDS = {"keyframes": KEYFRAMES, "orbit": ORBIT, "oscillate": OSCILLATE,
                 "spin": SPIN, "walk": WALK}
-EVENT_KINDS = ("teleport", "time_scale", "set_parameter")
+EVENT_KINDS = ("teleport", "time_scale", "set_parameter", "wind")
 INTERPOLATIONS = {"linear": 0, "step": 1, "smooth": 2, "cubic": 3}
 CUBIC = 3
 PARAM_WIDTH = 16
@@ -615,6 +616,8 @@ def _make_event(hierarchy, kind: str, params: dict, at: float, where: str) -> Ev
     if kind == "set_parameter":
         payload = {k: params[k] for k in ("cloth", "key", "value")}
         return Event(at, kind, payload)
+    if kind == "wind":  # applied by the cloth system's wind field (magica_py/wind)
+        return Event(at, kind, {"zone": params["zone"], "enabled": params.get("enabled"), "main": params.get("main")})
     # teleport
     target = _resolve(hierarchy, params["target"], f"{where}.teleport.target")
     position = params.get("position")

@@ -134,6 +134,7 @@ class Scene:
     source_text: str | None = None          # YAML of the scene as run (overrides applied): for replays
     overrides: tuple[str, ...] = ()         # the `--set PATH=VALUE` strings it was loaded with, in order:
                                             # recorded so `magica-py resim` can re-apply them
+    wind: tuple = ()                        # wind.zones.WindZoneSpec per `wind:` entry (none: no wind zones)
 
     def cloth(self, name: str) -> ClothSpec:
         for spec in self.cloths:
@@ -144,4 +145,4 @@ class Scene:
     def summary(self) -> dict:
         """Counts for ``magica-py info`` and logs."""
         return {"bones": self.hierarchy.count, "rigs": len(self.rigs), "colliders": len(self.collider_names),
-                "cloths": len(self.cloths)}
+                "cloths": len(self.cloths), "wind_zones": len(self.wind)}

@@ -158,6 +158,7 @@ class SceneStatics:
     collider_names: list[str] = field(default_factory=list)  # per collider of the ColliderSet
     collider_groups: list[str] = field(default_factory=list)  # per collider: its node's instance label or ""
     view_box: tuple | None = None         # (min (3,), max (3,)) of joints and particles at the first frame
+    wind_zones: list | None = None        # the scene's WindZoneSpecs ([] for moving wind alone); None: no wind
 
 
 @dataclass
@@ -190,6 +191,7 @@ class FrameData:
     # instead of ``colliders``: world position, rotation, lossy scale of each collider's
     # transform ((C,3), (C,4), (C,3)), evaluated per batch by a sink given the ColliderSet
     collider_pose: tuple | None = None
+    wind: Any = None                      # sinks.wind_view.WindFrame, or None
 
 
 class Sink(Protocol):

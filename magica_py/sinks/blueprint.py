@@ -2,7 +2,8 @@
 one plot per quantity, each titled with its unit.
 
 Layout: the 3D view of ``/world`` on the left (3/5 of the width); on the right, stacked:
-stretch (%), penetration (mm, only when a cloth has colliders), particle speed (m/s), a tab
+stretch (%), penetration (mm, only when a cloth has colliders), particle speed (m/s), the
+wind each cloth feels (m/s², only with wind), a tab
 pair "phase wall time (ms)" / "steps per frame", and the event log. Plots of one series hide
 their legend (the title names it); the phase plot's legend sits top right.
 
@@ -33,10 +34,11 @@ def eye_placement(box_min: np.ndarray, box_max: np.ndarray) -> tuple[np.ndarray,
 
 
 def default_blueprint(title: str = "scene", *, box=None, penetration: bool = True, phases=(),
-                      hidden=(L.ROOT_LINKS,), follow: bool = False):
+                      hidden=(L.ROOT_LINKS,), follow: bool = False, wind: bool = False):
     """The blueprint: ``box`` = (min, max) of the characters at the first frame (scene frame),
     ``phases`` the phase names plotted, ``hidden`` entities hidden at start (still toggleable),
-    ``follow``: the time cursor follows the newest frame (opens a file at its last frame)."""
+    ``follow``: the time cursor follows the newest frame (opens a file at its last frame),
+    ``wind``: a plot of the wind each cloth feels (``wind_view``)."""
     import rerun.blueprint as rrb
 
     eye = None
@@ -59,6 +61,10 @@ def default_blueprint(title: str = "scene", *, box=None, penetration: bool = Tru
     if penetration:
         plots.append(plot(L.METRIC_MAX_PENETRATION, "max collider penetration (mm)"))
     plots.append(plot(L.METRIC_MAX_SPEED, "max particle speed (m/s)"))
+    if wind:
+        from magica_py.sinks.wind_view import METRIC_WIND
+
+        plots.append(plot(METRIC_WIND, "wind felt per cloth (m/s²)", legend=True))
     timing = rrb.TimeSeriesView(
         origin=L.reader_path(L.METRIC_PHASE_TIME), name="phase wall time (ms, first frame left out)",
         contents=[L.reader_path(f"{L.METRIC_PHASE_TIME}/{p}_ms") for p in phases] or "$origin/**",

@@ -137,7 +137,7 @@ class Recorder:
             time_fields=self.time_fields, node_group=node_group,
             collider_names=[str(n) for n in getattr(self.colliders, "names", ())],
             collider_groups=[node_group[c] if 0 <= c < len(node_group) else "" for c in collider_nodes],
-            view_box=self._view_box(cloths))
+            view_box=self._view_box(cloths), wind_zones=self._wind_zones())
         rrd = output_rrd(opts, scene)
         if rrd is None and not opts.spawn and opts.connect is None:
             self.sink = NullSink()
@@ -213,11 +213,17 @@ class Recorder:
             joint_positions=hierarchy.world_position, positions=positions, colliders=shapes,
             metrics={k: float(v) for k, v in ctx.metrics.items() if _is_number(v)},
             events=list(ctx.events), base_positions=base, steps=steps, replay=self.pending_replay,
-            collider_pose=pose)
+            collider_pose=pose,
+            wind=self.provider.wind_frame() if hasattr(self.provider, "wind_frame") else None)
         self.sink.begin_frame(ctx.frame, data.sim_time)
         self.sink.log(data)
         self.sink.end_frame()
         self.pending_replay = None
+
+    def _wind_zones(self):
+        """The scene's wind zones for the drawing ([] with moving wind alone), None without wind."""
+        frame = self.provider.wind_frame() if hasattr(self.provider, "wind_frame") else None
+        return None if frame is None else list(getattr(self.scene, "wind", ()) or ())
 
     def _particles(self):
         """(positions (P,3), base positions or None, steps) of every cloth, topology order."""

@@ -35,6 +35,7 @@ from magica_py.sinks.collider_view import ColliderView
 from magica_py.sinks.live import FLUSH_SECONDS, OutputError, grpc_url, open_live_targets  # noqa: F401 - re-exported
 from magica_py.sinks.metrics import FrameMetrics
 from magica_py.sinks.shapes import ColliderBatch
+from magica_py.sinks.wind_view import WindView
 
 FILE_BATCH_FRAMES = 64
 # a crowd has one entity set per character (hundreds of entities, each one call per batch):
@@ -222,7 +223,7 @@ class RerunSink:
                                         collider_slot if collider_slot is not None else np.zeros(0, np.int64))
             blueprint = default_blueprint(statics.name or "scene", box=statics.view_box,
                                           penetration=self.metrics.has_collision, phases=PHASES,
-                                          follow=open_at_end or self.live)
+                                          follow=open_at_end or self.live, wind=statics.wind_zones is not None)
             self.rec.set_sinks(*sinks, default_blueprint=blueprint)
             self.rec.send_recording_name(recording_name or statics.name or "magica_py")
         except Exception as exc:  # noqa: BLE001 - rerun raises plain RuntimeError
@@ -283,6 +284,8 @@ class RerunSink:
         collider_groups = list(statics.collider_groups) if len(statics.collider_groups) == len(kinds) else \
             [instance_group(name, None, ()) for name in names]
         self.collider_view = ColliderView(names, kinds, slots, collider_groups)
+        self.wind_view = WindView(statics.wind_zones, [c.name for c in statics.cloths]) \
+            if statics.wind_zones is not None else None
         self._log_statics()
 
     # ------------------------------------------------------------------ statics
@@ -294,6 +297,8 @@ class RerunSink:
             "right-handed viewer: x_drawn = -x_scene under /world (LUF), so right is right on screen. "
             "/metrics and /replay are in scene units and handedness.")), static=True)
         rec.log(L.FOCUS, rr.Points3D.from_fields(radii=0.0), static=True)
+        if self.wind_view is not None:
+            self.wind_view.log_statics(rr, rec)
         if tg.skeleton:
             for group, _, _, _ in self.rig_parts:
                 rec.log(L.rig_path("joints", group), rr.Points3D.from_fields(radii=JOINT_RADIUS, colors=L.COLOR_JOINT),
@@ -385,6 +390,8 @@ class RerunSink:
                 self.rec.log(L.EVENTS, self.rr.TextLog(
                     "first frame wall times, left out of the plots (JIT compilation and warm-up): "
                     + ", ".join(skipped), level=self.rr.TextLogLevel.DEBUG))
+        if self.wind_view is not None and data.wind is not None:
+            WindView.put(buf, row, data.wind)
         if tg.events and data.events:
             self._log_events(data)
         if tg.replay and data.replay is not None:
@@ -487,6 +494,8 @@ class RerunSink:
                 sel = np.array([r for r, _ in rows], np.int64)
                 vals = np.array([v for _, v in rows], np.float64)
                 rec.send_columns(path, indexes=self._index(sel), columns=rr.Scalars.columns(scalars=vals))
+        if self.wind_view is not None:
+            self.wind_view.send(rr, rec, self.batch_index, a, metrics=tg.metrics)
         if tg.replay and "replay.time" in a:
             for key, component in (("replay.local_position", "local_position"),
                                    ("replay.local_rotation", "local_rotation"),

@@ -76,6 +76,12 @@ class ClothSystemSnapshots:
         counts = self.system.time_state.update_count
         return int(np.max(counts)) if len(counts) else 0
 
+    def wind_frame(self):
+        """The frame's wind zones and felt winds (``wind_view.WindFrame``), or None."""
+        from magica_py.sinks.wind_view import wind_frame
+
+        return wind_frame(self.system)
+
     def cloth_frames(self) -> list[ClothFrame]:
         s, m = self.system, self.system.model
         frames = []

@@ -17,7 +17,8 @@ def attach(player, scene):
     """Build the cloth system of ``scene`` and attach it to ``player``; returns the system."""
     from magica_py.solver.system import ClothSystem
 
-    return ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player, scene)
+    return ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings,
+                       wind=getattr(scene, "wind", ())).attach(player, scene)
 
 
 __all__ = ["attach"]

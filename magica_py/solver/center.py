@@ -306,6 +306,7 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
         store4(ts.frame_shift_rotation, team, IDENTITY)
         ts.inertia_shift[team] = 0
         ts.frame_moving_speed[team] = 0.0
+        store3(ts.frame_moving_direction, team, (0.0, 0.0, 0.0))
     else:
         # 5. world shift
         shift_vec = v_sub(cpos, old_pos)
@@ -372,6 +373,10 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
         if frame_delta_time > 0.0 and now_time_scale > 1e-6:
             speed = v_length(v_sub(cpos, work_pos)) / frame_delta_time / now_time_scale
         ts.frame_moving_speed[team] = speed
+        moving = v_sub(cpos, work_pos)
+        moving_length = v_length(moving)
+        store3(ts.frame_moving_direction, team,
+               v_scale(moving, 1.0 / moving_length) if moving_length > 1e-6 else (0.0, 0.0, 0.0))
     # 7. reset consequences
     if reset or ts.time_reset[team] != 0:
         ts.velocity_weight[team] = 0.0 if prm.stabilization_time[team] > 1e-6 else 1.0

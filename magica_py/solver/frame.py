@@ -48,6 +48,7 @@ from magica_py.solver.quality import display_collision_team, quality_end_of_step
 from magica_py.solver.rotations import line_rotations_team, triangle_rotations_team
 from magica_py.solver.step import end_step_team, predict_team, step_basic_pose_team, team_step_update
 from magica_py.solver.writeback import transform_data_team, write_transforms_team
+from magica_py.wind.force import wind_team
 
 TimeArrays = namedtuple("TimeArrays", TeamTimeState.FIELDS)
 HierarchyArrays = namedtuple("HierarchyArrays", [
@@ -67,10 +68,11 @@ FrameInputs = namedtuple("FrameInputs", [
 # The optional stages (None: not compiled, not called; 1: compiled, run where a team asks):
 # angle (D.5/D.6), bending (D.7 dihedral and volume), point and edge collision (D.8),
 # motion (D.9), quality (quality mode's build reset, end-of-step passes and display collision),
-# lines (E.2 line rotations), triangles (E.3 triangle rotations). ``system.stage_switches``
-# derives them from the live teams.
+# lines (E.2 line rotations), triangles (E.3 triangle rotations), wind (the wind's share of
+# D.1, ``wind.force.wind_team``: a scene with wind zones or a cloth with moving wind).
+# ``system.stage_switches`` derives them from the live teams.
 StageSwitches = namedtuple("StageSwitches", [
-    "angle", "bending", "point_collision", "edge_collision", "motion", "quality", "lines", "triangles"])
+    "angle", "bending", "point_collision", "edge_collision", "motion", "quality", "lines", "triangles", "wind"])
 # the per-thread work table of the parallel kernel: team_worker (teams,) int32, worker_load
 # (threads,) int64 particle-steps (written by ``assign_workers`` each frame)
 WorkerTable = namedtuple("WorkerTable", ["team_worker", "worker_load"])
@@ -120,7 +122,7 @@ def prepare_teams(m, ts, prm, tt, h):
 
 
 @kernel
-def run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edge_collision, motion, quality):
+def run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edge_collision, motion, quality, wind):
     """One simulation step of team t (§D.0 order) at frame interpolation fi."""
     dt = fi.dt
     ratio = fi.frequency_ratio
@@ -130,6 +132,9 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edg
     team_step_update(m, ts, prm, frac, t, dt)
     collider_step_team(cs, ts, t, frac)
     predict_team(m, ps, prm, ts, t, frac, dt, ratio, fi.power_z)
+    if wind is not None:
+        if ts.wind_zone_count[t] > 0 or prm.wind_moving_wind[t] > 0.01:  # wind's share of D.1's force sum
+            wind_team(m, ps, prm, ts, t, dt)
     step_basic_pose_team(m, ps, prm, ts, t)
     tether_team(m, ps, prm, t, tether_attenuation)
     distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
@@ -225,7 +230,7 @@ def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t, quality):
 
 @kernel
 def team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, t, angle, bending, point_collision, edge_collision, motion,
-                     quality):
+                     quality, wind):
     """Team t's frame up to the write-back: its begin of frame and its steps (each advancing
     its own clock, §A.6; the clock of a suspended but enabled team advances too)."""
     if ts.active[t] != 0:
@@ -233,7 +238,8 @@ def team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, t, angle, bending, point_col
     for step in range(tt.update_count[t]):
         _begin_step_team(tt, fi, step, t)
         if ts.active[t] != 0 and tt.step_running[t]:
-            run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edge_collision, motion, quality)
+            run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edge_collision, motion, quality,
+                     wind)
 
 
 @kernel
@@ -291,7 +297,8 @@ def _begin_step_team(tt, fi, step, t):
 
 
 @kernel
-def simulate_frame(tables, fi, angle, bending, point_collision, edge_collision, motion, quality, lines, triangles):
+def simulate_frame(tables, fi, angle, bending, point_collision, edge_collision, motion, quality, lines, triangles,
+                   wind):
     """The whole cloth frame, one team after another (see the module docstring): every team's
     begin and steps, then every team's end (all reads of this frame's transforms come before
     any write-back). ``tables``: ``tables.SolverTables``."""
@@ -301,7 +308,7 @@ def simulate_frame(tables, fi, angle, bending, point_collision, edge_collision, 
     _time_frame_update(tt, fi)
     for i in range(m.live_teams.shape[0]):
         team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, m.live_teams[i], angle, bending, point_collision,
-                         edge_collision, motion, quality)
+                         edge_collision, motion, quality, wind)
     for i in range(m.live_teams.shape[0]):
         team_frame_end(m, ps, prm, ts, cs, tt, h, fi, m.live_teams[i], quality, lines, triangles)
     _frame_close(tt, h, fi)
@@ -309,7 +316,7 @@ def simulate_frame(tables, fi, angle, bending, point_collision, edge_collision, 
 
 @kernel(parallel=True)
 def simulate_frame_parallel(tables, fi, wt, angle, bending, point_collision, edge_collision, motion, quality, lines,
-                            triangles):
+                            triangles, wind):
     """``simulate_frame`` with the teams dealt to ``fi.threads`` threads (opt-in:
     ``ClothSystem(parallel=True)``). ``assign_workers`` deals the teams each frame (greedy,
     largest first); each thread runs its teams' begin and steps in one parallel region and
@@ -326,7 +333,7 @@ def simulate_frame_parallel(tables, fi, wt, angle, bending, point_collision, edg
             t = m.live_teams[i]
             if wt.team_worker[t] == w:
                 team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, t, angle, bending, point_collision,
-                                 edge_collision, motion, quality)
+                                 edge_collision, motion, quality, wind)
     for w in prange(workers):
         for i in range(m.live_teams.shape[0]):
             t = m.live_teams[i]

@@ -63,6 +63,14 @@ TEAM_PARAMETER_FIELDS = [
     ("culling_fade_ratio", "team", (), F64, ""),
     ("culling_reference", "team", (), I32, "hierarchy node or -1"),
     ("rate_mode", "team", (), I32, "0 magica, 1 frequency_consistent"),
+    # wind (§D.1 WindParams)
+    ("wind_influence", "team", (), F64, "[0,2]; <= 1e-8: the team feels no wind"),
+    ("wind_frequency", "team", (), F64, "[0,2]; phase speed factor"),
+    ("wind_turbulence", "team", (), F64, "[0,2]; scales the zones' turbulence"),
+    ("wind_blend", "team", (), F64, "[0,1]; sine (0) to Perlin noise (1)"),
+    ("wind_synchronization", "team", (), F64, "[0,1]; 1: all root lines in phase"),
+    ("wind_depth_weight", "team", (), F64, "[0,1]; lerp(1, depth^2, depth_weight)"),
+    ("wind_moving_wind", "team", (), F64, "[0,10]; wind from the team's own movement"),
     # quality mode (docs/quality-mode.md); all zero in faithful mode
     ("quality", "team", (), U8, "1: solver.mode quality (implies rate_mode 1)"),
     ("time_based_smoothing", "team", (), U8, "1: smoothing and display converted by the frame time"),
@@ -179,6 +187,8 @@ def write_row(table, team: int, parameters, collision_mode: str | None = None,
     ref = g("culling.distance_culling_reference")
     table.culling_reference[t] = -1 if ref is None else (ref if isinstance(ref, int) else resolve(ref))
     table.rate_mode[t] = _enum(g("solver.rate_mode"), RATE_MODES, "solver.rate_mode")
+    for name in ("influence", "frequency", "turbulence", "blend", "synchronization", "depth_weight", "moving_wind"):
+        getattr(table, "wind_" + name)[t] = float(g("wind." + name))
     _write_quality(table, t, g)
     table.damping_curve[t] = curve_table(g("damping")) * 0.2
     table.radius_curve[t] = curve_table(g("radius"))

@@ -17,6 +17,7 @@ from magica_py.solver.fields import F64, I32, U8, allocate, grow, make_soa, rese
 
 V3 = (3,)
 Q4 = (4,)
+WIND_SLOTS = (4,)   # one area (or global) zone and up to three additive zones (§C, TeamWindData)
 
 PARTICLE_FIELDS = [
     # animated pose (C.1 writes position/rotation each frame; E.1 overwrites position with the display)
@@ -118,6 +119,7 @@ TEAM_FIELDS = [
     ("frame_shift_vector", "team", V3, F64, "m; rigid shift of this frame (C.4)"),
     ("frame_shift_rotation", "team", Q4, F64, ""),
     ("frame_moving_speed", "team", (), F64, "m/s (C.4 wind bookkeeping)"),
+    ("frame_moving_direction", "team", V3, F64, "unit or 0; direction of frame_moving_speed (C.4)"),
     # anchor (C.4.1)
     ("anchor_pos", "team", V3, F64, "m; anchor pose of this frame"),
     ("anchor_rot", "team", Q4, F64, ""),
@@ -127,6 +129,17 @@ TEAM_FIELDS = [
     # external force (D.1), applied on every step of the next frame that runs
     ("external_force", "team", V3, F64, "m/s^2 impact force direction * speed"),
     ("external_force_mode", "team", (), I32, "0 none, 1 add, 2 add w/o depth, 3 change, 4 change w/o depth"),
+    # wind (§C team selection, §D.1; magica_py/wind): the zones a team feels this frame, written
+    # once per frame by wind.selection.select_team_wind, phases advanced per step by wind_team
+    ("wind_zone_count", "team", (), I32, "zones felt this frame (<= WIND_SLOTS: one area zone + 3 additive)"),
+    ("wind_zone_id", "team", WIND_SLOTS, I32, "scene wind zone index of each slot, -1 unused"),
+    ("wind_zone_time", "team", WIND_SLOTS, F64, "phase time of each slot (starts at -10000, +freq*dt per step)"),
+    ("wind_zone_main", "team", WIND_SLOTS, F64, "m/s; main speed (radial: attenuated at the team center)"),
+    ("wind_zone_direction", "team", WIND_SLOTS + V3, F64, "unit world direction of each slot"),
+    ("wind_zone_turbulence", "team", WIND_SLOTS, F64, "the zone's turbulence [0,1]"),
+    ("moving_wind_main", "team", (), F64, "m/s; wind from the team's own movement at this step (0: none)"),
+    ("moving_wind_time", "team", (), F64, "phase time of the moving wind"),
+    ("wind_felt", "team", V3, F64, "m/s^2; mean wind acceleration over the Move particles at the last step"),
 ]
 TeamState = make_soa("TeamState", TEAM_FIELDS)
 
@@ -170,7 +183,7 @@ ColliderState = make_soa("ColliderState", COLLIDER_FIELDS)
 TEAM_FILL = {"reset": 1, "time_reset": 1, "scale_ratio": 1.0, "gravity_ratio": 1.0,
              "gravity_dot": 1.0, "distance_weight": 1.0, "component_scale_ratio": 1.0,
              "component_scale": 1.0, "old_component_scale": 1.0,
-             "frame_world_scale": 1.0, "old_frame_world_scale": 1.0}
+             "frame_world_scale": 1.0, "old_frame_world_scale": 1.0, "wind_zone_id": -1}
 COLLIDER_FILL = {"first_frame": 1, "frame_scale": 1.0}
 
 

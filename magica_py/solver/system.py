@@ -13,6 +13,8 @@ Runtime control (all take effect at the next frame, none resets the simulation u
   KeepTeleport when keep_pose);
 * ``set_enabled(cloth, enabled)`` (disable mode Reset: re-enabling resets), ``set_time_scale``,
   ``add_force(cloth, direction, speed, mode)``;
+* ``wind.set_zone(name, enabled=None, main=None)`` (``wind``: the scene's ``wind.zones.WindField``,
+  None without wind zones) — also the ``("wind", {zone, enabled, main})`` event raised by animation;
 * ``add_cloth(spec) -> team id`` / ``remove_cloth(team)`` — teams at runtime:
   chunks of the global SoA are allocated from freed space first and freed on removal
   (``layout.SolverLayout``); other teams' rows never move or change; the frame kernel visits
@@ -70,8 +72,11 @@ class ClothSystem:
     name = "cloth"
 
     def __init__(self, hierarchy, cloth_specs, colliders=None, settings=None, models=None,
-                 parallel: bool = False):
+                 parallel: bool = False, wind=()):
         from magica_py.build import build_cloth
+        from magica_py.wind.zones import WindField
+
+        self.wind = WindField(wind) if len(wind) else None   # the scene's wind zones (magica_py/wind)
 
         self.hierarchy = hierarchy
         self.specs = list(cloth_specs)
@@ -234,7 +239,8 @@ class ClothSystem:
             motion=any_of((prm.use_max_distance != 0) | (prm.use_backstop != 0)),
             quality=any_of((prm.quality != 0) | (prm.inextensibility != 0) | (prm.collision_last != 0)),
             lines=any_of(m.team_has_lines != 0),
-            triangles=any_of(m.team_triangle_count > 0))
+            triangles=any_of(m.team_triangle_count > 0),
+            wind=1 if self.wind is not None else any_of(prm.wind_moving_wind > 0.01))
 
     def _tables_changed(self) -> None:
         """After add/remove: new model, new kernel tables (same types: the compiled entry point
@@ -268,6 +274,8 @@ class ClothSystem:
         for kind, payload in list(ctx.events):
             if kind == "set_parameter":
                 self.set_parameter(payload["cloth"], payload["key"], payload["value"])
+            elif kind == "wind" and self.wind is not None:
+                self.wind.apply_event(payload)
         t = ctx.time
         counters = getattr(ctx, "counters", None)
         fixed_count = counters.fixed_update_count if counters is not None else t.fixed_update_count
@@ -287,6 +295,7 @@ class ClothSystem:
         clock = _time.perf_counter
         self.hierarchy.flush()   # the kernel reads the world poses through kept references
         t0 = clock()
+        self.select_wind()
         self._call_frame(fi)
         t1 = clock()
         if self._written_plan.threads != self.hierarchy.threads:
@@ -383,6 +392,7 @@ class ClothSystem:
             "frame_count": self.frame_count,
             "team_parameters": list(self.team_parameters),
             "collision_modes": list(self.collision_modes),
+            "wind": self.wind.capture_state() if self.wind is not None else None,
         }
 
     def restore_state(self, state: dict) -> None:
@@ -401,6 +411,8 @@ class ClothSystem:
         self.frame_count = state["frame_count"]
         self.team_parameters = list(state["team_parameters"])
         self.collision_modes = list(state["collision_modes"])
+        if self.wind is not None and state.get("wind") is not None:
+            self.wind.restore_state(state["wind"])
         self.stages = self.stage_switches()
 
     def _state_tables(self) -> dict:
@@ -432,6 +444,13 @@ class ClothSystem:
             self._tables = kernel_tables(self.model, self.particles, self.parameters, self.teams,
                                          self.collider_state, self._time, self._hierarchy)
         return self._tables
+
+    def select_wind(self) -> None:
+        """The wind zones' poses and the zones each team feels from this frame's transforms
+        (``wind.zones.WindField.update``; nothing without wind zones). ``step_frame`` calls it
+        before the frame kernel."""
+        if self.wind is not None:
+            self.wind.update(self._kernel_tables()[0])
 
     def _call_frame(self, fi) -> None:
         """One numba call per frame: the serial or the parallel kernel, with the stage switches."""
