@@ -3,6 +3,9 @@ on random hierarchies, over node subsets and threads, and inside the player's fr
 from __future__ import annotations
 
 import math
+import os
+import platform
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -190,15 +193,15 @@ def test_a_plan_is_reused_frame_after_frame_without_allocating_new_arrays():
     rng = np.random.default_rng(9)
     h = random_forest(rng, 400, 8)
     plan = h.plan(np.arange(0, 400, 37))
-    scratch = (plan.lane_input, plan.lane_output)
+    scratch = plan.scratch
     for _ in range(3):
         perturb(rng, h, plan.nodes)
         h.propagate(plan)
         assert_same_bits(world_state(h), reference_propagate(h))
-    assert (plan.lane_input, plan.lane_output) == scratch
+    assert plan.scratch is scratch
 
 
-@pytest.mark.parametrize("threads,width", [(1, 50), (2, 50), (4, 50), (2, SEGMENT_WIDTH), (1, 3000)])
+@pytest.mark.parametrize("threads,width", [(1, 50), (2, 50), (4, 50), (2, SEGMENT_WIDTH), (1, SEGMENT_WIDTH)])
 def test_plan_levels_and_chunks_are_independent(threads, width):
     rng = np.random.default_rng(3)
     h = random_forest(rng, 2000, 30)
@@ -237,8 +240,9 @@ def test_closure_of_no_nodes_is_empty_and_a_bad_index_is_named():
         h.plan([3, 50])
     with pytest.raises(ValueError, match="threads"):
         h.threads = 0
-    with pytest.raises(ValueError, match="width >= 1"):
-        build_plan(h.parent, None, 1, 0)
+    for width in (0, SEGMENT_WIDTH + 1):      # the scratch rows are SEGMENT_WIDTH lanes long
+        with pytest.raises(ValueError, match=f"1 <= width <= {SEGMENT_WIDTH}, got 1, {width}"):
+            build_plan(h.parent, None, 1, width)
 
 
 # ----------------------------------------------------------------------------- inside the frame
@@ -368,3 +372,128 @@ def test_small_and_lane_paths_give_the_same_reference_bits(small_plan, monkeypat
     perturb(rng, h, np.arange(300))
     h.propagate()
     assert_same_bits(world_state(h), reference_propagate(h))
+
+
+# ----------------------------------------------------------------------------- deferred propagation
+def _count_runs(monkeypatch, plan):
+    """Record how often ``plan`` runs its pass (``plan.execute``)."""
+    runs = []
+    original = plan.execute
+    monkeypatch.setattr(plan, "execute", lambda *a: (runs.append(1), original(*a)))
+    return runs
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_deferred_plan_runs_when_a_world_array_is_read_with_the_reference_bits(seed, monkeypatch):
+    rng = np.random.default_rng(seed)
+    h = random_forest(rng, 600, 9)
+    moved = rng.choice(h.count, 12, replace=False)
+    plan = h.plan(moved)
+    runs = _count_runs(monkeypatch, plan)
+    perturb(rng, h, plan.nodes)
+    h.propagate_later(plan)
+    assert h.deferred and runs == []                   # nothing computed yet
+    for name in ("world_position", "world_rotation", "lossy_scale", "local_to_world"):
+        h.propagate_later(plan)
+        getattr(h, name)                               # any derived array brings it up to date
+        assert not h.deferred
+    assert len(runs) == 4
+    assert_same_bits(world_state(h), reference_propagate(h))
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_a_propagation_covering_the_deferred_nodes_skips_their_stale_pass(seed, monkeypatch):
+    """The cloth defers its written bones; next frame RESTORE rewrites their local poses and
+    UPDATE's plan (a superset) recomputes them: the deferred pass is never run, same bits."""
+    rng = np.random.default_rng(seed)
+    h = random_forest(rng, 800, 12)
+    inner = h.plan(rng.choice(h.count, 10, replace=False))
+    outer = h.plan(np.concatenate([inner.nodes, rng.choice(h.count, 10, replace=False)]))
+    assert outer.covers(inner)
+    runs = _count_runs(monkeypatch, inner)
+    perturb(rng, h, inner.nodes)
+    h.propagate_later(inner)
+    perturb(rng, h, outer.nodes)                       # later writes, before anyone read
+    h.propagate(outer)
+    assert runs == [] and not h.deferred
+    assert_same_bits(world_state(h), reference_propagate(h))
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_a_propagation_not_covering_the_deferred_nodes_runs_them_first(seed):
+    rng = np.random.default_rng(seed)
+    h = random_forest(rng, 500, 20)
+    trees = np.flatnonzero(h.parent < 0)
+    first, second = h.plan(trees[:3]), h.plan(trees[3:6])   # disjoint subtrees
+    assert not first.covers(second) and not second.covers(first)
+    perturb(rng, h, first.nodes)
+    h.propagate_later(first)
+    perturb(rng, h, second.nodes)
+    h.propagate_later(second)                          # runs ``first`` now, defers ``second``
+    assert h.deferred
+    perturb(rng, h, first.nodes[:1])
+    h.propagate(first)                                 # runs ``second`` first, then ``first``
+    assert not h.deferred
+    assert_same_bits(world_state(h), reference_propagate(h))
+
+
+def test_in_the_player_an_unread_deferred_write_back_is_covered_by_the_next_update(monkeypatch):
+    """The cloth's pattern: write the restored bones back in LATE_UPDATE and defer their
+    propagation. Nothing reads them, so the deferred pass never runs (the next UPDATE plan
+    covers them) and UPDATE still sees the reference bits; the first read runs it once."""
+    h = character()
+    player, seen = frame_player(h, [{"target": "root", "orbit": {"radius": 0.5, "period": 2.0}}],
+                                restored=["head", "leg"])
+    written = h.plan([h.index("head"), h.index("leg")])
+    runs = _count_runs(monkeypatch, written)
+
+    def write_back(ctx):
+        h.local_rotation[h.index("head")] = (0.3, 0.0, 0.1 * ctx.frame, 1.0)
+        h.local_rotation[h.index("leg")] = (0.0, 0.0, 0.4, 1.0)
+        h.propagate_later(written)
+
+    player.schedule.add(Phase.LATE_UPDATE, System("cloth", write_back))
+    run_and_compare(player, seen)
+    assert runs == [] and h.deferred
+    expected = reference_propagate(h)                  # from the written-back local poses
+    assert_same_bits(world_state(h), expected)         # the read runs the deferred pass
+    assert len(runs) == 1 and not h.deferred
+
+
+def test_a_snapshot_taken_while_deferred_saves_the_up_to_date_world_poses():
+    from magica_py.runtime.snapshot import capture, restore
+
+    rng = np.random.default_rng(7)
+    h = random_forest(rng, 300, 4)
+    scene = SimpleNamespace(hierarchy=h)
+    player = Player(scene, default_schedule(scene), FixedFrameRate(30), TimeManager())
+    plan = h.plan(rng.choice(h.count, 5, replace=False))
+    perturb(rng, h, plan.nodes)
+    h.propagate_later(plan)
+    snap = capture(player)
+    expected = reference_propagate(h)
+    perturb(rng, h, plan.nodes)
+    h.propagate_later(plan)                            # stale again when restored
+    restore(player, snap)
+    assert not h.deferred                              # the restored arrays agree already
+    assert_same_bits(world_state(h), expected)
+
+
+# ----------------------------------------------------------------------------- vectorisation
+@pytest.mark.skipif(os.environ.get("NUMBA_DISABLE_JIT") == "1", reason="no machine code")
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86 assembly")
+def test_the_lane_loop_compiles_to_packed_double_arithmetic():
+    """``compose_lanes`` is the propagation's hot loop: it vectorises only while its maths is
+    inlined and LLVM can group its rows (once lost silently when process-wide LLVM options
+    went away: the plans fell back to the speed of the plain pass). Compiled afresh (cached
+    code cannot be inspected), its assembly must multiply packed doubles."""
+    import numba
+
+    from magica_py.scene import propagation
+
+    fresh = numba.njit(cache=False, error_model="numpy")(propagation.compose_lanes.py_func)
+    rows = np.zeros((propagation.OUTPUT_ROW + propagation.LANE_OUTPUT) * propagation.LANE_STRIDE)
+    s = propagation.LANE_STRIDE
+    fresh(4, rows[:10 * s], rows[10 * s:26 * s], rows[26 * s:])
+    asm = "\n".join(fresh.inspect_asm().values())
+    assert re.search(r"\bv?mulpd\b", asm), "compose_lanes no longer vectorises"

@@ -127,6 +127,8 @@ def capture(player) -> Snapshot:
     }
     hierarchy = getattr(scene, "hierarchy", None)
     if hierarchy is not None:
+        if hasattr(hierarchy, "flush"):
+            hierarchy.flush()          # a deferred propagation first: the saved poses agree
         parts["hierarchy"] = array_state(hierarchy)
     animation = getattr(scene, "animation", None)
     if animation is not None:
@@ -179,6 +181,8 @@ def restore(player, snapshot: Snapshot, keep_model: bool = False) -> None:
         h = scene.hierarchy
         restore_arrays("hierarchy", {n: v for n, v in vars(h).items() if isinstance(v, np.ndarray)},
                        snapshot.parts["hierarchy"])
+        if hasattr(h, "discard_deferred"):
+            h.discard_deferred()       # the restored world poses are those of the saved locals
     if "animation" in snapshot.parts:
         saved = snapshot.parts["animation"]
         restore_arrays("animation", {n: getattr(scene.animation, n) for n in saved["arrays"]}, saved["arrays"])

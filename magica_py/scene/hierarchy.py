@@ -10,7 +10,19 @@ Nodes are stored parents-before-children, so one forward pass (``propagate_world
 kernel) updates every world pose. Per frame, ``propagate(plan)`` runs a precomputed
 ``scene.propagation.PropagationPlan``: only the subtrees of the nodes that move, by depth
 level with the nodes of a level computed side by side, over ``threads`` threads, with the
-same bits as the forward pass. Arrays (n = ``count``):
+same bits as the forward pass.
+
+**Deferred propagation.** ``propagate_later(plan)`` marks the plan's nodes stale instead of
+computing them, as Unity does with the transforms a job writes: their world pose is computed
+when something next asks for it. Reading any of the four derived arrays below (the
+attribute access), ``flush()`` or the next ``propagate`` runs the stale plan first, unless
+that propagation covers every stale node anyway (then the stale pass is skipped: it would be
+overwritten from the same local poses). The cloth system defers the propagation of the
+bones it writes back: when nothing reads them before the next frame's RESTORE and UPDATE
+(no sink), that pass is never run; a sink, a test or a snapshot reading the world pose gets
+exactly the bits an immediate propagation would have given. Code that keeps references to
+the derived arrays across frames (the cloth system's kernel tables) must call ``flush()``
+before reading them. Arrays (n = ``count``):
 
 ==================  ===========  ======  ================================================
 field               shape        units   written by
@@ -20,10 +32,10 @@ local_position      (n, 3)       m       animation drivers (UPDATE), restore (RE
                                          cloth write-back (LATE_UPDATE)
 local_rotation      (n, 4)       xyzw    same as local_position
 local_scale         (n, 3)       1       animation drivers
-world_position      (n, 3)       m       ``propagate`` (derived)
-world_rotation      (n, 4)       xyzw    ``propagate`` (derived)
-lossy_scale         (n, 3)       1       ``propagate`` (derived)
-local_to_world      (n, 4, 4)    m       ``propagate`` (derived)
+world_position      (n, 3)       m       ``propagate`` (derived; reading flushes)
+world_rotation      (n, 4)       xyzw    ``propagate`` (derived; reading flushes)
+lossy_scale         (n, 3)       1       ``propagate`` (derived; reading flushes)
+local_to_world      (n, 4, 4)    m       ``propagate`` (derived; reading flushes)
 rest_local_*        like local   -       ``capture_rest_pose`` (build time)
 ==================  ===========  ======  ================================================
 """
@@ -107,6 +119,25 @@ class HierarchyError(ValueError):
     """A hierarchy that cannot be built (duplicate name, missing parent, cycle)."""
 
 
+class _DerivedArray:
+    """A derived pose array of ``TransformHierarchy`` (stored as ``_<name>``): reading the
+    attribute runs a deferred propagation first, so a reader never sees a stale pose."""
+
+    def __set_name__(self, owner, name):
+        self.storage = "_" + name
+
+    def __get__(self, hierarchy, owner=None):
+        if hierarchy is None:
+            return self
+        if hierarchy._stale is not None:
+            hierarchy.flush()
+        return getattr(hierarchy, self.storage)
+
+    def __set__(self, hierarchy, value):
+        raise AttributeError(f"TransformHierarchy.{self.storage[1:]} is derived by propagation; "
+                             "write into the array in place")
+
+
 class TransformHierarchy:
     """All transforms of a scene in one structure-of-arrays (see the module docstring)."""
 
@@ -133,10 +164,12 @@ class TransformHierarchy:
             self.local_rotation[new] = q / norm
             self.local_scale[new] = b.scale
             self.tags.append(dict(b.tags))
-        self.world_position = np.zeros((n, 3))
-        self.world_rotation = np.zeros((n, 4))
-        self.lossy_scale = np.ones((n, 3))
-        self.local_to_world = np.zeros((n, 4, 4))
+        # the derived arrays, behind the flushing properties below
+        self._world_position = np.zeros((n, 3))
+        self._world_rotation = np.zeros((n, 4))
+        self._lossy_scale = np.ones((n, 3))
+        self._local_to_world = np.zeros((n, 4, 4))
+        self._stale: PropagationPlan | None = None   # deferred plan (``propagate_later``)
         self.children: list[list[int]] = [[] for _ in range(n)]
         for i in range(n):  # sibling order = order of appearance in the bone list
             if self.parent[i] >= 0:
@@ -145,10 +178,19 @@ class TransformHierarchy:
         self._full_plan: PropagationPlan | None = None
         # the first pass also writes the constant bottom row of every matrix, which the
         # propagation plans leave alone
-        propagate_world(self.parent, self.local_position, self.local_rotation, self.local_scale,
-                        self.world_position, self.world_rotation, self.lossy_scale,
-                        self.local_to_world)
+        propagate_world(*self._pose_arrays())
         self.capture_rest_pose()
+
+    # -- derived arrays: reading one runs a deferred propagation first (``_DerivedArray``)
+    world_position = _DerivedArray()
+    world_rotation = _DerivedArray()
+    lossy_scale = _DerivedArray()
+    local_to_world = _DerivedArray()
+
+    def _pose_arrays(self) -> tuple:
+        return (self.parent, self.local_position, self.local_rotation, self.local_scale,
+                self._world_position, self._world_rotation, self._lossy_scale,
+                self._local_to_world)
 
     # -- queries
     def index(self, name: str) -> int:
@@ -195,8 +237,43 @@ class TransformHierarchy:
     def propagate(self, plan: PropagationPlan | None = None) -> None:
         """Recompute world poses from the local poses: every node (``plan=None``), or the nodes
         of ``plan`` (``plan(nodes)``: the subtrees of nodes whose local pose changed). Either
-        way one numba call, the same bits as a full pass over the nodes it covers."""
-        (plan if plan is not None else self.plan()).run(self)
+        way one numba call, the same bits as a full pass over the nodes it covers. A deferred
+        plan runs first unless ``plan`` covers all of its nodes."""
+        plan = plan if plan is not None else self.plan()
+        stale = self._stale
+        if stale is not None:
+            self._stale = None
+            if not plan.covers(stale):
+                stale.execute(*self._pose_arrays())
+        plan.execute(*self._pose_arrays())
+
+    def propagate_later(self, plan: PropagationPlan) -> None:
+        """Mark the nodes of ``plan`` stale: their world poses are computed at the next read of
+        a derived array, ``flush()`` or ``propagate`` (module docstring). Deferring a second
+        plan that neither covers nor is covered by the stale one runs the stale one now."""
+        stale = self._stale
+        if stale is None or plan.covers(stale):
+            self._stale = plan
+        elif not stale.covers(plan):
+            self.flush()
+            self._stale = plan
+
+    def flush(self) -> None:
+        """Run the deferred propagation now (nothing when none is pending)."""
+        stale = self._stale
+        if stale is not None:
+            self._stale = None
+            stale.execute(*self._pose_arrays())
+
+    @property
+    def deferred(self) -> bool:
+        """True while a deferred propagation is pending (world poses of its nodes are stale)."""
+        return self._stale is not None
+
+    def discard_deferred(self) -> None:
+        """Forget a pending deferred propagation: for callers that have just written every
+        derived array themselves (a snapshot restore)."""
+        self._stale = None
 
     def capture_rest_pose(self) -> None:
         """Remember the current local pose as the rest (build-time) pose restored each frame."""

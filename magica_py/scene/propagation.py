@@ -24,8 +24,8 @@ are the same bits; only the order of independent nodes changes:
 The plan never writes the constant bottom row ``(0, 0, 0, 1)`` of ``local_to_world``: the
 hierarchy's constructor writes it with its first full pass and nothing else changes it.
 
-Arrays of a plan (k nodes in the plan, r of them hierarchy roots, s segments, c chunks, W
-lanes per segment plus padding, L output slots):
+Arrays of a plan (k nodes in the plan, r of them hierarchy roots, s segments, c chunks, L
+output slots, R = 26 + 19 L scratch rows):
 
 ====================  ===================  ==============================================
 field                 shape                meaning
@@ -37,12 +37,14 @@ segment_start         (s + 1,) int64       segment g: order[segment_start[g]:seg
 chunk_segments        (c + 1,) int64       chunk j's segments
 segment_slot          (s,) int32           output slot segment g writes
 parent_slot           (s,) int32           slot holding g's parents lane for lane, or -1
-lane_input            (c, 10, W)           scratch: local pose rows, one column per lane
-lane_parent           (c, 16, W)           scratch: gathered parent rows (output layout)
-lane_output           (c, L, 19, W)        scratch: result rows per slot
+scratch               (c, R * S) float64   per chunk, rows of S = ``LANE_STRIDE`` lanes: 10
+                                           input rows (local pose), 16 gathered parent rows
+                                           (output layout), then L slots of 19 output rows
 ====================  ===================  ==============================================
 """
 from __future__ import annotations
+
+import weakref
 
 import numpy as np
 from numba import prange
@@ -62,12 +64,17 @@ SMALL_PLAN = 256
 # scratch rows are padded so that rows do not sit a multiple of 4 KiB apart (cache set
 # conflicts between the row streams of a segment)
 _ROW_PAD = 8
-# lane_input rows: local position 0-2, local rotation 3-6, local scale 7-9
+# distance between two scratch rows (doubles): a compile-time constant, so that LLVM sees the
+# rows of a segment as one group of fixed offsets (see ``compose_lanes``)
+LANE_STRIDE = SEGMENT_WIDTH + _ROW_PAD
+# input rows: local position 0-2, local rotation 3-6, local scale 7-9
 LANE_INPUT = 10
-# lane_output rows: local_to_world rows 0-2 at 0-3, 4-7, 8-11, world rotation 12-15,
-# lossy scale 16-18; lane_parent: the parents' rows 0-15 in the same layout
+# output rows: local_to_world rows 0-2 at 0-3, 4-7, 8-11, world rotation 12-15, lossy scale
+# 16-18; gathered parent rows: the parents' rows 0-15 in the same layout
 LANE_OUTPUT = 19
 LANE_PARENT = 16
+# first output row of a chunk's scratch (after the input and the gathered parent rows)
+OUTPUT_ROW = LANE_INPUT + LANE_PARENT
 
 
 # ----------------------------------------------------------------------------- per node
@@ -120,32 +127,49 @@ def propagate_node(i, parent, local_position, local_rotation, local_scale,
 
 
 # ----------------------------------------------------------------------------- lanes
+def _inlined(fn):
+    """``fn`` (a math3d kernel) compiled again with numba's ``inline="always"``: the lane loop
+    needs its per-lane maths in its own body to vectorise (a call in the loop body stops
+    LLVM's vectoriser). The same Python source, so the same arithmetic and bits."""
+    return kernel(getattr(fn, "py_func", fn), inline="always")
+
+
+_normalize = _inlined(q_normalize)
+_to_matrix = _inlined(q_to_matrix)
+_mul = _inlined(q_mul)
+_inverse = _inlined(q_inverse)
+_rotate = _inlined(q_rotate)
+
+
 @kernel
-def gather_local(order, k0, k1, local_position, local_rotation, local_scale, lane_input):
-    """Local poses of nodes order[k0:k1] into the scratch rows, lane j = node order[k0 + j]."""
+def gather_local(order, k0, k1, local_position, local_rotation, local_scale, inputs):
+    """Local poses of nodes order[k0:k1] into the input rows (row r of lane j at
+    ``r * LANE_STRIDE + j``). Unsigned indices: no wraparound selects."""
     for j in range(k1 - k0):
-        i = order[k0 + j]
+        i = np.uint64(order[k0 + j])
+        o = np.uint64(j)
         for c in range(3):
-            lane_input[c, j] = local_position[i, c]
-            lane_input[7 + c, j] = local_scale[i, c]
+            inputs[o + np.uint64(c * LANE_STRIDE)] = local_position[i, np.uint64(c)]
+            inputs[o + np.uint64((7 + c) * LANE_STRIDE)] = local_scale[i, np.uint64(c)]
         for c in range(4):
-            lane_input[3 + c, j] = local_rotation[i, c]
+            inputs[o + np.uint64((3 + c) * LANE_STRIDE)] = local_rotation[i, np.uint64(c)]
 
 
 @kernel
-def gather_parents(order, k0, k1, parent, world_rotation, local_to_world, lane_parent):
+def gather_parents(order, k0, k1, parent, world_rotation, local_to_world, parents):
     """The parents' matrix rows and world rotations of nodes order[k0:k1], in the row layout of
-    ``lane_output`` (so that an aligned segment reads its parents' output rows instead)."""
+    the output rows (so that an aligned segment reads its parents' output rows instead)."""
     for j in range(k1 - k0):
         p = parent[order[k0 + j]]
+        o = np.uint64(j)
         for row in range(3):
             for c in range(4):
-                lane_parent[4 * row + c, j] = local_to_world[p, row, c]
+                parents[o + np.uint64((4 * row + c) * LANE_STRIDE)] = local_to_world[p, row, c]
         for c in range(4):
-            lane_parent[12 + c, j] = world_rotation[p, c]
+            parents[o + np.uint64((12 + c) * LANE_STRIDE)] = world_rotation[p, c]
 
 
-@kernel
+@kernel(inline="always")
 def _matrix_row(a0, a1, a2, a3, r0, r1, r2, ls, lp):
     """One row of ``parent_l2w @ TRS(local)``: ``propagate_node``'s expression, element by element."""
     return ((a0 * r0[0] + a1 * r1[0] + a2 * r2[0]) * ls[0],
@@ -154,103 +178,125 @@ def _matrix_row(a0, a1, a2, a3, r0, r1, r2, ls, lp):
             a0 * lp[0] + a1 * lp[1] + a2 * lp[2] + a3)
 
 
+@kernel(inline="always")
+def _row(rows, row, u):
+    """Lane u of row ``row`` of a block of scratch rows (rows ``LANE_STRIDE`` apart)."""
+    return rows[np.uint64(row * LANE_STRIDE) + u]
+
+
 @kernel
-def compose_lanes(lanes, lane_input, lane_parent, lane_output):
-    """``propagate_node``'s arithmetic for a node with a parent, on ``lanes`` scratch columns.
-    Reads only ``lane_input`` and ``lane_parent`` and writes only ``lane_output`` (values kept
-    in registers in between), so the loop vectorises across lanes."""
-    for j in range(lanes):
-        lp = (lane_input[0, j], lane_input[1, j], lane_input[2, j])
-        lr = q_normalize((lane_input[3, j], lane_input[4, j], lane_input[5, j], lane_input[6, j]))
-        ls = (lane_input[7, j], lane_input[8, j], lane_input[9, j])
-        r0, r1, r2 = q_to_matrix(lr)
-        m0 = _matrix_row(lane_parent[0, j], lane_parent[1, j], lane_parent[2, j], lane_parent[3, j],
-                         r0, r1, r2, ls, lp)
-        m1 = _matrix_row(lane_parent[4, j], lane_parent[5, j], lane_parent[6, j], lane_parent[7, j],
-                         r0, r1, r2, ls, lp)
-        m2 = _matrix_row(lane_parent[8, j], lane_parent[9, j], lane_parent[10, j], lane_parent[11, j],
-                         r0, r1, r2, ls, lp)
-        wr = q_normalize(q_mul((lane_parent[12, j], lane_parent[13, j], lane_parent[14, j],
-                                lane_parent[15, j]), lr))
-        inverse = q_inverse(wr)
-        s0 = q_rotate(inverse, (m0[0], m1[0], m2[0]))[0]
-        s1 = q_rotate(inverse, (m0[1], m1[1], m2[1]))[1]
-        s2 = q_rotate(inverse, (m0[2], m1[2], m2[2]))[2]
+def compose_lanes(count, inputs, parents, outputs):
+    """``propagate_node``'s arithmetic for ``count`` nodes with a parent, lane by lane: reads the
+    input rows ``inputs`` and the parent rows ``parents``, writes the output rows ``outputs``
+    (three row blocks of one chunk's scratch, rows ``LANE_STRIDE`` apart). The row distance
+    is a compile-time constant and the per-lane maths is inlined, so LLVM sees three groups
+    of fixed-offset rows and vectorises the loop across lanes behind two overlap checks."""
+    for j in range(count):
+        u = np.uint64(j)
+        lp = (_row(inputs, 0, u), _row(inputs, 1, u), _row(inputs, 2, u))
+        lr = _normalize((_row(inputs, 3, u), _row(inputs, 4, u), _row(inputs, 5, u),
+                         _row(inputs, 6, u)))
+        ls = (_row(inputs, 7, u), _row(inputs, 8, u), _row(inputs, 9, u))
+        r0, r1, r2 = _to_matrix(lr)
+        m0 = _matrix_row(_row(parents, 0, u), _row(parents, 1, u), _row(parents, 2, u),
+                         _row(parents, 3, u), r0, r1, r2, ls, lp)
+        m1 = _matrix_row(_row(parents, 4, u), _row(parents, 5, u), _row(parents, 6, u),
+                         _row(parents, 7, u), r0, r1, r2, ls, lp)
+        m2 = _matrix_row(_row(parents, 8, u), _row(parents, 9, u), _row(parents, 10, u),
+                         _row(parents, 11, u), r0, r1, r2, ls, lp)
+        wr = _normalize(_mul((_row(parents, 12, u), _row(parents, 13, u), _row(parents, 14, u),
+                              _row(parents, 15, u)), lr))
+        inverse = _inverse(wr)
+        s0 = _rotate(inverse, (m0[0], m1[0], m2[0]))[0]
+        s1 = _rotate(inverse, (m0[1], m1[1], m2[1]))[1]
+        s2 = _rotate(inverse, (m0[2], m1[2], m2[2]))[2]
         for c in range(4):
-            lane_output[c, j] = m0[c]
-            lane_output[4 + c, j] = m1[c]
-            lane_output[8 + c, j] = m2[c]
-            lane_output[12 + c, j] = wr[c]
-        lane_output[16, j] = s0
-        lane_output[17, j] = s1
-        lane_output[18, j] = s2
+            outputs[np.uint64(c * LANE_STRIDE) + u] = m0[c]
+            outputs[np.uint64((4 + c) * LANE_STRIDE) + u] = m1[c]
+            outputs[np.uint64((8 + c) * LANE_STRIDE) + u] = m2[c]
+            outputs[np.uint64((12 + c) * LANE_STRIDE) + u] = wr[c]
+        outputs[np.uint64(16 * LANE_STRIDE) + u] = s0
+        outputs[np.uint64(17 * LANE_STRIDE) + u] = s1
+        outputs[np.uint64(18 * LANE_STRIDE) + u] = s2
 
 
 @kernel
 def scatter_lanes(order, k0, k1, world_position, world_rotation, lossy_scale, local_to_world,
-                  lane_output):
-    """Results of lanes 0..k1-k0 to nodes order[k0:k1] (the bottom matrix row is constant)."""
+                  outputs):
+    """Results of lanes 0..k1-k0 (the output rows) to nodes order[k0:k1] (the bottom matrix
+    row is constant)."""
     for j in range(k1 - k0):
-        i = order[k0 + j]
+        i = np.uint64(order[k0 + j])
+        o = np.uint64(j)
         for row in range(3):
+            r = np.uint64(row)
             for c in range(4):
-                local_to_world[i, row, c] = lane_output[4 * row + c, j]
-            world_position[i, row] = lane_output[4 * row + 3, j]
-            lossy_scale[i, row] = lane_output[16 + row, j]
+                local_to_world[i, r, np.uint64(c)] = outputs[o + np.uint64((4 * row + c) * LANE_STRIDE)]
+            world_position[i, r] = outputs[o + np.uint64((4 * row + 3) * LANE_STRIDE)]
+            lossy_scale[i, r] = outputs[o + np.uint64((16 + row) * LANE_STRIDE)]
         for c in range(4):
-            world_rotation[i, c] = lane_output[12 + c, j]
+            world_rotation[i, np.uint64(c)] = outputs[o + np.uint64((12 + c) * LANE_STRIDE)]
+
+
+@kernel(inline="always")
+def _slot_rows(lanes, slot):
+    """The 19 output rows of output slot ``slot`` of a chunk's scratch (a view)."""
+    first = (OUTPUT_ROW + LANE_OUTPUT * slot) * LANE_STRIDE
+    return lanes[first:first + LANE_OUTPUT * LANE_STRIDE]
 
 
 @kernel
 def propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segments, segment_slot,
-                    parent_slot, lane_input, lane_parent, lane_output, parent, local_position,
-                    local_rotation, local_scale, world_position, world_rotation, lossy_scale,
-                    local_to_world):
+                    parent_slot, scratch, parent, local_position, local_rotation, local_scale,
+                    world_position, world_rotation, lossy_scale, local_to_world):
     """One chunk of a plan: its hierarchy roots, then its segments in order; a segment whose
     parents are lane for lane the nodes of an earlier segment (``parent_slot`` >= 0) reads
     their results from that segment's output rows."""
     for k in range(chunk_roots[chunk], chunk_roots[chunk + 1]):
         propagate_node(roots[k], parent, local_position, local_rotation, local_scale,
                        world_position, world_rotation, lossy_scale, local_to_world)
-    scratch_in = lane_input[chunk]
-    gathered = lane_parent[chunk]
+    lanes = scratch[chunk]
+    inputs = lanes[:LANE_INPUT * LANE_STRIDE]
+    gathered = lanes[LANE_INPUT * LANE_STRIDE:OUTPUT_ROW * LANE_STRIDE]
     for g in range(chunk_segments[chunk], chunk_segments[chunk + 1]):
         k0 = segment_start[g]
         k1 = segment_start[g + 1]
-        gather_local(order, k0, k1, local_position, local_rotation, local_scale, scratch_in)
-        out = lane_output[chunk, segment_slot[g]]
+        gather_local(order, k0, k1, local_position, local_rotation, local_scale, inputs)
+        outputs = _slot_rows(lanes, segment_slot[g])
         if parent_slot[g] >= 0:
-            compose_lanes(k1 - k0, scratch_in, lane_output[chunk, parent_slot[g]], out)
+            parents = _slot_rows(lanes, parent_slot[g])
         else:
             gather_parents(order, k0, k1, parent, world_rotation, local_to_world, gathered)
-            compose_lanes(k1 - k0, scratch_in, gathered, out)
-        scatter_lanes(order, k0, k1, world_position, world_rotation, lossy_scale, local_to_world, out)
+            parents = gathered
+        compose_lanes(k1 - k0, inputs, parents, outputs)
+        scatter_lanes(order, k0, k1, world_position, world_rotation, lossy_scale, local_to_world,
+                      outputs)
 
 
 @kernel
 def propagate_plan_serial(roots, chunk_roots, order, segment_start, chunk_segments, segment_slot,
-                          parent_slot, lane_input, lane_parent, lane_output, parent,
-                          local_position, local_rotation, local_scale, world_position,
-                          world_rotation, lossy_scale, local_to_world):
+                          parent_slot, scratch, parent, local_position, local_rotation,
+                          local_scale, world_position, world_rotation, lossy_scale,
+                          local_to_world):
     """Every chunk of a plan in turn (one thread)."""
     for chunk in range(chunk_roots.shape[0] - 1):
         propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segments,
-                        segment_slot, parent_slot, lane_input, lane_parent, lane_output, parent,
-                        local_position, local_rotation, local_scale, world_position,
-                        world_rotation, lossy_scale, local_to_world)
+                        segment_slot, parent_slot, scratch, parent, local_position,
+                        local_rotation, local_scale, world_position, world_rotation, lossy_scale,
+                        local_to_world)
 
 
 @kernel(parallel=True)
 def propagate_plan_parallel(roots, chunk_roots, order, segment_start, chunk_segments,
-                            segment_slot, parent_slot, lane_input, lane_parent, lane_output,
-                            parent, local_position, local_rotation, local_scale, world_position,
-                            world_rotation, lossy_scale, local_to_world):
+                            segment_slot, parent_slot, scratch, parent, local_position,
+                            local_rotation, local_scale, world_position, world_rotation,
+                            lossy_scale, local_to_world):
     """The chunks of a plan on numba's threads (chunks share no node: same bits as serial)."""
     for chunk in prange(chunk_roots.shape[0] - 1):
         propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segments,
-                        segment_slot, parent_slot, lane_input, lane_parent, lane_output, parent,
-                        local_position, local_rotation, local_scale, world_position,
-                        world_rotation, lossy_scale, local_to_world)
+                        segment_slot, parent_slot, scratch, parent, local_position,
+                        local_rotation, local_scale, world_position, world_rotation, lossy_scale,
+                        local_to_world)
 
 
 @kernel
@@ -279,11 +325,11 @@ class PropagationPlan:
         self.nodes = nodes              # (k,) int32 sorted: every node the plan updates
         self.threads = threads          # threads it was built for (``chunks`` <= threads)
         chunks = max(chunk_roots.shape[0] - 1, 1)
-        width = width + _ROW_PAD                # lanes per segment, padded
-        self.lane_input = np.zeros((chunks, LANE_INPUT, width))
-        self.lane_parent = np.zeros((chunks, LANE_PARENT, width))
-        # two levels of output slots: the level being computed and the one above it
-        self.lane_output = np.zeros((chunks, max(slots, 1), LANE_OUTPUT, width))
+        # per chunk one flat row block: input rows, gathered parent rows, then two levels of
+        # output slots (the level being computed and the one above it)
+        rows = OUTPUT_ROW + LANE_OUTPUT * max(slots, 1)
+        self.scratch = np.zeros((chunks, rows * LANE_STRIDE))
+        self._covers = weakref.WeakKeyDictionary()   # other plan -> self.covers(other)
 
     @property
     def chunks(self) -> int:
@@ -293,19 +339,33 @@ class PropagationPlan:
     def size(self) -> int:
         return int(self.nodes.shape[0])
 
+    def covers(self, other: "PropagationPlan") -> bool:
+        """True if every node of ``other`` is a node of this plan (remembered per plan)."""
+        known = self._covers.get(other)
+        if known is None:
+            known = bool(np.isin(other.nodes, self.nodes, assume_unique=True).all())
+            self._covers[other] = known
+        return known
+
     def run(self, h) -> None:
-        """Update the plan's nodes of hierarchy ``h`` (one numba call)."""
+        """Update the plan's nodes of hierarchy ``h``: ``h.propagate(self)``."""
+        h.propagate(self)
+
+    def execute(self, parent, local_position, local_rotation, local_scale, world_position,
+                world_rotation, lossy_scale, local_to_world) -> None:
+        """The plan's pass over these hierarchy arrays (one numba call); ``TransformHierarchy``
+        calls it with its own arrays."""
         if self.size == 0:
             return
         if self.size <= SMALL_PLAN:
-            propagate_listed(self.nodes, h.parent, h.local_position, h.local_rotation, h.local_scale,
-                             h.world_position, h.world_rotation, h.lossy_scale, h.local_to_world)
+            propagate_listed(self.nodes, parent, local_position, local_rotation, local_scale,
+                             world_position, world_rotation, lossy_scale, local_to_world)
             return
         fn = propagate_plan_parallel if self.chunks > 1 else propagate_plan_serial
         fn(self.roots, self.chunk_roots, self.order, self.segment_start, self.chunk_segments,
-           self.segment_slot, self.parent_slot, self.lane_input, self.lane_parent,
-           self.lane_output, h.parent, h.local_position, h.local_rotation, h.local_scale,
-           h.world_position, h.world_rotation, h.lossy_scale, h.local_to_world)
+           self.segment_slot, self.parent_slot, self.scratch, parent, local_position,
+           local_rotation, local_scale, world_position, world_rotation, lossy_scale,
+           local_to_world)
 
 
 def subtree_closure(parent: np.ndarray, nodes) -> np.ndarray:
@@ -335,8 +395,9 @@ def build_plan(parent: np.ndarray, nodes, threads: int = 1,
     """The plan that updates ``nodes`` and their descendants (``nodes=None``: every node) of a
     hierarchy with parents-before-children ``parent``, split into at most ``threads`` chunks
     and segments of at most ``width`` lanes."""
-    if int(threads) < 1 or int(width) < 1:
-        raise ValueError(f"propagation plan: expected threads >= 1 and width >= 1, got {threads}, {width}")
+    if int(threads) < 1 or not 1 <= int(width) <= SEGMENT_WIDTH:
+        raise ValueError(f"propagation plan: expected threads >= 1 and 1 <= width <= "
+                         f"{SEGMENT_WIDTH}, got {threads}, {width}")
     n = parent.shape[0]
     members = np.arange(n, dtype=np.int32) if nodes is None else subtree_closure(parent, nodes)
     in_plan = np.zeros(n, dtype=bool)

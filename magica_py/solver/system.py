@@ -294,13 +294,15 @@ class ClothSystem:
                          90.0 / s.frequency, float(power[1]), float(power[2]), float(power[3]),
                          int(numba.get_num_threads()) if self.parallel else 1)
         clock = _time.perf_counter
+        self.hierarchy.flush()   # the kernel reads the world poses through kept references
         t0 = clock()
         self.select_wind()
         self._call_frame(fi)
         t1 = clock()
         if self._written_plan.threads != self.hierarchy.threads:
             self._written_plan = self.hierarchy.plan(self.restored_bones())
-        self.hierarchy.propagate(self._written_plan)  # the subtrees of the bones written back
+        # the subtrees of the bones written back, computed when next read (scene/hierarchy.py)
+        self.hierarchy.propagate_later(self._written_plan)
         t2 = clock()
         self.frame_count += 1
         codes = self.teams.guard_code
