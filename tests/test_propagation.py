@@ -480,20 +480,34 @@ def test_a_snapshot_taken_while_deferred_saves_the_up_to_date_world_poses():
 
 
 # ----------------------------------------------------------------------------- vectorisation
-@pytest.mark.skipif(os.environ.get("NUMBA_DISABLE_JIT") == "1", reason="no machine code")
+_ASM_SNIPPET = """
+import re
+import numba
+import numpy as np
+from magica_py.scene import propagation
+
+fresh = numba.njit(cache=False, error_model="numpy")(propagation.compose_lanes.py_func)
+s = propagation.LANE_STRIDE
+rows = np.zeros((propagation.OUTPUT_ROW + propagation.LANE_OUTPUT) * s)
+fresh(4, rows[:10 * s], rows[10 * s:26 * s], rows[26 * s:])
+asm = "\\n".join(fresh.inspect_asm().values())
+print("packed" if re.search(r"\\bv?mulpd\\b", asm) else "scalar")
+"""
+
+
 @pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86 assembly")
 def test_the_lane_loop_compiles_to_packed_double_arithmetic():
     """``compose_lanes`` is the propagation's hot loop: it vectorises only while its maths is
     inlined and LLVM can group its rows (once lost silently when process-wide LLVM options
     went away: the plans fell back to the speed of the plain pass). Compiled afresh (cached
-    code cannot be inspected), its assembly must multiply packed doubles."""
-    import numba
+    code cannot be inspected) in a process of its own with the JIT on and bounds checking off
+    (as users run it; CI's NUMBA_BOUNDSCHECK=1 adds a branch per access, which stops any loop
+    from vectorising), its assembly must multiply packed doubles."""
+    import subprocess
+    import sys
 
-    from magica_py.scene import propagation
-
-    fresh = numba.njit(cache=False, error_model="numpy")(propagation.compose_lanes.py_func)
-    rows = np.zeros((propagation.OUTPUT_ROW + propagation.LANE_OUTPUT) * propagation.LANE_STRIDE)
-    s = propagation.LANE_STRIDE
-    fresh(4, rows[:10 * s], rows[10 * s:26 * s], rows[26 * s:])
-    asm = "\n".join(fresh.inspect_asm().values())
-    assert re.search(r"\bv?mulpd\b", asm), "compose_lanes no longer vectorises"
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_DISABLE_JIT", "NUMBA_BOUNDSCHECK")}
+    out = subprocess.run([sys.executable, "-c", _ASM_SNIPPET], env=env, capture_output=True, text=True,
+                         timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == "packed", "compose_lanes no longer vectorises"
