@@ -123,7 +123,7 @@ def _center(m, ps, prm, ts, cs, h, live):
 def _guards_display(m, ps, prm, ts, cs, h, live):
     for t in live:
         check_team(m, ps, ts, t)
-        display_team(m, ps, prm, ts, t, DT, 1.0, 1.0 - DT, 1.0 - DT, False)
+        display_team(m, ps, prm, ts, t, DT, 1.0, 1.0 - DT, 1.0 - DT, False, None)
 
 
 @numba.njit

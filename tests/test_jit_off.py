@@ -67,7 +67,8 @@ print(json.dumps({"positions": result.cloths["tail"].positions.tolist(), "compil
 # constraint, faithful mode) does not use: never compiled
 UNUSED_BY_TAIL_ORBIT = ("bending_team", "apply_accumulated", "point_collision_team", "edge_collision_team",
                         "motion_team", "quality_end_of_step", "build_reset_team", "display_constraints_team",
-                        "triangle_rotations_team", "wind_team")
+                        "triangle_rotations_team", "wind_team", "record_display_state_team",
+                        "display_interpolated")
 
 
 def test_tail_orbit_runs_bounds_checked_and_compiles_only_the_stages_it_uses(tmp_path):

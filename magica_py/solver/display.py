@@ -106,9 +106,10 @@ def display_interpolated(m, ps, ts, team, p, alpha):
 
 
 @kernel
-def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, running):
+def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, running, quality):
     """E.1 for one team (module docstring); quality mode's collider and edge pass follows in
-    ``quality.display_constraints_team``."""
+    ``quality.display_constraints_team``. ``quality``: the frame's quality stage switch (None:
+    no team of the scene uses quality mode, its interpolation is not compiled)."""
     # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     m_attribute, m_team_particle_count, ps_disp_pos = m.attribute, m.team_particle_count, ps.disp_pos
     blend = ts.blend_weight[team]
@@ -119,15 +120,15 @@ def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, runn
     # from the last display is a per-frame filter whose strength depends on the frame rate),
     # within the states' edge lengths (extrapolating along each particle's velocity is not)
     alpha = min(max(time - now_update_time, 0.0), dt) / dt if dt > 0.0 else 0.0
-    if time_based:
-        # the roots' poses are read below: compute every Move display first (a Move root is
-        # not a display frame, so the order does not matter here)
-        start = m.team_particle_start[team]
-        for p in range(start, start + m_team_particle_count[team]):
-            if (m_attribute[p] & MOVE) != 0:
-                store3(ps_disp_pos, p, display_interpolated(m, ps, ts, team, p, alpha))
-    # arrays as locals, flat rows, unsigned indices: through the tables the array pointers
-    # are reloaded after every store. One pass in particle order (the root read below)
+    if quality is not None:
+        if time_based:
+            # the roots' poses are read below: compute every Move display first (a Move root
+            # is not a display frame, so the order does not matter here)
+            start = m.team_particle_start[team]
+            for p in range(start, start + m_team_particle_count[team]):
+                if (m_attribute[p] & MOVE) != 0:
+                    store3(ps_disp_pos, p, display_interpolated(m, ps, ts, team, p, alpha))
+    # one pass in particle order (the root read below)
     attribute, root_index = m_attribute, m.root_index
     position, rotation, disp_pos = ps.position, ps.rotation, ps_disp_pos
     old_pos, real_velocity = ps.old_pos, ps.real_velocity

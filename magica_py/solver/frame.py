@@ -42,7 +42,7 @@ from magica_py.solver.constraints.collision import edge_collision_team, point_co
 from magica_py.solver.constraints.distance import distance_team
 from magica_py.solver.constraints.motion import motion_team
 from magica_py.solver.constraints.tether import tether_team
-from magica_py.solver.display import display_team
+from magica_py.solver.display import display_team, record_display_state_team
 from magica_py.solver.guards import check_team, reset_team_to_base
 from magica_py.solver.quality import display_constraints_team, quality_end_of_step
 from magica_py.solver.rotations import line_rotations_team, triangle_rotations_team
@@ -158,6 +158,9 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edg
         if prm.inextensibility[t] != 0 or prm.collision_last[t] != 0:  # quality mode (§D.0)
             quality_end_of_step(m, ps, prm, ts, cs, t, ratio, fi.power_y, distance_attenuation)
     end_step_team(m, ps, prm, ts, t, dt, ratio)
+    if quality is not None:
+        if prm.time_based_smoothing[t] != 0:   # quality display: keep this step's state (display.py)
+            record_display_state_team(m, ps, ts, t)
     collider_end_step_team(cs, ts, t)
 
 
@@ -254,7 +257,7 @@ def team_frame_end(m, ps, prm, ts, cs, tt, h, fi, t, quality, lines, triangles):
         if t < h.ramp_from_build.shape[0]:
             h.ramp_from_build[t] = 0
     display_team(m, ps, prm, ts, t, fi.dt, tt.time[t], tt.old_time[t], tt.now_update_time[t],
-                 tt.running[t])
+                 tt.running[t], quality)
     if quality is not None:
         if prm.time_based_smoothing[t] != 0:
             display_constraints_team(m, ps, prm, ts, cs, t, fi.dt)  # quality mode (§E.1)

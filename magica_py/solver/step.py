@@ -19,7 +19,6 @@ from magica_py.kernels.math3d import (
     q_normalize, q_rotate, q_slerp, saturate, store3, store4, v_add, v_cross,
     v_dot, v_length, v_length_sq, v_lerp, v_mul, v_normalize, v_scale, v_sub,
 )
-from magica_py.solver.display import record_display_state_team
 from magica_py.solver.parameters import curve_at_clamp01, length_unit, step_keep, step_rate
 
 MOVE = 0x02
@@ -370,7 +369,5 @@ def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
             store3(ps_velocity, p, v_scale(vel, velocity_weight))
         store3(ps_real_velocity, p, v_scale(v_sub(next_pos, old_pos), 1.0 / dt))
         store3(ps_old_pos, p, next_pos)
-    if prm.time_based_smoothing[team] != 0:   # quality display: keep this state (display.py)
-        record_display_state_team(m, ps, ts, team)
 
 
