@@ -147,7 +147,10 @@ class Schedule:
         return None
 
     def systems(self, phase: Phase) -> tuple[System, ...]:
-        return tuple(self._systems[Phase(phase)])
+        systems = self._systems.get(phase)   # a Phase member: no enum lookup (every frame)
+        if systems is None:
+            systems = self._systems[Phase(phase)]
+        return tuple(systems)
 
     def describe(self) -> list[tuple[str, list[str]]]:
         """``[(phase name, [system names in order]), ...]`` for every phase, in order."""

@@ -35,6 +35,9 @@ from magica_py.runtime.clock import FrameTimeSource, TimeManager, UnityTime, tim
 from magica_py.runtime.phases import Phase, Schedule, System
 
 PHASE_METRIC = {phase: f"time.{phase.name.lower()}" for phase in Phase}
+# the phases in frame order (iterating the enum itself costs ~2 us a frame)
+PHASE_ORDER = tuple(Phase)
+_NUMBERS = (int, float, np.integer, np.floating)   # metrics that are summed over a run
 
 
 @dataclass
@@ -161,7 +164,7 @@ class Player:
         t = self.time_manager.advance(self.time_source.next_delta())
         ctx = FrameContext(frame=self.frame, time=t, scene=self.scene, counters=self.counters)
         clock = _time.perf_counter
-        for phase in Phase:
+        for phase in PHASE_ORDER:
             start = clock()
             if phase is Phase.FIXED_UPDATE:
                 first_fixed = t.fixed_time - t.fixed_update_count * t.fixed_delta_time
@@ -180,9 +183,10 @@ class Player:
             handler = self.event_handlers.get(kind)
             if handler is not None:
                 handler(self, payload)
+        totals = self.metric_totals
         for name, value in ctx.metrics.items():
-            if isinstance(value, (int, float, np.integer, np.floating)):
-                self.metric_totals[name] = self.metric_totals.get(name, 0.0) + float(value)
+            if isinstance(value, _NUMBERS):
+                totals[name] = totals.get(name, 0.0) + float(value)
         self.frame += 1
         self.last_context = ctx
         return ctx

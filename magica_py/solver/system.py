@@ -283,15 +283,27 @@ class ClothSystem:
         self.step_frame(t.delta_time, t.unscaled_delta_time, t.fixed_delta_time, fixed_count,
                         events=ctx.events, metrics=ctx.metrics)
 
+    def _time_constants(self) -> tuple:
+        """The frame inputs that follow from the time settings alone (recomputed when a
+        setting changes: the power terms take two ``pow`` each)."""
+        s = self.time_settings
+        key = (s.frequency, s.max_steps_per_frame, s.global_time_scale, s.timing)
+        if key != getattr(self, "_time_key", None):
+            power = s.simulation_power
+            self._time_values = (float(s.global_time_scale), float(s.simulation_delta_time),
+                                 int(s.max_steps_per_frame), int(s.timing_code), 90.0 / s.frequency,
+                                 float(power[1]), float(power[2]), float(power[3]))
+            self._time_key = key
+        return self._time_values
+
     def step_frame(self, delta_time, unscaled_delta_time=None, fixed_delta_time=0.02,
                    fixed_update_count=0, events=None, metrics=None) -> None:
         """One frame of every team (usable without a player: tests, benchmarks)."""
-        s = self.time_settings
-        power = s.simulation_power
+        (global_time_scale, dt, max_steps, timing, frequency_ratio, power_y, power_z,
+         power_w) = self._time_constants()
         fi = FrameInputs(float(delta_time), float(delta_time if unscaled_delta_time is None else unscaled_delta_time),
-                         float(fixed_delta_time), int(fixed_update_count), float(s.global_time_scale),
-                         float(s.simulation_delta_time), int(s.max_steps_per_frame), int(s.timing_code),
-                         90.0 / s.frequency, float(power[1]), float(power[2]), float(power[3]),
+                         float(fixed_delta_time), int(fixed_update_count), global_time_scale, dt, max_steps,
+                         timing, frequency_ratio, power_y, power_z, power_w,
                          int(numba.get_num_threads()) if self.parallel else 1)
         clock = _time.perf_counter
         self.hierarchy.flush()   # the kernel reads the world poses through kept references
