@@ -64,6 +64,7 @@ class GrpcServer:
     """``rerun --port P --save FILE`` or ``--serve-grpc``: a Rerun server without a window, stopped by its pid."""
 
     def __init__(self, saved=None):
+        self.saved = saved
         self.port = free_port()
         env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
         args = [viewer_executable(), "--port", str(self.port)] + (["--save", str(saved)] if saved else ["--serve-grpc"])
@@ -83,6 +84,17 @@ class GrpcServer:
         raise RuntimeError("the rerun server did not start")
 
     def __exit__(self, *exc):
+        # the client has flushed when the run returns, but the server writes what it received on
+        # its own time: wait until the saved file stops growing (at most 10 s) before stopping it
+        if self.saved is not None:
+            deadline, last, stable_since = time.time() + 10, -1, time.time()
+            while time.time() < deadline:
+                size = self.saved.stat().st_size if self.saved.exists() else -1
+                if size != last:
+                    last, stable_since = size, time.time()
+                elif time.time() - stable_since > 0.5:
+                    break
+                time.sleep(0.05)
         # Ctrl-C to the wrapper and the server it started: `--save` finishes writing what it got
         os.killpg(self.process.pid, signal.SIGINT)
         try:
