@@ -495,7 +495,9 @@ print("packed" if re.search(r"\\bv?mulpd\\b", asm) else "scalar")
 """
 
 
-@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86 assembly")
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"),
+                    reason="the check looks for x86-64 packed-double mnemonics (mulpd) in the assembly; "
+                           "other CPUs name them otherwise")
 def test_the_lane_loop_compiles_to_packed_double_arithmetic():
     """``compose_lanes`` is the propagation's hot loop: it vectorises only while its maths is
     inlined and LLVM can group its rows (once lost silently when process-wide LLVM options

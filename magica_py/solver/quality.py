@@ -40,10 +40,10 @@ from magica_py.kernels.math3d import (
 )
 from magica_py.solver.colliders import capsule_ends
 from magica_py.solver.constraints.collision import (
-    INVALID_OR_NO_COLLISION, PLANE, SPHERE, plane_push, segment_parameter, solve_point_collider,
+    INVALID_OR_NO_COLLISION, PLANE, SPHERE, particle_radius, plane_push, segment_parameter, solve_point_collider,
 )
 from magica_py.solver.constraints.distance import distance_team
-from magica_py.solver.parameters import curve_at, length_unit
+from magica_py.solver.parameters import length_unit
 from magica_py.kernels import portable
 
 MOVE = 0x02
@@ -164,7 +164,7 @@ def collision_last_team(m, ps, prm, ts, cs, team):
         attr = m_attribute[p]
         if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
             continue
-        r = max(curve_at(prm_radius_curve, team, m_depth[p]), 0.0001) * scale
+        r = particle_radius(prm_radius_curve, team, m_depth[p], scale)
         x = load3(ps_next_pos, p)
         start_x = load3(ps_old_pos, p)
         velocity_pos = load3(ps_velocity_pos, p)
@@ -360,7 +360,7 @@ def display_constraints_team(m, ps, prm, ts, cs, team, dt):
             x0 = load3(ps_position, v)
             x = x0
             hits = collide and (attr & INVALID_OR_NO_COLLISION) == 0
-            r = max(curve_at(prm_radius_curve, team, m_depth[v]), 0.0001) * scale
+            r = particle_radius(prm_radius_curve, team, m_depth[v], scale)
             for _ in range(DISPLAY_PASSES):
                 if hits:
                     for k in range(c0, c1):

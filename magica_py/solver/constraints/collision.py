@@ -59,6 +59,13 @@ def aabb_overlap(min_a, max_a, min_b, max_b):
             and max_a[1] >= min_b[1] and min_a[2] <= max_b[2] and max_a[2] >= min_b[2])
 
 
+@kernel
+def particle_radius(radius_curve, team, depth, scale):
+    """A particle's collision radius (m): the team's radius curve at its depth, at least
+    0.1 mm, times ``scale`` (team scale ratio and, in quality mode, the length unit)."""
+    return max(curve_at(radius_curve, team, depth), 0.0001) * scale
+
+
 # -- point mode, per element (array-free)
 @kernel
 def point_bounds(x, r):
@@ -160,7 +167,7 @@ def point_collision_team(m, ps, prm, ts, cs, team):
         attr = m_attribute[p]
         if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
             continue
-        r = max(curve_at(prm_radius_curve, team, m_depth[p]), 0.0001) * scale
+        r = particle_radius(prm_radius_curve, team, m_depth[p], scale)
         x = load3(ps_next_pos, p)
         bmin, bmax = point_bounds(x, r)
         sum_push, sum_n, n_acc, count, min_dist = z, z, z, 0, FAR

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_rotate, store3, v_add, v_length, v_lerp, v_scale, v_sub
+from magica_py.solver.constraints.collision import particle_radius
 from magica_py.solver.parameters import curve_at, length_unit
 
 MOVE = 0x02
@@ -78,7 +79,7 @@ def motion_team(m, ps, prm, team, attenuation):
         if (attr & MOVE) == 0 or (attr & INVALID_MOTION) != 0:
             continue
         d2 = m_depth[p] * m_depth[p]
-        r = max(curve_at(prm_radius_curve, team, m_depth[p]), 1e-4) * unit
+        r = particle_radius(prm_radius_curve, team, m_depth[p], unit)
         direction = q_rotate(load4(ps_base_rot, p), axis)
         o = load3(ps_next_pos, p)
         x = solve_motion(o, load3(ps_base_pos, p), direction,
