@@ -15,6 +15,13 @@ branch whose argument is ``None`` before it types the callee, so a scene whose c
 angle constraint neither compiles nor calls ``angle_team``. Each combination is its own
 compiled (and disk-cached) signature. Within a compiled stage, the per-team parameters still
 decide at run time (a switch is on when any team may need the stage).
+
+**The recipe's orchestration is inlined.** ``prepare_teams``, ``run_step``, the begin / end of
+frame functions and the time wrappers are ``inline="always"`` (numba's IR inlining): each is
+typed and optimised once, inside the frame kernel that calls it, instead of once as a
+function of its own and again in every caller that links it (every numba function is an
+LLVM module optimised on its own, then re-optimised inside each caller). The stage
+functions stay separate functions; the arithmetic, and so the bits, are the same.
 """
 from __future__ import annotations
 
@@ -96,7 +103,7 @@ def worker_table(team_capacity: int, threads: int) -> WorkerTable:
     return WorkerTable(np.full(max(team_capacity, 1), -1, dtype=np.int32), np.zeros(max(threads, 1), dtype=np.int64))
 
 
-@kernel
+@kernel(inline="always")
 def prepare_teams(m, ts, prm, tt, h):
     """Scale suspension (A.4) and distance culling (H.1) before the team time runs."""
     for i in range(m.live_teams.shape[0]):
@@ -121,7 +128,7 @@ def prepare_teams(m, ts, prm, tt, h):
         ts.active[t] = 0 if suspended else 1
 
 
-@kernel
+@kernel(inline="always")
 def run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edge_collision, motion, quality, wind):
     """One simulation step of team t (§D.0 order) at frame interpolation fi."""
     dt = fi.dt
@@ -198,7 +205,7 @@ def first_frame_continues_build_pose(m, prm, h, t):
     return jump < prm.teleport_distance[t] * ratio and turn < prm.teleport_rotation[t]
 
 
-@kernel
+@kernel(inline="always")
 def begin_frame_prelude_team(m, ps, prm, ts, tt, h, t, quality):
     """The team-level start of team t's frame: running flag, quality mode's first-frame build
     reset. Returns the team time since the last step (``center_and_inertia_team``)."""
@@ -219,7 +226,7 @@ def begin_frame_prelude_team(m, ps, prm, ts, tt, h, t, quality):
     return since_last_step
 
 
-@kernel
+@kernel(inline="always")
 def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t, quality):
     """Per-frame stages of team t before the steps (C.1, C.2/C.4, C.5, G.2)."""
     since_last_step = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t, quality)
@@ -231,7 +238,7 @@ def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t, quality):
     collider_frame_team(cs, ts, t, h.world_position, h.world_rotation, h.lossy_scale)
 
 
-@kernel
+@kernel(inline="always")
 def team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, t, angle, bending, point_collision, edge_collision, motion,
                      quality, wind):
     """Team t's frame up to the write-back: its begin of frame and its steps (each advancing
@@ -245,7 +252,7 @@ def team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, t, angle, bending, point_col
                      wind)
 
 
-@kernel
+@kernel(inline="always")
 def team_frame_end(m, ps, prm, ts, cs, tt, h, fi, t, quality, lines, triangles):
     """Per-frame stages of team t after the steps: guards, E.1-E.4, A.7."""
     if ts.active[t] == 0:
@@ -275,7 +282,7 @@ def team_frame_end(m, ps, prm, ts, cs, tt, h, fi, t, quality, lines, triangles):
     collider_end_frame_team(cs, ts, t, tt.running[t])
 
 
-@kernel
+@kernel(inline="always")
 def _time_frame_update(tt, fi):
     team_time_frame_update(
         tt.active, tt.suspended, tt.update_mode, tt.team_time_scale, tt.time, tt.old_time,
@@ -285,7 +292,7 @@ def _time_frame_update(tt, fi):
         fi.fixed_update_count, fi.global_time_scale, fi.dt, fi.max_steps, fi.timing)
 
 
-@kernel
+@kernel(inline="always")
 def _frame_close(tt, h, fi):
     team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
                         tt.now_update_time, tt.old_update_time, tt.frame_update_time,
@@ -293,7 +300,7 @@ def _frame_close(tt, h, fi):
     h.build_pose_pending[0] = 0  # teams added or reset later reset at their first frame
 
 
-@kernel
+@kernel(inline="always")
 def _begin_step_team(tt, fi, step, t):
     team_time_begin_step_team(step, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
                               tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
