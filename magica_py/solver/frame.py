@@ -15,13 +15,6 @@ branch whose argument is ``None`` before it types the callee, so a scene whose c
 angle constraint neither compiles nor calls ``angle_team``. Each combination is its own
 compiled (and disk-cached) signature. Within a compiled stage, the per-team parameters still
 decide at run time (a switch is on when any team may need the stage).
-
-**The recipe's orchestration is inlined.** ``prepare_teams``, ``run_step``, the begin / end of
-frame functions and the time wrappers are ``inline="always"`` (numba's IR inlining): each is
-typed and optimised once, inside the frame kernel that calls it, instead of once as a
-function of its own and again in every caller that links it (every numba function is an
-LLVM module optimised on its own, then re-optimised inside each caller). The stage
-functions stay separate functions; the arithmetic, and so the bits, are the same.
 """
 from __future__ import annotations
 
@@ -72,6 +65,11 @@ FrameInputs = namedtuple("FrameInputs", [
     "global_time_scale", "dt", "max_steps", "timing", "frequency_ratio",
     "power_y", "power_z", "power_w",
     "threads"])   # threads the parallel kernel deals its work to (numba.get_num_threads() at the call)
+# The frame inputs travel into the kernel as one float64 array in FrameInputs' field order
+# (``frame_input_values``; typing a namedtuple argument costs ~6-9 us per call, an array
+# 0.2 us) and the kernel rebuilds the namedtuple (``frame_inputs``); every value is a float64
+# or a small integer, so the round trip is exact.
+FRAME_INPUT_COUNT = len(FrameInputs._fields)
 # The optional stages (None: not compiled, not called; 1: compiled, run where a team asks):
 # angle (D.5/D.6), bending (D.7 dihedral and volume), point and edge collision (D.8),
 # motion (D.9), quality (quality mode's build reset, end-of-step passes and display collision),
@@ -83,6 +81,20 @@ StageSwitches = namedtuple("StageSwitches", [
 # the per-thread work table of the parallel kernel: team_worker (teams,) int32, worker_load
 # (threads,) int64 particle-steps (written by ``assign_workers`` each frame)
 WorkerTable = namedtuple("WorkerTable", ["team_worker", "worker_load"])
+
+
+def frame_input_values() -> np.ndarray:
+    """The array ``simulate_frame`` takes its frame inputs in: (13,) float64, FrameInputs' field
+    order (the system refills it every frame)."""
+    return np.zeros(FRAME_INPUT_COUNT)
+
+
+@kernel
+def frame_inputs(values):
+    """The ``FrameInputs`` of a frame from its (13,) float64 values (counts and codes back to
+    integers)."""
+    return FrameInputs(values[0], values[1], values[2], int(values[3]), values[4], values[5], int(values[6]),
+                       int(values[7]), values[8], values[9], values[10], values[11], int(values[12]))
 
 
 def time_arrays(state: TeamTimeState) -> TimeArrays:
@@ -103,7 +115,7 @@ def worker_table(team_capacity: int, threads: int) -> WorkerTable:
     return WorkerTable(np.full(max(team_capacity, 1), -1, dtype=np.int32), np.zeros(max(threads, 1), dtype=np.int64))
 
 
-@kernel(inline="always")
+@kernel
 def prepare_teams(m, ts, prm, tt, h):
     """Scale suspension (A.4) and distance culling (H.1) before the team time runs."""
     for i in range(m.live_teams.shape[0]):
@@ -128,7 +140,7 @@ def prepare_teams(m, ts, prm, tt, h):
         ts.active[t] = 0 if suspended else 1
 
 
-@kernel(inline="always")
+@kernel
 def run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edge_collision, motion, quality, wind):
     """One simulation step of team t (§D.0 order) at frame interpolation fi."""
     dt = fi.dt
@@ -205,7 +217,7 @@ def first_frame_continues_build_pose(m, prm, h, t):
     return jump < prm.teleport_distance[t] * ratio and turn < prm.teleport_rotation[t]
 
 
-@kernel(inline="always")
+@kernel
 def begin_frame_prelude_team(m, ps, prm, ts, tt, h, t, quality):
     """The team-level start of team t's frame: running flag, quality mode's first-frame build
     reset. Returns the team time since the last step (``center_and_inertia_team``)."""
@@ -226,7 +238,7 @@ def begin_frame_prelude_team(m, ps, prm, ts, tt, h, t, quality):
     return since_last_step
 
 
-@kernel(inline="always")
+@kernel
 def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t, quality):
     """Per-frame stages of team t before the steps (C.1, C.2/C.4, C.5, G.2)."""
     since_last_step = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t, quality)
@@ -238,7 +250,7 @@ def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t, quality):
     collider_frame_team(cs, ts, t, h.world_position, h.world_rotation, h.lossy_scale)
 
 
-@kernel(inline="always")
+@kernel
 def team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, t, angle, bending, point_collision, edge_collision, motion,
                      quality, wind):
     """Team t's frame up to the write-back: its begin of frame and its steps (each advancing
@@ -252,7 +264,7 @@ def team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, t, angle, bending, point_col
                      wind)
 
 
-@kernel(inline="always")
+@kernel
 def team_frame_end(m, ps, prm, ts, cs, tt, h, fi, t, quality, lines, triangles):
     """Per-frame stages of team t after the steps: guards, E.1-E.4, A.7."""
     if ts.active[t] == 0:
@@ -282,7 +294,7 @@ def team_frame_end(m, ps, prm, ts, cs, tt, h, fi, t, quality, lines, triangles):
     collider_end_frame_team(cs, ts, t, tt.running[t])
 
 
-@kernel(inline="always")
+@kernel
 def _time_frame_update(tt, fi):
     team_time_frame_update(
         tt.active, tt.suspended, tt.update_mode, tt.team_time_scale, tt.time, tt.old_time,
@@ -292,7 +304,7 @@ def _time_frame_update(tt, fi):
         fi.fixed_update_count, fi.global_time_scale, fi.dt, fi.max_steps, fi.timing)
 
 
-@kernel(inline="always")
+@kernel
 def _frame_close(tt, h, fi):
     team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
                         tt.now_update_time, tt.old_update_time, tt.frame_update_time,
@@ -300,18 +312,36 @@ def _frame_close(tt, h, fi):
     h.build_pose_pending[0] = 0  # teams added or reset later reset at their first frame
 
 
-@kernel(inline="always")
+@kernel
+def frame_counts(m, ts, tt):
+    """What the frame did, for the caller's metrics and events: (most steps of a team,
+    particle-steps, teams with a guard code). Integers: the same on every CPU."""
+    most_steps = np.int64(0)
+    particle_steps = np.int64(0)
+    guarded = 0
+    for t in range(tt.update_count.shape[0]):
+        c = np.int64(tt.update_count[t])
+        most_steps = max(most_steps, c)
+        particle_steps += c * np.int64(m.team_particle_count[t])
+        if ts.guard_code[t] != 0:
+            guarded += 1
+    return most_steps, particle_steps, guarded
+
+
+@kernel
 def _begin_step_team(tt, fi, step, t):
     team_time_begin_step_team(step, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
                               tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
 
 
 @kernel
-def simulate_frame(tables, fi, angle, bending, point_collision, edge_collision, motion, quality, lines, triangles,
-                   wind):
+def simulate_frame(tables, frame_values, angle, bending, point_collision, edge_collision, motion, quality, lines,
+                   triangles, wind):
     """The whole cloth frame, one team after another (see the module docstring): every team's
     begin and steps, then every team's end (all reads of this frame's transforms come before
-    any write-back). ``tables``: ``tables.SolverTables``."""
+    any write-back). ``tables``: ``tables.SolverTables``; ``frame_values``: the frame inputs
+    (``frame_input_values``). Returns ``frame_counts``."""
+    fi = frame_inputs(frame_values)
     m, ps, prm, ts, cs, tt, h = (tables.model, tables.particles, tables.parameters, tables.teams,
                                  tables.colliders, tables.time, tables.hierarchy)
     prepare_teams(m, ts, prm, tt, h)
@@ -322,34 +352,41 @@ def simulate_frame(tables, fi, angle, bending, point_collision, edge_collision, 
     for i in range(m.live_teams.shape[0]):
         team_frame_end(m, ps, prm, ts, cs, tt, h, fi, m.live_teams[i], quality, lines, triangles)
     _frame_close(tt, h, fi)
+    return frame_counts(m, ts, tt)
 
 
 @kernel(parallel=True)
-def simulate_frame_parallel(tables, fi, wt, angle, bending, point_collision, edge_collision, motion, quality, lines,
-                            triangles, wind):
-    """``simulate_frame`` with the teams dealt to ``fi.threads`` threads (opt-in:
-    ``ClothSystem(parallel=True)``). ``assign_workers`` deals the teams each frame (greedy,
+def simulate_frame_parallel(tables, frame_values, wt, angle, bending, point_collision, edge_collision, motion,
+                            quality, lines, triangles, wind):
+    """``simulate_frame`` with the teams dealt to ``fi.threads`` threads (``scene.threads``,
+    ``system.choose_threads``). ``assign_workers`` deals the teams each frame (greedy,
     largest first); each thread runs its teams' begin and steps in one parallel region and
     their ends in a second: two thread launches per frame. Teams are independent and each
     runs in its own order, so the results are the serial kernel's bits."""
+    fi = frame_inputs(frame_values)
     m, ps, prm, ts, cs, tt, h = (tables.model, tables.particles, tables.parameters, tables.teams,
                                  tables.colliders, tables.time, tables.hierarchy)
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
     workers = max(1, min(fi.threads, wt.worker_load.shape[0]))
     assign_workers(m, ts, tt, wt, workers)
+    # each region rebuilds the frame inputs from the array: a namedtuple made in the kernel
+    # cannot enter a prange body (numba's parfor lowering looks its class up by name)
     for w in prange(workers):
+        fw = frame_inputs(frame_values)
         for i in range(m.live_teams.shape[0]):
             t = m.live_teams[i]
             if wt.team_worker[t] == w:
-                team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, t, angle, bending, point_collision,
+                team_frame_steps(m, ps, prm, ts, cs, tt, h, fw, t, angle, bending, point_collision,
                                  edge_collision, motion, quality, wind)
     for w in prange(workers):
+        fw = frame_inputs(frame_values)
         for i in range(m.live_teams.shape[0]):
             t = m.live_teams[i]
             if wt.team_worker[t] == w:
-                team_frame_end(m, ps, prm, ts, cs, tt, h, fi, t, quality, lines, triangles)
+                team_frame_end(m, ps, prm, ts, cs, tt, h, fw, t, quality, lines, triangles)
     _frame_close(tt, h, fi)
+    return frame_counts(m, ts, tt)
 
 
 @kernel
