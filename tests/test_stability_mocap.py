@@ -77,9 +77,21 @@ def test_ejection_is_measured_against_the_body_part_speed():
     m/s over the bound's reference; one riding along with the body is 0 over."""
     v = np.array([[15.75, 0.0, 0.0], [4.3, 0.0, 0.0], [3.0, 0.0, 0.0]])
     body = np.array([[0.0, 4.3, 0.0], [4.3, 0.0, 0.0], [0.0, 4.0, 0.0]])
-    relative, excess = M.ejection_speeds(v, body)
+    outward = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    relative, excess, away = M.ejection_speeds(v, body, outward)
     assert excess == pytest.approx([11.45, 0.0, -1.0])
     assert relative == pytest.approx([math.hypot(15.75, 4.3), 0.0, 5.0])
+    # leaving along the normal at 15.75 m/s; riding along; sliding past (tangential): 0 away
+    assert away == pytest.approx([15.75, 0.0, 0.0])
+
+
+def test_the_contact_normal_points_out_of_the_collider_at_the_particle():
+    x = np.array([[0.0, 0.09, 0.0]])
+    _, n = M.pair_contacts(x, np.array([0.02]), ONE_PAIR, shapes(0, radius=0.10))
+    assert n[0] == pytest.approx([0.0, 1.0, 0.0])
+    capsule = shapes(1, start=(0, 0, 0), end=(0, 0.4, 0), radius=0.06, end_radius=0.04)
+    _, n = M.pair_contacts(np.array([[0.0, 0.2, -0.03]]), np.array([0.01]), ONE_PAIR, capsule)
+    assert n[0] == pytest.approx([0.0, 0.0, -1.0])
 
 
 def test_settling_is_measured_from_the_end_of_the_motion():

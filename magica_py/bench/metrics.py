@@ -131,17 +131,31 @@ def pair_depths(positions: np.ndarray, particle_radius: np.ndarray, pairs, shape
     the axis at the closest point; planes are one-sided (+normal is out); suspended colliders
     give -inf (never inside). With ``particle_radius`` 0 the depth is the centre's.
     """
+    return pair_contacts(positions, particle_radius, pairs, shapes)[0]
+
+
+def pair_contacts(positions: np.ndarray, particle_radius: np.ndarray, pairs, shapes
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """``pair_depths`` and the outward unit normal of the collider surface nearest to each
+    pair's particle ((P,3); zero where undefined: a centre on a sphere's centre or a capsule's
+    axis, a suspended collider)."""
     pi, ci = pairs
     d = np.full(pi.shape[0], -np.inf)
+    normal = np.zeros((pi.shape[0], 3))
     if pi.shape[0] == 0:
-        return d
+        return d, normal
+
+    def unit(v):
+        length = np.linalg.norm(v, axis=1)
+        return np.where(length[:, None] > 1e-12, v / np.maximum(length, 1e-12)[:, None], 0.0), length
+
     p = positions[pi]
     r = particle_radius[pi]
     shape = np.where(shapes.suspended[ci], -1, shapes.shape[ci])
     # sphere
     s = shape == 0
     if s.any():
-        dist = np.linalg.norm(p[s] - shapes.position[ci[s]], axis=1)
+        normal[s], dist = unit(p[s] - shapes.position[ci[s]])
         d[s] = shapes.radius[ci[s]] + r[s] - dist
     # capsule (two radii): closest point on the start-end segment
     c = shape == 1
@@ -152,12 +166,14 @@ def pair_depths(positions: np.ndarray, particle_radius: np.ndarray, pairs, shape
         u = np.clip(np.einsum("ij,ij->i", p[c] - a, ab) / len2, 0.0, 1.0)
         closest = a + ab * u[:, None]
         rad = shapes.radius[ci[c]] + (shapes.end_radius[ci[c]] - shapes.radius[ci[c]]) * u
-        d[c] = rad + r[c] - np.linalg.norm(p[c] - closest, axis=1)
+        normal[c], dist = unit(p[c] - closest)
+        d[c] = rad + r[c] - dist
     # plane: signed distance along the normal
     q = shape == 2
     if q.any():
         d[q] = r[q] - np.einsum("ij,ij->i", p[q] - shapes.position[ci[q]], shapes.normal[ci[q]])
-    return d
+        normal[q] = shapes.normal[ci[q]]
+    return d, normal
 
 
 def penetration_depth(positions: np.ndarray, particle_radius: np.ndarray, pairs, shapes) -> np.ndarray:
@@ -189,12 +205,18 @@ def rigid_point_velocity(points: np.ndarray, pose_before, pose_after, dt: float)
     return (points - before) / dt
 
 
-def ejection_speeds(velocity: np.ndarray, body_velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For particles touching a body part: their speed relative to it ``|v - v_body|`` and
-    their excess speed ``|v| - |v_body|`` (m/s; issue 16's bound: excess <= 2 m/s); (P,) each."""
-    relative = np.linalg.norm(velocity - body_velocity, axis=1)
+def ejection_speeds(velocity: np.ndarray, body_velocity: np.ndarray, normal: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For particles touching a body part ((P,3) each, m/s; ``normal`` the body's outward unit
+    normal at the particle): their speed relative to it ``|v - v_body|``, their excess speed
+    ``|v| - |v_body|`` (issue 16's bound: at most 2 m/s) and their speed away from it
+    ``(v - v_body) . normal`` (the ejection proper; a strand swinging along the body has 0);
+    (P,) each."""
+    relative_velocity = velocity - body_velocity
+    relative = np.linalg.norm(relative_velocity, axis=1)
     excess = np.linalg.norm(velocity, axis=1) - np.linalg.norm(body_velocity, axis=1)
-    return relative, excess
+    outward = np.einsum("ij,ij->i", relative_velocity, normal)
+    return relative, excess, outward
 
 
 def particle_radius(model, parameters, scale_ratio=None) -> np.ndarray:

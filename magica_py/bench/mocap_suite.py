@@ -9,9 +9,10 @@ so, ``hair`` for every other cloth: hair, ribbons, hair balls):
 
 * displayed edge stretch: every proxy edge of the bones after the write-back (what a user
   sees), ``|p1 - p0| / rest - 1``, max over the frames;
-* simulated edge stretch: the same of the solver state at the end of a step
-  (``particles.old_pos`` after a frame that ran steps: the last step of that frame; at 144
-  and 240 fps every step is the last of its frame, at 30 / 60 fps one in three / two);
+* simulated edge stretch: the same of the solver state at the end of a step, after a frame
+  that ran steps: its last step's state (``particles.old_pos``) and the one before it
+  (``old_pos - real_velocity dt``, D.10), the two states the quality display interpolates; at
+  144 and 240 fps that is every step, at 30 fps two steps in three;
 * root-distance stretch, displayed and simulated (a particle's distance to its root);
 * deepest penetration at the end of a step, against the colliders at that step's pose (the
   solver's collider slots): the deepest particle centre inside a collider (m; > 0 means a
@@ -20,7 +21,10 @@ so, ``hair`` for every other cloth: hair, ribbons, hair balls):
   one radius of a collider carried by a bone; the static ground is not a body part), their
   solver velocity against the body part's velocity at the particle (rigid motion of the
   collider's bone over the frame, rotation included): ``|v| - |v_body|`` (the issue's bound:
-  at most 2 m/s) and ``|v - v_body|``;
+  at most 2 m/s), ``|v - v_body|`` and ``(v - v_body) . n`` (the speed away from the body
+  along its outward normal: the ejection proper, where a strand swinging along it counts 0);
+  penetration and ejection are seen at the end of each frame's last step only (the solver
+  runs a frame's steps in one call), every step at 144 and 240 fps, one in three at 30 fps;
 * settling time: from the end of the motion, when every bone of the kind moves below
   ``REST_SPEED`` on the display and stays so (``metrics.settling_time``); "> REST s" when not.
 
@@ -101,6 +105,7 @@ class KindResult:
     sphere_depth_ratio: float = 0.0        # deepest sphere penetration / its radius (>= 0)
     ejection_excess: float = -math.inf     # m/s, max |v| - |v_body| of touching particles
     ejection_relative: float = 0.0         # m/s, max |v - v_body|
+    ejection_outward: float = -math.inf    # m/s, max (v - v_body) . outward normal
     ejection_at: tuple = ()                # (time s, particle speed, body speed) of the max excess
     settle: float = math.inf               # s after the motion's end (inf: not by the end; nan: run too short)
     particles: int = 0
@@ -200,6 +205,7 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
     speed = {k: np.zeros(p.frames) for k in kinds}               # m/s, fastest displayed bone of the kind
     finite, resets = True, 0
     ps = system.particles
+    step_dt = 1.0 / p.frequency
     previous = h.world_position[nodes].copy()
     previous_time = 0.0
     shapes_before = scene.colliders.world_shapes(h)
@@ -219,9 +225,12 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
                 speed[k][i] = v[(kind == k) & moving].max(initial=0.0)
         stepped = ctx.metrics.get("cloth.simulation_steps", 0.0) > 0
         if stepped:
+            # the last step's state and the one before it (D.10: old - real_velocity dt), the
+            # two the quality display interpolates
             state = np.asarray(ps.old_pos[:n]).copy()
-            state_edge = M.edge_stretch(state, geometry)
-            state_root = M.root_distance_stretch(state, geometry)
+            before = state - np.asarray(ps.real_velocity[:n]) * step_dt
+            state_edge = np.maximum(M.edge_stretch(state, geometry), M.edge_stretch(before, geometry))
+            state_root = np.maximum(M.root_distance_stretch(state, geometry), M.root_distance_stretch(before, geometry))
         for k in kinds:
             r = out[k]
             sel_e, sel_p = edge_kind == k, kind == k
@@ -255,7 +264,7 @@ def _contacts(system, state, radius_base, step_pairs, slot_count, collider_index
     radius = radius_base * (np.asarray(ts.scale_ratio) * np.asarray(ts.length_unit))[team]
     shapes = step_collider_shapes(system.collider_state, slot_count)
     pi = step_pairs[0]
-    sphere = M.pair_depths(state, radius, step_pairs, shapes)                 # (P,) m
+    sphere, normal = M.pair_contacts(state, radius, step_pairs, shapes)       # (P,) m, (P,3)
     centre = sphere - radius[pi]
     touching = (sphere > -CONTACT_RANGE * radius[pi]) & body_pair
     if touching.any():
@@ -264,7 +273,7 @@ def _contacts(system, state, radius_base, step_pairs, slot_count, collider_index
         vb = M.rigid_point_velocity(points, (shapes_before.position[tc], shapes_before.rotation[tc]),
                                     (shapes_now.position[tc], shapes_now.rotation[tc]), dt)
         v = np.asarray(system.particles.velocity)[tp]
-        relative, excess = M.ejection_speeds(v, vb)
+        relative, excess, outward = M.ejection_speeds(v, vb, normal[touching])
     for k, r in out.items():
         sel = kind[pi] == k
         if not sel.any():
@@ -279,6 +288,7 @@ def _contacts(system, state, radius_base, step_pairs, slot_count, collider_index
                     r.ejection_excess = float(excess[j])
                     r.ejection_at = (float(t), float(np.linalg.norm(v[j])), float(np.linalg.norm(vb[j])))
                 r.ejection_relative = max(r.ejection_relative, float(relative[mine].max()))
+                r.ejection_outward = max(r.ejection_outward, float(outward[mine].max()))
 
 
 # ----------------------------------------------------------------------------- report
@@ -295,6 +305,7 @@ CSV_COLUMNS = (
     ("sphere_pct", "sphere penetration (% of radius)", "{:.1f}"),
     ("ejection_excess", "ejection |v| - |v_body| (m/s)", "{:.2f}"),
     ("ejection_relative", "ejection |v - v_body| (m/s)", "{:.2f}"),
+    ("ejection_outward", "ejection (v - v_body).n (m/s)", "{:.2f}"),
     ("ejection_time", "at (s)", "{:.3f}"), ("ejection_speed", "particle speed (m/s)", "{:.2f}"),
     ("body_speed", "body speed (m/s)", "{:.2f}"),
     ("settle", "settling (s after the motion)", "{:.2f}"), ("finite", "finite", "{}"),
@@ -315,6 +326,7 @@ def run_rows(run: MocapRun) -> list[dict]:
                      "sphere_pct": 100 * r.sphere_depth_ratio,
                      "ejection_excess": r.ejection_excess if math.isfinite(r.ejection_excess) else None,
                      "ejection_relative": r.ejection_relative if r.ejection_at else None,
+                     "ejection_outward": r.ejection_outward if math.isfinite(r.ejection_outward) else None,
                      "ejection_time": t, "ejection_speed": vp, "body_speed": vb,
                      "settle": r.settle, "finite": "yes" if run.finite else "NO",
                      "guard_resets": run.guard_resets, "wall_s": run.wall})
@@ -341,7 +353,8 @@ SIDE_BY_SIDE = (("shown_edge_pct", "displayed edge %", "{:.2f}"), ("state_edge_p
                 ("shown_root_pct", "displayed root %", "{:.2f}"), ("state_root_pct", "simulated root %", "{:.2f}"),
                 ("centre_depth_mm", "deepest centre mm (> 0 inside)", "{:.1f}"),
                 ("sphere_pct", "sphere pen. % of r", "{:.1f}"),
-                ("ejection_excess", "ejection \\|v\\|-\\|v_body\\| m/s", "{:.2f}"),
+                ("ejection_excess", "\\|v\\|-\\|v_body\\| m/s", "{:.2f}"),
+                ("ejection_outward", "ejection (v-v_body)·n m/s", "{:.2f}"),
                 ("settle", "settling s", "{:.2f}"))
 
 
