@@ -83,6 +83,12 @@ def test_ejection_is_measured_against_the_body_part_speed():
     assert relative == pytest.approx([math.hypot(15.75, 4.3), 0.0, 5.0])
     # leaving along the normal at 15.75 m/s; riding along; sliding past (tangential): 0 away
     assert away == pytest.approx([15.75, 0.0, 0.0])
+    # a head dropping away at 6 m/s from a strand at rest does not eject it; the strand
+    # leaving at 1 m/s while the thigh pushes at 4 m/s along the normal is 3 m/s too fast
+    _, _, away = M.ejection_speeds(np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0]]),
+                                   np.array([[0.0, -6.0, 0.0], [4.0, 0.0, 0.0]]),
+                                   np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]))
+    assert away == pytest.approx([0.0, 1.0])
 
 
 def test_the_contact_normal_points_out_of_the_collider_at_the_particle():

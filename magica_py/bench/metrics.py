@@ -209,13 +209,15 @@ def ejection_speeds(velocity: np.ndarray, body_velocity: np.ndarray, normal: np.
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For particles touching a body part ((P,3) each, m/s; ``normal`` the body's outward unit
     normal at the particle): their speed relative to it ``|v - v_body|``, their excess speed
-    ``|v| - |v_body|`` (issue 16's bound: at most 2 m/s) and their speed away from it
-    ``(v - v_body) . normal`` (the ejection proper; a strand swinging along the body has 0);
-    (P,) each."""
-    relative_velocity = velocity - body_velocity
-    relative = np.linalg.norm(relative_velocity, axis=1)
+    ``|v| - |v_body|`` (issue 16's bound: at most 2 m/s) and their ejection, the speed at
+    which they leave the surface beyond the body's own push, ``v.n - max(v_body.n, 0)``: a
+    particle thrown out of a thigh counts its whole outward speed above the thigh's, one
+    carried along (or swinging along the surface) 0, and one left behind by a body moving
+    away from it (a head dropping away under the hair) its own outward speed only, not the
+    body's retreat; (P,) each."""
+    relative = np.linalg.norm(velocity - body_velocity, axis=1)
     excess = np.linalg.norm(velocity, axis=1) - np.linalg.norm(body_velocity, axis=1)
-    outward = np.einsum("ij,ij->i", relative_velocity, normal)
+    outward = np.einsum("ij,ij->i", velocity, normal) - np.maximum(np.einsum("ij,ij->i", body_velocity, normal), 0.0)
     return relative, excess, outward
 
 

@@ -21,8 +21,9 @@ so, ``hair`` for every other cloth: hair, ribbons, hair balls):
   one radius of a collider carried by a bone; the static ground is not a body part), their
   solver velocity against the body part's velocity at the particle (rigid motion of the
   collider's bone over the frame, rotation included): ``|v| - |v_body|`` (the issue's bound:
-  at most 2 m/s), ``|v - v_body|`` and ``(v - v_body) . n`` (the speed away from the body
-  along its outward normal: the ejection proper, where a strand swinging along it counts 0);
+  at most 2 m/s), ``|v - v_body|`` and the ejection proper ``v.n - max(v_body.n, 0)`` (the
+  speed leaving the surface beyond the body's own push, ``metrics.ejection_speeds``: a strand
+  swinging along the body or left behind by it counts 0);
   penetration and ejection are seen at the end of each frame's last step only (the solver
   runs a frame's steps in one call), every step at 144 and 240 fps, one in three at 30 fps;
 * settling time: from the end of the motion, when every bone of the kind moves below
@@ -105,7 +106,7 @@ class KindResult:
     sphere_depth_ratio: float = 0.0        # deepest sphere penetration / its radius (>= 0)
     ejection_excess: float = -math.inf     # m/s, max |v| - |v_body| of touching particles
     ejection_relative: float = 0.0         # m/s, max |v - v_body|
-    ejection_outward: float = -math.inf    # m/s, max (v - v_body) . outward normal
+    ejection_outward: float = -math.inf    # m/s, max v.n - max(v_body.n, 0) (n: outward normal)
     ejection_at: tuple = ()                # (time s, particle speed, body speed) of the max excess
     settle: float = math.inf               # s after the motion's end (inf: not by the end; nan: run too short)
     particles: int = 0
@@ -305,7 +306,7 @@ CSV_COLUMNS = (
     ("sphere_pct", "sphere penetration (% of radius)", "{:.1f}"),
     ("ejection_excess", "ejection |v| - |v_body| (m/s)", "{:.2f}"),
     ("ejection_relative", "ejection |v - v_body| (m/s)", "{:.2f}"),
-    ("ejection_outward", "ejection (v - v_body).n (m/s)", "{:.2f}"),
+    ("ejection_outward", "ejection v.n - max(v_body.n, 0) (m/s)", "{:.2f}"),
     ("ejection_time", "at (s)", "{:.3f}"), ("ejection_speed", "particle speed (m/s)", "{:.2f}"),
     ("body_speed", "body speed (m/s)", "{:.2f}"),
     ("settle", "settling (s after the motion)", "{:.2f}"), ("finite", "finite", "{}"),
@@ -354,7 +355,7 @@ SIDE_BY_SIDE = (("shown_edge_pct", "displayed edge %", "{:.2f}"), ("state_edge_p
                 ("centre_depth_mm", "deepest centre mm (> 0 inside)", "{:.1f}"),
                 ("sphere_pct", "sphere pen. % of r", "{:.1f}"),
                 ("ejection_excess", "\\|v\\|-\\|v_body\\| m/s", "{:.2f}"),
-                ("ejection_outward", "ejection (v-v_body)·n m/s", "{:.2f}"),
+                ("ejection_outward", "ejection m/s", "{:.2f}"),
                 ("settle", "settling s", "{:.2f}"))
 
 
