@@ -12,7 +12,7 @@ so, ``hair`` for every other cloth: hair, ribbons, hair balls):
 * simulated edge stretch: the same of the solver state at the end of a step, after a frame
   that ran steps: its last step's state (``particles.old_pos``) and the one before it
   (``old_pos - real_velocity dt``, D.10), the two states the quality display interpolates; at
-  144 and 240 fps that is every step, at 30 fps two steps in three;
+  60, 144 and 240 fps that is every step, at 30 fps two steps in three;
 * root-distance stretch, displayed and simulated (a particle's distance to its root);
 * deepest penetration at the end of a step, against the colliders at that step's pose (the
   solver's collider slots): the deepest particle centre inside a collider (m; > 0 means a
@@ -25,7 +25,8 @@ so, ``hair`` for every other cloth: hair, ribbons, hair balls):
   speed leaving the surface beyond the body's own push, ``metrics.ejection_speeds``: a strand
   swinging along the body or left behind by it counts 0);
   penetration and ejection are seen at the end of each frame's last step only (the solver
-  runs a frame's steps in one call), every step at 144 and 240 fps, one in three at 30 fps;
+  runs a frame's steps in one call), every step at 144 and 240 fps, two in three at 60 fps,
+  one in three at 30 fps;
 * settling time: from the end of the motion, when every bone of the kind moves below
   ``REST_SPEED`` on the display and stays so (``metrics.settling_time``); "> REST s" when not.
 
