@@ -425,9 +425,10 @@ def main_mocap(args) -> int:
     R.write_csv(out / "stability_mocap.csv", rows, S.CSV_COLUMNS)
     stamp = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     load = " ".join(f"{x:.1f}" for x in __import__("os").getloadavg())
+    legend = " / ".join(m for m in S.MODES if m in modes)
     text = (f"# magica-py stability --suite mocap ({stamp})\n\n{machine_description()}; load average at the end "
             f"{load}; wall time {elapsed:.0f} s; {'0.5 s per run (--short)' if args.short else f'motion + {S.REST:g} s of rest per run'}"
-            f"\n\nEach cell: quality / faithful.\n\n{S.side_by_side_table(rows)}\n\n## Issue 16 bounds\n\n"
+            f"\n\nEach cell: {legend}.\n\n{S.side_by_side_table(rows)}\n\n## Issue 16 bounds\n\n"
             f"{S.bound_summary(rows)}\n")
     (out / "stability_mocap.md").write_text(text)
     if not args.quiet:

@@ -37,12 +37,14 @@ from __future__ import annotations
 
 import math
 import pathlib
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from magica_py.bench import metrics as M
 from magica_py.bench.variants import Variant, colliding_pairs, prepare
+from magica_py.scene.colliders import static_transform_name
 
 HARD_DIR = pathlib.Path(__file__).resolve().parents[2] / "configs" / "hard"
 FRAME_RATES = (30.0, 60.0, 144.0, 240.0)
@@ -168,8 +170,6 @@ def cloth_kind(name: str) -> str:
 def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None, progress=None) -> MocapRun:
     """Run one case in ``mode`` at ``fps`` for its motion and rest (or ``duration`` s), and
     gather the maxima per cloth kind. ``progress(done, total)`` after every frame."""
-    import time
-
     if mode not in MODES:
         raise ValueError(f"mode {mode!r}: expected one of {', '.join(MODES)}")
     if not fps > 0:
@@ -197,7 +197,8 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
     slot_count = int(slot.max(initial=-1)) + 1
     step_pairs = (pairs[0], slot)
     collider_index = pairs[1]
-    static = np.array([h.names[int(t)] == f"collider:{name}"
+    # colliders without a transform (the ground) sit on their own static node: no body part
+    static = np.array([h.names[int(t)] == static_transform_name(name)
                        for t, name in zip(scene.colliders.transform, scene.colliders.names)], dtype=bool)
     body_pair = ~static[collider_index] if collider_index.size else np.zeros(0, dtype=bool)
     radius_base = M.particle_radius(model, system.parameters)
@@ -250,12 +251,11 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
         previous, previous_time, shapes_before = now, times[i], shapes_now
         if progress is not None:
             progress(i + 1, p.frames)
-    run_speeds = speed          # kept for inspection (MocapRun.speeds)
     ended = times.size and times[-1] >= c.motion_end
     for k in kinds:      # nan: the run ends before the motion does (a short run)
         out[k].settle = M.settling_time(speed[k], times, REST_SPEED, after=c.motion_end) if ended else math.nan
     return MocapRun(c, mode, float(fps), p.frames, out, finite, resets, time.perf_counter() - started,
-                    times, run_speeds)
+                    times, speed)
 
 
 def _contacts(system, state, radius_base, step_pairs, slot_count, collider_index, body_pair, kind,
@@ -335,7 +335,9 @@ def run_rows(run: MocapRun) -> list[dict]:
     return rows
 
 
-def _pair(q, f, fmt):
+def _pair(q_row, f_row, key, fmt):
+    """``quality / faithful`` of one column ("-" for a value a run has not got, e.g. no
+    contact); one value when only one mode ran."""
     def one(v):
         if v is None:
             return "-"
@@ -344,11 +346,8 @@ def _pair(q, f, fmt):
         if isinstance(v, float) and not math.isfinite(v):
             return f"> {REST:g}" if v > 0 else "-"
         return fmt.format(v)
-    if f is None:
-        return one(q)
-    if q is None:
-        return one(f)
-    return f"{one(q)} / {one(f)}"
+    values = [one(row.get(key)) for row in (q_row, f_row) if row is not None]
+    return " / ".join(values)
 
 
 SIDE_BY_SIDE = (("shown_edge_pct", "displayed edge %", "{:.2f}"), ("state_edge_pct", "simulated edge %", "{:.2f}"),
@@ -372,7 +371,7 @@ def side_by_side_table(rows: list[dict]) -> str:
     lines = [head, "|" + "---|" * (3 + len(SIDE_BY_SIDE))]
     for key in keys:
         q, f = keyed.get(key + ("quality",)), keyed.get(key + ("faithful",))
-        cells = [_pair(q.get(c[0]) if q else None, f.get(c[0]) if f else None, c[2]) for c in SIDE_BY_SIDE]
+        cells = [_pair(q, f, c[0], c[2]) for c in SIDE_BY_SIDE]
         lines.append(f"| {key[0]} | {key[1]:g} | {key[2]} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
