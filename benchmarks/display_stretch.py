@@ -28,7 +28,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from magica_py.bench import metrics as M  # noqa: E402
-from magica_py.bench.variants import Variant, colliding_pairs, prepare  # noqa: E402
+from magica_py.bench.variants import Variant, prepare, rest_geometry  # noqa: E402
 
 
 def measure(scene: str, fps: float, mode: str, duration: float | None, parameters: dict, overrides=()) -> dict:
@@ -40,12 +40,9 @@ def measure(scene: str, fps: float, mode: str, duration: float | None, parameter
     scene_obj, player, system = p.scene, p.player, p.system
     model = system.model
     h = scene_obj.hierarchy
-    h.propagate()
-    nodes = np.asarray(model.transform_index, dtype=np.int64)
-    geometry = M.chain_geometry(model, h.world_position[nodes].copy())
+    nodes, geometry, pairs = rest_geometry(p)
     n = nodes.shape[0]
     radius = M.particle_radius(model, system.parameters)
-    pairs = colliding_pairs(system, geometry)
     edge_team = geometry.team[geometry.edges[:, 0]] if geometry.edges.size else np.zeros(0, dtype=np.int64)
     parent = np.asarray(model.parent, dtype=np.int64)
     e = geometry.edges

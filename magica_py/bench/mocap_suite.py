@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from magica_py.bench import metrics as M
-from magica_py.bench.variants import Variant, colliding_pairs, prepare
+from magica_py.bench.variants import Variant, prepare, rest_geometry
 from magica_py.scene.colliders import static_transform_name
 
 HARD_DIR = pathlib.Path(__file__).resolve().parents[2] / "configs" / "hard"
@@ -181,9 +181,7 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
     scene, player, system = p.scene, p.player, p.system
     model = system.model
     h = scene.hierarchy
-    h.propagate()
-    nodes = np.asarray(model.transform_index, dtype=np.int64)
-    geometry = M.chain_geometry(model, h.world_position[nodes].copy())
+    nodes, geometry, pairs = rest_geometry(p)
     n = nodes.shape[0]
     team = geometry.team
     kind_of_team = np.array([cloth_kind(getattr(spec, "name", "")) for spec in system.specs])
@@ -192,7 +190,6 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
     kinds = [k for k in KINDS if (kind == k).any()]
     moving = geometry.moving
 
-    pairs = colliding_pairs(system, geometry)
     slot = slot_pairs(system, pairs)
     slot_count = int(slot.max(initial=-1)) + 1
     step_pairs = (pairs[0], slot)

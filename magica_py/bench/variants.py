@@ -197,6 +197,18 @@ def _frames_for(settings, duration: float) -> int:
     return max(1, int(math.ceil(duration / settings.nominal_frame_time() - 1e-9)))
 
 
+def rest_geometry(p: Prepared):
+    """What the measurements of a prepared run share, taken at the rest pose before the first
+    frame: (nodes, geometry, pairs): the bone of each particle ((N,) int64), the cloths'
+    ``metrics.ChainGeometry`` with its rest lengths, and the (particle, collider) pairs the
+    solver checks (``colliding_pairs``)."""
+    h = p.scene.hierarchy
+    h.propagate()
+    nodes = np.asarray(p.system.model.transform_index, dtype=np.int64)
+    geometry = M.chain_geometry(p.system.model, h.world_position[nodes].copy())
+    return nodes, geometry, colliding_pairs(p.system, geometry)
+
+
 def colliding_pairs(system, geometry: M.ChainGeometry) -> tuple[np.ndarray, np.ndarray]:
     """(particle, collider) index pairs the solver checks: the moving particles (fixed bones
     follow the animation; DisableCollision 0x10 excluded) of each cloth whose collision mode
@@ -220,11 +232,8 @@ def run_variant(variant: Variant, record_positions: bool = True, progress=None,
     scene, player, system = p.scene, p.player, p.system
     model = system.model
     h = scene.hierarchy
-    h.propagate()
-    nodes = np.asarray(model.transform_index, dtype=np.int64)
-    geometry = M.chain_geometry(model, h.world_position[nodes].copy())
+    nodes, geometry, pairs = rest_geometry(p)
     radius_base = M.particle_radius(model, system.parameters)
-    pairs = colliding_pairs(system, geometry)
     has_colliders = pairs[0].shape[0] > 0
     children = np.asarray(model.child_count)
     tips = np.nonzero(geometry.moving & (children == 0))[0]
