@@ -298,12 +298,12 @@ def pareto_plot(path, results: list, title: str = "speed against short-horizon e
                        s=30, zorder=3, label=None if resolved.any() else name)
             points += list(zip(x, y))
             labels += [f"{r['frequency']}" for r in sel]
-        for ref in res.references:       # written on the line itself (the legend stays short)
+        for ref in res.references:       # in the legend: a text on the line collides with the points' labels
             level = 10 * ref["short_residual"]
             colour = colours.get(ref["reference"], "0.4")
-            ax.axhline(level, color=colour, linestyle=":", linewidth=1.2, zorder=1)
-            ax.text(0.99, level, f"10x residual of the {ref['reference']} reference", color=colour, fontsize=6.5,
-                    ha="right", va="bottom", transform=ax.get_yaxis_transform(), zorder=1)
+            ax.axhline(level, color=colour, linestyle=":", linewidth=1.2, zorder=1,
+                       label=f"dotted: 10x the residual of the {ref['reference']} reference "
+                             f"({ref['frequency']} vs {ref['check_frequency']} Hz)")
         front = pareto_front([(r["ms_per_frame"], r["short_error"]) for r in res.rows])
         if len(front) > 1:       # a wide grey band behind the series: the points on the front stand out
             ax.plot([res.rows[i]["ms_per_frame"] for i in front], [res.rows[i]["short_error"] for i in front],
