@@ -5,7 +5,7 @@ Both write to the git-ignored ``reports/`` folder and print a progress bar on a 
 bench, per showcase scene (``--scenes``, default tail_orbit and character_walk):
 
 1. warm-up: every scene and family runs 0.1 s first, so that no timing includes a compile;
-2. references: each family's own model at 5760 Hz (``--reference-frequency``;
+2. references: each family's own model at 11520 Hz (``--reference-frequency``;
    frequency-consistent rates, quality mode for quality), its state captured every 0.25 s
    (``--horizon``), checked against twice and half that frequency;
 3. sweep: every frequency (``--frequencies``) x family (``--families``: faithful,
@@ -87,7 +87,7 @@ def main_bench(argv) -> int:
                         "'q_ftl:solver.mode=quality,solver.inextensibility=ftl' "
                         "(values parsed as YAML; repeatable)")
     p.add_argument("--reference-frequency", type=int, default=None, metavar="HZ",
-                   help="frequency of the references (default 5760; checked at twice and half that): a finer "
+                   help="frequency of the references (default 11520; checked at twice and half that): a finer "
                         "reference resolves smaller errors when it converges, at its cost")
     p.add_argument("--horizon", type=float, default=None, metavar="SECONDS",
                    help="short-horizon window (default 0.25 s; the whole number of frames nearest to it)")

@@ -192,7 +192,8 @@ class ResolutionCheck:
                                                    f"frequency {100 * self.half_residual:.3g} %)")
         head = {RESOLVED: "resolved", NOT_RESOLVED: "NOT RESOLVED (the reference converges: a finer one is needed)",
                 UNRESOLVABLE: "UNRESOLVABLE (the reference does not converge at this horizon: its residual does not "
-                              "fall as its frequency doubles, so no finer reference resolves it)"}[self.verdict]
+                              "fall as its frequency doubles, order below "
+                              f"{self.min_order:g}, so a finer reference is not expected to resolve it)"}[self.verdict]
         return (f"{self.label}: {head}: residual {100 * self.residual:.3g} % of the chain, smallest error "
                 f"{100 * self.smallest:.3g} % ({self.smallest_of}), ratio {self.margin:.1f} (needs >= "
                 f"{1 / self.ratio:g}){order}")

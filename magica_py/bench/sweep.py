@@ -99,13 +99,13 @@ class ReferenceRuns:
     parameters: dict
     run: object                       # RunResult at REFERENCE_FREQUENCY
     windows: object                   # short_horizon.ReferenceWindows
-    long_residual_rms: np.ndarray     # (F,) fraction of the chain, 1440 vs 2880 Hz
+    long_residual_rms: np.ndarray     # (F,) fraction of the chain, frequency vs check_frequency
     long_residual_max: np.ndarray     # (F,)
     short_residual: object            # short_horizon.WindowErrors of the check frequency's windows
-    frequency: int = 5760             # Hz of the reference run
-    check_frequency: int = 11520      # Hz of its check
+    frequency: int = 11520            # Hz of the reference run
+    check_frequency: int = 23040      # Hz of its check
     half_residual: object = None      # short_horizon.WindowErrors of the half frequency's windows
-    half_frequency: int = 2880
+    half_frequency: int = 5760
 
     @property
     def order(self) -> float:
