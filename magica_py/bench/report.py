@@ -301,9 +301,10 @@ def pareto_plot(path, results: list, title: str = "speed against short-horizon e
         for ref in res.references:       # in the legend: a text on the line collides with the points' labels
             level = 10 * ref["short_residual"]
             colour = colours.get(ref["reference"], "0.4")
+            pair = (f" ({ref['frequency']} vs {ref['check_frequency']} Hz)"
+                    if "frequency" in ref and "check_frequency" in ref else "")
             ax.axhline(level, color=colour, linestyle=":", linewidth=1.2, zorder=1,
-                       label=f"dotted: 10x the residual of the {ref['reference']} reference "
-                             f"({ref['frequency']} vs {ref['check_frequency']} Hz)")
+                       label=f"dotted: 10x the residual of the {ref['reference']} reference{pair}")
         front = pareto_front([(r["ms_per_frame"], r["short_error"]) for r in res.rows])
         if len(front) > 1:       # a wide grey band behind the series: the points on the front stand out
             ax.plot([res.rows[i]["ms_per_frame"] for i in front], [res.rows[i]["short_error"] for i in front],
