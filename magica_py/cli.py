@@ -311,7 +311,8 @@ def cmd_run(args) -> int:
             _remove_if_empty(created_dir)
     if not args.quiet:
         out = getattr(recorder, "output_path", None) if recorder is not None else None
-        print(summary_line(scene, summary, solver_attached, out, compile_seconds=compile_watch.seconds))
+        print(summary_line(scene, summary, solver_attached, out, compile_seconds=compile_watch.seconds,
+                           threads=getattr(system, "threads", None)))
         if summary.warnings:
             print(f"magica-py: {summary.warnings}", file=sys.stderr)
     return EXIT_OK

@@ -274,10 +274,12 @@ def play(player, scene, frames: int | None, *, system=None, progress: FrameProgr
     return stats
 
 
-def summary_line(scene, stats: RunStats, solver_attached: bool, output, compile_seconds: float | None = None) -> str:
-    """``name: N frames, S simulation steps (P particle-steps), x ms/frame (wall w s[; compile c s,
-    first run only]) -> output``. ``compile_seconds``: the whole run's compile time (attach
-    included), default the frames'."""
+def summary_line(scene, stats: RunStats, solver_attached: bool, output, compile_seconds: float | None = None,
+                 threads: int | None = None) -> str:
+    """``name: N frames, S simulation steps (P particle-steps), x ms/frame[ on T threads] (wall w
+    s[; compile c s, first run only]) -> output``. ``compile_seconds``: the whole run's compile
+    time (attach included), default the frames'. ``threads``: the cloth frame's threads (named
+    when more than one)."""
     import os
 
     per_frame = 1000.0 * stats.wall_time / max(stats.frames, 1)
@@ -301,5 +303,6 @@ def summary_line(scene, stats: RunStats, solver_attached: bool, output, compile_
     if output:
         text = os.path.relpath(output)
         where = f" -> {text if not text.startswith('..') else os.path.abspath(output)}"
-    return (f"{scene.name}: {stats.frames} frames, {steps}, {per_frame:.2f} ms/frame "
+    on = f" on {threads} threads" if threads is not None and threads > 1 else ""
+    return (f"{scene.name}: {stats.frames} frames, {steps}, {per_frame:.2f} ms/frame{on} "
             f"(wall {stats.wall_time:.2f} s{first}{compile_text}){where}")

@@ -84,6 +84,6 @@ def test_tail_orbit_runs_bounds_checked_and_compiles_only_the_stages_it_uses(tmp
     assert out.returncode == 0, out.stderr[-3000:]
     checked = json.loads(out.stdout.strip().splitlines()[-1])
     compiled = set(checked["compiled"])
-    assert {"simulate_frame", "run_step", "distance_team", "angle_team", "line_rotations_team"} <= compiled
+    assert {"simulate_frame", "predict_team", "distance_team", "angle_team", "line_rotations_team"} <= compiled
     assert not compiled & set(UNUSED_BY_TAIL_ORBIT), sorted(compiled & set(UNUSED_BY_TAIL_ORBIT))
     assert np.array(checked["positions"]).tobytes() == np.array(_run(False)["positions"]).tobytes()

@@ -99,7 +99,9 @@ def _prepare(job):
                              "batch was started with; keep the workers' checkouts in step (docs/batch.md)")
     scene = _load_scene(job)
     player = Player.for_scene(scene)
-    system = attach_cloth(player, scene)
+    # a batch runs one job per core: a job keeps to one thread unless its scene asks for more
+    single = False if scene.settings.threads == "auto" else None
+    system = attach_cloth(player, scene, parallel=single)
     frames = job.frames if job.frames is not None else scene.settings.frame_count()
     if frames is None:
         raise ValueError("the scene runs on the wall clock for a duration: give the job file 'frames'")

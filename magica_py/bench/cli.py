@@ -365,15 +365,30 @@ def main_stability(argv) -> int:
 
     p = argparse.ArgumentParser(prog="magica-py stability",
                                 description="Run the hard-case stability suite (configs/hard) and report "
-                                            "finiteness, speed, stretch, penetration and return to rest.")
+                                            "finiteness, speed, stretch, penetration and return to rest; "
+                                            "--suite mocap runs the motion-capture stress suite "
+                                            "(configs/hard/mocap_*, both modes, 30/60/144/240 fps).")
+    p.add_argument("--suite", choices=("hard", "mocap"), default="hard",
+                   help="hard (default): the hard cases; mocap: the motion-capture stress suite "
+                        "(writes stability_mocap.md / .csv)")
     p.add_argument("--case", action="append", default=[], help="run only this case (repeatable)")
-    p.add_argument("--short", action="store_true", help="the CI-length version of each case")
+    p.add_argument("--short", action="store_true",
+                   help="the CI-length version of each case (mocap: 0.5 s per run)")
+    p.add_argument("--mode", action="append", default=[], choices=("quality", "faithful"),
+                   help="mocap suite: run only this mode (repeatable; default both)")
+    p.add_argument("--fps", action="append", default=[], type=float, metavar="FPS",
+                   help="mocap suite: run only this frame rate (repeatable; default 30, 60, 144, 240)")
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="a cloth parameter applied to every case (validated; VALUE is YAML), e.g. "
                         "solver.rate_mode=frequency_consistent; repeatable")
     p.add_argument("--out", default=None, help="report folder (default: reports/ in the current folder)")
     p.add_argument("--quiet", "-q", action="store_true")
     args = p.parse_args(argv)
+    if args.suite == "mocap":
+        return main_mocap(args)
+    if args.mode or args.fps:
+        print("magica-py stability: --mode and --fps belong to --suite mocap", file=sys.stderr)
+        return 2
     try:
         cases = [case(n) for n in args.case] if args.case else list(CASES)
     except KeyError as exc:
@@ -398,6 +413,57 @@ def main_stability(argv) -> int:
         print(table)
         print(f"\n{len(rows) - failed}/{len(rows)} cases within their bounds; written {out / 'stability.md'}")
     return 0 if failed == 0 else 1
+
+
+def main_mocap(args) -> int:
+    """``magica-py stability --suite mocap``: every case x mode x frame rate (docs/STABILITY.md)."""
+    from magica_py.bench import mocap_suite as S
+    from magica_py.bench import report as R
+
+    try:
+        cases = [S.case(n) for n in args.case] if args.case else list(S.CASES)
+    except KeyError as exc:
+        print(f"magica-py stability: {exc.args[0]}", file=sys.stderr)
+        return 2
+    if args.param:
+        print("magica-py stability: --param is not used by --suite mocap (it runs both modes as they are)",
+              file=sys.stderr)
+        return 2
+    bad = [f for f in args.fps if not 1.0 <= f <= 1000.0]
+    if bad:
+        print(f"magica-py stability: --fps {bad[0]:g}: expected a frame rate in [1, 1000]", file=sys.stderr)
+        return 2
+    modes = list(dict.fromkeys(args.mode)) or list(S.MODES)
+    rates = list(dict.fromkeys(args.fps)) or list(S.FRAME_RATES)
+    duration = 0.5 if args.short else None
+    runs = [(c, m, f) for c in cases for m in modes for f in rates]
+    total = sum(int(math.ceil((duration or c.duration) * f - 1e-9)) for c, m, f in runs)
+    started = time.perf_counter()
+    if not args.quiet:
+        print(f"magica-py stability --suite mocap: {len(cases)} cases x {len(modes)} modes x {len(rates)} frame rates "
+              f"= {len(runs)} runs, {total} frames", file=sys.stderr)
+    bar = Progress(total, args.quiet)
+    rows = []
+    for c, m, f in runs:
+        run = S.run_case(c, m, f, duration, progress=bar.run_callback())
+        rows.extend(S.run_rows(run))
+    bar.close()
+    elapsed = time.perf_counter() - started
+    out = R.default_report_dir() if args.out is None else __import__("pathlib").Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    R.write_csv(out / "stability_mocap.csv", rows, S.CSV_COLUMNS)
+    stamp = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    load = " ".join(f"{x:.1f}" for x in __import__("os").getloadavg())
+    legend = " / ".join(m for m in S.MODES if m in modes)
+    text = (f"# magica-py stability --suite mocap ({stamp})\n\n{machine_description()}; load average at the end "
+            f"{load}; wall time {elapsed:.0f} s; {'0.5 s per run (--short)' if args.short else f'motion + {S.REST:g} s of rest per run'}"
+            f"\n\nEach cell: {legend}.\n\n{S.side_by_side_table(rows)}\n\n## Issue 16 bounds\n\n"
+            f"{S.bound_summary(rows)}\n")
+    (out / "stability_mocap.md").write_text(text)
+    if not args.quiet:
+        print(text)
+        print(f"written: {out / 'stability_mocap.md'}, {out / 'stability_mocap.csv'}")
+    return 0
 
 
 def stability_row(r) -> dict:

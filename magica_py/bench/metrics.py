@@ -118,29 +118,44 @@ def particle_collider_pairs(particle_team: np.ndarray, team_colliders: list) -> 
     return np.concatenate(pi).astype(np.int64), np.concatenate(ci).astype(np.int64)
 
 
-def penetration_depth(positions: np.ndarray, particle_radius: np.ndarray, pairs, shapes) -> np.ndarray:
-    """Depth (m, >= 0) of each particle inside the shell "collider surface + particle radius"
-    (the surface the solver projects onto, docs/solver.md §D.8), max over its colliders; (N,).
+def pair_depths(positions: np.ndarray, particle_radius: np.ndarray, pairs, shapes) -> np.ndarray:
+    """Signed depth (m, > 0 inside, < 0 the gap) of each checked (particle, collider) pair's
+    particle inside the shell "collider surface + particle radius" (the surface the solver
+    projects onto, docs/solver.md §D.8); (P,) in the order of ``pairs``.
 
-    ``shapes`` is ``ColliderSet.world_shapes(hierarchy)`` (§G.2); capsules use the radius
-    interpolated along the axis at the closest point; planes are one-sided (+normal is out);
-    suspended colliders are skipped.
+    ``pairs`` is ``(particle index (P,), collider index (P,))``; ``shapes`` has per collider
+    ``shape`` (0 sphere, 1 capsule, 2 plane), ``position``, ``start``/``end`` (capsule end
+    centres), ``radius``/``end_radius`` (m), ``normal`` (plane, unit) and ``suspended``: a
+    ``ColliderSet.world_shapes(hierarchy)`` (§G.2) or a solver step's collider slots
+    (``bench.mocap_suite.step_collider_shapes``). Capsules use the radius interpolated along
+    the axis at the closest point; planes are one-sided (+normal is out); suspended colliders
+    give -inf (never inside). With ``particle_radius`` 0 the depth is the centre's.
     """
-    n = positions.shape[0]
-    depth = np.zeros(n)
+    return pair_contacts(positions, particle_radius, pairs, shapes)[0]
+
+
+def pair_contacts(positions: np.ndarray, particle_radius: np.ndarray, pairs, shapes
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """``pair_depths`` and the outward unit normal of the collider surface nearest to each
+    pair's particle ((P,3); zero where undefined: a centre on a sphere's centre or a capsule's
+    axis, a suspended collider)."""
     pi, ci = pairs
+    d = np.full(pi.shape[0], -np.inf)
+    normal = np.zeros((pi.shape[0], 3))
     if pi.shape[0] == 0:
-        return depth
-    keep = ~shapes.suspended[ci]
-    pi, ci = pi[keep], ci[keep]
+        return d, normal
+
+    def unit(v):
+        length = np.linalg.norm(v, axis=1)
+        return np.where(length[:, None] > 1e-12, v / np.maximum(length, 1e-12)[:, None], 0.0), length
+
     p = positions[pi]
     r = particle_radius[pi]
-    shape = shapes.shape[ci]
-    d = np.zeros(pi.shape[0])
+    shape = np.where(shapes.suspended[ci], -1, shapes.shape[ci])
     # sphere
     s = shape == 0
     if s.any():
-        dist = np.linalg.norm(p[s] - shapes.position[ci[s]], axis=1)
+        normal[s], dist = unit(p[s] - shapes.position[ci[s]])
         d[s] = shapes.radius[ci[s]] + r[s] - dist
     # capsule (two radii): closest point on the start-end segment
     c = shape == 1
@@ -151,13 +166,59 @@ def penetration_depth(positions: np.ndarray, particle_radius: np.ndarray, pairs,
         u = np.clip(np.einsum("ij,ij->i", p[c] - a, ab) / len2, 0.0, 1.0)
         closest = a + ab * u[:, None]
         rad = shapes.radius[ci[c]] + (shapes.end_radius[ci[c]] - shapes.radius[ci[c]]) * u
-        d[c] = rad + r[c] - np.linalg.norm(p[c] - closest, axis=1)
+        normal[c], dist = unit(p[c] - closest)
+        d[c] = rad + r[c] - dist
     # plane: signed distance along the normal
     q = shape == 2
     if q.any():
         d[q] = r[q] - np.einsum("ij,ij->i", p[q] - shapes.position[ci[q]], shapes.normal[ci[q]])
-    np.maximum.at(depth, pi, np.maximum(d, 0.0))
+        normal[q] = shapes.normal[ci[q]]
+    return d, normal
+
+
+def penetration_depth(positions: np.ndarray, particle_radius: np.ndarray, pairs, shapes) -> np.ndarray:
+    """Depth (m, >= 0) of each particle inside the shell "collider surface + particle radius",
+    max over its colliders (``pair_depths``); (N,)."""
+    depth = np.zeros(positions.shape[0])
+    pi = pairs[0]
+    if pi.shape[0] == 0:
+        return depth
+    np.maximum.at(depth, pi, np.maximum(pair_depths(positions, particle_radius, pairs, shapes), 0.0))
     return depth
+
+
+def rigid_point_velocity(points: np.ndarray, pose_before, pose_after, dt: float) -> np.ndarray:
+    """Velocity (m/s, (P,3)) of body points that are at ``points`` (P,3) now, the body having
+    moved rigidly from ``pose_before`` to ``pose_after`` over ``dt`` s; a pose is (position
+    (P,3) m, rotation (P,4) xyzw), one row per point (its body's pose). The point's previous
+    place is its body-local coordinates taken back to the earlier pose: a body part's speed
+    where a particle touches it, rotation included (a spinning head's surface moves)."""
+    from magica_py.scene.colliders import _rotation_matrices
+
+    p0, q0 = pose_before
+    p1, q1 = pose_after
+    if points.shape[0] == 0 or dt <= 0.0:
+        return np.zeros_like(points)
+    r0, r1 = _rotation_matrices(np.asarray(q0)), _rotation_matrices(np.asarray(q1))
+    local = np.einsum("pji,pj->pi", r1, points - p1)            # R1^T (x - p1)
+    before = p0 + np.einsum("pij,pj->pi", r0, local)
+    return (points - before) / dt
+
+
+def ejection_speeds(velocity: np.ndarray, body_velocity: np.ndarray, normal: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For particles touching a body part ((P,3) each, m/s; ``normal`` the body's outward unit
+    normal at the particle): their speed relative to it ``|v - v_body|``, their excess speed
+    ``|v| - |v_body|`` (issue 16's bound: at most 2 m/s) and their ejection, the speed at
+    which they leave the surface beyond the body's own push, ``v.n - max(v_body.n, 0)``: a
+    particle thrown out of a thigh counts its whole outward speed above the thigh's, one
+    carried along (or swinging along the surface) 0, and one left behind by a body moving
+    away from it (a head dropping away under the hair) its own outward speed only, not the
+    body's retreat; (P,) each."""
+    relative = np.linalg.norm(velocity - body_velocity, axis=1)
+    excess = np.linalg.norm(velocity, axis=1) - np.linalg.norm(body_velocity, axis=1)
+    outward = np.einsum("ij,ij->i", velocity, normal) - np.maximum(np.einsum("ij,ij->i", body_velocity, normal), 0.0)
+    return relative, excess, outward
 
 
 def particle_radius(model, parameters, scale_ratio=None) -> np.ndarray:

@@ -128,14 +128,14 @@ def steps_needed(settings, frequency: int) -> int:
     return max(int(settings.max_steps_per_frame), int(math.ceil(frequency * longest - 1e-9)) + 1)
 
 
-def attach_cloth(player, scene):
+def attach_cloth(player, scene, parallel=None):
     """Attach the cloth system the way ``magica-py run`` does (``magica_py.solver.attach``),
     and return it; falls back to ``ClothSystem(...).attach`` when the package has no
-    ``attach`` yet."""
+    ``attach`` yet. ``parallel``: as ``solver.attach`` (None: the scene's ``threads``)."""
     solver = importlib.import_module("magica_py.solver")
     attach = getattr(solver, "attach", None)
     if attach is not None:
-        system = attach(player, scene)
+        system = attach(player, scene, parallel=parallel)
         if system is not None and hasattr(system, "particles"):
             return system
         for systems in getattr(player.schedule, "systems", {}).values():
@@ -147,7 +147,8 @@ def attach_cloth(player, scene):
                            "in the schedule")
     from magica_py.solver.system import ClothSystem
 
-    return ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player, scene)
+    return ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings,
+                       parallel=parallel).attach(player, scene)
 
 
 def set_frequency(system, frequency: int, max_steps: int) -> None:

@@ -295,7 +295,7 @@ def _section(c: Checker, root: dict, key: str, min_length: int, check) -> list:
 SETTINGS_KEYS = ("name", "fps", "frame_times", "frame_times_cycle", "clock", "frames", "duration", "time_scale", "update_mode",
                  "simulation_frequency", "max_steps_per_frame", "global_time_scale", "fixed_delta_time",
                  "maximum_delta_time",
-                 "gravity", "timing", "seed")
+                 "gravity", "timing", "seed", "threads")
 
 
 def check_settings(c: Checker, value, path: tuple) -> dict:
@@ -332,6 +332,12 @@ def check_settings(c: Checker, value, path: tuple) -> dict:
     s["gravity"] = c.direction(m, "gravity", path, (0.0, -1.0, 0.0))
     s["timing"] = c.choice(m, "timing", path, TIMING_MODES, "exact")
     s["seed"] = c.integer(m, "seed", path, 0, Range(0, 2**63 - 1))
+    threads = m.get("threads", "auto")
+    if threads != "auto" and (isinstance(threads, bool) or not isinstance(threads, int) or not 1 <= threads <= 1024):
+        c.error(path + ("threads",), f"expected 'auto' or an integer in [1, 1024] (threads the cloth frame uses), "
+                                     f"got {threads!r}")
+        threads = "auto"
+    s["threads"] = threads
     return s
 
 

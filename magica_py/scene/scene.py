@@ -37,6 +37,7 @@ class SceneSettings:
     gravity: tuple[float, float, float] = (0.0, -1.0, 0.0)  # unit world direction
     timing: str = "exact"                  # exact | faithful | faithful32 (Appendix 3.1)
     seed: int = 0
+    threads: str | int = "auto"            # "auto" | threads the cloth frame uses (docs/scene-format.md)
 
     @property
     def frame_source(self) -> str:

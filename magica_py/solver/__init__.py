@@ -13,11 +13,13 @@ LATE_UPDATE frame for every cloth of a scene in one numba call.
 from __future__ import annotations
 
 
-def attach(player, scene):
-    """Build the cloth system of ``scene`` and attach it to ``player``; returns the system."""
+def attach(player, scene, parallel=None):
+    """Build the cloth system of ``scene`` and attach it to ``player``; returns the system.
+    ``parallel``: None follows the scene's ``threads`` setting, True / False force numba's
+    threads / one thread (``system.choose_threads``)."""
     from magica_py.solver.system import ClothSystem
 
-    return ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings,
+    return ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings, parallel=parallel,
                        wind=getattr(scene, "wind", ())).attach(player, scene)
 
 

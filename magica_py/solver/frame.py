@@ -65,6 +65,11 @@ FrameInputs = namedtuple("FrameInputs", [
     "global_time_scale", "dt", "max_steps", "timing", "frequency_ratio",
     "power_y", "power_z", "power_w",
     "threads"])   # threads the parallel kernel deals its work to (numba.get_num_threads() at the call)
+# The frame inputs travel into the kernel as one float64 array in FrameInputs' field order
+# (``frame_input_values``; typing a namedtuple argument costs ~6-9 us per call, an array
+# 0.2 us) and the kernel rebuilds the namedtuple (``frame_inputs``); every value is a float64
+# or a small integer, so the round trip is exact.
+FRAME_INPUT_COUNT = len(FrameInputs._fields)
 # The optional stages (None: not compiled, not called; 1: compiled, run where a team asks):
 # angle (D.5/D.6), bending (D.7 dihedral and volume), point and edge collision (D.8),
 # motion (D.9), quality (quality mode's build reset, end-of-step passes and display collision),
@@ -76,6 +81,20 @@ StageSwitches = namedtuple("StageSwitches", [
 # the per-thread work table of the parallel kernel: team_worker (teams,) int32, worker_load
 # (threads,) int64 particle-steps (written by ``assign_workers`` each frame)
 WorkerTable = namedtuple("WorkerTable", ["team_worker", "worker_load"])
+
+
+def frame_input_values() -> np.ndarray:
+    """The array ``simulate_frame`` takes its frame inputs in: (13,) float64, FrameInputs' field
+    order (the system refills it every frame)."""
+    return np.zeros(FRAME_INPUT_COUNT)
+
+
+@kernel
+def frame_inputs(values):
+    """The ``FrameInputs`` of a frame from its (13,) float64 values (counts and codes back to
+    integers)."""
+    return FrameInputs(values[0], values[1], values[2], int(values[3]), values[4], values[5], int(values[6]),
+                       int(values[7]), values[8], values[9], values[10], values[11], int(values[12]))
 
 
 def time_arrays(state: TeamTimeState) -> TimeArrays:
@@ -294,17 +313,35 @@ def _frame_close(tt, h, fi):
 
 
 @kernel
+def frame_counts(m, ts, tt):
+    """What the frame did, for the caller's metrics and events: (most steps of a team,
+    particle-steps, teams with a guard code). Integers: the same on every CPU."""
+    most_steps = np.int64(0)
+    particle_steps = np.int64(0)
+    guarded = 0
+    for t in range(tt.update_count.shape[0]):
+        c = np.int64(tt.update_count[t])
+        most_steps = max(most_steps, c)
+        particle_steps += c * np.int64(m.team_particle_count[t])
+        if ts.guard_code[t] != 0:
+            guarded += 1
+    return most_steps, particle_steps, guarded
+
+
+@kernel
 def _begin_step_team(tt, fi, step, t):
     team_time_begin_step_team(step, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
                               tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
 
 
 @kernel
-def simulate_frame(tables, fi, angle, bending, point_collision, edge_collision, motion, quality, lines, triangles,
-                   wind):
+def simulate_frame(tables, frame_values, angle, bending, point_collision, edge_collision, motion, quality, lines,
+                   triangles, wind):
     """The whole cloth frame, one team after another (see the module docstring): every team's
     begin and steps, then every team's end (all reads of this frame's transforms come before
-    any write-back). ``tables``: ``tables.SolverTables``."""
+    any write-back). ``tables``: ``tables.SolverTables``; ``frame_values``: the frame inputs
+    (``frame_input_values``). Returns ``frame_counts``."""
+    fi = frame_inputs(frame_values)
     m, ps, prm, ts, cs, tt, h = (tables.model, tables.particles, tables.parameters, tables.teams,
                                  tables.colliders, tables.time, tables.hierarchy)
     prepare_teams(m, ts, prm, tt, h)
@@ -315,34 +352,41 @@ def simulate_frame(tables, fi, angle, bending, point_collision, edge_collision, 
     for i in range(m.live_teams.shape[0]):
         team_frame_end(m, ps, prm, ts, cs, tt, h, fi, m.live_teams[i], quality, lines, triangles)
     _frame_close(tt, h, fi)
+    return frame_counts(m, ts, tt)
 
 
 @kernel(parallel=True)
-def simulate_frame_parallel(tables, fi, wt, angle, bending, point_collision, edge_collision, motion, quality, lines,
-                            triangles, wind):
-    """``simulate_frame`` with the teams dealt to ``fi.threads`` threads (opt-in:
-    ``ClothSystem(parallel=True)``). ``assign_workers`` deals the teams each frame (greedy,
+def simulate_frame_parallel(tables, frame_values, wt, angle, bending, point_collision, edge_collision, motion,
+                            quality, lines, triangles, wind):
+    """``simulate_frame`` with the teams dealt to ``fi.threads`` threads (``scene.threads``,
+    ``system.choose_threads``). ``assign_workers`` deals the teams each frame (greedy,
     largest first); each thread runs its teams' begin and steps in one parallel region and
     their ends in a second: two thread launches per frame. Teams are independent and each
     runs in its own order, so the results are the serial kernel's bits."""
+    fi = frame_inputs(frame_values)
     m, ps, prm, ts, cs, tt, h = (tables.model, tables.particles, tables.parameters, tables.teams,
                                  tables.colliders, tables.time, tables.hierarchy)
     prepare_teams(m, ts, prm, tt, h)
     _time_frame_update(tt, fi)
     workers = max(1, min(fi.threads, wt.worker_load.shape[0]))
     assign_workers(m, ts, tt, wt, workers)
+    # each region rebuilds the frame inputs from the array: a namedtuple made in the kernel
+    # cannot enter a prange body (numba's parfor lowering looks its class up by name)
     for w in prange(workers):
+        fw = frame_inputs(frame_values)
         for i in range(m.live_teams.shape[0]):
             t = m.live_teams[i]
             if wt.team_worker[t] == w:
-                team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, t, angle, bending, point_collision,
+                team_frame_steps(m, ps, prm, ts, cs, tt, h, fw, t, angle, bending, point_collision,
                                  edge_collision, motion, quality, wind)
     for w in prange(workers):
+        fw = frame_inputs(frame_values)
         for i in range(m.live_teams.shape[0]):
             t = m.live_teams[i]
             if wt.team_worker[t] == w:
-                team_frame_end(m, ps, prm, ts, cs, tt, h, fi, t, quality, lines, triangles)
+                team_frame_end(m, ps, prm, ts, cs, tt, h, fw, t, quality, lines, triangles)
     _frame_close(tt, h, fi)
+    return frame_counts(m, ts, tt)
 
 
 @kernel

@@ -37,7 +37,7 @@ from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, u
 from magica_py.solver.colliders import fill_slots
 from magica_py.solver.fields import F64
 from magica_py.solver.frame import (
-    FrameInputs, StageSwitches, hierarchy_arrays, simulate_frame, simulate_frame_parallel, time_arrays, worker_table,
+    StageSwitches, frame_input_values, hierarchy_arrays, simulate_frame, simulate_frame_parallel, time_arrays, worker_table,
 )
 from magica_py.solver.tables import kernel_tables
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
@@ -57,13 +57,35 @@ _BUILD_POSE_FIELDS = ("build_world_position", "build_world_rotation", "build_los
 GUARD_REASONS = {GUARD_NON_FINITE: "non-finite particle state", GUARD_SPEED: "particle speed above the guard bound"}
 
 
+# "auto" runs the frame on numba's threads from this many teams and particles: below it the
+# two thread launches per frame cost more than they save (single tail: 40 -> 49 us per frame
+# on 2 threads; crowd, 200 teams: 10.8 -> 6.7 ms; docs/BENCHMARKS.md)
+AUTO_PARALLEL_TEAMS = 8
+AUTO_PARALLEL_PARTICLES = 2000
+
+
+def choose_threads(parallel, setting, teams: int, particles: int) -> int:
+    """Threads the frame kernel deals its teams to: ``parallel`` True / False forces numba's
+    thread count / 1; otherwise the scene's ``threads`` setting: a count (at most numba's
+    threads, ``NUMBA_NUM_THREADS``) or ``"auto"``: numba's threads when the scene has at
+    least ``AUTO_PARALLEL_TEAMS`` teams and ``AUTO_PARALLEL_PARTICLES`` particles, else 1."""
+    available = max(1, int(numba.get_num_threads()))
+    if parallel is not None:
+        return available if parallel else 1
+    if setting == "auto":
+        many = teams >= AUTO_PARALLEL_TEAMS and particles >= AUTO_PARALLEL_PARTICLES
+        return available if many else 1
+    return max(1, min(int(setting), available))
+
+
 class ClothSystem:
     """Simulates ``cloth_specs`` (``scene.ClothSpec``-like) on ``hierarchy``.
 
     ``models`` may be given (prebuilt ``build.ClothModel`` in the same order); otherwise each
     spec is built with ``build.build_cloth`` from the hierarchy's current (rest) pose.
-    ``parallel=True`` spreads teams over numba threads (same results bit for bit; worth it
-    for crowds on idle cores only, docs/tech-notes.md §8: off by default). Only the stages
+    Threads: ``parallel=True`` spreads teams over numba's threads, ``False`` keeps one;
+    ``None`` (the default) follows the scene's ``threads`` setting (``settings.threads``:
+    ``"auto"`` or a count; ``choose_threads``): the same results bit for bit either way. Only the stages
     the live teams use are compiled and called (``stage_switches``). After the write-back the
     hierarchy is propagated over the subtrees of the cloth bones only (a plan rebuilt when teams
     change); with ``parallel=True`` over the numba threads too (``hierarchy.threads``).
@@ -72,7 +94,7 @@ class ClothSystem:
     name = "cloth"
 
     def __init__(self, hierarchy, cloth_specs, colliders=None, settings=None, models=None,
-                 parallel: bool = False, wind=()):
+                 parallel: bool | None = None, wind=()):
         from magica_py.build import build_cloth
         from magica_py.wind.zones import WindField
 
@@ -119,11 +141,14 @@ class ClothSystem:
         self.frame_count = 0
         self._player = None
         self._tables = None
-        self.parallel = bool(parallel)
-        self._workers = worker_table(self.layout.team_count, int(numba.get_num_threads()))
+        self.threads = choose_threads(parallel, getattr(settings, "threads", "auto") if settings is not None else "auto",
+                                      team_count, int(self.model.team_particle_count.sum()))
+        self.parallel = self.threads > 1
+        self._workers = worker_table(self.layout.team_count, self.threads)
+        self._frame_values = frame_input_values()
         self.stages = self.stage_switches()
         if self.parallel:  # the hierarchy propagation spreads over the same threads
-            hierarchy.threads = max(hierarchy.threads, int(numba.get_num_threads()))
+            hierarchy.threads = max(hierarchy.threads, self.threads)
         self._written_plan = hierarchy.plan(self.restored_bones())
 
     # ------------------------------------------------------------------ registration
@@ -250,7 +275,7 @@ class ClothSystem:
         self._time = time_arrays(self.time_state)
         self._tables = None
         if self._workers.team_worker.shape[0] < self.layout.team_count:
-            self._workers = worker_table(self.layout.team_count, int(numba.get_num_threads()))
+            self._workers = worker_table(self.layout.team_count, self.threads)
         self.stages = self.stage_switches()
         self._written_plan = self.hierarchy.plan(self.restored_bones())
         if self._player is not None:
@@ -301,15 +326,25 @@ class ClothSystem:
         """One frame of every team (usable without a player: tests, benchmarks)."""
         (global_time_scale, dt, max_steps, timing, frequency_ratio, power_y, power_z,
          power_w) = self._time_constants()
-        fi = FrameInputs(float(delta_time), float(delta_time if unscaled_delta_time is None else unscaled_delta_time),
-                         float(fixed_delta_time), int(fixed_update_count), global_time_scale, dt, max_steps,
-                         timing, frequency_ratio, power_y, power_z, power_w,
-                         int(numba.get_num_threads()) if self.parallel else 1)
+        fi = self._frame_values   # frame.FrameInputs' fields, in order
+        fi[0] = delta_time
+        fi[1] = delta_time if unscaled_delta_time is None else unscaled_delta_time
+        fi[2] = fixed_delta_time
+        fi[3] = int(fixed_update_count)
+        fi[4] = global_time_scale
+        fi[5] = dt
+        fi[6] = max_steps
+        fi[7] = timing
+        fi[8] = frequency_ratio
+        fi[9] = power_y
+        fi[10] = power_z
+        fi[11] = power_w
+        fi[12] = self.threads
         clock = _time.perf_counter
         self.hierarchy.flush()   # the kernel reads the world poses through kept references
         t0 = clock()
         self.select_wind()
-        self._call_frame(fi)
+        most_steps, particle_steps, guarded = self._call_frame(fi)
         t1 = clock()
         if self._written_plan.threads != self.hierarchy.threads:
             self._written_plan = self.hierarchy.plan(self.restored_bones())
@@ -317,17 +352,16 @@ class ClothSystem:
         self.hierarchy.propagate_later(self._written_plan)
         t2 = clock()
         self.frame_count += 1
-        codes = self.teams.guard_code
-        if codes.any():
+        if guarded:
+            codes = self.teams.guard_code
             for team in np.nonzero(codes)[0]:
                 if events is not None:
                     events.append(("cloth_reset", {"cloth": self.team_names[team], "team": int(team),
                                                    "reason": GUARD_REASONS.get(int(codes[team]), "guard")}))
             codes[:] = 0
         if metrics is not None:
-            steps = int(np.dot(self.time_state.update_count, self.model.team_particle_count))  # cpu-independent: integers
-            metrics["cloth.steps"] = float(steps)
-            metrics["cloth.simulation_steps"] = float(self.time_state.update_count.max(initial=0))
+            metrics["cloth.steps"] = float(particle_steps)
+            metrics["cloth.simulation_steps"] = float(most_steps)
             metrics["cloth.kernel"] = t1 - t0
             metrics["cloth.propagate"] = t2 - t1
 
@@ -465,13 +499,13 @@ class ClothSystem:
         if self.wind is not None:
             self.wind.update(self._kernel_tables()[0])
 
-    def _call_frame(self, fi) -> None:
-        """One numba call per frame: the serial or the parallel kernel, with the stage switches."""
+    def _call_frame(self, fi) -> tuple:
+        """One numba call per frame: the serial or the parallel kernel, with the stage switches;
+        returns the frame's counts (``frame.frame_counts``)."""
         tables = self._kernel_tables()[0]
         if self.parallel:
-            simulate_frame_parallel(tables, fi, self._workers, *self.stages)
-        else:
-            simulate_frame(tables, fi, *self.stages)
+            return simulate_frame_parallel(tables, fi, self._workers, *self.stages)
+        return simulate_frame(tables, fi, *self.stages)
 
     def _parameter(self, team, key, default):
         params = self.team_parameters[team]

@@ -1,0 +1,406 @@
+"""The motion-capture stress suite (issue 16 item 7; ``magica-py stability --suite mocap``).
+
+Each case is a scene ``configs/hard/mocap_*.yaml`` (violent procedural motion written by
+``benchmarks/mocap_scenes.py``, and CMU capture 01_01) on the character rig (hair fan + skirt)
+or on Godette (her VRM spring-bone cloths). Every case runs in both modes (faithful,
+quality) at 30, 60, 144 and 240 fps (90 Hz simulation), for the scene's motion and then
+``REST`` s standing still, and reports per run and per cloth kind (``skirt`` for cloths named
+so, ``hair`` for every other cloth: hair, ribbons, hair balls):
+
+* displayed edge stretch: every proxy edge of the bones after the write-back (what a user
+  sees), ``|p1 - p0| / rest - 1``, max over the frames;
+* simulated edge stretch: the same of the solver state at the end of a step, after a frame
+  that ran steps: its last step's state (``particles.old_pos``) and the one before it
+  (``old_pos - real_velocity dt``, D.10), the two states the quality display interpolates; at
+  60, 144 and 240 fps that is every step, at 30 fps two steps in three;
+* root-distance stretch, displayed and simulated (a particle's distance to its root);
+* deepest penetration at the end of a step, against the colliders at that step's pose (the
+  solver's collider slots): the deepest particle centre inside a collider (m; > 0 means a
+  centre inside) and the deepest particle sphere, as % of its radius;
+* fastest ejection: for particles touching a body part at the end of a step (sphere within
+  one radius of a collider carried by a bone; the static ground is not a body part), their
+  solver velocity against the body part's velocity at the particle (rigid motion of the
+  collider's bone over the frame, rotation included): ``|v| - |v_body|`` (the issue's bound:
+  at most 2 m/s), ``|v - v_body|`` and the ejection proper ``v.n - max(v_body.n, 0)`` (the
+  speed leaving the surface beyond the body's own push, ``metrics.ejection_speeds``: a strand
+  swinging along the body or left behind by it counts 0);
+  penetration and ejection are seen at the end of each frame's last step only (the solver
+  runs a frame's steps in one call), every step at 144 and 240 fps, two in three at 60 fps,
+  one in three at 30 fps;
+* settling time: from the end of the motion, when every bone of the kind moves below
+  ``REST_SPEED`` on the display and stays so (``metrics.settling_time``); "> REST s" when not.
+
+The metrics themselves are ``bench.metrics`` (one implementation each); this module only
+gathers the arrays of a run.
+"""
+from __future__ import annotations
+
+import math
+import pathlib
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from magica_py.bench import metrics as M
+from magica_py.bench.variants import Variant, colliding_pairs, prepare
+from magica_py.scene.colliders import static_transform_name
+
+HARD_DIR = pathlib.Path(__file__).resolve().parents[2] / "configs" / "hard"
+FRAME_RATES = (30.0, 60.0, 144.0, 240.0)
+MODES = ("quality", "faithful")
+REST = 4.0              # s of standing still run after the motion (settling window)
+REST_SPEED = 0.02       # m/s: a bone slower than this is at rest (as the hard-case suite)
+CONTACT_RANGE = 1.0     # particle radii: a sphere closer than this to a collider touches it
+KINDS = ("hair", "skirt")
+
+
+@dataclass(frozen=True)
+class MocapCase:
+    name: str
+    scene: str                 # file name in configs/hard
+    motion_end: float          # s: the motion is over (standing still afterwards)
+    rig: str                   # "character" or "godette"
+    motion: str                # what the motion is, for the report
+
+    @property
+    def path(self) -> str:
+        return str(HARD_DIR / self.scene)
+
+    @property
+    def duration(self) -> float:
+        return self.motion_end + REST
+
+
+def _cases() -> tuple[MocapCase, ...]:
+    motions = (("backflip", 1.5, "full backward turn in 0.5 s of a jump"),
+               ("spin", 1.7, "3 rev/s about the vertical for 1.5 s, running on the spot"),
+               ("roll", 1.8, "crouch and forward roll (360 deg in 0.8 s)"),
+               ("sprint", 1.9, "sprint start and stop at 10 m/s^2 (0-6-0 m/s)"),
+               ("jitter", 1.8, "root +-5 mm and head +-3 deg noise re-drawn every 1/120 s, 1.5 s"),
+               ("cmu", 2.0, "CMU 01_01 seconds 2-4 (a forward jump), retargeted"))
+    out = []
+    for rig in ("character", "godette"):
+        for motion, end, text in motions:
+            scene = "mocap_spin.yaml" if (motion, rig) == ("spin", "character") else f"mocap_{motion}_{rig}.yaml"
+            out.append(MocapCase(f"{motion}_{rig}", scene, end, rig, text))
+    return tuple(out)
+
+
+CASES: tuple[MocapCase, ...] = _cases()
+
+
+def case(name: str) -> MocapCase:
+    for c in CASES:
+        if c.name == name:
+            return c
+    raise KeyError(f"no mocap case {name!r}; cases: {', '.join(c.name for c in CASES)}")
+
+
+@dataclass
+class KindResult:
+    """Maxima over one run for one cloth kind (relative stretch, m, m/s, s)."""
+
+    shown_edge: float = 0.0
+    state_edge: float = 0.0
+    shown_root: float = 0.0
+    state_root: float = 0.0
+    centre_depth: float = -math.inf       # m, deepest centre (> 0: inside a collider)
+    sphere_depth_ratio: float = 0.0        # deepest sphere penetration / its radius (>= 0)
+    ejection_excess: float = -math.inf     # m/s, max |v| - |v_body| of touching particles
+    ejection_relative: float = 0.0         # m/s, max |v - v_body|
+    ejection_outward: float = -math.inf    # m/s, max v.n - max(v_body.n, 0) (n: outward normal)
+    ejection_at: tuple = ()                # (time s, particle speed, body speed) of the max excess
+    settle: float = math.inf               # s after the motion's end (inf: not by the end; nan: run too short)
+    particles: int = 0
+
+
+@dataclass
+class MocapRun:
+    case: MocapCase
+    mode: str
+    fps: float
+    frames: int
+    kinds: dict                 # kind -> KindResult (only kinds the scene has)
+    finite: bool
+    guard_resets: int
+    wall: float                 # s, the whole run
+    times: np.ndarray = None    # (F,) s, unscaled time at the end of each frame
+    speeds: dict = None         # kind -> (F,) m/s, fastest displayed moving bone of the kind
+
+
+# ----------------------------------------------------------------------------- solver arrays
+@dataclass(frozen=True)
+class StepColliders:
+    """The colliders at the pose of the last simulated step, one row per solver slot (a
+    collider per cloth, docs/solver.md §G.3), with the fields ``metrics.pair_depths`` reads."""
+
+    shape: np.ndarray           # (S,) 0 sphere, 1 capsule, 2 plane
+    position: np.ndarray        # (S,3) m: sphere centre / plane point
+    start: np.ndarray           # (S,3) m: capsule start
+    end: np.ndarray             # (S,3) m: capsule end
+    radius: np.ndarray          # (S,) m
+    end_radius: np.ndarray      # (S,) m
+    normal: np.ndarray          # (S,3) unit, planes
+    suspended: np.ndarray       # (S,) bool: skipped this step (scale ~ 0)
+
+
+def step_collider_shapes(collider_state, slots: int) -> StepColliders:
+    cs = collider_state
+    return StepColliders(np.asarray(cs.shape[:slots]), np.asarray(cs.start_new[:slots]),
+                         np.asarray(cs.start_new[:slots]), np.asarray(cs.end_new[:slots]),
+                         np.asarray(cs.radius_start[:slots]), np.asarray(cs.radius_end[:slots]),
+                         np.asarray(cs.plane_normal[:slots]), np.asarray(cs.scale_suspend[:slots]) != 0)
+
+
+def slot_pairs(system, pairs) -> np.ndarray:
+    """The solver slot of each (particle, scene collider) pair of ``variants.colliding_pairs``."""
+    cs = system.collider_state
+    team = np.asarray(system.model.particle_team, dtype=np.int64)
+    slots = int((np.asarray(system.teams.collider_start) + np.asarray(system.teams.collider_count)).max(initial=0))
+    slot_of = {(int(cs.team[k]), int(cs.collider_index[k])): k for k in range(slots)}
+    return np.array([slot_of[(int(team[p]), int(c))] for p, c in zip(*pairs)], dtype=np.int64)
+
+
+def cloth_kind(name: str) -> str:
+    return "skirt" if "skirt" in name.lower() else "hair"
+
+
+# ----------------------------------------------------------------------------- the run
+def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None, progress=None) -> MocapRun:
+    """Run one case in ``mode`` at ``fps`` for its motion and rest (or ``duration`` s), and
+    gather the maxima per cloth kind. ``progress(done, total)`` after every frame."""
+    if mode not in MODES:
+        raise ValueError(f"mode {mode!r}: expected one of {', '.join(MODES)}")
+    if not fps > 0:
+        raise ValueError(f"fps {fps!r}: expected a positive frame rate")
+    started = time.perf_counter()
+    variant = Variant(f"{c.name}/{mode}@{fps:g}", c.path, parameters={"solver.mode": mode}, fps=fps,
+                      duration=c.duration if duration is None else duration, family="mocap")
+    p = prepare(variant)
+    scene, player, system = p.scene, p.player, p.system
+    model = system.model
+    h = scene.hierarchy
+    h.propagate()
+    nodes = np.asarray(model.transform_index, dtype=np.int64)
+    geometry = M.chain_geometry(model, h.world_position[nodes].copy())
+    n = nodes.shape[0]
+    team = geometry.team
+    kind_of_team = np.array([cloth_kind(getattr(spec, "name", "")) for spec in system.specs])
+    kind = kind_of_team[team]                                    # (N,) per particle
+    edge_kind = kind[geometry.edges[:, 0]] if geometry.edges.size else np.zeros(0, dtype=kind.dtype)
+    kinds = [k for k in KINDS if (kind == k).any()]
+    moving = geometry.moving
+
+    pairs = colliding_pairs(system, geometry)
+    slot = slot_pairs(system, pairs)
+    slot_count = int(slot.max(initial=-1)) + 1
+    step_pairs = (pairs[0], slot)
+    collider_index = pairs[1]
+    # colliders without a transform (the ground) sit on their own static node: no body part
+    static = np.array([h.names[int(t)] == static_transform_name(name)
+                       for t, name in zip(scene.colliders.transform, scene.colliders.names)], dtype=bool)
+    body_pair = ~static[collider_index] if collider_index.size else np.zeros(0, dtype=bool)
+    radius_base = M.particle_radius(model, system.parameters)
+
+    out = {k: KindResult(particles=int(((kind == k) & moving).sum())) for k in kinds}
+    times = np.zeros(p.frames)
+    speed = {k: np.zeros(p.frames) for k in kinds}               # m/s, fastest displayed bone of the kind
+    finite, resets = True, 0
+    ps = system.particles
+    step_dt = 1.0 / p.frequency
+    previous = h.world_position[nodes].copy()
+    previous_time = 0.0
+    shapes_before = scene.colliders.world_shapes(h)
+    for i in range(p.frames):
+        ctx = player.step()
+        times[i] = ctx.time.unscaled_time
+        dt = times[i] - previous_time
+        now = h.world_position[nodes].copy()
+        shapes_now = scene.colliders.world_shapes(h)
+        finite &= bool(np.isfinite(now).all() and np.isfinite(ps.old_pos[:n]).all() and np.isfinite(ps.velocity[:n]).all())
+        resets += sum(1 for kind_, _ in ctx.events if kind_ == "cloth_reset")
+        shown_edge = M.edge_stretch(now, geometry)
+        shown_root = M.root_distance_stretch(now, geometry)
+        if i > 0 and dt > 1e-12:
+            v = np.linalg.norm(now - previous, axis=1) / dt
+            for k in kinds:
+                speed[k][i] = v[(kind == k) & moving].max(initial=0.0)
+        stepped = ctx.metrics.get("cloth.simulation_steps", 0.0) > 0
+        if stepped:
+            # the last step's state and the one before it (D.10: old - real_velocity dt), the
+            # two the quality display interpolates
+            state = np.asarray(ps.old_pos[:n]).copy()
+            before = state - np.asarray(ps.real_velocity[:n]) * step_dt
+            state_edge = np.maximum(M.edge_stretch(state, geometry), M.edge_stretch(before, geometry))
+            state_root = np.maximum(M.root_distance_stretch(state, geometry), M.root_distance_stretch(before, geometry))
+        for k in kinds:
+            r = out[k]
+            sel_e, sel_p = edge_kind == k, kind == k
+            r.shown_edge = max(r.shown_edge, float(shown_edge[sel_e].max(initial=0.0)))
+            r.shown_root = max(r.shown_root, float(shown_root[sel_p].max(initial=0.0)))
+            if stepped:
+                r.state_edge = max(r.state_edge, float(state_edge[sel_e].max(initial=0.0)))
+                r.state_root = max(r.state_root, float(state_root[sel_p].max(initial=0.0)))
+        if stepped and slot_count:
+            # frame 0 has no body velocity: the previous pose is the build pose, which a capture's
+            # first frame jumps away from
+            _contacts(system, state, radius_base, step_pairs, slot_count, collider_index,
+                      body_pair if i > 0 else np.zeros_like(body_pair), kind, shapes_before, shapes_now, dt,
+                      times[i], out)
+        previous, previous_time, shapes_before = now, times[i], shapes_now
+        if progress is not None:
+            progress(i + 1, p.frames)
+    ended = times.size and times[-1] >= c.motion_end
+    for k in kinds:      # nan: the run ends before the motion does (a short run)
+        out[k].settle = M.settling_time(speed[k], times, REST_SPEED, after=c.motion_end) if ended else math.nan
+    return MocapRun(c, mode, float(fps), p.frames, out, finite, resets, time.perf_counter() - started,
+                    times, speed)
+
+
+def _contacts(system, state, radius_base, step_pairs, slot_count, collider_index, body_pair, kind,
+              shapes_before, shapes_now, dt, t, out) -> None:
+    """Penetration and ejection at the end of this frame's last step, into ``out``."""
+    ts = system.teams
+    team = np.asarray(system.model.particle_team, dtype=np.int64)
+    radius = radius_base * (np.asarray(ts.scale_ratio) * np.asarray(ts.length_unit))[team]
+    shapes = step_collider_shapes(system.collider_state, slot_count)
+    pi = step_pairs[0]
+    sphere, normal = M.pair_contacts(state, radius, step_pairs, shapes)       # (P,) m, (P,3)
+    centre = sphere - radius[pi]
+    touching = (sphere > -CONTACT_RANGE * radius[pi]) & body_pair
+    if touching.any():
+        tp, tc = pi[touching], collider_index[touching]
+        points = state[tp]
+        vb = M.rigid_point_velocity(points, (shapes_before.position[tc], shapes_before.rotation[tc]),
+                                    (shapes_now.position[tc], shapes_now.rotation[tc]), dt)
+        v = np.asarray(system.particles.velocity)[tp]
+        relative, excess, outward = M.ejection_speeds(v, vb, normal[touching])
+    for k, r in out.items():
+        sel = kind[pi] == k
+        if not sel.any():
+            continue
+        r.centre_depth = max(r.centre_depth, float(centre[sel].max()))
+        r.sphere_depth_ratio = max(r.sphere_depth_ratio, float((np.maximum(sphere[sel], 0.0) / radius[pi][sel]).max()))
+        if touching.any():
+            mine = kind[tp] == k
+            if mine.any():
+                j = int(np.argmax(np.where(mine, excess, -np.inf)))
+                if excess[j] > r.ejection_excess:
+                    r.ejection_excess = float(excess[j])
+                    r.ejection_at = (float(t), float(np.linalg.norm(v[j])), float(np.linalg.norm(vb[j])))
+                r.ejection_relative = max(r.ejection_relative, float(relative[mine].max()))
+                r.ejection_outward = max(r.ejection_outward, float(outward[mine].max()))
+
+
+# ----------------------------------------------------------------------------- report
+HAIR_BOUND, SKIRT_BOUND = 0.02, 0.03      # issue 16: edge stretch, displayed and simulated
+SPHERE_BOUND = 0.10                       # penetration of the particle sphere / its radius
+EJECTION_BOUND = 2.0                      # m/s above the body part's speed
+
+CSV_COLUMNS = (
+    ("case", "case", "{}"), ("rig", "rig", "{}"), ("mode", "mode", "{}"), ("fps", "fps", "{:g}"),
+    ("kind", "kind", "{}"), ("particles", "moving particles", "{}"), ("frames", "frames", "{}"),
+    ("shown_edge_pct", "displayed edge stretch (%)", "{:.2f}"), ("state_edge_pct", "simulated edge stretch (%)", "{:.2f}"),
+    ("shown_root_pct", "displayed root stretch (%)", "{:.2f}"), ("state_root_pct", "simulated root stretch (%)", "{:.2f}"),
+    ("centre_depth_mm", "deepest centre (mm, > 0 inside)", "{:.2f}"),
+    ("sphere_pct", "sphere penetration (% of radius)", "{:.1f}"),
+    ("ejection_excess", "ejection |v| - |v_body| (m/s)", "{:.2f}"),
+    ("ejection_relative", "ejection |v - v_body| (m/s)", "{:.2f}"),
+    ("ejection_outward", "ejection v.n - max(v_body.n, 0) (m/s)", "{:.2f}"),
+    ("ejection_time", "at (s)", "{:.3f}"), ("ejection_speed", "particle speed (m/s)", "{:.2f}"),
+    ("body_speed", "body speed (m/s)", "{:.2f}"),
+    ("settle", "settling (s after the motion)", "{:.2f}"), ("finite", "finite", "{}"),
+    ("guard_resets", "guard resets", "{}"), ("wall_s", "wall (s)", "{:.1f}"),
+)
+
+
+def run_rows(run: MocapRun) -> list[dict]:
+    """One CSV row per cloth kind of a run (percentages, mm, m/s, s)."""
+    rows = []
+    for k, r in run.kinds.items():
+        t, vp, vb = r.ejection_at if r.ejection_at else (None, None, None)
+        rows.append({"case": run.case.name, "rig": run.case.rig, "mode": run.mode, "fps": run.fps, "kind": k,
+                     "particles": r.particles, "frames": run.frames,
+                     "shown_edge_pct": 100 * r.shown_edge, "state_edge_pct": 100 * r.state_edge,
+                     "shown_root_pct": 100 * r.shown_root, "state_root_pct": 100 * r.state_root,
+                     "centre_depth_mm": 1000 * r.centre_depth if math.isfinite(r.centre_depth) else None,
+                     "sphere_pct": 100 * r.sphere_depth_ratio,
+                     "ejection_excess": r.ejection_excess if math.isfinite(r.ejection_excess) else None,
+                     "ejection_relative": r.ejection_relative if r.ejection_at else None,
+                     "ejection_outward": r.ejection_outward if math.isfinite(r.ejection_outward) else None,
+                     "ejection_time": t, "ejection_speed": vp, "body_speed": vb,
+                     "settle": r.settle, "finite": "yes" if run.finite else "NO",
+                     "guard_resets": run.guard_resets, "wall_s": run.wall})
+    return rows
+
+
+def _pair(q_row, f_row, key, fmt):
+    """``quality / faithful`` of one column ("-" for a value a run has not got, e.g. no
+    contact); one value when only one mode ran."""
+    def one(v):
+        if v is None:
+            return "-"
+        if isinstance(v, float) and math.isnan(v):
+            return "n/a"
+        if isinstance(v, float) and not math.isfinite(v):
+            return f"> {REST:g}" if v > 0 else "-"
+        return fmt.format(v)
+    values = [one(row.get(key)) for row in (q_row, f_row) if row is not None]
+    return " / ".join(values)
+
+
+SIDE_BY_SIDE = (("shown_edge_pct", "displayed edge %", "{:.2f}"), ("state_edge_pct", "simulated edge %", "{:.2f}"),
+                ("shown_root_pct", "displayed root %", "{:.2f}"), ("state_root_pct", "simulated root %", "{:.2f}"),
+                ("centre_depth_mm", "deepest centre mm (> 0 inside)", "{:.1f}"),
+                ("sphere_pct", "sphere pen. % of r", "{:.1f}"),
+                ("ejection_excess", "\\|v\\|-\\|v_body\\| m/s", "{:.2f}"),
+                ("ejection_outward", "ejection m/s", "{:.2f}"),
+                ("settle", "settling s", "{:.2f}"))
+
+
+def side_by_side_table(rows: list[dict]) -> str:
+    """Markdown: one line per case, fps and kind, each cell ``quality / faithful``."""
+    keyed = {(r["case"], r["fps"], r["kind"], r["mode"]): r for r in rows}
+    keys = []
+    for r in rows:
+        key = (r["case"], r["fps"], r["kind"])
+        if key not in keys:
+            keys.append(key)
+    head = "| case | fps | kind | " + " | ".join(c[1] for c in SIDE_BY_SIDE) + " |"
+    lines = [head, "|" + "---|" * (3 + len(SIDE_BY_SIDE))]
+    for key in keys:
+        q, f = keyed.get(key + ("quality",)), keyed.get(key + ("faithful",))
+        cells = [_pair(q, f, c[0], c[2]) for c in SIDE_BY_SIDE]
+        lines.append(f"| {key[0]} | {key[1]:g} | {key[2]} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def bound_summary(rows: list[dict]) -> str:
+    """The issue's bounds, per mode: runs meeting each, and the worst run."""
+    checks = (
+        ("displayed and simulated edge stretch <= 2 % (hair) / 3 % (skirt)",
+         lambda r: max(r["shown_edge_pct"], r["state_edge_pct"]),
+         lambda r: 100 * (HAIR_BOUND if r["kind"] == "hair" else SKIRT_BOUND), "{:.2f} %"),
+        ("no particle centre inside a collider at the end of a step",
+         lambda r: r["centre_depth_mm"] if r["centre_depth_mm"] is not None else -math.inf, lambda r: 0.0, "{:.2f} mm"),
+        ("particle sphere penetration <= 10 % of its radius", lambda r: r["sphere_pct"],
+         lambda r: 100 * SPHERE_BOUND, "{:.1f} %"),
+        ("no particle faster than the body part it touches + 2 m/s",
+         lambda r: r["ejection_excess"] if r["ejection_excess"] is not None else -math.inf,
+         lambda r: EJECTION_BOUND, "{:.2f} m/s"),
+        ("(the same bound read as an ejection: leaving the surface <= 2 m/s beyond the body's push)",
+         lambda r: r["ejection_outward"] if r["ejection_outward"] is not None else -math.inf,
+         lambda r: EJECTION_BOUND, "{:.2f} m/s"),
+    )
+    lines = ["| bound | mode | runs within | worst (case, fps, kind) |", "|---|---|---|---|"]
+    for text, value, bound, fmt in checks:
+        for mode in MODES:
+            mine = [r for r in rows if r["mode"] == mode]
+            if not mine:
+                continue
+            ok = sum(1 for r in mine if value(r) <= bound(r) + 1e-12)
+            worst = max(mine, key=lambda r: value(r) - bound(r))
+            lines.append(f"| {text} | {mode} | {ok}/{len(mine)} | {fmt.format(value(worst))} "
+                         f"({worst['case']}, {worst['fps']:g}, {worst['kind']}) |")
+    return "\n".join(lines)
