@@ -10,9 +10,16 @@ runs the window's frames; its error is measured at the window's end. The reporte
 the mean over the windows of the RMS over the moving bones of ``|p - p_ref| / chain length``
 (``WindowErrors.mean_rms``), with the max over windows and bones beside it.
 
-The reference must resolve that horizon: its own residual, the same windows run at
-``CHECK_FREQUENCY`` from the same snapshots, has to be at least ``1/RESOLUTION_RATIO`` (10x)
-below the smallest error reported against it (``resolution_check``).
+The reference must resolve that horizon (``resolution_check``, one per family): its own
+residual, the same windows run at twice its frequency from the same snapshots, has to be at
+least ``1/RESOLUTION_RATIO`` (10x) below the smallest error of the family, and that residual
+must not be a floor: either it falls when the reference's frequency doubles (the windows run
+at half its frequency differ from it by at least ``2^MIN_REFERENCE_ORDER`` times the
+residual), or the half-frequency residual too is 10x below the error (the three references
+agree to a tenth of it). A residual that does not fall measures the model's own dependence on
+the step, not the reference's step error, and no finer reference makes it smaller: a family
+that fails the check against such a reference is reported *unresolvable*, with the measured
+order, not as a reference too coarse.
 """
 from __future__ import annotations
 
@@ -25,6 +32,11 @@ from magica_py.bench import metrics as M
 
 HORIZON = 0.25              # s, target window length (a whole number of frames is used)
 RESOLUTION_RATIO = 0.1      # the reference's residual must stay below this fraction of every error
+MIN_REFERENCE_ORDER = 0.5   # the reference's residual must fall at least 2^0.5 x per doubling of its frequency
+
+RESOLVED = "resolved"
+NOT_RESOLVED = "not resolved"       # the reference converges but is too coarse: a finer one would do
+UNRESOLVABLE = "unresolvable"       # the reference does not converge at this horizon: no finer one helps
 
 
 def window_frames(fps: float, horizon: float = HORIZON) -> int:
@@ -117,22 +129,58 @@ def candidate_window_errors(variant, reference: ReferenceWindows, prepared=None)
     return WindowErrors(rms, worst)
 
 
+def reference_order(half_residual: float, residual: float) -> float:
+    """The reference's observed order from its windows at half and twice its frequency:
+    ``log2(half_residual / residual)`` (1 for a first-order reference; 0 or below when the
+    residual does not fall as the frequency doubles). nan when either is missing or zero."""
+    if not (math.isfinite(half_residual) and math.isfinite(residual)) or half_residual <= 0 or residual <= 0:
+        return math.nan
+    return math.log2(half_residual / residual)
+
+
 @dataclass(frozen=True)
 class ResolutionCheck:
-    """Whether a reference resolves the errors reported against it: ``residual`` (the
-    reference's own short-horizon error against ``CHECK_FREQUENCY``, fraction of the chain)
-    at most ``ratio`` x ``smallest`` (the smallest error reported against it)."""
+    """Whether a reference resolves the errors of one family reported against it:
+    ``residual`` (the reference's short-horizon error against twice its frequency, fraction
+    of the chain) at most ``ratio`` x ``smallest`` (the family's smallest error), and the
+    residual not a floor: ``half_residual`` (against half its frequency; nan when not
+    measured) at least ``2^min_order`` x ``residual``, or itself at most ``ratio`` x
+    ``smallest``."""
 
     label: str
     residual: float
     smallest: float
     smallest_of: str
     ratio: float = RESOLUTION_RATIO
+    half_residual: float = math.nan
+    min_order: float = MIN_REFERENCE_ORDER
+
+    @property
+    def order(self) -> float:
+        """The reference's observed order (``reference_order``; nan when not measured)."""
+        return reference_order(self.half_residual, self.residual)
+
+    @property
+    def fine_enough(self) -> bool:
+        """The residual is ``1/ratio`` x below the smallest error."""
+        return resolves(self.smallest, self.residual, self.ratio)
+
+    @property
+    def converges(self) -> bool:
+        """The residual falls as the reference's frequency doubles (True when not measured)."""
+        return not self.order < self.min_order
 
     @property
     def ok(self) -> bool:
-        return (math.isfinite(self.residual) and math.isfinite(self.smallest)
-                and self.residual <= self.ratio * self.smallest)
+        return self.verdict == RESOLVED
+
+    @property
+    def verdict(self) -> str:
+        """``RESOLVED``; ``UNRESOLVABLE`` when it is not and the reference does not converge;
+        ``NOT_RESOLVED`` when the reference converges but its residual is too large."""
+        if self.fine_enough and (self.converges or resolves(self.smallest, self.half_residual, self.ratio)):
+            return RESOLVED
+        return NOT_RESOLVED if self.converges else UNRESOLVABLE
 
     @property
     def margin(self) -> float:
@@ -140,17 +188,35 @@ class ResolutionCheck:
         return self.smallest / self.residual if self.residual > 0 else math.inf
 
     def message(self) -> str:
-        verdict = "resolves" if self.ok else "DOES NOT RESOLVE"
-        return (f"reference {self.label} {verdict} the errors reported against it: residual "
-                f"{100 * self.residual:.3g} % of the chain, smallest error {100 * self.smallest:.3g} % "
-                f"({self.smallest_of}), ratio {self.margin:.1f} (needs >= {1 / self.ratio:g})")
+        order = "" if math.isnan(self.order) else (f", reference order {self.order:.2f} (residual at half its "
+                                                   f"frequency {100 * self.half_residual:.3g} %)")
+        head = {RESOLVED: "resolved", NOT_RESOLVED: "NOT RESOLVED (the reference converges: a finer one is needed)",
+                UNRESOLVABLE: "UNRESOLVABLE (the reference does not converge at this horizon: its residual does not "
+                              "fall as its frequency doubles, order below "
+                              f"{self.min_order:g}, so a finer reference is not expected to resolve it)"}[self.verdict]
+        return (f"{self.label}: {head}: residual {100 * self.residual:.3g} % of the chain, smallest error "
+                f"{100 * self.smallest:.3g} % ({self.smallest_of}), ratio {self.margin:.1f} (needs >= "
+                f"{1 / self.ratio:g}){order}")
 
 
-def resolution_check(label: str, residual: float, errors: dict, ratio: float = RESOLUTION_RATIO) -> ResolutionCheck:
-    """The check for one reference: ``errors`` maps a candidate's label to its short-horizon
-    error (fraction of the chain); non-finite errors are ignored (none left: not resolved)."""
+def resolves(error: float, residual: float, ratio: float = RESOLUTION_RATIO) -> bool:
+    """``residual <= ratio * error``, both finite."""
+    return math.isfinite(error) and math.isfinite(residual) and residual <= ratio * error
+
+
+def point_resolved(error: float, residual: float, half_residual: float = math.nan,
+                   ratio: float = RESOLUTION_RATIO, min_order: float = MIN_REFERENCE_ORDER) -> bool:
+    """One error (a row of the sweep) by the same rule as ``ResolutionCheck.verdict``."""
+    return ResolutionCheck("", residual, error, "", ratio, half_residual, min_order).ok
+
+
+def resolution_check(label: str, residual: float, errors: dict, ratio: float = RESOLUTION_RATIO,
+                     half_residual: float = math.nan) -> ResolutionCheck:
+    """The check for one family against its reference: ``errors`` maps a candidate's label to
+    its short-horizon error (fraction of the chain); non-finite errors are ignored (none left:
+    not resolved); ``half_residual``: the reference's windows at half its frequency against it."""
     finite = {k: float(v) for k, v in errors.items() if v is not None and math.isfinite(float(v))}
     if not finite:
-        return ResolutionCheck(label, float(residual), math.nan, "no error", ratio)
+        return ResolutionCheck(label, float(residual), math.nan, "no error", ratio, float(half_residual))
     name = min(finite, key=finite.get)
-    return ResolutionCheck(label, float(residual), finite[name], name, ratio)
+    return ResolutionCheck(label, float(residual), finite[name], name, ratio, float(half_residual))

@@ -14,7 +14,7 @@ frame by frame, timing only ``player.step()`` and recording what the metrics nee
 * per-frame statistics (F,): max edge stretch, max root-distance stretch, max collider
   penetration, max display speed, max solver velocity, non-finite flag, guard resets.
 
-Frequencies beyond MagicaCloth2's 150 Hz cap (180 ... 2880 Hz) and step counts beyond its
+Frequencies beyond MagicaCloth2's 150 Hz cap (180 ... 23040 Hz) and step counts beyond its
 5-step cap are set on the system's time settings after construction: the scene format and
 ``SimulationTimeSettings`` clamp them (on purpose, for scenes), the benchmark must not.
 """
