@@ -66,7 +66,8 @@ DISPLAY_EDGE_PASSES = 2    # edge passes of the quality display's target after i
 DISPLAY_MOVE_PASSES = 3    # bounded moves of the quality display towards its target
 PROJECTION_ITERATIONS = 4  # conjugate-gradient iterations of the edge projection (mesh cloths)
 PROJECTION_COMPLIANCE = 1e-3  # share of each edge's own stiffness added to the diagonal (keeps J W J^T definite)
-PROJECTION_THRESHOLD = 1e-3   # an edge enters the projection when stretched by more than this share of its rest
+PROJECTION_THRESHOLD = 5e-3   # the projection runs when an edge is stretched by more than this share of its rest
+PROJECTION_SLACK = 1e-2       # edges down to this share shorter than their rest enter it too, to stay at most as long
 PROJECTION_TOLERANCE = 1e-2   # the conjugate gradients stop when the residual's norm fell by this factor
 SHAPE_ROUNDS = 2           # rounds of (edge projection, passes, collision last) of a colliding mesh cloth
 
@@ -181,8 +182,11 @@ def tangential(v, c):
 @kernel
 def edge_projection_team(m, ps, team, iterations, contacts):
     """Fast projection (Goldenthal et al. 2007) of the team's stretched proxy edges, all at
-    once: one linearised solve of ``(J W S J^T + c D) lambda = C`` over the edges longer than
-    their step-basic rest length (C = length - rest, J the edges' unit directions, W D.4's
+    once, when one of them is stretched by more than ``PROJECTION_THRESHOLD``: one linearised
+    solve of ``(J W S J^T + c D) lambda = C`` over the edges at least ``1 - PROJECTION_SLACK``
+    times their step-basic rest length (C = max(length - rest, 0): the stretched ones are
+    shortened, the others kept from stretching while their neighbours move; J the edges'
+    unit directions, W D.4's
     depth inverse masses with fixed ends 0, D = diag(w_a + w_b), c = PROJECTION_COMPLIANCE),
     by ``iterations`` Jacobi-preconditioned conjugate-gradient iterations, then
     ``x -= W S J^T lambda`` with lambda >= 0 (an edge only pulls). The correction becomes
@@ -197,7 +201,7 @@ def edge_projection_team(m, ps, team, iterations, contacts):
     of the ring's edges: 13 % of it per pass on a 12-strand ring). The solve couples every
     edge and removes that mode with the others (conjugate gradients converge in about
     sqrt(condition) iterations, and exactly in as many as the system has distinct
-    eigenvalues)."""
+    eigenvalues). Returns whether it ran."""
     # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     m_attribute, m_depth, m_edges = m.attribute, m.depth, m.edges
     ps_friction, ps_next_pos, ps_step_basic_pos = ps.friction, ps.next_pos, ps.step_basic_pos
@@ -210,7 +214,8 @@ def edge_projection_team(m, ps, team, iterations, contacts):
     for p in range(start, end):
         ps_w[p] = inverse_mass_friction_depth(ps_friction[p], m_depth[p]) if (m_attribute[p] & MOVE) != 0 else 0.0
     e0 = m.team_edge_start[team]
-    count = 0   # the stretched edges, listed in ps_active[e0:e0 + count]
+    count = 0   # the edges in the solve, listed in ps_active[e0:e0 + count]
+    stretched = False
     rz = 0.0
     for e in range(e0, e0 + m.team_edge_count[team]):
         a = m_edges[e, 0]
@@ -222,10 +227,11 @@ def edge_projection_team(m, ps, team, iterations, contacts):
         rest = v_length(v_sub(load3(ps_step_basic_pos, a), load3(ps_step_basic_pos, b)))
         d = v_sub(load3(ps_next_pos, b), load3(ps_next_pos, a))
         length = v_length(d)
-        if length <= rest * (1.0 + PROJECTION_THRESHOLD) or length < 1e-12:
+        if length < rest * (1.0 - PROJECTION_SLACK) or length < 1e-12:
             continue
         n = v_scale(d, 1.0 / length)
-        c = length - rest
+        c = max(length - rest, 0.0)
+        stretched = stretched or length > rest * (1.0 + PROJECTION_THRESHOLD)
         diagonal = PROJECTION_COMPLIANCE * (wa + wb)
         if contacts:
             diagonal += wa * v_length_sq(tangential(n, load3(ps_contact, a))) \
@@ -240,8 +246,8 @@ def edge_projection_team(m, ps, team, iterations, contacts):
         ps_residual[e] = c
         ps_direction[e] = c / diagonal
         rz += c * c / diagonal
-    if count == 0:
-        return
+    if not stretched:
+        return False
     stop = rz * PROJECTION_TOLERANCE * PROJECTION_TOLERANCE
     beta = 0.0
     for iteration in range(iterations):
@@ -299,6 +305,7 @@ def edge_projection_team(m, ps, team, iterations, contacts):
             db = tangential(db, load3(ps_contact, b))
         store3(ps_next_pos, a, v_add(load3(ps_next_pos, a), da))
         store3(ps_next_pos, b, v_sub(load3(ps_next_pos, b), db))
+    return True
 
 
 @kernel
@@ -639,7 +646,9 @@ def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, dist
     """The quality passes of one team after D.9 (see the module docstring): the
     inextensibility pass, then collision last. A mesh cloth under ``ftl_edges`` that collides
     then runs ``SHAPE_ROUNDS - 1`` more rounds of (edge projection with the particles that
-    collision last pushed sliding along their push's plane, collision last): collision last
+    collision last pushed sliding along their push's plane, edge passes, collision last),
+    while collision last moves a particle and the push leaves an edge stretched by more than
+    ``PROJECTION_THRESHOLD``: collision last
     pushes particles out along the collider's normal, which stretches the edges the passes had
     just shortened; the filtered projection shortens them again by moving the pushed
     particles' neighbours and the pushed particles along the collider, not back into it.
@@ -657,9 +666,8 @@ def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, dist
     pushed = collision_last_team(m, ps, prm, ts, cs, team, True)
     if mesh:
         for _ in range(SHAPE_ROUNDS - 1):
-            if pushed == 0:
+            if pushed == 0 or not edge_projection_team(m, ps, team, PROJECTION_ITERATIONS, True):
                 break
-            edge_projection_team(m, ps, team, PROJECTION_ITERATIONS, True)
             for _ in range(prm.distance_iterations[team]):
                 edge_pass_team(m, ps, team)
             pushed = collision_last_team(m, ps, prm, ts, cs, team, False)
