@@ -28,7 +28,7 @@ M = namedtuple("M", "team_edge_start team_edge_count edges attribute depth team_
                     "team_particle_count")
 P = namedtuple("P", "step_basic_pos next_pos friction projection_inverse_mass projection_gather "
                     "projection_contact edge_normal edge_lambda edge_residual edge_direction edge_product "
-                    "edge_diagonal edge_active")
+                    "edge_diagonal edge_compliance edge_active")
 
 
 def ring(stretch: float):
@@ -40,7 +40,7 @@ def ring(stretch: float):
     m = M(np.array([0], np.int32), np.array([N], np.int32), edges, np.full(N, 0x02, np.uint8), np.ones(N),
           np.array([0], np.int32), np.array([N], np.int32))
     ps = P(rest, rest * (1.0 + stretch), np.zeros(N), np.zeros(N), np.zeros((N, 3)), np.zeros((N, 3)),
-           np.zeros((N, 3)), np.zeros(N), np.zeros(N), np.zeros(N), np.zeros(N), np.zeros(N), np.zeros(N, np.int32))
+           np.zeros((N, 3)), np.zeros(N), np.zeros(N), np.zeros(N), np.zeros(N), np.zeros(N), np.zeros(N), np.zeros(N, np.int32))
     return m, ps
 
 

@@ -65,7 +65,7 @@ COLLISION_LAST_ROUNDS = 2  # rounds over the colliders of collision last
 DISPLAY_EDGE_PASSES = 2    # edge passes of the quality display's target after its collider push
 DISPLAY_MOVE_PASSES = 3    # bounded moves of the quality display towards its target
 PROJECTION_ITERATIONS = 4  # conjugate-gradient iterations of the edge projection (mesh cloths)
-PROJECTION_COMPLIANCE = 1e-3  # share of each edge's own stiffness added to the diagonal (keeps J W J^T definite)
+PROJECTION_COMPLIANCE = 1e-3  # compliance of an edge at or above its rest length, x (w_a + w_b) (keeps J W J^T definite)
 PROJECTION_THRESHOLD = 5e-3   # the projection runs when an edge is stretched by more than this share of its rest
 PROJECTION_SLACK = 1e-2       # edges down to this share shorter than their rest enter it too, to stay at most as long
 PROJECTION_TOLERANCE = 1e-2   # the conjugate gradients stop when the residual's norm fell by this factor
@@ -183,11 +183,13 @@ def tangential(v, c):
 def edge_projection_team(m, ps, team, iterations, contacts):
     """Fast projection (Goldenthal et al. 2007) of the team's stretched proxy edges, all at
     once, when one of them is stretched by more than ``PROJECTION_THRESHOLD``: one linearised
-    solve of ``(J W S J^T + c D) lambda = C`` over the edges at least ``1 - PROJECTION_SLACK``
+    solve of ``(J W S J^T + K) lambda = C`` over the edges at least ``1 - PROJECTION_SLACK``
     times their step-basic rest length (C = max(length - rest, 0): the stretched ones are
     shortened, the others kept from stretching while their neighbours move; J the edges'
-    unit directions, W D.4's
-    depth inverse masses with fixed ends 0, D = diag(w_a + w_b), c = PROJECTION_COMPLIANCE),
+    unit directions, W D.4's depth inverse masses with fixed ends 0, K diagonal,
+    ``(PROJECTION_COMPLIANCE + s / (1 - s)) (w_a + w_b)`` with s the edge's compression as a
+    share of the slack: a shorter edge holds less, and nothing as it leaves the solve, so the
+    result is continuous in the positions),
     by ``iterations`` Jacobi-preconditioned conjugate-gradient iterations, then
     ``x -= W S J^T lambda`` with lambda >= 0 (an edge only pulls). The correction becomes
     velocity in full. ``contacts``: S removes, for a particle that collision last pushed
@@ -208,7 +210,7 @@ def edge_projection_team(m, ps, team, iterations, contacts):
     ps_w, ps_gather, ps_contact = ps.projection_inverse_mass, ps.projection_gather, ps.projection_contact
     ps_normal, ps_lambda, ps_residual = ps.edge_normal, ps.edge_lambda, ps.edge_residual
     ps_direction, ps_product, ps_diagonal = ps.edge_direction, ps.edge_product, ps.edge_diagonal
-    ps_active = ps.edge_active
+    ps_active, ps_compliance = ps.edge_active, ps.edge_compliance
     start = m.team_particle_start[team]
     end = start + m.team_particle_count[team]
     for p in range(start, end):
@@ -227,12 +229,17 @@ def edge_projection_team(m, ps, team, iterations, contacts):
         rest = v_length(v_sub(load3(ps_step_basic_pos, a), load3(ps_step_basic_pos, b)))
         d = v_sub(load3(ps_next_pos, b), load3(ps_next_pos, a))
         length = v_length(d)
-        if length < rest * (1.0 - PROJECTION_SLACK) or length < 1e-12:
+        slack = (rest - length) / (rest * PROJECTION_SLACK) if rest > 0.0 else 0.0
+        if slack >= 1.0 or length < 1e-12:
             continue
         n = v_scale(d, 1.0 / length)
         c = max(length - rest, 0.0)
         stretched = stretched or length > rest * (1.0 + PROJECTION_THRESHOLD)
-        diagonal = PROJECTION_COMPLIANCE * (wa + wb)
+        # a shorter edge is kept from stretching less the shorter it is, and not at all at
+        # 1 - PROJECTION_SLACK of its rest: its compliance grows from 0 to infinity on the way
+        compliance = (PROJECTION_COMPLIANCE + (slack / (1.0 - slack) if slack > 0.0 else 0.0)) * (wa + wb)
+        ps_compliance[e] = compliance
+        diagonal = compliance
         if contacts:
             diagonal += wa * v_length_sq(tangential(n, load3(ps_contact, a))) \
                 + wb * v_length_sq(tangential(n, load3(ps_contact, b)))
@@ -273,7 +280,7 @@ def edge_projection_team(m, ps, team, iterations, contacts):
             a = m_edges[e, 0]
             b = m_edges[e, 1]
             ad = v_dot(load3(ps_normal, e), v_sub(load3(ps_gather, b), load3(ps_gather, a))) \
-                + PROJECTION_COMPLIANCE * (ps_w[a] + ps_w[b]) * de
+                + ps_compliance[e] * de
             ps_product[e] = ad
             dad += de * ad
         if dad <= 0.0:

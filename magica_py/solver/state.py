@@ -81,6 +81,7 @@ PARTICLE_FIELDS = [
     ("edge_direction", "edge", (), F64, "m; conjugate-gradient search direction"),
     ("edge_product", "edge", (), F64, "m; (J W J^T + compliance) times the search direction"),
     ("edge_diagonal", "edge", (), F64, "the edge's diagonal entry of J W J^T + compliance"),
+    ("edge_compliance", "edge", (), F64, "the edge's compliance times (w_a + w_b)"),
     ("edge_active", "edge", (), I32, "the stretched edges of a team, listed from its first edge row"),
 ]
 ParticleState = make_soa("ParticleState", PARTICLE_FIELDS)
