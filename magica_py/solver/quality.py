@@ -14,14 +14,20 @@ and the motion constraint (D.9), before the end of the step (D.10):
      correction as velocity (its reaction), so the pass does not damp the swing;
    * ``ftl_tether`` — the tether, then FTL (edges exact, root distance bounded);
    * ``iterations`` — ``distance_iterations`` more D.4 passes (the brute-force candidate);
-   * ``ftl_edges`` — ``distance_iterations`` Gauss-Seidel passes of a unilateral PBD
-     projection over every proxy edge (horizontal skirt edges too, depth-weighted masses as
-     D.4, fixed ends immovable), then the tether and FTL;
+   * ``ftl_edges`` — on a mesh cloth (proxy edges besides the parent links: a skirt's
+     horizontal links and triangle diagonals) first the edge projection
+     (``edge_projection_team``: every stretched edge at once, a linearised solve by
+     conjugate gradients), then ``distance_iterations`` Gauss-Seidel passes of a unilateral
+     PBD projection over every proxy edge (depth-weighted masses as D.4, fixed ends
+     immovable), then the tether and FTL;
 
 2. ``collision_last``: a final point projection of every colliding particle against each
    collider in turn (two rounds), so that no particle ends the step inside one; a particle
    that started the step inside a collider is carried out with it without the starting depth
-   becoming velocity (``collision_last_push``).
+   becoming velocity (``collision_last_push``). A colliding mesh cloth under ``ftl_edges``
+   then runs ``SHAPE_ROUNDS - 1`` more rounds of (edge projection in which the particles
+   collision last pushed slide along their push's plane, edge passes, collision last), so
+   that the push's stretch is spread over the mesh instead of left on the pushed edges.
 
 The quality display (``display.py``) ends with ``display_constraints_team``: collider push at
 this frame's pose and edge bounds taken from the step states.
@@ -58,6 +64,12 @@ DISPLAY_PASSES = 2        # collider push + edge clamp passes of the quality dis
 COLLISION_LAST_ROUNDS = 2  # rounds over the colliders of collision last
 DISPLAY_EDGE_PASSES = 2    # edge passes of the quality display's target after its collider push
 DISPLAY_MOVE_PASSES = 3    # bounded moves of the quality display towards its target
+PROJECTION_ITERATIONS = 4  # conjugate-gradient iterations of the edge projection (mesh cloths)
+PROJECTION_COMPLIANCE = 1e-3  # compliance of an edge at or above its rest length, x (w_a + w_b) (keeps J W J^T definite)
+PROJECTION_THRESHOLD = 1.5e-2  # the projection runs when an edge is stretched by more than this share of its rest
+PROJECTION_SLACK = 1e-2       # edges down to this share shorter than their rest enter it too, to stay at most as long
+PROJECTION_TOLERANCE = 1e-2   # the conjugate gradients stop when the residual's norm fell by this factor
+SHAPE_ROUNDS = 2           # rounds of (edge projection, passes, collision last) of a colliding mesh cloth
 
 
 @kernel
@@ -148,18 +160,180 @@ def edge_pass_team(m, ps, team):
 
 
 @kernel
-def collision_last_team(m, ps, prm, ts, cs, team):
+def has_cross_links(m, team):
+    """Does the team have a proxy edge that is not a parent link (a mesh cloth's horizontal
+    links and triangle diagonals)? Line cloths are held exactly by FTL and skip the projection."""
+    m_edges, m_parent = m.edges, m.parent
+    e0 = m.team_edge_start[team]
+    for e in range(e0, e0 + m.team_edge_count[team]):
+        a = m_edges[e, 0]
+        b = m_edges[e, 1]
+        if m_parent[a] != b and m_parent[b] != a:
+            return True
+    return False
+
+
+@kernel
+def tangential(v, c):
+    """v without its component along the unit (or zero) contact direction c."""
+    return v_sub(v, v_scale(c, v_dot(v, c)))
+
+
+@kernel
+def edge_projection_team(m, ps, team, iterations, contacts):
+    """Fast projection (Goldenthal et al. 2007) of the team's stretched proxy edges, all at
+    once, when one of them is stretched by more than ``PROJECTION_THRESHOLD``: one linearised
+    solve of ``(J W S J^T + K) lambda = C`` over the edges at least ``1 - PROJECTION_SLACK``
+    times their step-basic rest length (C = max(length - rest, 0): the stretched ones are
+    shortened, the others kept from stretching while their neighbours move; J the edges'
+    unit directions, W D.4's depth inverse masses with fixed ends 0, K diagonal,
+    ``(PROJECTION_COMPLIANCE + s / (1 - s)) (w_a + w_b)`` with s the edge's compression as a
+    share of the slack: a shorter edge holds less, and nothing as it leaves the solve, so the
+    result is continuous in the positions),
+    by ``iterations`` Jacobi-preconditioned conjugate-gradient iterations, then
+    ``x -= W S J^T lambda`` with lambda >= 0 (an edge only pulls). The correction becomes
+    velocity in full. ``contacts``: S removes, for a particle that collision last pushed
+    out of a collider this step, the component along that push (``projection_contact``): it
+    slides along the collider's supporting plane and its neighbours give way (a filtered
+    solve, Baraff and Witkin 1998); otherwise S = I.
+
+    Gauss-Seidel edge passes shorten an edge by moving its ends along it; the uniform
+    expansion of a ring (a flared skirt) needs every particle to move inwards, which each
+    pass reaches only through the small angle between neighbouring chords (the slowest mode
+    of the ring's edges: 13 % of it per pass on a 12-strand ring). The solve couples every
+    edge and removes that mode with the others (conjugate gradients converge in about
+    sqrt(condition) iterations, and exactly in as many as the system has distinct
+    eigenvalues). Returns whether it ran."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_depth, m_edges = m.attribute, m.depth, m.edges
+    ps_friction, ps_next_pos, ps_step_basic_pos = ps.friction, ps.next_pos, ps.step_basic_pos
+    ps_w, ps_gather, ps_contact = ps.projection_inverse_mass, ps.projection_gather, ps.projection_contact
+    ps_normal, ps_lambda, ps_residual = ps.edge_normal, ps.edge_lambda, ps.edge_residual
+    ps_direction, ps_product, ps_diagonal = ps.edge_direction, ps.edge_product, ps.edge_diagonal
+    ps_active, ps_compliance = ps.edge_active, ps.edge_compliance
+    start = m.team_particle_start[team]
+    end = start + m.team_particle_count[team]
+    for p in range(start, end):
+        ps_w[p] = inverse_mass_friction_depth(ps_friction[p], m_depth[p]) if (m_attribute[p] & MOVE) != 0 else 0.0
+    e0 = m.team_edge_start[team]
+    count = 0   # the edges in the solve, listed in ps_active[e0:e0 + count]
+    stretched = False
+    rz = 0.0
+    for e in range(e0, e0 + m.team_edge_count[team]):
+        a = m_edges[e, 0]
+        b = m_edges[e, 1]
+        wa = ps_w[a]
+        wb = ps_w[b]
+        if wa + wb <= 0.0:
+            continue
+        rest = v_length(v_sub(load3(ps_step_basic_pos, a), load3(ps_step_basic_pos, b)))
+        d = v_sub(load3(ps_next_pos, b), load3(ps_next_pos, a))
+        length = v_length(d)
+        slack = (rest - length) / (rest * PROJECTION_SLACK) if rest > 0.0 else 0.0
+        if slack >= 1.0 or length < 1e-12:
+            continue
+        n = v_scale(d, 1.0 / length)
+        c = max(length - rest, 0.0)
+        stretched = stretched or length > rest * (1.0 + PROJECTION_THRESHOLD)
+        # a shorter edge is kept from stretching less the shorter it is, and not at all at
+        # 1 - PROJECTION_SLACK of its rest: its compliance grows from 0 to infinity on the way
+        compliance = (PROJECTION_COMPLIANCE + (slack / (1.0 - slack) if slack > 0.0 else 0.0)) * (wa + wb)
+        ps_compliance[e] = compliance
+        diagonal = compliance
+        if contacts:
+            diagonal += wa * v_length_sq(tangential(n, load3(ps_contact, a))) \
+                + wb * v_length_sq(tangential(n, load3(ps_contact, b)))
+        else:
+            diagonal += wa + wb
+        ps_active[e0 + count] = e
+        count += 1
+        store3(ps_normal, e, n)
+        ps_diagonal[e] = diagonal
+        ps_lambda[e] = 0.0
+        ps_residual[e] = c
+        ps_direction[e] = c / diagonal
+        rz += c * c / diagonal
+    if not stretched:
+        return False
+    stop = rz * PROJECTION_TOLERANCE * PROJECTION_TOLERANCE
+    beta = 0.0
+    for iteration in range(iterations):
+        for p in range(start, end):
+            store3(ps_gather, p, (0.0, 0.0, 0.0))
+        for i in range(e0, e0 + count):   # the search direction (after the first), and W S J^T of it
+            e = ps_active[i]
+            if iteration > 0:
+                ps_direction[e] = ps_residual[e] / ps_diagonal[e] + beta * ps_direction[e]
+            de = ps_direction[e]
+            a = m_edges[e, 0]
+            b = m_edges[e, 1]
+            n = load3(ps_normal, e)
+            store3(ps_gather, a, v_sub(load3(ps_gather, a), v_scale(n, ps_w[a] * de)))
+            store3(ps_gather, b, v_add(load3(ps_gather, b), v_scale(n, ps_w[b] * de)))
+        if contacts:
+            for p in range(start, end):
+                store3(ps_gather, p, tangential(load3(ps_gather, p), load3(ps_contact, p)))
+        dad = 0.0
+        for i in range(e0, e0 + count):
+            e = ps_active[i]
+            de = ps_direction[e]
+            a = m_edges[e, 0]
+            b = m_edges[e, 1]
+            ad = v_dot(load3(ps_normal, e), v_sub(load3(ps_gather, b), load3(ps_gather, a))) \
+                + ps_compliance[e] * de
+            ps_product[e] = ad
+            dad += de * ad
+        if dad <= 0.0:
+            break
+        alpha = rz / dad
+        rz_next = 0.0
+        for i in range(e0, e0 + count):
+            e = ps_active[i]
+            ps_lambda[e] += alpha * ps_direction[e]
+            r = ps_residual[e] - alpha * ps_product[e]
+            ps_residual[e] = r
+            rz_next += r * r / ps_diagonal[e]
+        if rz_next <= stop:
+            break
+        beta = rz_next / rz
+        rz = rz_next
+    for i in range(e0, e0 + count):
+        e = ps_active[i]
+        lam = ps_lambda[e]
+        if lam <= 0.0:
+            continue
+        a = m_edges[e, 0]
+        b = m_edges[e, 1]
+        n = load3(ps_normal, e)
+        da = v_scale(n, ps_w[a] * lam)
+        db = v_scale(n, ps_w[b] * lam)
+        if contacts:
+            da = tangential(da, load3(ps_contact, a))
+            db = tangential(db, load3(ps_contact, b))
+        store3(ps_next_pos, a, v_add(load3(ps_next_pos, a), da))
+        store3(ps_next_pos, b, v_sub(load3(ps_next_pos, b), db))
+    return True
+
+
+@kernel
+def collision_last_team(m, ps, prm, ts, cs, team, carry):
     """Project every colliding moving particle out of each collider (``collision_last_push``),
     ``COLLISION_LAST_ROUNDS`` rounds over the colliders so that a push out of one collider
-    into another is undone. Friction and normals are left to D.8."""
+    into another is undone. Friction and normals are left to D.8. ``carry``: a particle that
+    started the step inside is carried out without its starting depth becoming velocity
+    (the first call of a step; a later call only undoes the inextensibility passes in
+    between, whose corrections became velocity, so its push does too). The direction of
+    each push is kept in ``projection_contact`` for the next edge projection. Returns the
+    number of particles it moved."""
     # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     cs_scale_suspend, m_attribute, m_depth = cs.scale_suspend, m.attribute, m.depth
     m_team_particle_count, prm_radius_curve, ps_next_pos = m.team_particle_count, prm.radius_curve, ps.next_pos
-    ps_old_pos, ps_velocity_pos = ps.old_pos, ps.velocity_pos
+    ps_old_pos, ps_velocity_pos, ps_contact = ps.old_pos, ps.velocity_pos, ps.projection_contact
     scale = ts.scale_ratio[team] * length_unit(m, prm, team)
     c0 = ts.collider_start[team]
     c1 = c0 + ts.collider_count[team]
     start = m.team_particle_start[team]
+    pushed = 0
     for p in range(start, start + m_team_particle_count[team]):
         attr = m_attribute[p]
         if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
@@ -168,17 +342,23 @@ def collision_last_team(m, ps, prm, ts, cs, team):
         x = load3(ps_next_pos, p)
         start_x = load3(ps_old_pos, p)
         velocity_pos = load3(ps_velocity_pos, p)
+        x0 = x
         for _ in range(COLLISION_LAST_ROUNDS):
             for k in range(c0, c1):
                 if cs_scale_suspend[k] == 0:
                     x, velocity_pos = collision_last_push(cs, k, x, start_x, velocity_pos, r,
-                                                          INSIDE_TOLERANCE * scale)
+                                                          INSIDE_TOLERANCE * scale, carry)
+        push = v_sub(x, x0)
+        if v_dot(push, push) > 0.0:
+            store3(ps_contact, p, v_normalize(push))
+            pushed += 1
         store3(ps_next_pos, p, x)
         store3(ps_velocity_pos, p, velocity_pos)
+    return pushed
 
 
 @kernel
-def collision_last_push(cs, k, x, start_x, velocity_pos, r, tolerance):
+def collision_last_push(cs, k, x, start_x, velocity_pos, r, tolerance, carry):
     """One particle (end-of-step position x, radius r, start-of-step position ``start_x``)
     against collider slot k moving from its previous-step to its current pose within the step:
     (x, velocity_pos) after the push. ``tolerance`` (m): the depth below which it counts as
@@ -225,8 +405,9 @@ def collision_last_push(cs, k, x, start_x, velocity_pos, r, tolerance):
             d, x2 = plane_push(surface, n, x)
         if d >= 0.0:
             return x, velocity_pos
-        along = v_dot(v_sub(x2, x), n)
-        velocity_pos = v_add(velocity_pos, v_scale(n, min(depth, along)))
+        if carry:
+            along = v_dot(v_sub(x2, x), n)
+            velocity_pos = v_add(velocity_pos, v_scale(n, min(depth, along)))
     return x2, velocity_pos
 
 
@@ -448,12 +629,14 @@ def quality_restoration_attenuation(prm, team, frequency_ratio, converted):
 
 
 @kernel
-def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, distance_attenuation):
-    """The quality passes of one team after D.9 (see the module docstring)."""
+def inextensibility_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh):
+    """The inextensibility pass ``mode`` (module docstring); ``mesh``: the team has cross
+    links (``has_cross_links``) and ``ftl_edges`` starts with the edge projection."""
     # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     prm_distance_iterations = prm.distance_iterations
-    mode = prm.inextensibility[team]
     if mode == INEXT_FTL_EDGES:
+        if mesh:
+            edge_projection_team(m, ps, team, PROJECTION_ITERATIONS, False)
         for _ in range(prm_distance_iterations[team]):
             edge_pass_team(m, ps, team)
     if mode == INEXT_TETHER or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES:
@@ -463,5 +646,35 @@ def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, dist
     elif mode == INEXT_ITERATIONS:
         for _ in range(prm_distance_iterations[team]):
             distance_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation)
-    if prm.collision_last[team] != 0 and ts.collider_count[team] > 0 and prm.collision_mode[team] != 0:
-        collision_last_team(m, ps, prm, ts, cs, team)
+
+
+@kernel
+def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, distance_attenuation):
+    """The quality passes of one team after D.9 (see the module docstring): the
+    inextensibility pass, then collision last. A mesh cloth under ``ftl_edges`` that collides
+    then runs ``SHAPE_ROUNDS - 1`` more rounds of (edge projection with the particles that
+    collision last pushed sliding along their push's plane, edge passes, collision last),
+    while collision last moves a particle and the push leaves an edge stretched by more than
+    ``PROJECTION_THRESHOLD``: collision last
+    pushes particles out along the collider's normal, which stretches the edges the passes had
+    just shortened; the filtered projection shortens them again by moving the pushed
+    particles' neighbours and the pushed particles along the collider, not back into it.
+    Every round ends with collision last, so no particle ends the step inside a collider."""
+    mode = prm.inextensibility[team]
+    mesh = mode == INEXT_FTL_EDGES and has_cross_links(m, team)
+    collide = prm.collision_last[team] != 0 and ts.collider_count[team] > 0 and prm.collision_mode[team] != 0
+    inextensibility_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh)
+    if not collide:
+        return
+    if mesh:
+        ps_contact = ps.projection_contact
+        for p in range(m.team_particle_start[team], m.team_particle_start[team] + m.team_particle_count[team]):
+            store3(ps_contact, p, (0.0, 0.0, 0.0))
+    pushed = collision_last_team(m, ps, prm, ts, cs, team, True)
+    if mesh:
+        for _ in range(SHAPE_ROUNDS - 1):
+            if pushed == 0 or not edge_projection_team(m, ps, team, PROJECTION_ITERATIONS, True):
+                break
+            for _ in range(prm.distance_iterations[team]):
+                edge_pass_team(m, ps, team)
+            pushed = collision_last_team(m, ps, prm, ts, cs, team, False)

@@ -70,6 +70,19 @@ PARTICLE_FIELDS = [
     # per-triangle scratch of E.3 (one row per triangle of the model's triangle pool)
     ("triangle_normal", "triangle", V3, F64, "unit or 0; display normal of each triangle (E.3, per frame)"),
     ("triangle_tangent", "triangle", V3, F64, "unit; display uv tangent of each triangle (E.3, per frame)"),
+    # scratch of quality mode's edge projection (quality.edge_projection_team, per step): one
+    # row per particle / per edge of the model's pools
+    ("projection_inverse_mass", "particle", (), F64, "inverse mass of the edge projection (0: fixed)"),
+    ("projection_gather", "particle", V3, F64, "W J^T p of the projection's conjugate gradients"),
+    ("projection_contact", "particle", V3, F64, "unit or 0; direction collision last pushed it this step"),
+    ("edge_normal", "edge", V3, F64, "unit direction a -> b of a stretched edge, 0 otherwise"),
+    ("edge_lambda", "edge", (), F64, "m; the edge projection's multiplier"),
+    ("edge_residual", "edge", (), F64, "m; conjugate-gradient residual"),
+    ("edge_direction", "edge", (), F64, "m; conjugate-gradient search direction"),
+    ("edge_product", "edge", (), F64, "m; (J W J^T + compliance) times the search direction"),
+    ("edge_diagonal", "edge", (), F64, "the edge's diagonal entry of J W J^T + compliance"),
+    ("edge_compliance", "edge", (), F64, "the edge's compliance times (w_a + w_b)"),
+    ("edge_active", "edge", (), I32, "the stretched edges of a team, listed from its first edge row"),
 ]
 ParticleState = make_soa("ParticleState", PARTICLE_FIELDS)
 
@@ -193,9 +206,11 @@ TEAM_FILL = {"reset": 1, "time_reset": 1, "scale_ratio": 1.0, "length_unit": 1.0
 COLLIDER_FILL = {"first_frame": 1, "frame_scale": 1.0}
 
 
-def allocate_state(particle_count: int, team_count: int, slot_count: int, triangle_count: int = 0):
+def allocate_state(particle_count: int, team_count: int, slot_count: int, triangle_count: int = 0,
+                   edge_count: int = 0):
     """Fresh state tables sized for the given counts (every team starts with Reset)."""
-    particles = allocate(ParticleState, {"particle": particle_count, "triangle": triangle_count})
+    particles = allocate(ParticleState, {"particle": particle_count, "triangle": triangle_count,
+                                         "edge": edge_count})
     teams = allocate(TeamState, {"team": team_count}, fill=TEAM_FILL)
     colliders = allocate(ColliderState, {"slot": slot_count}, fill=COLLIDER_FILL)
     return particles, teams, colliders

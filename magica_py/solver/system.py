@@ -122,7 +122,8 @@ class ClothSystem:
         slots = [(t, self._collider_indices(spec)) for t, spec in enumerate(self.specs)]
         starts = [self._slots.allocate(len(indices)) for _t, indices in slots]
         self.particles, self.teams, self.collider_state = allocate_state(
-            self.layout.capacity("particle"), team_count, self._slots.capacity, self.layout.capacity("triangle"))
+            self.layout.capacity("particle"), team_count, self._slots.capacity, self.layout.capacity("triangle"),
+            self.layout.capacity("edge"))
         for (t, indices), start in zip(slots, starts):
             self.teams.collider_start[t] = start
             self.teams.collider_count[t] = len(indices)
@@ -192,7 +193,8 @@ class ClothSystem:
         slot_start = self._slots.allocate(len(indices))
         self.particles, self.teams, self.collider_state = grow_state(
             self.particles, self.teams, self.collider_state, self.layout.capacity("particle"),
-            self.layout.team_count, self._slots.capacity, self.layout.capacity("triangle"))
+            self.layout.team_count, self._slots.capacity, self.layout.capacity("triangle"),
+            self.layout.capacity("edge"))
         p0, pn = self.layout.chunks[team]["particle"]
         free_particle_rows(self.particles, p0, pn)   # a reused chunk starts fresh too
         free_team_row(self.teams, team)
