@@ -217,13 +217,15 @@ def allocate_state(particle_count: int, team_count: int, slot_count: int, triang
 
 
 def grow_state(particles, teams, colliders, particle_count: int, team_count: int, slot_count: int,
-               triangle_count: int = 0):
+               triangle_count: int = 0, edge_count: int = 0):
     """The state tables enlarged to the given counts: existing rows copied bit for bit, new
     rows fresh (used when a cloth is added at runtime and a pool has no free chunk)."""
-    if particles.position.shape[0] < particle_count or particles.triangle_normal.shape[0] < triangle_count:
+    if (particles.position.shape[0] < particle_count or particles.triangle_normal.shape[0] < triangle_count
+            or particles.edge_lambda.shape[0] < edge_count):
         particles = grow(ParticleState, particles, {
             "particle": max(particle_count, particles.position.shape[0]),
-            "triangle": max(triangle_count, particles.triangle_normal.shape[0])})
+            "triangle": max(triangle_count, particles.triangle_normal.shape[0]),
+            "edge": max(edge_count, particles.edge_lambda.shape[0])})
     if teams.reset.shape[0] < team_count:
         teams = grow(TeamState, teams, {"team": team_count}, fill=TEAM_FILL)
     if colliders.shape.shape[0] < slot_count:
