@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from magica_py.bench import metrics as M
+from magica_py.bench.stability import find_case
 from magica_py.bench.variants import Variant, prepare, rest_geometry
 from magica_py.scene.colliders import static_transform_name
 
@@ -91,10 +92,7 @@ CASES: tuple[MocapCase, ...] = _cases()
 
 
 def case(name: str) -> MocapCase:
-    for c in CASES:
-        if c.name == name:
-            return c
-    raise KeyError(f"no mocap case {name!r}; cases: {', '.join(c.name for c in CASES)}")
+    return find_case(CASES, name, "mocap")
 
 
 @dataclass

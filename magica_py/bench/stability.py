@@ -93,11 +93,17 @@ CASES: tuple[HardCase, ...] = (
 )
 
 
-def case(name: str) -> HardCase:
-    for c in CASES:
+def find_case(cases, name: str, what: str):
+    """The case called ``name`` among ``cases`` (anything with a ``name``); a KeyError that
+    lists them otherwise. ``what``: the kind of case, for the message."""
+    for c in cases:
         if c.name == name:
             return c
-    raise KeyError(f"no hard case {name!r}; cases: {', '.join(c.name for c in CASES)}")
+    raise KeyError(f"no {what} case {name!r}; cases: {', '.join(c.name for c in cases)}")
+
+
+def case(name: str) -> HardCase:
+    return find_case(CASES, name, "hard")
 
 
 @dataclass
