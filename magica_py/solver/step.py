@@ -291,7 +291,7 @@ def end_step_velocity(next_pos, velocity_pos, dt):
     vel = v_scale(v_sub(next_pos, velocity_pos), 1.0 / dt)
     speed_sq = v_length_sq(vel)
     moving = speed_sq >= 1e-8
-    unit = v_scale(vel, 1.0 / math.sqrt(speed_sq))
+    unit = v_scale(vel, 1.0 / math.sqrt(max(speed_sq, 1e-300)))   # at rest: discarded by the select
     return vel, (unit if moving else (0.0, 0.0, 0.0)), moving
 
 
@@ -311,7 +311,7 @@ def centrifugal_velocity(vel, next_pos, direction, moving, depth, angular_veloci
     the axis). Branch-free."""
     lv = project_on_plane(v_sub(next_pos, center), axis)
     radius = v_length(lv)
-    n = v_scale(lv, 1.0 / radius)
+    n = v_scale(lv, 1.0 / max(radius, 1e-300))   # on the axis: discarded by the select
     mass = 1.0 + (1.0 - depth)
     force = mass * angular_velocity * angular_velocity * radius
     u = v_normalize(v_cross(axis, n))

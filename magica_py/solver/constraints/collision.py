@@ -126,8 +126,9 @@ def point_contact_result(x, sum_push, sum_n, count, n_acc, min_dist, r, friction
     The push is the mean push scaled by the length of the mean normal (opposed colliders cancel);
     friction grows with the closeness of the nearest collider within the contact range
     (``min_dist <= r`` exactly when one was: min_dist starts at FAR). Branch-free."""
-    mag = v_length(v_scale(sum_n, 1.0 / count))
-    pushed = v_add(x, v_scale(sum_push, min(mag, 1.0) / count))
+    n = max(count, 1)   # no contact: the select below keeps x (and no 1/0 with the JIT off)
+    mag = v_length(v_scale(sum_n, 1.0 / n))
+    pushed = v_add(x, v_scale(sum_push, min(mag, 1.0) / n))
     new_x = pushed if (count > 0 and mag >= 1e-8) else x
     contact = min_dist <= r and v_length_sq(n_acc) > 1e-6
     rubbed = max(friction, 1.0 - saturate(min_dist / r))
