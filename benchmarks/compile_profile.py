@@ -5,6 +5,13 @@ frames, with an empty kernel cache, from numba's documented event API (``numba:c
 
 Times are inclusive (a function's compile includes the callees it compiles first), so read
 the list as a tree: ``simulate_frame`` holds everything below it.
+
+    NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/compile_profile.py tail_orbit 3 --passes
+
+``--passes``: exclusive seconds per numba compiler pass and per function (a pass's time minus
+the passes of the callees it compiled meanwhile, from the ``numba:run_pass`` events), and the
+seconds spent inside LLVM (the ``numba:llvm_lock`` events: every call into llvmlite's
+binding, i.e. LLVM's optimisation passes, machine-code emission, module parsing and linking).
 """
 from __future__ import annotations
 
@@ -18,6 +25,8 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    passes = "--passes" in argv
+    argv = [a for a in argv if a != "--passes"]
     if not argv:
         print(__doc__)
         return 2
@@ -43,6 +52,39 @@ def main(argv=None) -> int:
                 seconds[f"{fn.__module__}.{fn.__qualname__}"] += time.perf_counter() - start
 
     event.register("numba:compile", Listener())
+    pass_seconds: dict[str, float] = collections.defaultdict(float)
+    function_seconds: dict[str, float] = collections.defaultdict(float)
+    llvm = [0.0, 0, None]   # seconds, calls, start of the current call
+
+    class Passes(event.Listener):
+        """Exclusive pass times: a stack of (pass, function, start, seconds of nested passes)."""
+
+        def __init__(self):
+            self.stack = []
+
+        def on_start(self, ev):
+            self.stack.append([ev.data["name"], time.perf_counter(), 0.0])
+
+        def on_end(self, ev):
+            name, start, nested = self.stack.pop()
+            spent = time.perf_counter() - start
+            if self.stack:
+                self.stack[-1][2] += spent
+            pass_name, _, function = name.partition(" [")
+            pass_seconds[pass_name] += spent - nested
+            function_seconds[function.rstrip("]")] += spent - nested
+
+    class Llvm(event.Listener):
+        def on_start(self, ev):
+            llvm[2] = time.perf_counter()
+
+        def on_end(self, ev):
+            llvm[0] += time.perf_counter() - llvm[2]
+            llvm[1] += 1
+
+    if passes:
+        event.register("numba:run_pass", Passes())
+        event.register("numba:llvm_lock", Llvm())
     wall, cpu = time.perf_counter(), time.process_time()
     from magica_py.config import load_scene
     from magica_py.runtime.player import Player
@@ -53,6 +95,15 @@ def main(argv=None) -> int:
     ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player)
     player.run(frames)
     print(f"{scene_name}: wall {time.perf_counter() - wall:.1f} s, cpu {time.process_time() - cpu:.1f} s")
+    if passes:
+        print(f"inside LLVM: {llvm[0]:.1f} s over {llvm[1]} calls into llvmlite's binding")
+        print("exclusive seconds per compiler pass:")
+        for name, s in sorted(pass_seconds.items(), key=lambda kv: -kv[1])[:8]:
+            print(f"{s:8.2f} s  {name}")
+        print(f"exclusive seconds per function ({len(function_seconds)} functions):")
+        for name, s in sorted(function_seconds.items(), key=lambda kv: -kv[1])[:25]:
+            print(f"{s:8.2f} s  {name}")
+        return 0
     for name, s in sorted(seconds.items(), key=lambda kv: -kv[1])[:40]:
         print(f"{s:8.2f} s  {name}")
     return 0
