@@ -56,16 +56,44 @@ def test_collision_last_leaves_no_particle_inside_the_sphere_at_the_end_of_a_ste
     assert off_step > 1e-3 and faithful_step > 1e-3     # measured 14-42 mm and 10-19 mm
 
 
-def test_display_enters_a_static_sphere_less_than_faithful_where_leaving_it_would_stretch(bq):
-    """The root passes inside the sphere: the state keeps its first edges stretched (18.8 %)
-    to stay out of it. The quality display keeps every edge within the lengths of the states
-    it interpolates (tests/test_quality_display.py) and moves out of the sphere at this
-    frame's pose only as far as that allows: between two steps the root has moved on and the
-    display stays partly inside, less than the faithful display."""
+def state_edge_stretch(bq, name, params, duration=2.0):
+    """Max stretch of each parent link (root first) over the two states of every frame."""
+    path, raw, _ = bq.SCENES[name]
+    p = prepare(bq.variant((path, raw, duration), "t", params))
+    system = p.system
+    ps = system.particles
+    parent = np.asarray(system.model.parent)
+    child = np.nonzero(parent >= 0)[0]
+    dt = 1.0 / p.frequency
+    rest, worst = None, np.zeros(child.size)
+    for _ in range(p.frames):
+        p.player.step()
+        if rest is None:   # the step-basic pose, set by the first step
+            rest = np.linalg.norm(ps.step_basic_pos[child] - ps.step_basic_pos[parent[child]], axis=1)
+            if rest.min() <= 0.0:
+                rest = None
+                continue
+        for x in (np.asarray(ps.old_pos), np.asarray(ps.old_pos - ps.real_velocity * dt)):
+            worst = np.maximum(worst, np.linalg.norm(x[child] - x[parent[child]], axis=1) / rest - 1.0)
+    return worst
+
+
+def test_a_root_passing_through_a_sphere_stretches_only_its_own_edge_and_the_display_keeps_it(bq):
+    """The root passes inside the sphere: the state cannot keep its first edge and stay out
+    of it, and collision wins there (7.1 %); the chain's other edges are held by the
+    collider-aware follow-the-leader after collision last (``quality.ftl_collision_team``;
+    before it: 24.1 % and 5.3 % on the first two edges). The quality display keeps every edge
+    within the lengths of the states it interpolates (tests/test_quality_display.py), so
+    between two steps, with the root already further into the sphere, it stays partly inside:
+    21.9 mm against faithful's 15.6 mm (10.3 mm before, when the states' stretched edges let
+    it out)."""
     params = {"inertia.movement_inertia_smoothing": 0.0}
+    stretch = state_edge_stretch(bq, "tail_sphere", {**bq.QUALITY, **params})
+    assert stretch[0] > 0.02                     # the root's edge: collision wins (measured 7.1 %)
+    assert stretch[1:].max() <= 1e-3             # the others are held (main: 5.3 % on the second)
     _step, display = penetrations(bq, "tail_sphere", {**bq.QUALITY, **params})
     _s, faithful_display = penetrations(bq, "tail_sphere", params)
-    assert display < 0.8 * faithful_display            # measured 10.3 mm against 15.7 mm
+    assert display < 1.5 * faithful_display     # measured 21.9 mm against 15.6 mm
 
 
 def test_inside_old_pose_oracle():

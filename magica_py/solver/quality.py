@@ -24,7 +24,9 @@ and the motion constraint (D.9), before the end of the step (D.10):
 2. ``collision_last``: a final point projection of every colliding particle against each
    collider in turn (two rounds), so that no particle ends the step inside one; a particle
    that started the step inside a collider is carried out with it without the starting depth
-   becoming velocity (``collision_last_push``). A colliding mesh cloth under ``ftl_edges``
+   becoming velocity (``collision_last_push``). A colliding line cloth under an FTL mode then
+   runs follow-the-leader again with the colliders (``ftl_collision_team``): a pushed particle
+   keeps its place and its edges pull the rest of the chain. A colliding mesh cloth under ``ftl_edges``
    then runs ``SHAPE_ROUNDS - 1`` more rounds of (edge projection in which the particles
    collision last pushed slide along their push's plane, edge passes, collision last), so
    that the push's stretch is spread over the mesh instead of left on the pushed edges.
@@ -69,6 +71,7 @@ PROJECTION_COMPLIANCE = 1e-3  # compliance of an edge at or above its rest lengt
 PROJECTION_THRESHOLD = 1.5e-2  # the projection runs when an edge is stretched by more than this share of its rest
 PROJECTION_SLACK = 1e-2       # edges down to this share shorter than their rest enter it too, to stay at most as long
 PROJECTION_TOLERANCE = 1e-2   # the conjugate gradients stop when the residual's norm fell by this factor
+FTL_COLLISION_ITERATIONS = 4  # alternations of (parent ball, collider push) of the line cloth's FTL after collision last
 SHAPE_ROUNDS = 2           # rounds of (edge projection, passes, collision last) of a colliding mesh cloth
 
 
@@ -128,6 +131,70 @@ def ftl_team(m, ps, prm, team):
             store3(ps_next_pos, v, x)
             if damping > 0.0 and (m_attribute[p] & MOVE) != 0:
                 store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(move, damping)))
+
+
+@kernel
+def ftl_collision_team(m, ps, prm, ts, cs, team):
+    """Follow-the-leader with the colliders, after collision last, for a line cloth: along
+    each baseline, parents first, a child is moved into the ball of its step-basic rest length
+    around its (final) parent and out of the team's colliders at this step's pose
+    (``step_collider_push``), alternately, ``FTL_COLLISION_ITERATIONS`` times at most, the
+    collider push last: alternating projections towards a point of both sets (for a parent
+    outside a convex collider, or inside it by less than the rest length like a root fixed
+    inside one, the set is not empty). A pushed particle keeps its place and its edges pull
+    the free end, the rest of the chain towards the tip, instead of being left stretched.
+    The start-of-step carry was collision last's (it already ran); the moves become
+    velocity, with the parent's DFTL correction as in ``ftl_team`` for the ball's share."""
+    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
+    m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
+    m_baseline_start, m_parent, m_team_baseline_count = m.baseline_start, m.parent, m.team_baseline_count
+    ps_next_pos, ps_step_basic_pos, ps_velocity_pos = ps.next_pos, ps.step_basic_pos, ps.velocity_pos
+    cs_scale_suspend, m_depth, prm_radius_curve = cs.scale_suspend, m.depth, prm.radius_curve
+    damping = prm.ftl_damping[team]
+    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
+    c0 = ts.collider_start[team]
+    c1 = c0 + ts.collider_count[team]
+    b0 = m.team_baseline_start[team]
+    for b in range(b0, b0 + m_team_baseline_count[team]):
+        e0 = m_baseline_start[b]
+        for e in range(e0 + 1, e0 + m_baseline_count[b]):
+            v = m_baseline_data[e]
+            attr = m_attribute[v]
+            if (attr & MOVE) == 0:
+                continue
+            p = m_parent[v]
+            if p < 0:
+                continue
+            hits = (attr & INVALID_OR_NO_COLLISION) == 0
+            r = particle_radius(prm_radius_curve, team, m_depth[v], scale)
+            rest = v_length(v_sub(load3(ps_step_basic_pos, v), load3(ps_step_basic_pos, p)))
+            parent = load3(ps_next_pos, p)
+            if hits:
+                # no point of the ball is outside a collider the parent is deeper in than the
+                # rest length (a fixed root passing through it): collision wins, as before
+                feasible = True
+                for k in range(c0, c1):
+                    if cs_scale_suspend[k] == 0 and \
+                            v_length(v_sub(step_collider_push(cs, k, parent, r), parent)) >= rest:
+                        feasible = False
+                if not feasible:
+                    continue
+            x = load3(ps_next_pos, v)
+            pulled = (0.0, 0.0, 0.0)
+            for _ in range(FTL_COLLISION_ITERATIONS):
+                x, move = clamp_to_sphere(x, parent, rest)
+                pulled = v_add(pulled, move)
+                if not hits or (move[0] == 0.0 and move[1] == 0.0 and move[2] == 0.0):
+                    break
+                x0 = x
+                for k in range(c0, c1):
+                    if cs_scale_suspend[k] == 0:
+                        x = step_collider_push(cs, k, x, r)
+                if x[0] == x0[0] and x[1] == x0[1] and x[2] == x0[2]:
+                    break
+            store3(ps_next_pos, v, x)
+            if damping > 0.0 and (m_attribute[p] & MOVE) != 0:
+                store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(pulled, damping)))
 
 
 @kernel
@@ -412,6 +479,35 @@ def collision_last_push(cs, k, x, start_x, velocity_pos, r, tolerance, carry):
 
 
 @kernel
+def step_collider_push(cs, k, x, r):
+    """``x`` (a sphere of radius r) moved onto the surface of collider slot k at its pose of
+    this step (``start_new`` / ``end_new``, ``plane_normal``) when it lies inside it, along the
+    shortest way out (the nearest point of a sphere or capsule surface, or the plane's normal);
+    unchanged otherwise or on the capsule's axis. Unlike D.8's moving plane (normal from the
+    previous pose) the set it projects onto does not depend on the collider's motion: the
+    alternation of ``ftl_collision_team`` projects onto two fixed sets."""
+    shape = cs.shape[k]
+    a = load3(cs.start_new, k)
+    if shape == PLANE:
+        n = load3(cs.plane_normal, k)
+        d = v_dot(v_sub(x, a), n) - r
+        return v_sub(x, v_scale(n, d)) if d < 0.0 else x
+    if shape == SPHERE:
+        t = 0.0
+        c = a
+    else:
+        b = load3(cs.end_new, k)
+        t = segment_parameter(x, a, b)
+        c = v_lerp(a, b, t)
+    reach = cs.radius_start[k] + (cs.radius_end[k] - cs.radius_start[k]) * t + r
+    v = v_sub(x, c)
+    length = v_length(v)
+    if length >= reach or length < 1e-12:
+        return x
+    return v_add(c, v_scale(v, reach / length))
+
+
+@kernel
 def start_depth(cs, k, x, r):
     """How deep the particle sphere (x, r) lay inside collider slot k at its previous-step
     pose (m; <= 0 outside)."""
@@ -671,6 +767,8 @@ def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, dist
         for p in range(m.team_particle_start[team], m.team_particle_start[team] + m.team_particle_count[team]):
             store3(ps_contact, p, (0.0, 0.0, 0.0))
     pushed = collision_last_team(m, ps, prm, ts, cs, team, True)
+    if not mesh and pushed > 0 and (mode == INEXT_FTL or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES):
+        ftl_collision_team(m, ps, prm, ts, cs, team)
     if mesh:
         for _ in range(SHAPE_ROUNDS - 1):
             if pushed == 0 or not edge_projection_team(m, ps, team, PROJECTION_ITERATIONS, True):
