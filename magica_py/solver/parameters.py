@@ -292,3 +292,33 @@ def step_keep(keep, frequency_ratio, rate_mode):
     if rate_mode == 0 or frequency_ratio == 1.0:
         return keep
     return portable.pow(keep, frequency_ratio)
+
+
+@kernel
+def step_share(share, frequency_ratio, rate_mode):
+    """A per-step share of a correction that is itself about proportional to the step (e.g.
+    the share of angle restoration's correction that becomes velocity, ``1 - attn``):
+    unchanged in MagicaCloth2 mode, ``share * 90/f`` (clamped to [0, 1]) in
+    frequency-consistent mode, so that the velocity it leaves per unit time does not depend
+    on f (exactly ``share`` at 90 Hz)."""
+    if rate_mode == 0 or frequency_ratio == 1.0:
+        return share
+    s = share * frequency_ratio
+    return 1.0 if s > 1.0 else (0.0 if s < 0.0 else s)
+
+
+@kernel
+def step_stiffness(k, frequency_ratio, power, rate_mode):
+    """A constraint's per-step stiffness (the share of its violation a step removes) whose whole
+    correction becomes velocity: ``k * power`` (MagicaCloth2) or, in frequency-consistent mode,
+    ``1 - (1 - k)^((90/f)^2)`` (exactly k at 90 Hz; 1 stays 1). A soft constraint projected
+    this way is a spring: its correction moves the position by ``k_step C`` and the velocity by
+    ``k_step C / dt``, so ``k_step`` must scale with dt^2 (as XPBD's compliance does) for the
+    acceleration to stay the same at every frequency; scaled with dt (``step_rate``) the
+    spring would stiffen in proportion to f."""
+    if rate_mode == 0:
+        return k * power
+    if frequency_ratio == 1.0:
+        return k
+    kk = 0.0 if k < 0.0 else (1.0 if k > 1.0 else k)
+    return 1.0 - portable.pow(1.0 - kk, frequency_ratio * frequency_ratio)
