@@ -9,7 +9,10 @@ import pytest
 from magica_py.params import resolve_parameters
 from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.constraints.tether import solve_tether
-from magica_py.solver.parameters import allocate_parameters, step_keep, step_rate, step_share, write_row
+from magica_py.solver.constraints.distance import distance_stiffness
+from magica_py.solver.parameters import (
+    allocate_parameters, constraint_stiffness, step_keep, step_rate, step_share, write_row,
+)
 from magica_py.solver.step import dynamic_friction_brake, dynamic_friction_keep, static_friction_step
 
 
@@ -81,3 +84,16 @@ def test_static_friction_loss_scales_with_the_step():
     sf180 = static_friction_step(nxt, old, old, normal, 0.9, dt, 0.05, 0.04, 0.5)[2]
     assert sf90 == pytest.approx(0.9 - 0.5, abs=1e-12)
     assert sf180 == pytest.approx(0.9 - 0.25, abs=1e-12)
+
+
+def test_projection_stiffness_is_a_per_step_strength():
+    """Distance and triangle-bending stiffness are not converted in frequency-consistent mode
+    (a rate-converted soft link whose correction becomes velocity stiffens with f); quality
+    mode converts them as rates, MagicaCloth2 mode scales them by SimulationPower."""
+    assert constraint_stiffness(0.5, 0.25, 1.0, 1, 0) == 0.5
+    assert constraint_stiffness(0.5, 0.25, 1.0, 1, 1) == pytest.approx(1.0 - 0.5 ** 0.25, rel=1e-14)
+    assert constraint_stiffness(0.5, 0.25, 0.5, 0, 0) == 0.25
+    fc = row(**FC, **{"distance.stiffness": 0.8})
+    assert distance_stiffness(fc, 0, 0.5, 0.125, 1.0) == (0.8, 0.4)
+    faithful = row(**{"distance.stiffness": 0.8})
+    assert distance_stiffness(faithful, 0, 0.5, 0.125, 0.5) == (0.4, 0.2)

@@ -7,7 +7,10 @@ takes effect at the next frame without touching the simulation state.
 
 Per-step rates (``rate_mode``): MagicaCloth2 tunes them for 90 Hz and patches other
 frequencies with SimulationPower (§A.3); ``frequency_consistent`` converts every per-step
-rate k with ``1 - (1 - k)^(90/f)`` instead (``step_rate`` below).
+rate k with ``1 - (1 - k)^(90/f)`` instead (``step_rate`` below), every per-step retention
+with ``keep^(90/f)`` (``step_keep``), every per-step amount with ``x 90/f`` (``step_share``),
+and keeps the projections' stiffness as per-step strengths (``constraint_stiffness``;
+docs/parameters.md, *solver.rate_mode*).
 """
 from __future__ import annotations
 
@@ -307,18 +310,17 @@ def step_share(share, frequency_ratio, rate_mode):
     return 1.0 if s > 1.0 else (0.0 if s < 0.0 else s)
 
 
+
 @kernel
-def step_stiffness(k, frequency_ratio, power, rate_mode):
-    """A constraint's per-step stiffness (the share of its violation a step removes) whose whole
-    correction becomes velocity: ``k * power`` (MagicaCloth2) or, in frequency-consistent mode,
-    ``1 - (1 - k)^((90/f)^2)`` (exactly k at 90 Hz; 1 stays 1). A soft constraint projected
-    this way is a spring: its correction moves the position by ``k_step C`` and the velocity by
-    ``k_step C / dt``, so ``k_step`` must scale with dt^2 (as XPBD's compliance does) for the
-    acceleration to stay the same at every frequency; scaled with dt (``step_rate``) the
-    spring would stiffen in proportion to f."""
-    if rate_mode == 0:
-        return k * power
-    if frequency_ratio == 1.0:
+def constraint_stiffness(k, frequency_ratio, power, rate_mode, quality):
+    """A projection's per-step stiffness (distance links, triangle bending: the share of the
+    violation one pass removes, the whole correction kept as velocity): ``k * power``
+    (MagicaCloth2), ``1 - (1 - k)^(90/f)`` in quality mode (``step_rate``), and ``k`` as is in
+    frequency-consistent mode. Converted as a rate, a soft projection whose correction becomes
+    velocity kicks the velocity by about ``-ln(1 - k) 90 C`` every step whatever the step, a
+    spring that stiffens in proportion to f and whose short-horizon map does not converge (the
+    character's skirt, docs/BENCHMARKS.md); a per-step strength, like the angle limit's, tends
+    to the hard constraint as f grows, and the map converges to it."""
+    if rate_mode != 0 and quality == 0:
         return k
-    kk = 0.0 if k < 0.0 else (1.0 if k > 1.0 else k)
-    return 1.0 - portable.pow(1.0 - kk, frequency_ratio * frequency_ratio)
+    return step_rate(k, frequency_ratio, power, rate_mode)
