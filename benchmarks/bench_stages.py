@@ -58,7 +58,7 @@ def _basic_pose(m, ps, prm, ts, cs, h, live):
 @numba.njit
 def _tether(m, ps, prm, ts, cs, h, live):
     for t in live:
-        tether_team(m, ps, prm, t, 0.7)
+        tether_team(m, ps, prm, t, 0.7, 1.0)
 
 
 @numba.njit

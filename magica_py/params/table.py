@@ -104,7 +104,7 @@ PARAMETER_DEFS: tuple[ParameterDef, ...] = (
     _p("wind.moving_wind", "float", 0.0, 0, 10, "", "C.4, D.1", "Wind against the cloth's own movement: speed = frame moving speed x moving_wind / scale ratio (off below 0.01)."),
     # -- beyond MagicaCloth2 (docs/parameters.md, docs/quality-mode.md)
     _p("solver.rate_mode", "enum", "magica", ref="docs/parameters.md",
-       doc="magica: per-step rates tuned for 90 Hz and patched by SimulationPower (MagicaCloth2); frequency_consistent: every per-step rate k becomes 1-(1-k)^(90/f), so the same parameters give the same motion at any frequency (identical at 90 Hz).",
+       doc="magica: per-step rates tuned for 90 Hz and patched by SimulationPower (MagicaCloth2); frequency_consistent: every per-step quantity is converted by the step (rates 1-(1-k)^(90/f), retentions a^(90/f), per-step amounts x 90/f; projection stiffnesses kept as per-step strengths), so the same parameters give the same model at any frequency, up to soft projections, which stiffen towards the hard constraint as f grows (identical at 90 Hz).",
        choices=("magica", "frequency_consistent")),
     # -- quality mode (docs/quality-mode.md); "auto" = disabled in faithful mode, the measured default in quality mode (enabled/disabled, not on/off: YAML reads on/off as booleans)
     _p("solver.mode", "enum", "faithful", ref="docs/quality-mode.md",

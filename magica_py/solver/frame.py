@@ -155,7 +155,7 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edg
         if ts.wind_zone_count[t] > 0 or prm.wind_moving_wind[t] > 0.01:  # wind's share of D.1's force sum
             wind_team(m, ps, prm, ts, t, dt)
     step_basic_pose_team(m, ps, prm, ts, t)
-    tether_team(m, ps, prm, t, tether_attenuation)
+    tether_team(m, ps, prm, t, tether_attenuation, ratio)
     distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
     if angle is not None:
         angle_team(m, ps, prm, ts, t, ratio, fi.power_w, limit_attenuation, restoration_attenuation)

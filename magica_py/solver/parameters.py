@@ -7,7 +7,10 @@ takes effect at the next frame without touching the simulation state.
 
 Per-step rates (``rate_mode``): MagicaCloth2 tunes them for 90 Hz and patches other
 frequencies with SimulationPower (§A.3); ``frequency_consistent`` converts every per-step
-rate k with ``1 - (1 - k)^(90/f)`` instead (``step_rate`` below).
+rate k with ``1 - (1 - k)^(90/f)`` instead (``step_rate`` below), every per-step retention
+with ``keep^(90/f)`` (``step_keep``), every per-step amount with ``x 90/f`` (``step_share``),
+and keeps the projections' stiffness as per-step strengths (``constraint_stiffness``;
+docs/parameters.md, *solver.rate_mode*).
 """
 from __future__ import annotations
 
@@ -292,3 +295,32 @@ def step_keep(keep, frequency_ratio, rate_mode):
     if rate_mode == 0 or frequency_ratio == 1.0:
         return keep
     return portable.pow(keep, frequency_ratio)
+
+
+@kernel
+def step_share(share, frequency_ratio, rate_mode):
+    """A per-step share of a correction that is itself about proportional to the step (e.g.
+    the share of angle restoration's correction that becomes velocity, ``1 - attn``):
+    unchanged in MagicaCloth2 mode, ``share * 90/f`` (clamped to [0, 1]) in
+    frequency-consistent mode, so that the velocity it leaves per unit time does not depend
+    on f (exactly ``share`` at 90 Hz)."""
+    if rate_mode == 0 or frequency_ratio == 1.0:
+        return share
+    s = share * frequency_ratio
+    return 1.0 if s > 1.0 else (0.0 if s < 0.0 else s)
+
+
+
+@kernel
+def constraint_stiffness(k, frequency_ratio, power, rate_mode, quality):
+    """A projection's per-step stiffness (distance links, triangle bending: the share of the
+    violation one pass removes, the whole correction kept as velocity): ``k * power``
+    (MagicaCloth2), ``1 - (1 - k)^(90/f)`` in quality mode (``step_rate``), and ``k`` as is in
+    frequency-consistent mode. Converted as a rate, a soft projection whose correction becomes
+    velocity kicks the velocity by about ``-ln(1 - k) 90 C`` every step whatever the step, a
+    spring that stiffens in proportion to f and whose short-horizon map does not converge (the
+    character's skirt, docs/BENCHMARKS.md); a per-step strength, like the angle limit's, tends
+    to the hard constraint as f grows, and the map converges to it."""
+    if rate_mode != 0 and quality == 0:
+        return k
+    return step_rate(k, frequency_ratio, power, rate_mode)

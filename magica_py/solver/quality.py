@@ -703,8 +703,8 @@ def quality_hard_attenuation(prm, team, frequency_ratio, attenuation, converted)
     """Velocity attenuation of a hard limit (tether D.3, angle limit D.5, motion D.9) at the
     step size. When a limit removes a step's penetration, ``1 - attn`` of the normal velocity
     survives into the next step: a per-step retention, so quality mode converts it as one,
-    ``attn^(90/f)`` (the frequency-consistent mode converts attn as a rate, which lets the
-    surviving share tend to 1 - and the limit to a hard bounce - as f grows)."""
+    ``attn^(90/f)``, as the frequency-consistent mode does too (``converted``; converting attn
+    as a rate let the surviving share tend to 1 - and the limit to a hard bounce - as f grows)."""
     if prm.quality[team] == 0:
         return converted
     return portable.pow(attenuation, frequency_ratio)
@@ -715,9 +715,10 @@ def quality_restoration_attenuation(prm, team, frequency_ratio, converted):
     """D.6's velocity attenuation at the step size. Quality mode scales the share of the
     restoration correction that becomes velocity, ``1 - attn``, linearly with the step
     (``(1 - attn) 90/f``): the correction itself is about proportional to the step, so the
-    velocity it leaves per unit time stays the same at any frequency (the converted rate of
-    the frequency-consistent mode lets that share tend to 1 as f grows, and the restoration
-    then acts as a force growing with f: 29 % of the tail's length between 90 and 1440 Hz)."""
+    velocity it leaves per unit time stays the same at any frequency, as the
+    frequency-consistent mode does too (``converted``; converted as a rate, that share tends to
+    1 as f grows, and the restoration then acts as a force growing with f: 29 % of the tail's
+    length between 90 and 1440 Hz)."""
     if prm.quality[team] == 0:
         return converted
     share = (1.0 - prm.restoration_attenuation[team]) * frequency_ratio

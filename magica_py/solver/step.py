@@ -19,7 +19,7 @@ from magica_py.kernels.math3d import (
     q_normalize, q_rotate, q_slerp, saturate, store3, store4, v_add, v_cross,
     v_dot, v_length, v_length_sq, v_lerp, v_mul, v_normalize, v_scale, v_sub,
 )
-from magica_py.solver.parameters import curve_at_clamp01, length_unit, step_keep, step_rate
+from magica_py.solver.parameters import curve_at_clamp01, length_unit, step_keep, step_rate, step_share
 
 MOVE = 0x02
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -271,15 +271,18 @@ def step_basic_pose_team(m, ps, prm, ts, team):
 
 
 @kernel
-def static_friction_step(next_pos, old_pos, velocity_pos, normal, static_friction, dt, static_threshold, gain):
+def static_friction_step(next_pos, old_pos, velocity_pos, normal, static_friction, dt, static_threshold, gain,
+                         loss_scale):
     """D.10 static friction of a particle in contact: its tangential move this step is cancelled
     by the static friction factor, which grows while the particle holds (tangential speed below
-    the threshold) and drops as it slips. Returns (next_pos, velocity_pos, static_friction)."""
+    the threshold) and drops as it slips (by ``max((speed - threshold) / 0.2, 0.05)`` per step
+    at 90 Hz, times ``loss_scale``: 1 in MagicaCloth2 mode, 90/f in frequency-consistent
+    mode). Returns (next_pos, velocity_pos, static_friction)."""
     d = v_sub(next_pos, old_pos)
     tv = v_sub(d, v_scale(normal, v_dot(d, normal)))
     speed = v_length(tv) / dt
     held = saturate(static_friction + gain)
-    slipping = saturate(static_friction - max((speed - static_threshold) / 0.2, STATIC_FRICTION_LOSS))
+    slipping = saturate(static_friction - max((speed - static_threshold) / 0.2, STATIC_FRICTION_LOSS) * loss_scale)
     sf = held if speed < static_threshold else slipping
     return v_sub(next_pos, v_scale(tv, sf)), v_sub(velocity_pos, v_scale(tv, sf)), sf
 
@@ -302,6 +305,16 @@ def dynamic_friction_brake(vel, direction, normal, friction, dynamic_friction):
     dd = 0.5 + 0.5 * v_dot(normal, direction)
     dd = 1.0 - dd * dd
     return v_sub(vel, v_scale(vel, dd * saturate(friction * dynamic_friction)))
+
+
+@kernel
+def dynamic_friction_keep(vel, direction, normal, friction, dynamic_friction, frequency_ratio):
+    """``dynamic_friction_brake`` in frequency-consistent mode: the share of the velocity the
+    brake keeps in a step, ``1 - dd friction dynamic_friction`` at 90 Hz, is a per-step
+    retention, converted as ``keep^(90/f)`` (``step_keep``)."""
+    dd = 0.5 + 0.5 * v_dot(normal, direction)
+    dd = 1.0 - dd * dd
+    return v_scale(vel, step_keep(1.0 - dd * saturate(friction * dynamic_friction), frequency_ratio, 1))
 
 
 @kernel
@@ -339,6 +352,14 @@ def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
     axis = load3(ts.rotation_axis, team)
     center = load3(ts.now_world_pos, team)
     velocity_weight = ts.velocity_weight[team]
+    # frequency-consistent mode (not quality mode, which keeps MagicaCloth2's per-step amounts
+    # here) converts the per-step amounts of D.10 by the step: the centrifugal velocity
+    # increment and the static-friction loss scale with 90/f, the dynamic-friction brake's
+    # kept share becomes a retention keep^(90/f); MagicaCloth2 mode and 90 Hz keep the bits
+    consistent = mode != 0 and prm.quality[team] == 0 and frequency_ratio != 1.0
+    loss_scale = frequency_ratio if consistent else 1.0
+    if consistent:
+        centrifugal = step_share(centrifugal, frequency_ratio, mode)
     friction_keep = step_keep(FRICTION_DAMPING_RATE, frequency_ratio, mode)
     gain = step_rate(STATIC_FRICTION_GAIN, frequency_ratio, 1.0, mode)
     start = m.team_particle_start[team]
@@ -352,14 +373,18 @@ def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
             velocity_pos = load3(ps_velocity_pos, p)
             if contact and static_threshold > 0.0:
                 next_pos, velocity_pos, sf = static_friction_step(next_pos, old_pos, velocity_pos, cn,
-                                                                  ps_static_friction[p], dt, static_threshold, gain)
+                                                                  ps_static_friction[p], dt, static_threshold, gain,
+                                                                  loss_scale)
                 store3(ps_next_pos, p, next_pos)
             else:
-                sf = saturate(ps_static_friction[p] - STATIC_FRICTION_LOSS)
+                sf = saturate(ps_static_friction[p] - STATIC_FRICTION_LOSS * loss_scale)
             ps_static_friction[p] = sf
             vel, direction, moving = end_step_velocity(next_pos, velocity_pos, dt)
             if moving and contact and dynamic > 0.0:
-                vel = dynamic_friction_brake(vel, direction, cn, f, dynamic)
+                if consistent:
+                    vel = dynamic_friction_keep(vel, direction, cn, f, dynamic, frequency_ratio)
+                else:
+                    vel = dynamic_friction_brake(vel, direction, cn, f, dynamic)
             ps_friction[p] = f * friction_keep
             if speed_limit >= 0.0:
                 vel = clamp_length(vel, speed_limit * scale)

@@ -20,7 +20,7 @@ from magica_py.kernels.math3d import (
     inverse_mass_friction_depth, load3, saturate, store3, v_cross, v_dot, v_length, v_length_sq,
     v_scale, v_sub,
 )
-from magica_py.solver.parameters import step_rate
+from magica_py.solver.parameters import constraint_stiffness
 
 MOVE = 0x02
 FIXED_POINT = 1e6
@@ -126,7 +126,7 @@ def bending_rate(prm, team, frequency_ratio, power_y):
     stiffness = prm.bending_stiffness[team]
     if stiffness < 1e-6:
         return -1.0
-    return saturate(step_rate(stiffness, frequency_ratio, power_y, prm.rate_mode[team]))
+    return saturate(constraint_stiffness(stiffness, frequency_ratio, power_y, prm.rate_mode[team], prm.quality[team]))
 
 
 # ----------------------------------------------------------------------------- per team

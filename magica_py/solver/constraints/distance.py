@@ -14,7 +14,7 @@ from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     inverse_mass_friction_depth, lerp, load3, saturate, store3, v_add, v_length, v_length_sq, v_scale, v_sub,
 )
-from magica_py.solver.parameters import curve_at_clamp01, step_rate
+from magica_py.solver.parameters import constraint_stiffness, curve_at_clamp01
 
 MOVE = 0x02
 FIXED = 0x01
@@ -64,8 +64,9 @@ def distance_stiffness(prm, team, depth, frequency_ratio, power_y):
     """(vertical, horizontal) per-step stiffness of a particle at ``depth``."""
     k = curve_at_clamp01(prm.distance_stiffness_curve, team, depth)
     mode = prm.rate_mode[team]
-    return (saturate(step_rate(k, frequency_ratio, power_y, mode)),
-            saturate(step_rate(k * 0.5, frequency_ratio, power_y, mode)))
+    quality = prm.quality[team]
+    return (saturate(constraint_stiffness(k, frequency_ratio, power_y, mode, quality)),
+            saturate(constraint_stiffness(k * 0.5, frequency_ratio, power_y, mode, quality)))
 
 
 @kernel
