@@ -30,7 +30,7 @@ IDENTITY = (0.0, 0.0, 0.0, 1.0)
 def normalize_or_zero(a):
     """``v_normalize`` without a branch."""
     n = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-    inv = 1.0 / n
+    inv = 1.0 / max(n, 1e-300)   # a zero vector: discarded below (and no 1/0 with the JIT off)
     small = n < 1e-12
     return (0.0 if small else a[0] * inv, 0.0 if small else a[1] * inv, 0.0 if small else a[2] * inv)
 
@@ -39,7 +39,7 @@ def normalize_or_zero(a):
 def q_normalize_or_identity(q):
     """``q_normalize`` without a branch."""
     n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    inv = 1.0 / n
+    inv = 1.0 / max(n, 1e-300)   # a zero quaternion: discarded below
     small = n < 1e-12
     return (0.0 if small else q[0] * inv, 0.0 if small else q[1] * inv,
             0.0 if small else q[2] * inv, 1.0 if small else q[3] * inv)

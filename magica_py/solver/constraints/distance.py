@@ -52,7 +52,7 @@ def distance_rest_length(signed_rest, scale, p_base, q_base, animation_pose_rati
 @kernel
 def distance_apply(position, velocity_pos, acc, n, attenuation):
     """(next_pos, velocity_pos) after the mean correction ``acc / n`` (unchanged when n == 0)."""
-    delta = v_scale(acc, 1.0 / n)
+    delta = v_scale(acc, 1.0 / max(n, 1))   # no link: discarded below (and no 1/0 with the JIT off)
     moved = v_add(position, delta)
     dragged = v_add(velocity_pos, v_scale(delta, attenuation))
     some = n > 0

@@ -36,7 +36,7 @@ def clamp_length_selected(v, max_length):
     """``math3d.clamp_length`` (``clamp_len`` of §0.2) with the same bits, branch-free: the
     shortened vector is computed either way and selected."""
     n = v_length(v)
-    shortened = v_scale(v, max_length / n)
+    shortened = v_scale(v, max_length / max(n, 1e-300))   # a zero vector: discarded below
     return shortened if (n > 1e-9) & (n > max_length) else v
 
 
