@@ -713,20 +713,31 @@ def display_constraints_team(m, ps, prm, ts, cs, team, dt):
             store3(ps_position, a, v_add(pa, v_scale(c, wa)))
             store3(ps_position, b, v_sub(pb, v_scale(c, wb)))
     common = 1.0   # the whole team towards its target by one fraction: each edge moves linearly in it
+    moved = False
     for v in range(start, end):
-        move_v = v_sub(load3(ps_position, v), load3(ps_disp_pos, v))
+        shown = load3(ps_disp_pos, v)
+        target = load3(ps_position, v)
+        move_v = v_sub(target, shown)
+        if v_dot(move_v, move_v) > 0.0:
+            moved = True
         for link in range(m_distance_start[v], m_distance_start[v] + m_distance_count[v]):
             u = m_distance_target[link]
-            e0 = v_sub(load3(ps_disp_pos, v), load3(ps_disp_pos, u))
-            de = v_sub(move_v, v_sub(load3(ps_position, u), load3(ps_disp_pos, u)))
-            if v_dot(de, de) > 0.0:
-                common = min(common, safe_fraction(e0, de, display_edge_bound(ps, v, u, dt)))
+            e0 = v_sub(shown, load3(ps_disp_pos, u))
+            e1 = v_sub(target, load3(ps_position, u))
+            if v_dot(e1, e1) > v_dot(e0, e0):   # otherwise the edge never gets longer than now
+                common = min(common, safe_fraction(e0, v_sub(e1, e0), display_edge_bound(ps, v, u, dt)))
+    if not moved:
+        return   # the target is the interpolated display (already in ps.position)
     if common > 0.0:
         for v in range(start, end):
             if (m_attribute[v] & MOVE) != 0:
                 shown = load3(ps_disp_pos, v)
                 store3(ps_disp_pos, v, v_add(shown, v_scale(v_sub(load3(ps_position, v), shown), common)))
-    for _ in range(DISPLAY_MOVE_PASSES):
+    if common >= 1.0:
+        passes = 0   # every particle reached its target
+    else:
+        passes = DISPLAY_MOVE_PASSES
+    for _ in range(passes):
         for v in range(start, end):
             if (m_attribute[v] & MOVE) == 0:
                 continue
