@@ -712,14 +712,17 @@ def display_constraints_team(m, ps, prm, ts, cs, team, dt):
             c = v_scale(d, (length - bound) / (length * (wa + wb)))
             store3(ps_position, a, v_add(pa, v_scale(c, wa)))
             store3(ps_position, b, v_sub(pb, v_scale(c, wb)))
-    common = 1.0   # the whole team towards its target by one fraction: each edge moves linearly in it
+    # the whole team towards its target by one fraction: each edge moves linearly in it (an edge
+    # is seen from its moving ends, as in the passes below; one whose ends keep still keeps its length)
+    common = 1.0
     moved = False
     for v in range(start, end):
         shown = load3(ps_disp_pos, v)
         target = load3(ps_position, v)
         move_v = v_sub(target, shown)
-        if v_dot(move_v, move_v) > 0.0:
-            moved = True
+        if (m_attribute[v] & MOVE) == 0 or v_dot(move_v, move_v) == 0.0:
+            continue
+        moved = True
         for link in range(m_distance_start[v], m_distance_start[v] + m_distance_count[v]):
             u = m_distance_target[link]
             e0 = v_sub(shown, load3(ps_disp_pos, u))
