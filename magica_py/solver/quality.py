@@ -32,7 +32,7 @@ and the motion constraint (D.9), before the end of the step (D.10):
    that the push's stretch is spread over the mesh instead of left on the pushed edges.
 
 The quality display (``display.py``) ends with ``display_constraints_team``: collider push at
-this frame's pose and edge bounds taken from the step states.
+this frame's pose within edge bounds taken from the step states.
 
 Every pass is unilateral (only stretch is removed) and uses the step-basic pose (D.2) as the
 rest reference, like the tether of D.3. Faithful mode never calls this module.
@@ -556,6 +556,49 @@ def frame_collider_push(cs, k, x, r):
 
 
 @kernel
+def frame_collider_push_bounded(cs, k, x, r, parent, bound):
+    """``frame_collider_push`` of x, kept within ``bound`` of ``parent`` when it can be: a
+    pushed point farther than ``bound`` from ``parent`` is moved to the nearest point of the
+    circle where the pushed-to surface (the sphere, or a capsule's sphere at the pushed
+    point's axis parameter) meets the sphere of radius ``bound`` around ``parent``; exact for a
+    sphere, where alternating the push with the parent clamp only converges slowly. Where that
+    circle does not exist (the parent deeper than ``bound``, or a plane) the pushed point is
+    returned and the caller's clamp wins."""
+    y = frame_collider_push(cs, k, x, r)
+    if cs.shape[k] == PLANE or (y[0] == x[0] and y[1] == x[1] and y[2] == x[2]):
+        return y
+    if v_length_sq(v_sub(y, parent)) <= bound * bound:
+        return y
+    pos = load3(cs.frame_pos, k)
+    if cs.shape[k] == SPHERE:
+        c = pos
+        reach = cs.size[k, 0] * abs(cs.frame_scale[k, 0]) + r
+    else:
+        d = cs.direction[k]
+        size = (cs.size[k, 0], cs.size[k, 1], cs.size[k, 2])
+        a, b, ra, rb = capsule_ends(pos, load4(cs.frame_rot, k), d, cs.reverse_direction[k] != 0,
+                                    cs.aligned_on_center[k] != 0, size, cs.frame_scale[k, d])
+        t = segment_parameter(x, a, b)
+        c = v_lerp(a, b, t)
+        reach = ra + (rb - ra) * t + r
+    n = v_sub(parent, c)
+    dist = v_length(n)
+    if dist < 1e-12:
+        return y
+    n = v_scale(n, 1.0 / dist)
+    along = (reach * reach - bound * bound + dist * dist) / (2.0 * dist)   # circle plane, from c along n
+    h2 = reach * reach - along * along
+    if h2 <= 0.0:
+        return y
+    w = v_sub(y, c)
+    w = v_sub(w, v_scale(n, v_dot(w, n)))
+    wl = v_length(w)
+    if wl < 1e-12:
+        return y
+    return v_add(v_add(c, v_scale(n, along)), v_scale(w, math.sqrt(h2) / wl))
+
+
+@kernel
 def display_edge_bound(ps, a, b, dt):
     """The longest the displayed edge (a, b) may be: the larger of its step-basic rest length
     and its length in the two step states the display interpolates, the last one
@@ -593,18 +636,22 @@ def display_constraints_team(m, ps, prm, ts, cs, team, dt):
     target that is out of the colliders at this frame's pose, never past the bounds.
 
     1. The target, in ``ps.position``: along every baseline, parents first, each Move
-       particle is pushed out of the team's colliders at this frame's pose
-       (``frame_collider_push``; only when the cloth collides: ``collision_mode`` not none and
-       ``collision_last`` on) and kept within its parent link's bound (follow-the-leader),
+       particle is pushed out of the team's colliders at this frame's pose, onto the
+       nearest point that is also within its parent link's bound when there is one
+       (``frame_collider_push_bounded``; only when the cloth collides: ``collision_mode`` not
+       none and ``collision_last`` on), and kept within that bound (follow-the-leader),
        ``DISPLAY_PASSES`` times; then ``DISPLAY_EDGE_PASSES`` Gauss-Seidel passes shorten the
        other edges (a skirt's rings) longer than their bound, both ends moving.
-    2. The display, in ``ps.disp_pos``: starting from the interpolated display, each Move
-       particle in turn moves towards its target by the largest fraction that keeps each of
-       its links (D.4's partners, every proxy edge) within its bound with its neighbours'
-       current display (``safe_fraction``), ``DISPLAY_MOVE_PASSES`` times. Every move keeps
-       the display within the bounds, so none is ever shown longer than the state allows;
-       where a push would need more stretch than the state has, the particle is shown
-       partly inside the collider. Then copied to ``ps.position``."""
+    2. The display, in ``ps.disp_pos``: starting from the interpolated display, the whole
+       team moves towards its target by one common fraction, the largest that keeps every
+       link (D.4's partners, every proxy edge) within its bound (each link moves linearly in
+       the fraction and its length is convex, ``safe_fraction``): a target within every
+       bound (a line cloth's) is reached exactly. Then each Move particle in turn moves
+       towards its target by the largest fraction that keeps each of its links within its
+       bound with its neighbours' current display, ``DISPLAY_MOVE_PASSES`` times. Every move
+       keeps the display within the bounds, so none is ever shown longer than the state
+       allows; where a push would need more stretch than the state has, the particle is
+       shown partly inside the collider. Then copied to ``ps.position``."""
     # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     cs_scale_suspend, m_attribute, m_baseline_count = cs.scale_suspend, m.attribute, m.baseline_count
     m_baseline_data, m_baseline_start, m_depth = m.baseline_data, m.baseline_start, m.depth
@@ -642,7 +689,7 @@ def display_constraints_team(m, ps, prm, ts, cs, team, dt):
                 if hits:
                     for k in range(c0, c1):
                         if cs_scale_suspend[k] == 0:
-                            x = frame_collider_push(cs, k, x, r)
+                            x = frame_collider_push_bounded(cs, k, x, r, parent_pos, bound)
                 x, _move = clamp_to_sphere(x, parent_pos, bound)
             store3(ps_position, v, x)
     f0 = m.team_edge_start[team]
@@ -665,7 +712,35 @@ def display_constraints_team(m, ps, prm, ts, cs, team, dt):
             c = v_scale(d, (length - bound) / (length * (wa + wb)))
             store3(ps_position, a, v_add(pa, v_scale(c, wa)))
             store3(ps_position, b, v_sub(pb, v_scale(c, wb)))
-    for _ in range(DISPLAY_MOVE_PASSES):
+    # the whole team towards its target by one fraction: each edge moves linearly in it (an edge
+    # is seen from its moving ends, as in the passes below; one whose ends keep still keeps its length)
+    common = 1.0
+    moved = False
+    for v in range(start, end):
+        shown = load3(ps_disp_pos, v)
+        target = load3(ps_position, v)
+        move_v = v_sub(target, shown)
+        if (m_attribute[v] & MOVE) == 0 or v_dot(move_v, move_v) == 0.0:
+            continue
+        moved = True
+        for link in range(m_distance_start[v], m_distance_start[v] + m_distance_count[v]):
+            u = m_distance_target[link]
+            e0 = v_sub(shown, load3(ps_disp_pos, u))
+            e1 = v_sub(target, load3(ps_position, u))
+            if v_dot(e1, e1) > v_dot(e0, e0):   # otherwise the edge never gets longer than now
+                common = min(common, safe_fraction(e0, v_sub(e1, e0), display_edge_bound(ps, v, u, dt)))
+    if not moved:
+        return   # the target is the interpolated display (already in ps.position)
+    if common > 0.0:
+        for v in range(start, end):
+            if (m_attribute[v] & MOVE) != 0:
+                shown = load3(ps_disp_pos, v)
+                store3(ps_disp_pos, v, v_add(shown, v_scale(v_sub(load3(ps_position, v), shown), common)))
+    if common >= 1.0:
+        passes = 0   # every particle reached its target
+    else:
+        passes = DISPLAY_MOVE_PASSES
+    for _ in range(passes):
         for v in range(start, end):
             if (m_attribute[v] & MOVE) == 0:
                 continue
