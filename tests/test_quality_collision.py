@@ -86,7 +86,7 @@ def test_a_root_passing_through_a_sphere_stretches_only_its_own_edge_and_the_dis
     lengths of the states it interpolates (tests/test_quality_display.py), shows no moving
     particle deeper inside the sphere than the state has one (0; only the fixed root, which
     cannot move, is inside): its target is pushed onto the circle where the sphere meets the
-    ball of the edge's bound around the parent (``quality.frame_collider_push_bounded``), and the
+    ball of the edge's bound around the parent (``quality_display.frame_collider_push_bounded``), and the
     whole team moves to it by one common fraction. Before: 21.9 mm (faithful 15.6 mm)."""
     params = {"inertia.movement_inertia_smoothing": 0.0}
     stretch = state_edge_stretch(bq, "tail_sphere", {**bq.QUALITY, **params})
@@ -125,7 +125,7 @@ def segment_distance(x, a, b):
 
 
 def test_the_display_stays_outside_a_capsule_the_root_passes_through(bq, tmp_path):
-    """The capsule case of the display's bounded push (``quality.frame_collider_push_bounded``
+    """The capsule case of the display's bounded push (``quality_display.frame_collider_push_bounded``
     works on the capsule's local sphere, the sphere around the axis point nearest the
     particle): no moving particle ends a step inside the capsule, and the display shows one at
     most 1 % of the particle radius deep (measured 0.064 mm; 32.3 mm before the bounded push

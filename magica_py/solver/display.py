@@ -18,7 +18,7 @@ latency. A rotation keeps lengths and a lerp of two vectors is no longer
 than the longer of them, so in the interpolated display an edge between two particles of the
 same root (or of roots moving rigidly together) is never longer than in one of the two
 states: it shows no stretch the state does not have, at any render rate, and it is a function
-of time only. ``display_team`` writes it; ``quality.display_constraints_team`` then moves it out of
+of time only. ``display_team`` writes it; ``quality_display.display_constraints_team`` then moves it out of
 the colliders at this frame's pose as far as the edge bounds allow.
 """
 from __future__ import annotations
@@ -108,7 +108,7 @@ def display_interpolated(m, ps, ts, team, p, alpha):
 @kernel
 def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, running, quality):
     """E.1 for one team (module docstring); quality mode's collider and edge pass follows in
-    ``quality.display_constraints_team``. ``quality``: the frame's quality stage switch (None:
+    ``quality_display.display_constraints_team``. ``quality``: the frame's quality stage switch (None:
     no team of the scene uses quality mode, its interpolation is not compiled)."""
     # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     m_attribute, m_team_particle_count, ps_disp_pos = m.attribute, m.team_particle_count, ps.disp_pos

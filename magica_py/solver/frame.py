@@ -44,7 +44,8 @@ from magica_py.solver.constraints.motion import motion_team
 from magica_py.solver.constraints.tether import tether_team
 from magica_py.solver.display import display_team, record_display_state_team
 from magica_py.solver.guards import check_team, reset_team_to_base
-from magica_py.solver.quality import display_constraints_team, quality_end_of_step
+from magica_py.solver.quality import quality_end_of_step
+from magica_py.solver.quality_display import display_constraints_team
 from magica_py.solver.rotations import line_rotations_team, triangle_rotations_team
 from magica_py.solver.step import end_step_team, predict_team, step_basic_pose_team, team_step_update
 from magica_py.solver.writeback import transform_data_team, write_transforms_team
