@@ -473,6 +473,18 @@ def collision_last_push(cs, k, x, start_x, velocity_pos, r, tolerance, carry):
 
 
 @kernel
+def push_out_of_ball(x, c, reach):
+    """``x`` moved radially onto the sphere of radius ``reach`` around ``c`` when it lies inside
+    it; unchanged outside or at the centre (no direction). The last move of the collider
+    pushes of collision last's follow-the-leader and of the quality display."""
+    v = v_sub(x, c)
+    length = v_length(v)
+    if length >= reach or length < 1e-12:
+        return x
+    return v_add(c, v_scale(v, reach / length))
+
+
+@kernel
 def step_collider_push(cs, k, x, r):
     """``x`` (a sphere of radius r) moved onto the surface of collider slot k at its pose of
     this step (``start_new`` / ``end_new``, ``plane_normal``) when it lies inside it, along the
@@ -494,11 +506,7 @@ def step_collider_push(cs, k, x, r):
         t = segment_parameter(x, a, b)
         c = v_lerp(a, b, t)
     reach = cs.radius_start[k] + (cs.radius_end[k] - cs.radius_start[k]) * t + r
-    v = v_sub(x, c)
-    length = v_length(v)
-    if length >= reach or length < 1e-12:
-        return x
-    return v_add(c, v_scale(v, reach / length))
+    return push_out_of_ball(x, c, reach)
 
 
 @kernel

@@ -16,7 +16,7 @@ from magica_py.solver.constraints.collision import (
     INVALID_OR_NO_COLLISION, PLANE, SPHERE, particle_radius, segment_parameter,
 )
 from magica_py.solver.parameters import length_unit
-from magica_py.solver.quality import MOVE, clamp_to_sphere
+from magica_py.solver.quality import MOVE, clamp_to_sphere, push_out_of_ball
 
 DISPLAY_PASSES = 2        # collider push + edge clamp passes of the quality display
 DISPLAY_EDGE_PASSES = 2    # edge passes of the quality display's target after its collider push
@@ -48,11 +48,7 @@ def frame_collider_push(cs, k, x, r):
     t = segment_parameter(x, a, b)
     c = v_lerp(a, b, t)
     reach = ra + (rb - ra) * t + r
-    v = v_sub(x, c)
-    length = v_length(v)
-    if length >= reach or length < 1e-12:
-        return x
-    return v_add(c, v_scale(v, reach / length))
+    return push_out_of_ball(x, c, reach)
 
 
 @kernel

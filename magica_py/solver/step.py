@@ -299,22 +299,28 @@ def end_step_velocity(next_pos, velocity_pos, dt):
 
 
 @kernel
+def dynamic_friction_share(direction, normal, friction, dynamic_friction):
+    """D.10: the share of a moving particle's velocity dynamic friction removes in a step at
+    90 Hz: none moving straight away from the surface, ``friction x dynamic_friction`` along it."""
+    dd = 0.5 + 0.5 * v_dot(normal, direction)
+    dd = 1.0 - dd * dd
+    return dd * saturate(friction * dynamic_friction)
+
+
+@kernel
 def dynamic_friction_brake(vel, direction, normal, friction, dynamic_friction):
     """D.10 dynamic friction of a moving particle in contact: brakes motion along the surface,
     not away from it."""
-    dd = 0.5 + 0.5 * v_dot(normal, direction)
-    dd = 1.0 - dd * dd
-    return v_sub(vel, v_scale(vel, dd * saturate(friction * dynamic_friction)))
+    return v_sub(vel, v_scale(vel, dynamic_friction_share(direction, normal, friction, dynamic_friction)))
 
 
 @kernel
 def dynamic_friction_keep(vel, direction, normal, friction, dynamic_friction, frequency_ratio):
     """``dynamic_friction_brake`` in frequency-consistent mode: the share of the velocity the
-    brake keeps in a step, ``1 - dd friction dynamic_friction`` at 90 Hz, is a per-step
-    retention, converted as ``keep^(90/f)`` (``step_keep``)."""
-    dd = 0.5 + 0.5 * v_dot(normal, direction)
-    dd = 1.0 - dd * dd
-    return v_scale(vel, step_keep(1.0 - dd * saturate(friction * dynamic_friction), frequency_ratio, 1))
+    brake keeps in a step, ``1 - share`` at 90 Hz, is a per-step retention, converted as
+    ``keep^(90/f)`` (``step_keep``)."""
+    keep = 1.0 - dynamic_friction_share(direction, normal, friction, dynamic_friction)
+    return v_scale(vel, step_keep(keep, frequency_ratio, 1))
 
 
 @kernel
