@@ -24,6 +24,13 @@ so, ``hair`` for every other cloth: hair, ribbons, hair balls):
   at most 2 m/s), ``|v - v_body|`` and the ejection proper ``v.n - max(v_body.n, 0)`` (the
   speed leaving the surface beyond the body's own push, ``metrics.ejection_speeds``: a strand
   swinging along the body or left behind by it counts 0);
+* the same two readings in contact only (``contact_pairs``): of those pairs, the ones whose
+  sphere touches the collider (gap at most ``TOUCH_TOLERANCE`` of its radius) or whose
+  particle D.8 pushed in that step (``pushed_by_collision``). "Within one radius" also counts
+  a strand in free flight past a body part: a 2 cm particle flying straight at 4 m/s past a
+  still 10 cm sphere reads v.n = |v| s / (R + r + gap) (s its distance from the tangent point),
+  2.06 m/s at a gap of one radius, with no contact force at all; and a strand the body carried
+  and then stopped under reads the body's old speed against its new one;
   penetration and ejection are seen at the end of each frame's last step only (the solver
   runs a frame's steps in one call), every step at 144 and 240 fps, two in three at 60 fps,
   one in three at 30 fps;
@@ -52,7 +59,8 @@ FRAME_RATES = (30.0, 60.0, 144.0, 240.0)
 MODES = ("quality", "faithful")
 REST = 4.0              # s of standing still run after the motion (settling window)
 REST_SPEED = 0.02       # m/s: a bone slower than this is at rest (as the hard-case suite)
-CONTACT_RANGE = 1.0     # particle radii: a sphere closer than this to a collider touches it
+CONTACT_RANGE = 1.0     # particle radii: a sphere closer than this to a collider is near it (the first readings)
+TOUCH_TOLERANCE = 0.05  # particle radii: a sphere this close to a collider at the end of a step touches it
 KINDS = ("hair", "skirt")
 
 
@@ -109,6 +117,9 @@ class KindResult:
     ejection_relative: float = 0.0         # m/s, max |v - v_body|
     ejection_outward: float = -math.inf    # m/s, max v.n - max(v_body.n, 0) (n: outward normal)
     ejection_at: tuple = ()                # (time s, particle speed, body speed) of the max excess
+    contact_excess: float = -math.inf      # m/s, the same two of the particles in contact only (contact_pairs)
+    contact_outward: float = -math.inf
+    contact_at: tuple = ()                 # (time s, particle speed, body speed) of the max excess in contact
     settle: float = math.inf               # s after the motion's end (inf: not by the end; nan: run too short)
     particles: int = 0
 
@@ -160,6 +171,39 @@ def slot_pairs(system, pairs) -> np.ndarray:
     return np.array([slot_of[(int(team[p]), int(c))] for p, c in zip(*pairs)], dtype=np.int64)
 
 
+def friction_keep(system) -> np.ndarray:
+    """D.10's per-step friction retention of each team (x0.6 per step; ``keep^(90/f)`` in
+    frequency-consistent mode away from 90 Hz, ``parameters.step_keep``)."""
+    from magica_py.solver.step import FRICTION_DAMPING_RATE
+
+    ratio = 90.0 / float(system.time_settings.frequency)
+    rate_mode = np.asarray(system.parameters.rate_mode)
+    return np.where((rate_mode == 0) | (ratio == 1.0), FRICTION_DAMPING_RATE, FRICTION_DAMPING_RATE ** ratio)
+
+
+def pushed_by_collision(friction: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """Did D.8 push each particle out of a collider in the last step? Read from the particle's
+    friction after the step: D.8 sets it to ``1 - saturate(d / r)`` of the nearest collider
+    within range, which is 1 exactly when the sphere was inside one (d <= 0: the push; edge
+    mode records ``trunc`` of it, 1 likewise), and D.10 then multiplies it by the step's keep.
+    A particle not pushed ends below keep: its value is at most max(keep, 1 - d/r) x keep with
+    d > 0. (Quality mode's collision last ends a pushed particle on the surface, which the
+    ``TOUCH_TOLERANCE`` of ``contact_pairs`` sees.)"""
+    return np.asarray(friction) >= np.asarray(keep) * (1.0 - 1e-9)
+
+
+def contact_pairs(sphere_depth: np.ndarray, radius: np.ndarray, pushed: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(near, touching) of (particle, collider) pairs at the end of a step, from the pair's
+    sphere depth (m, < 0 the gap), the particle's radius (m) and whether collision pushed it
+    this step: near, within ``CONTACT_RANGE`` radii (the first readings); touching, near and
+    either within ``TOUCH_TOLERANCE`` radii or pushed. The push is per particle, not per
+    collider: a particle pushed by one collider counts as touching every collider it is near
+    (an over-count, never an under-count)."""
+    near = sphere_depth > -CONTACT_RANGE * radius
+    return near, near & ((sphere_depth >= -TOUCH_TOLERANCE * radius) | pushed)
+
+
 def cloth_kind(name: str) -> str:
     return "skirt" if "skirt" in name.lower() else "hair"
 
@@ -197,6 +241,7 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
                        for t, name in zip(scene.colliders.transform, scene.colliders.names)], dtype=bool)
     body_pair = ~static[collider_index] if collider_index.size else np.zeros(0, dtype=bool)
     radius_base = M.particle_radius(model, system.parameters)
+    keep = friction_keep(system)[team]                           # (N,) D.10's friction keep per particle
 
     out = {k: KindResult(particles=int(((kind == k) & moving).sum())) for k in kinds}
     times = np.zeros(p.frames)
@@ -240,7 +285,7 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
         if stepped and slot_count:
             # frame 0 has no body velocity: the previous pose is the build pose, which a capture's
             # first frame jumps away from
-            _contacts(system, state, radius_base, step_pairs, slot_count, collider_index,
+            _contacts(system, state, radius_base, keep, step_pairs, slot_count, collider_index,
                       body_pair if i > 0 else np.zeros_like(body_pair), kind, shapes_before, shapes_now, dt,
                       times[i], out)
         previous, previous_time, shapes_before = now, times[i], shapes_now
@@ -253,7 +298,7 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
                     times, speed)
 
 
-def _contacts(system, state, radius_base, step_pairs, slot_count, collider_index, body_pair, kind,
+def _contacts(system, state, radius_base, keep, step_pairs, slot_count, collider_index, body_pair, kind,
               shapes_before, shapes_now, dt, t, out) -> None:
     """Penetration and ejection at the end of this frame's last step, into ``out``."""
     ts = system.teams
@@ -263,7 +308,9 @@ def _contacts(system, state, radius_base, step_pairs, slot_count, collider_index
     pi = step_pairs[0]
     sphere, normal = M.pair_contacts(state, radius, step_pairs, shapes)       # (P,) m, (P,3)
     centre = sphere - radius[pi]
-    touching = (sphere > -CONTACT_RANGE * radius[pi]) & body_pair
+    pushed = pushed_by_collision(np.asarray(system.particles.friction)[pi], keep[pi])
+    near, in_contact = contact_pairs(sphere, radius[pi], pushed)
+    touching = near & body_pair                   # the first readings: within one radius of a body part
     if touching.any():
         tp, tc = pi[touching], collider_index[touching]
         points = state[tp]
@@ -271,6 +318,7 @@ def _contacts(system, state, radius_base, step_pairs, slot_count, collider_index
                                     (shapes_now.position[tc], shapes_now.rotation[tc]), dt)
         v = np.asarray(system.particles.velocity)[tp]
         relative, excess, outward = M.ejection_speeds(v, vb, normal[touching])
+        strict = in_contact[touching]             # of those, the ones in contact (touching or pushed)
     for k, r in out.items():
         sel = kind[pi] == k
         if not sel.any():
@@ -286,6 +334,13 @@ def _contacts(system, state, radius_base, step_pairs, slot_count, collider_index
                     r.ejection_at = (float(t), float(np.linalg.norm(v[j])), float(np.linalg.norm(vb[j])))
                 r.ejection_relative = max(r.ejection_relative, float(relative[mine].max()))
                 r.ejection_outward = max(r.ejection_outward, float(outward[mine].max()))
+                mine = mine & strict
+                if mine.any():
+                    j = int(np.argmax(np.where(mine, excess, -np.inf)))
+                    if excess[j] > r.contact_excess:
+                        r.contact_excess = float(excess[j])
+                        r.contact_at = (float(t), float(np.linalg.norm(v[j])), float(np.linalg.norm(vb[j])))
+                    r.contact_outward = max(r.contact_outward, float(outward[mine].max()))
 
 
 # ----------------------------------------------------------------------------- report
@@ -305,6 +360,10 @@ CSV_COLUMNS = (
     ("ejection_outward", "ejection v.n - max(v_body.n, 0) (m/s)", "{:.2f}"),
     ("ejection_time", "at (s)", "{:.3f}"), ("ejection_speed", "particle speed (m/s)", "{:.2f}"),
     ("body_speed", "body speed (m/s)", "{:.2f}"),
+    ("contact_excess", "in contact: |v| - |v_body| (m/s)", "{:.2f}"),
+    ("contact_outward", "in contact: v.n - max(v_body.n, 0) (m/s)", "{:.2f}"),
+    ("contact_time", "in contact: at (s)", "{:.3f}"), ("contact_speed", "in contact: particle speed (m/s)", "{:.2f}"),
+    ("contact_body_speed", "in contact: body speed (m/s)", "{:.2f}"),
     ("settle", "settling (s after the motion)", "{:.2f}"), ("finite", "finite", "{}"),
     ("guard_resets", "guard resets", "{}"), ("wall_s", "wall (s)", "{:.1f}"),
 )
@@ -315,6 +374,7 @@ def run_rows(run: MocapRun) -> list[dict]:
     rows = []
     for k, r in run.kinds.items():
         t, vp, vb = r.ejection_at if r.ejection_at else (None, None, None)
+        ct, cvp, cvb = r.contact_at if r.contact_at else (None, None, None)
         rows.append({"case": run.case.name, "rig": run.case.rig, "mode": run.mode, "fps": run.fps, "kind": k,
                      "particles": r.particles, "frames": run.frames,
                      "shown_edge_pct": 100 * r.shown_edge, "state_edge_pct": 100 * r.state_edge,
@@ -325,6 +385,9 @@ def run_rows(run: MocapRun) -> list[dict]:
                      "ejection_relative": r.ejection_relative if r.ejection_at else None,
                      "ejection_outward": r.ejection_outward if math.isfinite(r.ejection_outward) else None,
                      "ejection_time": t, "ejection_speed": vp, "body_speed": vb,
+                     "contact_excess": r.contact_excess if math.isfinite(r.contact_excess) else None,
+                     "contact_outward": r.contact_outward if math.isfinite(r.contact_outward) else None,
+                     "contact_time": ct, "contact_speed": cvp, "contact_body_speed": cvb,
                      "settle": r.settle, "finite": "yes" if run.finite else "NO",
                      "guard_resets": run.guard_resets, "wall_s": run.wall})
     return rows
@@ -351,6 +414,8 @@ SIDE_BY_SIDE = (("shown_edge_pct", "displayed edge %", "{:.2f}"), ("state_edge_p
                 ("sphere_pct", "sphere pen. % of r", "{:.1f}"),
                 ("ejection_excess", "\\|v\\|-\\|v_body\\| m/s", "{:.2f}"),
                 ("ejection_outward", "ejection m/s", "{:.2f}"),
+                ("contact_excess", "in contact: \\|v\\|-\\|v_body\\| m/s", "{:.2f}"),
+                ("contact_outward", "in contact: ejection m/s", "{:.2f}"),
                 ("settle", "settling s", "{:.2f}"))
 
 
@@ -386,6 +451,13 @@ def bound_summary(rows: list[dict]) -> str:
          lambda r: EJECTION_BOUND, "{:.2f} m/s"),
         ("(the same bound read as an ejection: leaving the surface <= 2 m/s beyond the body's push)",
          lambda r: r["ejection_outward"] if r["ejection_outward"] is not None else -math.inf,
+         lambda r: EJECTION_BOUND, "{:.2f} m/s"),
+        ("in contact (sphere within 5 % of its radius, or pushed by D.8 this step): "
+         "no particle faster than the body part + 2 m/s",
+         lambda r: r["contact_excess"] if r["contact_excess"] is not None else -math.inf,
+         lambda r: EJECTION_BOUND, "{:.2f} m/s"),
+        ("in contact: leaving the surface <= 2 m/s beyond the body's push",
+         lambda r: r["contact_outward"] if r["contact_outward"] is not None else -math.inf,
          lambda r: EJECTION_BOUND, "{:.2f} m/s"),
     )
     lines = ["| bound | mode | runs within | worst (case, fps, kind) |", "|---|---|---|---|"]
