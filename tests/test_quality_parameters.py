@@ -35,7 +35,8 @@ def test_quality_mode_turns_on_the_measured_defaults():
     assert t.distance_full_velocity[0] == 1
     assert t.collision_last[0] == 1
     assert t.distance_iterations[0] == 2
-    assert t.tether_limit[0] == pytest.approx(0.008)
+    assert t.tether_limit[0] == pytest.approx(0.02)
+    assert t.restoration_drift[0] == 1
 
 
 def test_each_switch_overrides_the_quality_default():
@@ -45,7 +46,7 @@ def test_each_switch_overrides_the_quality_default():
     assert t.collision_last[0] == 0 and t.time_based_smoothing[0] == 0 and t.distance_full_velocity[0] == 0
     # a switch can also be used alone in faithful mode
     t = row(**{"solver.collision_last": "enabled"})
-    assert t.quality[0] == 0 and t.collision_last[0] == 1
+    assert t.quality[0] == 0 and t.collision_last[0] == 1 and t.restoration_drift[0] == 0
 
 
 def test_bad_quality_values_name_the_path_and_the_choices():

@@ -50,7 +50,7 @@ def test_follow_the_leader_alone_keeps_chain_edges_at_rest_length(bq):
     assert edge <= 0.01
     # the tight tether alone bounds the root distance but not the edges
     edge_t, root_t = stretch(bq, "chain20_g100", {**bq.QUALITY, "solver.inextensibility": "tether"}, 1.5)
-    assert root_t <= 1.5 and edge_t >= 20.0
+    assert root_t <= 2.5 and edge_t >= 20.0   # tether_limit 2 % (the quality default)
 
 
 def test_ftl_pass_oracle():

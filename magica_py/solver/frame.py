@@ -44,7 +44,7 @@ from magica_py.solver.constraints.motion import motion_team
 from magica_py.solver.constraints.tether import tether_team
 from magica_py.solver.display import display_team, record_display_state_team
 from magica_py.solver.guards import check_team, reset_team_to_base
-from magica_py.solver.quality import quality_end_of_step
+from magica_py.solver.quality import drift_applies, drift_begin_team, drift_end_team, quality_end_of_step
 from magica_py.solver.quality_display import display_constraints_team
 from magica_py.solver.rotations import line_rotations_team, triangle_rotations_team
 from magica_py.solver.step import end_step_team, predict_team, step_basic_pose_team, team_step_update
@@ -158,8 +158,14 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edg
     step_basic_pose_team(m, ps, prm, ts, t)
     tether_team(m, ps, prm, t, tether_attenuation, ratio)
     distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
+    drift = False
     if angle is not None:
+        drift = quality is not None and drift_applies(prm, t)
+        if drift:   # quality mode: the angle pass's kept-out share, a drift the passes do not see
+            drift_begin_team(m, ps, t)
         angle_team(m, ps, prm, ts, t, ratio, fi.power_w, limit_attenuation, restoration_attenuation)
+        if drift:
+            drift_end_team(m, ps, t)
     if bending is not None:
         if m.team_bend_count[t] > 0 or m.team_volume_count[t] > 0:
             bending_team(m, ps, prm, ts, t, ratio, fi.power_y)
@@ -176,7 +182,7 @@ def run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edg
         motion_team(m, ps, prm, t, motion_attenuation)
     if quality is not None:
         if prm.inextensibility[t] != 0 or prm.collision_last[t] != 0:  # quality mode (§D.0)
-            quality_end_of_step(m, ps, prm, ts, cs, t, ratio, fi.power_y, distance_attenuation)
+            quality_end_of_step(m, ps, prm, ts, cs, t, ratio, fi.power_y, distance_attenuation, drift)
     end_step_team(m, ps, prm, ts, t, dt, ratio)
     if quality is not None:
         if prm.time_based_smoothing[t] != 0:   # quality display: keep this step's state (display.py)

@@ -83,6 +83,7 @@ TEAM_PARAMETER_FIELDS = [
     ("tether_limit", "team", (), F64, "allowed root-distance stretch of the tight tether (ratio)"),
     ("distance_iterations", "team", (), I32, "extra distance passes of the iterations option"),
     ("ftl_damping", "team", (), F64, "DFTL velocity correction factor s_damp"),
+    ("restoration_drift", "team", (), U8, "1: the passes do not see the restoration's kept-out drift (quality)"),
     ("distance_full_velocity", "team", (), U8, "1: distance corrections become velocity in full"),
     ("collision_last", "team", (), U8, "1: final collision projection at the end of the step"),
     # depth tables (§0.3)
@@ -104,7 +105,8 @@ SOLVER_MODES = ("faithful", "quality")
 INEXTENSIBILITY = ("none", "tether", "ftl", "ftl_tether", "iterations", "ftl_edges")
 # what "auto" means in quality mode (chosen by measurement, docs/quality-mode.md)
 QUALITY_AUTO = {"solver.time_based_smoothing": "enabled", "solver.inextensibility": "ftl_edges",
-                "solver.distance_velocity": "full", "solver.collision_last": "enabled"}
+                "solver.distance_velocity": "full", "solver.collision_last": "enabled",
+                "solver.restoration_drift": "enabled"}
 
 def curve_table(value) -> np.ndarray:
     """The 16-sample depth table of a ``Curve`` (``.samples``) or of a plain number."""
@@ -229,6 +231,7 @@ def _write_quality(table, t: int, g) -> None:
         raise ValueError(f"parameter solver.distance_iterations: expected an integer, got {iterations!r}")
     table.distance_iterations[t] = int(iterations)
     table.ftl_damping[t] = float(g("solver.ftl_damping"))
+    table.restoration_drift[t] = 1 if _switch(g, "solver.restoration_drift", quality) == "enabled" else 0
     table.distance_full_velocity[t] = 1 if _switch(g, "solver.distance_velocity", quality) == "full" else 0
     table.collision_last[t] = 1 if _switch(g, "solver.collision_last", quality) == "enabled" else 0
 

@@ -21,6 +21,11 @@ and the motion constraint (D.9), before the end of the step (D.10):
      PBD projection over every proxy edge (depth-weighted masses as D.4, fixed ends
      immovable), then the tether and FTL;
 
+   With ``restoration_drift`` (quality default) the pass runs without D.6's drift: the angle
+   pass's kept-out share, taken out of the positions from the angle pass on (``drift_*``),
+   is put back after it and projected by the same passes without velocity
+   (docs/quality-mode.md, *Convergence*);
+
 2. ``collision_last``: a final point projection of every colliding particle against each
    collider in turn (two rounds), so that no particle ends the step inside one; a particle
    that started the step inside a collider is carried out with it without the starting depth
@@ -105,11 +110,16 @@ def ftl_team(m, ps, prm, team):
     """Follow-the-leader along each baseline (parents before children): every edge is at
     most its step-basic rest length. DFTL: the parent's velocity gets ``-s_damp`` x the
     child's correction (velocity_pos += s_damp x correction)."""
+    ftl_pass(m, ps, team, prm.ftl_damping[team])
+
+
+@kernel
+def ftl_pass(m, ps, team, damping):
+    """``ftl_team`` with the DFTL factor ``damping``."""
     # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
     m_baseline_start, m_parent, m_team_baseline_count = m.baseline_start, m.parent, m.team_baseline_count
     ps_next_pos, ps_step_basic_pos, ps_velocity_pos = ps.next_pos, ps.step_basic_pos, ps.velocity_pos
-    damping = prm.ftl_damping[team]
     b0 = m.team_baseline_start[team]
     for b in range(b0, b0 + m_team_baseline_count[team]):
         e0 = m_baseline_start[b]
@@ -571,6 +581,14 @@ def quality_restoration_attenuation(prm, team, frequency_ratio, converted):
 def inextensibility_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh):
     """The inextensibility pass ``mode`` (module docstring); ``mesh``: the team has cross
     links (``has_cross_links``) and ``ftl_edges`` starts with the edge projection."""
+    inextensibility_passes(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh,
+                           prm.ftl_damping[team])
+
+
+@kernel
+def inextensibility_passes(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh,
+                           damping):
+    """``inextensibility_team`` with the DFTL factor ``damping``."""
     # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     prm_distance_iterations = prm.distance_iterations
     if mode == INEXT_FTL_EDGES:
@@ -581,14 +599,14 @@ def inextensibility_team(m, ps, prm, ts, team, frequency_ratio, power_y, distanc
     if mode == INEXT_TETHER or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES:
         tight_tether_team(m, ps, prm, team)
     if mode == INEXT_FTL or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES:
-        ftl_team(m, ps, prm, team)
+        ftl_pass(m, ps, team, damping)
     elif mode == INEXT_ITERATIONS:
         for _ in range(prm_distance_iterations[team]):
             distance_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation)
 
 
 @kernel
-def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, distance_attenuation):
+def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, distance_attenuation, drift):
     """The quality passes of one team after D.9 (see the module docstring): the
     inextensibility pass, then collision last. A mesh cloth under ``ftl_edges`` that collides
     then runs ``SHAPE_ROUNDS - 1`` more rounds of (edge projection with the particles that
@@ -598,11 +616,17 @@ def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, dist
     pushes particles out along the collider's normal, which stretches the edges the passes had
     just shortened; the filtered projection shortens them again by moving the pushed
     particles' neighbours and the pushed particles along the collider, not back into it.
-    Every round ends with collision last, so no particle ends the step inside a collider."""
+    Every round ends with collision last, so no particle ends the step inside a collider.
+
+    ``drift``: ``quality_drift`` holds this step's restoration drift, taken out of the
+    positions since the angle pass (``drift_begin_team`` / ``drift_end_team`` around it): put
+    back after the inextensibility pass (``drift_in_team``)."""
     mode = prm.inextensibility[team]
     mesh = mode == INEXT_FTL_EDGES and has_cross_links(m, team)
     collide = prm.collision_last[team] != 0 and ts.collider_count[team] > 0 and prm.collision_mode[team] != 0
     inextensibility_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh)
+    if drift:
+        drift_in_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh)
     if not collide:
         return
     if mesh:
@@ -619,3 +643,78 @@ def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, dist
             for _ in range(prm.distance_iterations[team]):
                 edge_pass_team(m, ps, team)
             pushed = collision_last_team(m, ps, prm, ts, cs, team, False)
+
+
+@kernel
+def drift_applies(prm, team):
+    """Does the team take its restoration drift out of the passes (``restoration_drift`` on an
+    inextensibility pass that projects: tether, FTL, ``ftl_edges``)?"""
+    mode = prm.inextensibility[team]
+    return prm.restoration_drift[team] != 0 and mode != INEXT_NONE and mode != INEXT_ITERATIONS
+
+
+@kernel
+def drift_begin_team(m, ps, team):
+    """Before the angle pass (D.5/D.6) of a quality team with ``restoration_drift``: keep
+    velocity_pos in ``quality_drift``."""
+    ps_velocity_pos, ps_drift = ps.velocity_pos, ps.quality_drift
+    start = m.team_particle_start[team]
+    for p in range(start, start + m.team_particle_count[team]):
+        store3(ps_drift, p, load3(ps_velocity_pos, p))
+
+
+@kernel
+def drift_end_team(m, ps, team):
+    """After the angle pass: ``quality_drift`` = what the pass moved velocity_pos by, i.e. the
+    share of its correction it kept out of the velocity (quality mode: ``1 - (1 - attn) 90/f``
+    of the restoration's, the drift; and the angle limit's retention); then taken out of the
+    positions (``drift_out_team``) until the inextensibility pass has run."""
+    ps_velocity_pos, ps_drift = ps.velocity_pos, ps.quality_drift
+    start = m.team_particle_start[team]
+    for p in range(start, start + m.team_particle_count[team]):
+        store3(ps_drift, p, v_sub(load3(ps_velocity_pos, p), load3(ps_drift, p)))
+    drift_out_team(m, ps, team)
+
+
+@kernel
+def drift_out_team(m, ps, team):
+    """The drift taken out of next_pos and velocity_pos of the moving particles (the velocity,
+    their difference, does not change): the constraints after the angle pass (bending,
+    collision, D.4's second pass, motion) and the inextensibility passes see the step's motion
+    without it, so they turn into velocity only the stretch that motion made."""
+    m_attribute, ps_next_pos, ps_velocity_pos, ps_drift = m.attribute, ps.next_pos, ps.velocity_pos, ps.quality_drift
+    start = m.team_particle_start[team]
+    for p in range(start, start + m.team_particle_count[team]):
+        if (m_attribute[p] & MOVE) == 0:
+            continue
+        o = load3(ps_drift, p)
+        store3(ps_next_pos, p, v_sub(load3(ps_next_pos, p), o))
+        store3(ps_velocity_pos, p, v_sub(load3(ps_velocity_pos, p), o))
+
+
+@kernel
+def drift_in_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh):
+    """The drift put back into next_pos and velocity_pos after the inextensibility pass, then
+    the same pass (no DFTL reaction) over the drifted positions with velocity_pos moved with
+    every correction: the constraints bend the drift (its share along a taut edge is
+    removed) and none of it becomes velocity. Without this, the passes removed the drift's
+    stretch as velocity at every step, a share per step that per second grew with f
+    (docs/quality-mode.md, *Convergence*)."""
+    m_attribute, ps_next_pos, ps_velocity_pos, ps_drift = m.attribute, ps.next_pos, ps.velocity_pos, ps.quality_drift
+    start = m.team_particle_start[team]
+    end = start + m.team_particle_count[team]
+    for p in range(start, end):
+        if (m_attribute[p] & MOVE) == 0:
+            continue
+        o = load3(ps_drift, p)
+        x = v_add(load3(ps_next_pos, p), o)
+        store3(ps_next_pos, p, x)
+        store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), o))
+        store3(ps_drift, p, x)
+    inextensibility_passes(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh, 0.0)
+    for p in range(start, end):
+        if (m_attribute[p] & MOVE) == 0:
+            continue
+        x = load3(ps_next_pos, p)
+        store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_sub(x, load3(ps_drift, p))))
+        store3(ps_drift, p, (0.0, 0.0, 0.0))

@@ -75,6 +75,7 @@ PARTICLE_FIELDS = [
     ("projection_inverse_mass", "particle", (), F64, "inverse mass of the edge projection (0: fixed)"),
     ("projection_gather", "particle", V3, F64, "W J^T p of the projection's conjugate gradients"),
     ("projection_contact", "particle", V3, F64, "unit or 0; direction collision last pushed it this step"),
+    ("quality_drift", "particle", V3, F64, "m; the angle pass's share of this step's correction kept out of the velocity (restoration drift)"),
     ("edge_normal", "edge", V3, F64, "unit direction a -> b of a stretched edge, 0 otherwise"),
     ("edge_lambda", "edge", (), F64, "m; the edge projection's multiplier"),
     ("edge_residual", "edge", (), F64, "m; conjugate-gradient residual"),
