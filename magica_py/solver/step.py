@@ -360,9 +360,8 @@ def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
     velocity_weight = ts.velocity_weight[team]
     # frequency-consistent and quality modes convert the per-step amounts of D.10 by the step:
     # the centrifugal velocity increment and the static-friction loss scale with 90/f, the
-    # dynamic-friction brake's kept share becomes a retention keep^(90/f) (quality mode kept
-    # MagicaCloth2's per-step amounts until 2026-11-26: a brake per step, stronger per second as
-    # f grows, that kept the character's consecutive-frequency differences from halving,
+    # dynamic-friction brake's kept share becomes a retention keep^(90/f) (per step, the brake
+    # would grow per second with f and the motion would not converge as the step shrinks,
     # docs/quality-mode.md *Convergence*); MagicaCloth2 mode and 90 Hz keep the bits
     consistent = mode != 0 and frequency_ratio != 1.0
     loss_scale = frequency_ratio if consistent else 1.0
