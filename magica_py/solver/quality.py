@@ -711,7 +711,11 @@ def drift_in_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_atten
         store3(ps_next_pos, p, x)
         store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), o))
         store3(ps_drift, p, x)
-    inextensibility_passes(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh, 0.0)
+    # a line cloth's edges are its parent links, which follow-the-leader alone brings within
+    # their rest lengths: its edge passes are left out here (the tether and FTL remain)
+    drift_mode = INEXT_FTL_TETHER if (mode == INEXT_FTL_EDGES and not mesh) else mode
+    inextensibility_passes(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, drift_mode, False,
+                           0.0)
     for p in range(start, end):
         if (m_attribute[p] & MOVE) == 0:
             continue
