@@ -695,8 +695,9 @@ def drift_out_team(m, ps, team):
 @kernel
 def drift_in_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh):
     """The drift put back into next_pos and velocity_pos after the inextensibility pass, then
-    the same pass (no DFTL reaction) over the drifted positions with velocity_pos moved with
-    every correction: the constraints bend the drift (its share along a taut edge is
+    the pass again (no DFTL reaction; a line cloth's tether and FTL only, a mesh cloth's without
+    the edge projection) over the drifted positions with velocity_pos moved with every
+    correction: the constraints bend the drift (its share along a taut edge is
     removed) and none of it becomes velocity. Without this, the passes removed the drift's
     stretch as velocity at every step, a share per step that per second grew with f
     (docs/quality-mode.md, *Convergence*)."""
