@@ -58,18 +58,17 @@ def test_ftl_pass_oracle():
     rest length by moving the child only, and the parent gets the DFTL reaction velocity."""
     from collections import namedtuple
 
-    from magica_py.solver.quality import ftl_team
+    from magica_py.solver.quality import ftl_pass
 
     M = namedtuple("M", "team_baseline_start team_baseline_count baseline_start baseline_count "
                         "baseline_data attribute parent")
     P = namedtuple("P", "step_basic_pos next_pos velocity_pos")
-    R = namedtuple("R", "ftl_damping")
     m = M(np.array([0], np.int32), np.array([1], np.int32), np.array([0], np.int32), np.array([3], np.int32),
           np.array([0, 1, 2], np.int32), np.array([1, 2, 2], np.uint8), np.array([-1, 0, 1], np.int32))
     ps = P(np.array([[0.0, 0, 0], [0, -1, 0], [0, -2, 0]]),        # rest: 1 m edges
            np.array([[0.0, 0, 0], [0, -1.5, 0], [0.5, -2.5, 0]]),  # stretched
            np.zeros((3, 3)))
-    ftl_team(m, ps, R(np.array([0.9])), 0)
+    ftl_pass(m, ps, 0, 0.9)
     assert ps.next_pos[1] == pytest.approx([0, -1, 0])
     d = ps.next_pos[2] - ps.next_pos[1]
     assert np.linalg.norm(d) == pytest.approx(1.0)

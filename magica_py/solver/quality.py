@@ -106,16 +106,11 @@ def tight_tether_team(m, ps, prm, team):
 
 
 @kernel
-def ftl_team(m, ps, prm, team):
-    """Follow-the-leader along each baseline (parents before children): every edge is at
-    most its step-basic rest length. DFTL: the parent's velocity gets ``-s_damp`` x the
-    child's correction (velocity_pos += s_damp x correction)."""
-    ftl_pass(m, ps, team, prm.ftl_damping[team])
-
-
-@kernel
 def ftl_pass(m, ps, team, damping):
-    """``ftl_team`` with the DFTL factor ``damping``."""
+    """Follow-the-leader along each baseline (parents before children): every edge is at
+    most its step-basic rest length. DFTL: the parent's velocity gets ``-damping`` x the
+    child's correction (velocity_pos += damping x correction; the team's ``ftl_damping``, 0
+    for the drift's second pass)."""
     # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
     m_baseline_start, m_parent, m_team_baseline_count = m.baseline_start, m.parent, m.team_baseline_count
@@ -148,7 +143,7 @@ def ftl_collision_team(m, ps, prm, ts, cs, team):
     inside one, the set is not empty). A pushed particle keeps its place and its edges pull
     the free end, the rest of the chain towards the tip, instead of being left stretched.
     The start-of-step carry was collision last's (it already ran); the moves become
-    velocity, with the parent's DFTL correction as in ``ftl_team`` for the ball's share."""
+    velocity, with the parent's DFTL correction as in ``ftl_pass`` for the ball's share."""
     # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
     m_baseline_start, m_parent, m_team_baseline_count = m.baseline_start, m.parent, m.team_baseline_count
@@ -578,17 +573,11 @@ def quality_restoration_attenuation(prm, team, frequency_ratio, converted):
 
 
 @kernel
-def inextensibility_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh):
-    """The inextensibility pass ``mode`` (module docstring); ``mesh``: the team has cross
-    links (``has_cross_links``) and ``ftl_edges`` starts with the edge projection."""
-    inextensibility_passes(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh,
-                           prm.ftl_damping[team])
-
-
-@kernel
 def inextensibility_passes(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh,
                            damping):
-    """``inextensibility_team`` with the DFTL factor ``damping``."""
+    """The inextensibility pass ``mode`` (module docstring); ``mesh``: the team has cross
+    links (``has_cross_links``) and ``ftl_edges`` starts with the edge projection; ``damping``:
+    FTL's DFTL factor."""
     # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
     prm_distance_iterations = prm.distance_iterations
     if mode == INEXT_FTL_EDGES:
@@ -624,7 +613,8 @@ def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, dist
     mode = prm.inextensibility[team]
     mesh = mode == INEXT_FTL_EDGES and has_cross_links(m, team)
     collide = prm.collision_last[team] != 0 and ts.collider_count[team] > 0 and prm.collision_mode[team] != 0
-    inextensibility_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh)
+    inextensibility_passes(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh,
+                           prm.ftl_damping[team])
     if drift:
         drift_in_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh)
     if not collide:
@@ -667,29 +657,21 @@ def drift_begin_team(m, ps, team):
 def drift_end_team(m, ps, team):
     """After the angle pass: ``quality_drift`` = what the pass moved velocity_pos by, i.e. the
     share of its correction it kept out of the velocity (quality mode: ``1 - (1 - attn) 90/f``
-    of the restoration's, the drift; and the angle limit's retention); then taken out of the
-    positions (``drift_out_team``) until the inextensibility pass has run."""
-    ps_velocity_pos, ps_drift = ps.velocity_pos, ps.quality_drift
-    start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        store3(ps_drift, p, v_sub(load3(ps_velocity_pos, p), load3(ps_drift, p)))
-    drift_out_team(m, ps, team)
-
-
-@kernel
-def drift_out_team(m, ps, team):
-    """The drift taken out of next_pos and velocity_pos of the moving particles (the velocity,
-    their difference, does not change): the constraints after the angle pass (bending,
-    collision, D.4's second pass, motion) and the inextensibility passes see the step's motion
-    without it, so they turn into velocity only the stretch that motion made."""
+    of the restoration's, the drift; and the angle limit's retention). The drift is then taken
+    out of next_pos and velocity_pos of the moving particles (the velocity, their difference,
+    does not change) until the inextensibility pass has run: the constraints after the angle
+    pass (bending, collision, D.4's second pass, motion) and the inextensibility passes see the
+    step's motion without it, so they turn into velocity only the stretch that motion made."""
     m_attribute, ps_next_pos, ps_velocity_pos, ps_drift = m.attribute, ps.next_pos, ps.velocity_pos, ps.quality_drift
     start = m.team_particle_start[team]
     for p in range(start, start + m.team_particle_count[team]):
+        vp = load3(ps_velocity_pos, p)
+        o = v_sub(vp, load3(ps_drift, p))
+        store3(ps_drift, p, o)
         if (m_attribute[p] & MOVE) == 0:
             continue
-        o = load3(ps_drift, p)
         store3(ps_next_pos, p, v_sub(load3(ps_next_pos, p), o))
-        store3(ps_velocity_pos, p, v_sub(load3(ps_velocity_pos, p), o))
+        store3(ps_velocity_pos, p, v_sub(vp, o))
 
 
 @kernel
