@@ -52,8 +52,13 @@ from magica_py.kernels.math3d import (
 from magica_py.solver.constraints.collision import (
     INVALID_OR_NO_COLLISION, PLANE, SPHERE, particle_radius, plane_push, segment_parameter, solve_point_collider,
 )
-from magica_py.solver.constraints.distance import distance_team
-from magica_py.solver.parameters import length_unit
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import get3, put3
+from magica_py.solver.parameters import (
+    PRM_DISTANCE_FULL_VELOCITY, PRM_INEXTENSIBILITY, PRM_QUALITY, PRM_RESTORATION_ATTENUATION, PRM_RESTORATION_DRIFT,
+    length_unit,
+)
 from magica_py.kernels import portable
 
 MOVE = 0x02
@@ -538,27 +543,27 @@ def inside_old_pose(cs, k, x, r):
 
 
 @kernel
-def quality_distance_attenuation(prm, team, faithful_attenuation):
+def quality_distance_attenuation(P, b, faithful_attenuation):
     """D.4's velocity attenuation: 0 (full PBD velocity) when distance_full_velocity is on."""
-    if prm.distance_full_velocity[team] != 0:
+    if P[b, PRM_DISTANCE_FULL_VELOCITY] != 0.0:
         return 0.0
     return faithful_attenuation
 
 
 @kernel
-def quality_hard_attenuation(prm, team, frequency_ratio, attenuation, converted):
+def quality_hard_attenuation(P, b, frequency_ratio, attenuation, converted):
     """Velocity attenuation of a hard limit (tether D.3, angle limit D.5, motion D.9) at the
     step size. When a limit removes a step's penetration, ``1 - attn`` of the normal velocity
     survives into the next step: a per-step retention, so quality mode converts it as one,
     ``attn^(90/f)``, as the frequency-consistent mode does too (``converted``; converting attn
     as a rate let the surviving share tend to 1 - and the limit to a hard bounce - as f grows)."""
-    if prm.quality[team] == 0:
+    if P[b, PRM_QUALITY] == 0.0:
         return converted
     return portable.pow(attenuation, frequency_ratio)
 
 
 @kernel
-def quality_restoration_attenuation(prm, team, frequency_ratio, converted):
+def quality_restoration_attenuation(P, b, frequency_ratio, converted):
     """D.6's velocity attenuation at the step size. Quality mode scales the share of the
     restoration correction that becomes velocity, ``1 - attn``, linearly with the step
     (``(1 - attn) 90/f``): the correction itself is about proportional to the step, so the
@@ -566,9 +571,9 @@ def quality_restoration_attenuation(prm, team, frequency_ratio, converted):
     frequency-consistent mode does too (``converted``; converted as a rate, that share tends to
     1 as f grows, and the restoration then acts as a force growing with f: 29 % of the tail's
     length between 90 and 1440 Hz)."""
-    if prm.quality[team] == 0:
+    if P[b, PRM_QUALITY] == 0.0:
         return converted
-    share = (1.0 - prm.restoration_attenuation[team]) * frequency_ratio
+    share = (1.0 - P[b, PRM_RESTORATION_ATTENUATION]) * frequency_ratio
     return 1.0 - (1.0 if share > 1.0 else (0.0 if share < 0.0 else share))
 
 
@@ -636,42 +641,46 @@ def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, dist
 
 
 @kernel
-def drift_applies(prm, team):
-    """Does the team take its restoration drift out of the passes (``restoration_drift`` on an
+def drift_applies(P, b):
+    """Does block b take its restoration drift out of the passes (``restoration_drift`` on an
     inextensibility pass that projects: tether, FTL, ``ftl_edges``)?"""
-    mode = prm.inextensibility[team]
-    return prm.restoration_drift[team] != 0 and mode != INEXT_NONE and mode != INEXT_ITERATIONS
+    mode = int(P[b, PRM_INEXTENSIBILITY])
+    return P[b, PRM_RESTORATION_DRIFT] != 0.0 and mode != INEXT_NONE and mode != INEXT_ITERATIONS
 
 
 @kernel
-def drift_begin_team(m, ps, team):
-    """Before the angle pass (D.5/D.6) of a quality team with ``restoration_drift``: keep
-    velocity_pos in ``quality_drift``."""
-    ps_velocity_pos, ps_drift = ps.velocity_pos, ps.quality_drift
-    start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        store3(ps_drift, p, load3(ps_velocity_pos, p))
+def drift_begin_block(PS, BI, b):
+    """Before the angle pass (D.5/D.6) of a quality block with ``restoration_drift``: keep
+    velocity_pos in ``QUALITY_DRIFT``."""
+    g0 = BI[b, bk.BI_G0]
+    w = BI[b, bk.BI_WIDTH]
+    for g in range(g0, g0 + BI[b, bk.BI_N]):
+        for l in range(w):
+            put3(PS, g, st.QUALITY_DRIFT, l, get3(PS, g, st.VELOCITY_POS, l))
 
 
 @kernel
-def drift_end_team(m, ps, team):
-    """After the angle pass: ``quality_drift`` = what the pass moved velocity_pos by, i.e. the
+def drift_end_block(PS, BI, topology, b):
+    """After the angle pass: ``QUALITY_DRIFT`` = what the pass moved velocity_pos by, i.e. the
     share of its correction it kept out of the velocity (quality mode: ``1 - (1 - attn) 90/f``
     of the restoration's, the drift; and the angle limit's retention). The drift is then taken
     out of next_pos and velocity_pos of the moving particles (the velocity, their difference,
     does not change) until the inextensibility pass has run: the constraints after the angle
     pass (bending, collision, D.4's second pass, motion) and the inextensibility passes see the
     step's motion without it, so they turn into velocity only the stretch that motion made."""
-    m_attribute, ps_next_pos, ps_velocity_pos, ps_drift = m.attribute, ps.next_pos, ps.velocity_pos, ps.quality_drift
-    start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        vp = load3(ps_velocity_pos, p)
-        o = v_sub(vp, load3(ps_drift, p))
-        store3(ps_drift, p, o)
-        if (m_attribute[p] & MOVE) == 0:
-            continue
-        store3(ps_next_pos, p, v_sub(load3(ps_next_pos, p), o))
-        store3(ps_velocity_pos, p, v_sub(vp, o))
+    g0 = BI[b, bk.BI_G0]
+    w = BI[b, bk.BI_WIDTH]
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    for j in range(BI[b, bk.BI_N]):
+        g = g0 + j
+        move = (topology[attribute + j] & MOVE) != 0
+        for l in range(w):
+            vp = get3(PS, g, st.VELOCITY_POS, l)
+            o = v_sub(vp, get3(PS, g, st.QUALITY_DRIFT, l))
+            put3(PS, g, st.QUALITY_DRIFT, l, o)
+            if move:
+                put3(PS, g, st.NEXT_POS, l, v_sub(get3(PS, g, st.NEXT_POS, l), o))
+                put3(PS, g, st.VELOCITY_POS, l, v_sub(vp, o))
 
 
 @kernel
@@ -705,3 +714,9 @@ def drift_in_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_atten
         x = load3(ps_next_pos, p)
         store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_sub(x, load3(ps_drift, p))))
         store3(ps_drift, p, (0.0, 0.0, 0.0))
+
+
+# ---- lane form: being ported (development placeholder; removed before merge)
+@kernel
+def quality_end_of_step_block(PS, PM, TS, TM, CS, LM, EDS, P, BI, topology, b, frequency_ratio, power_y, distance_attenuation, drift):
+    raise NotImplementedError("quality_end_of_step_block: not ported to the lane form yet")

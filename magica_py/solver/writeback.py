@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import load3, load4, store3, store4, q_inverse, q_mul, q_normalize, q_rotate, v_sub
+from magica_py.kernels.math3d import q_inverse, q_mul, q_normalize, q_rotate, v_sub
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import get3, get4, put3, put4
 from magica_py.solver.rotations import q_normalize_or_identity
 
 FIXED = 0x01
@@ -37,22 +38,16 @@ def bone_rotation(rotation, v2t):
 
 
 @kernel
-def transform_data_team(m, ps, team):
-    """World transform data of every bone of one team; returns False if any value is non-finite.
-
-    Vectorised over the team's bones (flat rows, selects, the verdict AND-ed)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_team_particle_count = m.team_particle_count
-    position, rotation, v2t = ps.position, ps.rotation, m.vertex_to_transform_rotation
-    transform_position, transform_rotation = ps.transform_position, ps.transform_rotation
+def transform_data_lane(PS, PM, BI, b, l):
+    """World transform data of every bone of lane l's team; returns False if any value is
+    non-finite."""
     ok = True
-    first = np.uint64(m.team_particle_start[team])
-    for j in range(m_team_particle_count[team]):
-        p = first + np.uint64(j)
-        pos = load3(position, p)
-        rot = bone_rotation(load4(rotation, p), load4(v2t, p))
-        store3(transform_position, p, pos)
-        store4(transform_rotation, p, rot)
+    g0 = BI[b, bk.BI_G0]
+    for g in range(g0, g0 + BI[b, bk.BI_N]):
+        pos = get3(PS, g, st.POSITION, l)
+        rot = bone_rotation(get4(PS, g, st.ROTATION, l), get4(PM, g, bk.VERTEX_TO_TRANSFORM_ROTATION, l))
+        put3(PS, g, st.TRANSFORM_POSITION, l, pos)
+        put4(PS, g, st.TRANSFORM_ROTATION, l, rot)
         ok = ok & finite3(pos) & finite4(rot)
     return ok
 
@@ -77,42 +72,37 @@ def fixed_bone_local(rotation, parent_world_rotation, has_parent):
 
 
 @kernel
-def write_transforms_team(m, ps, team, parent_node, world_rotation, lossy_scale,
+def write_transforms_lane(PS, BI, PT, topology, b, l, parent_node, world_rotation, lossy_scale,
                           local_position, local_rotation):
-    """Write one team's bones into the hierarchy's local pose arrays.
-
-    Scalar: the writes are scatters (through transform_index) of 3- and 4-value rows, which
-    LLVM's vectoriser cannot check for overlap, so the branches stay."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_team_particle_count = m.team_particle_count
-    # arrays as locals and flat rows: through the tables their pointers would be reloaded
-    # after every store (the stores may alias the tables as far as LLVM knows)
-    attribute, node_of, parent_of = m.attribute, m.transform_index, m.parent
-    transform_position, transform_rotation = ps.transform_position, ps.transform_rotation
-    world_rot, scale = world_rotation, lossy_scale
-    out_position, out_rotation = local_position, local_rotation
-    first = np.uint64(m.team_particle_start[team])
-    for j in range(m_team_particle_count[team]):
-        p = first + np.uint64(j)
-        attr = attribute[p]
-        node = np.uint64(node_of[p])
+    """Write lane l's bones into the hierarchy's local pose arrays (scatters through the
+    bones' hierarchy nodes)."""
+    g0 = BI[b, bk.BI_G0]
+    attribute, parent = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_PARENT]
+    for j in range(BI[b, bk.BI_N]):
+        attr = topology[attribute + j]
+        g = g0 + j
+        node = PT[g, l]
         if (attr & MOVE) != 0:
-            pp = parent_of[p]
+            pp = topology[parent + j]
             if pp < 0:
                 continue
-            ppu = np.uint64(pp)
-            pnode = np.uint64(node_of[ppu])
-            lp, lq = moving_bone_local(load4(transform_rotation, ppu),
-                                       load3(transform_position, ppu),
-                                       load4(transform_rotation, p),
-                                       load3(transform_position, p), load3(scale, pnode))
-            store3(out_position, node, lp)
-            store4(out_rotation, node, lq)
+            gp = g0 + pp
+            pnode = PT[gp, l]
+            lp, lq = moving_bone_local(get4(PS, gp, st.TRANSFORM_ROTATION, l), get3(PS, gp, st.TRANSFORM_POSITION, l),
+                                       get4(PS, g, st.TRANSFORM_ROTATION, l), get3(PS, g, st.TRANSFORM_POSITION, l),
+                                       (lossy_scale[pnode, 0], lossy_scale[pnode, 1], lossy_scale[pnode, 2]))
+            local_position[node, 0] = lp[0]
+            local_position[node, 1] = lp[1]
+            local_position[node, 2] = lp[2]
+            for c in range(4):
+                local_rotation[node, c] = lq[c]
         elif (attr & FIXED) != 0:
-            parent = parent_node[node]
-            rot = load4(transform_rotation, p)
-            if parent >= 0:
-                store4(out_rotation, node,
-               fixed_bone_local(rot, load4(world_rot, np.uint64(parent)), True))
+            up = parent_node[node]
+            rot = get4(PS, g, st.TRANSFORM_ROTATION, l)
+            if up >= 0:
+                q = fixed_bone_local(rot, (world_rotation[up, 0], world_rotation[up, 1], world_rotation[up, 2],
+                                           world_rotation[up, 3]), True)
             else:
-                store4(out_rotation, node, fixed_bone_local(rot, rot, False))
+                q = fixed_bone_local(rot, rot, False)
+            for c in range(4):
+                local_rotation[node, c] = q[c]

@@ -205,3 +205,9 @@ def wind_team(m, ps, prm, ts, team, dt):
         ps_next_pos[p, 2] += dvz * dt
     if moved > 0:
         store3(ts.wind_felt, team, (sx / moved, sy / moved, sz / moved))
+
+
+# ---- lane form: being ported (development placeholder; removed before merge)
+@kernel
+def wind_block(PS, PM, TS, TI, P, BI, topology, b, dt, wind_zones):
+    raise NotImplementedError("wind_block: not ported to the lane form yet")

@@ -336,3 +336,9 @@ def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation
             store3(ps_angle_rest_vector, c, ZERO3)
 
 
+
+
+# ---- lane form: being ported (development placeholder; removed before merge)
+@kernel
+def angle_block(PS, PM, TS, P, BI, topology, b, frequency_ratio, power_w, limit_attenuation, restoration_attenuation):
+    raise NotImplementedError("angle_block: not ported to the lane form yet")

@@ -7,8 +7,10 @@ and averages (Jacobi). Neither touches ``velocity_pos``: the push becomes veloci
 Edge-mode friction is quantised to {0, 1} as MagicaCloth2's fixed-point max does (§0.2,
 Appendix 2.5): we reproduce it deliberately.
 
-``point_collision_team`` calls array-free per-element functions (``point_sphere``,
-``point_capsule``, ``point_plane``, ``point_contact_add``, ``point_contact_result``).
+``point_collision_block`` runs one block: per particle, per collider slot, the lanes side by
+side through array-free per-element functions (``point_sphere``, ``point_capsule``,
+``point_plane``, ``point_contact_add``), summed in scratch rows, then
+``point_contact_result``. ``edge_collision_block`` runs a block's lanes one by one.
 """
 from __future__ import annotations
 
@@ -17,11 +19,15 @@ import math
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    closest_segment_segment, load3, load4, q_rotate, saturate, store3, v_add, v_dot, v_length, v_length_sq, v_lerp,
-    v_normalize, v_scale, v_sub,
+    closest_segment_segment, q_rotate, saturate, v_add, v_dot, v_length, v_length_sq, v_lerp, v_normalize, v_scale,
+    v_sub,
 )
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import get1, get3, get4, put1, put3
+from magica_py.solver.parameters import PRM_RADIUS_CURVE, curve_at
+
 from magica_py.solver.constraints.bending import FIXED_POINT
-from magica_py.solver.parameters import curve_at, length_unit
 
 MOVE = 0x02
 INVALID_OR_NO_COLLISION = 0x10
@@ -60,10 +66,10 @@ def aabb_overlap(min_a, max_a, min_b, max_b):
 
 
 @kernel
-def particle_radius(radius_curve, team, depth, scale):
-    """A particle's collision radius (m): the team's radius curve at its depth, at least
+def particle_radius(P, b, depth, scale):
+    """A particle's collision radius (m): block b's radius curve at its depth, at least
     0.1 mm, times ``scale`` (team scale ratio and, in quality mode, the length unit)."""
-    return max(curve_at(radius_curve, team, depth), 0.0001) * scale
+    return max(curve_at(P, b, PRM_RADIUS_CURVE, depth), 0.0001) * scale
 
 
 # -- point mode, per element (array-free)
@@ -137,54 +143,80 @@ def point_contact_result(x, sum_push, sum_n, count, n_acc, min_dist, r, friction
 
 
 @kernel
-def solve_point_collider(cs, k, x, r, bmin, bmax):
-    """One particle (x, radius r, bounds) against collider slot k: (distance, normal, pushed x)."""
+def solve_point_collider(CS, k, l, shape, x, r, bmin, bmax):
+    """One particle (x, radius r, bounds) against collider slot k of lane l: (distance, normal,
+    pushed x); a missed bounding box gives (FAR, 0, x)."""
     z = (0.0, 0.0, 0.0)
-    shape = cs.shape[k]
     if shape == PLANE:
-        return point_plane(x, r, load3(cs.start_new, k), load3(cs.plane_normal, k))
-    if not aabb_overlap(bmin, bmax, load3(cs.aabb_min, k), load3(cs.aabb_max, k)):
+        return point_plane(x, r, get3(CS, k, st.START_NEW, l), get3(CS, k, st.PLANE_NORMAL, l))
+    if not aabb_overlap(bmin, bmax, get3(CS, k, st.AABB_MIN, l), get3(CS, k, st.AABB_MAX, l)):
         return FAR, z, x
     if shape == SPHERE:
-        return point_sphere(x, r, load3(cs.start_old, k), load3(cs.start_new, k), cs.radius_start[k])
-    return point_capsule(x, r, load3(cs.start_old, k), load3(cs.end_old, k), load3(cs.start_new, k),
-                         load3(cs.end_new, k), cs.radius_start[k], cs.radius_end[k],
-                         load4(cs.inverse_old_rot, k), load4(cs.now_rot, k))
+        return point_sphere(x, r, get3(CS, k, st.START_OLD, l), get3(CS, k, st.START_NEW, l),
+                            get1(CS, k, st.RADIUS_START, l))
+    return point_capsule(x, r, get3(CS, k, st.START_OLD, l), get3(CS, k, st.END_OLD, l), get3(CS, k, st.START_NEW, l),
+                         get3(CS, k, st.END_NEW, l), get1(CS, k, st.RADIUS_START, l), get1(CS, k, st.RADIUS_END, l),
+                         get4(CS, k, st.INVERSE_OLD_ROT, l), get4(CS, k, st.NOW_ROT, l))
 
 
 @kernel
-def point_collision_team(m, ps, prm, ts, cs, team):
-    """D.8 point mode over one team's moving particles."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    cs_scale_suspend, m_attribute, m_depth = cs.scale_suspend, m.attribute, m.depth
-    m_team_particle_count, prm_radius_curve = m.team_particle_count, prm.radius_curve
-    ps_collision_normal, ps_friction, ps_next_pos = ps.collision_normal, ps.friction, ps.next_pos
-    start = m.team_particle_start[team]
-    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
-    c0 = ts.collider_start[team]
-    c1 = c0 + ts.collider_count[team]
+def point_collision_block(PS, PM, TS, CS, P, BI, topology, b):
+    """D.8 point mode over block b's moving particles: per particle and collider slot, the
+    lanes side by side; the sums of ``point_contact_add`` in scratch rows (``ACCUM3`` push,
+    ``CONTACT_*``), then each particle's result."""
+    g0 = BI[b, bk.BI_G0]
+    w = BI[b, bk.BI_WIDTH]
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    c0 = BI[b, bk.BI_COLLIDER0]
+    shapes = BI[b, bk.BI_COLLIDER_SHAPE]
     z = (0.0, 0.0, 0.0)
-    for p in range(start, start + m_team_particle_count[team]):
-        attr = m_attribute[p]
+    for j in range(BI[b, bk.BI_N]):
+        attr = topology[attribute + j]
         if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
             continue
-        r = particle_radius(prm_radius_curve, team, m_depth[p], scale)
-        x = load3(ps_next_pos, p)
-        bmin, bmax = point_bounds(x, r)
-        sum_push, sum_n, n_acc, count, min_dist = z, z, z, 0, FAR
-        for k in range(c0, c1):
-            if cs_scale_suspend[k] != 0:
-                continue
-            d, n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
-            if d <= r:  # otherwise (out of range, or missed) the sums stay as they are: skip the work
-                sum_push, sum_n, n_acc, count, min_dist = point_contact_add(sum_push, sum_n, n_acc, count, min_dist,
-                                                                            x, r, d, n, x2)
-        if count > 0 or min_dist <= r:  # otherwise the result is (x, friction, n_acc): skip the work
-            new_x, friction, n_acc = point_contact_result(x, sum_push, sum_n, count, n_acc, min_dist, r,
-                                                          ps_friction[p])
-            store3(ps_next_pos, p, new_x)
-            ps_friction[p] = friction
-        store3(ps_collision_normal, p, n_acc)
+        g = g0 + j
+        for l in range(w):
+            put3(PS, g, st.ACCUM3, l, z)
+            put3(PS, g, st.CONTACT_NORMAL_SUM, l, z)
+            put3(PS, g, st.CONTACT_NEAR_SUM, l, z)
+            put1(PS, g, st.ACCUM_N, l, 0.0)
+            put1(PS, g, st.CONTACT_MIN_DIST, l, FAR)
+        for c in range(BI[b, bk.BI_COLLIDERS]):
+            k = c0 + c
+            shape = topology[shapes + c]
+            for l in range(w):
+                scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
+                r = particle_radius(P, b, get1(PM, g, bk.DEPTH, l), scale)
+                x = get3(PS, g, st.NEXT_POS, l)
+                bmin, bmax = point_bounds(x, r)
+                d, n, x2 = solve_point_collider(CS, k, l, shape, x, r, bmin, bmax)
+                # out of range, missed or suspended: the sums stay as they are
+                hit = d <= r and get1(CS, k, st.SCALE_SUSPEND, l) == 0.0
+                sum_push, sum_n, n_acc, count, min_dist = point_contact_add(
+                    get3(PS, g, st.ACCUM3, l), get3(PS, g, st.CONTACT_NORMAL_SUM, l),
+                    get3(PS, g, st.CONTACT_NEAR_SUM, l), get1(PS, g, st.ACCUM_N, l),
+                    get1(PS, g, st.CONTACT_MIN_DIST, l), x, r, d, n, x2)
+                if hit:
+                    put3(PS, g, st.ACCUM3, l, sum_push)
+                    put3(PS, g, st.CONTACT_NORMAL_SUM, l, sum_n)
+                    put3(PS, g, st.CONTACT_NEAR_SUM, l, n_acc)
+                    put1(PS, g, st.ACCUM_N, l, count)
+                    put1(PS, g, st.CONTACT_MIN_DIST, l, min_dist)
+        for l in range(w):
+            scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
+            r = particle_radius(P, b, get1(PM, g, bk.DEPTH, l), scale)
+            x = get3(PS, g, st.NEXT_POS, l)
+            count = get1(PS, g, st.ACCUM_N, l)
+            min_dist = get1(PS, g, st.CONTACT_MIN_DIST, l)
+            n_acc = get3(PS, g, st.CONTACT_NEAR_SUM, l)
+            # otherwise the result is (x, friction, n_acc): nothing else changes
+            if count > 0.0 or min_dist <= r:
+                new_x, friction, n_acc = point_contact_result(x, get3(PS, g, st.ACCUM3, l),
+                                                              get3(PS, g, st.CONTACT_NORMAL_SUM, l), count, n_acc,
+                                                              min_dist, r, get1(PS, g, st.FRICTION, l))
+                put3(PS, g, st.NEXT_POS, l, new_x)
+                put1(PS, g, st.FRICTION, l, friction)
+            put3(PS, g, st.COLLISION_NORMAL, l, n_acc)
 
 
 @kernel
@@ -342,3 +374,9 @@ def _accumulate(ps, p, v):
     ps.accum_vector[p, 1] += float(math.trunc(v[1] * FIXED_POINT))
     ps.accum_vector[p, 2] += float(math.trunc(v[2] * FIXED_POINT))
     ps.accum_count[p] += 1
+
+
+# ---- lane form: being ported (development placeholder; removed before merge)
+@kernel
+def edge_collision_block(PS, PM, TS, CS, P, BI, topology, b):
+    raise NotImplementedError("edge_collision_block: not ported to the lane form yet")
