@@ -54,6 +54,8 @@ ACCUM3 = _p("accum3", 3, "m; scratch: a correction summed over a particle's link
 ACCUM_N = _p("accum_n", 1, "scratch: the number of links summed in accum3")
 CONTACT_NORMAL_SUM = _p("contact_normal_sum", 3, "scratch of D.8 point mode: normals of the colliders penetrated")
 CONTACT_NEAR_SUM = _p("contact_near_sum", 3, "scratch of D.8 point mode: normals of the colliders within range")
+BONE_MATRIX = _p("bone_matrix", 12, "scratch of C.1: the first three rows of the bone's local-to-world matrix, "
+                 "row major (gathered from the hierarchy)")
 CHILD_REST_SUM = _p("child_rest_sum", 3, "scratch of E.2: the children's rest edges summed (ctv)")
 CHILD_EDGE_SUM = _p("child_edge_sum", 3, "scratch of E.2: the children's simulated edges summed (cv)")
 CONTACT_MIN_DIST = _p("contact_min_dist", 1, "m; scratch of D.8 point mode: closest distance within range")

@@ -66,10 +66,10 @@ def aabb_overlap(min_a, max_a, min_b, max_b):
 
 
 @kernel
-def particle_radius(P, b, depth, scale):
-    """A particle's collision radius (m): block b's radius curve at its depth, at least
-    0.1 mm, times ``scale`` (team scale ratio and, in quality mode, the length unit)."""
-    return max(curve_at(P, b, PRM_RADIUS_CURVE, depth), 0.0001) * scale
+def particle_radius(curve, scale):
+    """A particle's collision radius (m) from its radius curve value (``blocks.CURVE_RADIUS``):
+    at least 0.1 mm, times ``scale`` (team scale ratio and, in quality mode, the length unit)."""
+    return max(curve, 0.0001) * scale
 
 
 # -- point mode, per element (array-free)
@@ -160,7 +160,7 @@ def solve_point_collider(CS, k, l, shape, x, r, bmin, bmax):
 
 
 @kernel
-def point_collision_block(PS, PM, TS, CS, P, BI, topology, b):
+def point_collision_block(PS, PP, TS, CS, BI, topology, b):
     """D.8 point mode over block b's moving particles: per particle and collider slot, the
     lanes side by side; the sums of ``point_contact_add`` in scratch rows (``ACCUM3`` push,
     ``CONTACT_*``), then each particle's result."""
@@ -186,7 +186,7 @@ def point_collision_block(PS, PM, TS, CS, P, BI, topology, b):
             shape = topology[shapes + c]
             for l in range(w):
                 scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
-                r = particle_radius(P, b, get1(PM, g, bk.DEPTH, l), scale)
+                r = particle_radius(get1(PP, g, bk.CURVE_RADIUS, l), scale)
                 x = get3(PS, g, st.NEXT_POS, l)
                 bmin, bmax = point_bounds(x, r)
                 d, n, x2 = solve_point_collider(CS, k, l, shape, x, r, bmin, bmax)
@@ -204,7 +204,7 @@ def point_collision_block(PS, PM, TS, CS, P, BI, topology, b):
                     put1(PS, g, st.CONTACT_MIN_DIST, l, min_dist)
         for l in range(w):
             scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
-            r = particle_radius(P, b, get1(PM, g, bk.DEPTH, l), scale)
+            r = particle_radius(get1(PP, g, bk.CURVE_RADIUS, l), scale)
             x = get3(PS, g, st.NEXT_POS, l)
             count = get1(PS, g, st.ACCUM_N, l)
             min_dist = get1(PS, g, st.CONTACT_MIN_DIST, l)
