@@ -144,9 +144,9 @@ def accumulate_lane(PS, g, l, v, ok):
 
 @kernel
 def bending_inverse_masses(PS, PM, BI, topology, b):
-    """Every particle's inverse mass of this bending pass into ``BEND_INVERSE_MASS``: friction
-    and depth do not change during the routine, and a mesh vertex belongs to several bend
-    pairs (computed per pair, the same division ran ~8 times per vertex)."""
+    """Every particle's inverse mass of this bending pass into ``BEND_INVERSE_MASS``, once per
+    particle: friction and depth do not change during the routine, and a mesh vertex belongs
+    to up to ~8 bend pairs."""
     g0 = BI[b, bk.BI_G0]
     w = BI[b, bk.BI_WIDTH]
     attribute = BI[b, bk.BI_ATTRIBUTE]
