@@ -30,6 +30,11 @@ VARIANTS = {
     "faithful": [],
     "quality": ["parameters.solver.mode=quality"],
     "consistent": ["parameters.solver.rate_mode=frequency_consistent"],
+    # stages no showcase scene uses: edge collision (D.8 edge mode), the motion constraint (D.9)
+    "edge": ["collision_mode=edge"],
+    "motion": ["parameters.motion.use_max_distance=true", "parameters.motion.use_backstop=true"],
+    # every cloth a closed mesh: a fan of strands (the character's hair) then has volume pairs (D.7)
+    "loop_mesh": ["connection=sequential_loop_mesh"],
 }
 
 
