@@ -6,7 +6,8 @@
 For every scene (``configs/*.yaml`` and ``configs/hard/*.yaml``; those that need
 ``../shared/data`` are skipped when it is absent) and every variant (``faithful``: the file as
 it is; ``quality``: every cloth with ``solver.mode: quality``; ``consistent``: every cloth with
-``solver.rate_mode: frequency_consistent``), the scene is loaded twice, the package's
+``solver.rate_mode: frequency_consistent``; ``moving_wind``: every cloth with
+``wind.moving_wind: 1``), the scene is loaded twice, the package's
 ``ClothSystem`` attached to one player and ``tests/reference_solver``'s per-team
 ``ClothSystem`` (the solver before the lane form, frozen) to the other, and both run frame by
 frame. After each frame the display positions of every team and the hierarchy's local and
@@ -35,6 +36,8 @@ VARIANTS = {
     "motion": ["parameters.motion.use_max_distance=true", "parameters.motion.use_backstop=true"],
     # every cloth a closed mesh: a fan of strands (the character's hair) then has volume pairs (D.7)
     "loop_mesh": ["connection=sequential_loop_mesh"],
+    # the wind a cloth makes from its own movement (wind.moving_wind)
+    "moving_wind": ["parameters.wind.moving_wind=1.0"],
 }
 
 

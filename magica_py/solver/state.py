@@ -192,6 +192,12 @@ WIND_ZONE_TURBULENCE = _t("wind_zone_turbulence", WIND_SLOTS, "the zone's turbul
 MOVING_WIND_MAIN = _t("moving_wind_main", 1, "m/s; wind from the team's own movement at this step (0: none)")
 MOVING_WIND_TIME = _t("moving_wind_time", 1, "phase time of the moving wind")
 WIND_FELT = _t("wind_felt", 3, "m/s^2; mean wind acceleration over the Move particles at the last step")
+# wind (wind.force.wind_block): the lane's part of a step, kept for its particle loop
+WIND_RUNS = _t("wind_runs", 1, "1: the lane's particles take wind at this step (wind_lane)", INTEGER)
+WIND_ZONE_FRAME = _t("wind_zone_frame", 4 * WIND_SLOTS, "direction_angles (cos x, sin x, cos y, sin y) of each "
+                     "slot's direction at this step (4 rows per slot)")
+MOVING_WIND_FRAME = _t("moving_wind_frame", 4, "direction_angles of the moving wind's direction at this step")
+WIND_LINE = _t("wind_line", 3, "m/s; wind at the root line of the particle being pushed (scratch)")
 del _t
 
 COLLIDER = RowTable("collider state", "collider slot")
