@@ -54,8 +54,8 @@ CURVE_RADIUS = _q("radius", 1, "m; D.8 collision radius curve at the depth")
 CURVE_DISTANCE_STIFFNESS = _q("distance_stiffness", 1, "D.4 stiffness curve at the depth")
 CURVE_RESTORATION_STIFFNESS = _q("restoration_stiffness", 1, "D.6 stiffness curve (x0.2 applied) at the depth")
 CURVE_LIMIT_ANGLE = _q("limit_angle", 1, "deg; D.5 limit angle curve at the depth")
-CURVE_MAX_DISTANCE = _q("max_distance", 1, "m; D.9 max distance curve at the depth")
-CURVE_BACKSTOP_DISTANCE = _q("backstop_distance", 1, "m; D.9 backstop distance curve at the depth")
+CURVE_MAX_DISTANCE = _q("max_distance", 1, "m; D.9 max distance curve at the depth squared")
+CURVE_BACKSTOP_DISTANCE = _q("backstop_distance", 1, "m; D.9 backstop distance curve at the depth squared")
 del _q
 
 TEAM_MODEL = RowTable("team model", "block")

@@ -55,10 +55,10 @@ from magica_py.solver.constraints.motion import motion_block
 from magica_py.solver.constraints.tether import tether_block
 from magica_py.solver.display import display_block, display_fraction, record_display_state_block
 from magica_py.solver.guards import check_lane, reset_lane_to_base
-from magica_py.solver.lanes import LANES, get1, get3, get4, put1
+from magica_py.solver.lanes import LANES, get1, get3, put1
 from magica_py.solver.parameters import (
     PRM_COLLISION_LAST, PRM_COLLISION_MODE, PRM_INEXTENSIBILITY, PRM_QUALITY, PRM_TELEPORT_DISTANCE,
-    PRM_TELEPORT_ROTATION, PRM_TIME_BASED_SMOOTHING, PRM_WIND_MOVING_WIND,
+    PRM_TELEPORT_ROTATION, PRM_TIME_BASED_SMOOTHING,
 )
 from magica_py.solver.quality import drift_applies, drift_begin_block, drift_end_block, quality_end_of_step_block
 from magica_py.solver.quality_display import display_constraints_block
@@ -314,10 +314,10 @@ def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, moti
                 point_collision_block(PS, PP, TS, CS, BI, topology, b)
         if edge_collision is not None:
             if P[b, PRM_COLLISION_MODE] == 2.0:
-                edge_collision_block(PS, PM, TS, CS, P, BI, topology, b)
+                edge_collision_block(PS, PP, TS, CS, BI, topology, b)
     distance_block(PS, PM, PP, TS, TM, T.LM, P, BI, topology, b, ratio, fi.power_y, distance_attenuation)
     if motion is not None:
-        motion_block(PS, PM, TS, P, BI, topology, b, motion_attenuation)
+        motion_block(PS, PP, TS, P, BI, topology, b, motion_attenuation)
     if quality is not None:
         if P[b, PRM_INEXTENSIBILITY] != 0.0 or P[b, PRM_COLLISION_LAST] != 0.0:  # quality mode (§D.0)
             quality_end_of_step_block(PS, PM, TS, TM, CS, T.LM, T.EDS, P, BI, topology, b, ratio, fi.power_y,

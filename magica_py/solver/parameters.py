@@ -440,8 +440,9 @@ def particle_parameters_block(PP, PM, P, BI, b):
             PP[g, bk.CURVE_DISTANCE_STIFFNESS + l] = curve_at(P, b, PRM_DISTANCE_STIFFNESS_CURVE, depth)
             PP[g, bk.CURVE_RESTORATION_STIFFNESS + l] = curve_at(P, b, PRM_RESTORATION_STIFFNESS_CURVE, depth)
             PP[g, bk.CURVE_LIMIT_ANGLE + l] = curve_at(P, b, PRM_LIMIT_ANGLE_CURVE, depth)
-            PP[g, bk.CURVE_MAX_DISTANCE + l] = curve_at(P, b, PRM_MAX_DISTANCE_CURVE, depth)
-            PP[g, bk.CURVE_BACKSTOP_DISTANCE + l] = curve_at(P, b, PRM_BACKSTOP_DISTANCE_CURVE, depth)
+            # D.9 reads its curves at the depth squared
+            PP[g, bk.CURVE_MAX_DISTANCE + l] = curve_at(P, b, PRM_MAX_DISTANCE_CURVE, depth * depth)
+            PP[g, bk.CURVE_BACKSTOP_DISTANCE + l] = curve_at(P, b, PRM_BACKSTOP_DISTANCE_CURVE, depth * depth)
 
 
 @kernel

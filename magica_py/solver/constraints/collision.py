@@ -26,7 +26,6 @@ from magica_py.kernels.math3d import (
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
 from magica_py.solver.lanes import get1, get3, get4, put1, put3
-from magica_py.solver.parameters import PRM_RADIUS_CURVE, curve_at
 
 from magica_py.solver.constraints.bending import FIXED_POINT
 
@@ -298,7 +297,7 @@ def accumulate_push(PS, g, l, v):
 
 
 @kernel
-def edge_collision_block(PS, PM, TS, CS, P, BI, topology, b):
+def edge_collision_block(PS, PP, TS, CS, BI, topology, b):
     """D.8 edge mode over block b: per edge (in order) and lane, the edge against every
     collider slot of the lane, its pushes accumulated in fixed point at both ends and its
     contact recorded (friction as a fixed-point max, normals summed); then the sum step.
@@ -322,8 +321,8 @@ def edge_collision_block(PS, PM, TS, CS, P, BI, topology, b):
         gb = g0 + jb
         for l in range(w):
             scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
-            ra = curve_at(P, b, PRM_RADIUS_CURVE, get1(PM, ga, bk.DEPTH, l)) * scale
-            rb = curve_at(P, b, PRM_RADIUS_CURVE, get1(PM, gb, bk.DEPTH, l)) * scale
+            ra = get1(PP, ga, bk.CURVE_RADIUS, l) * scale
+            rb = get1(PP, gb, bk.CURVE_RADIUS, l) * scale
             cfr = (ra + rb) * 0.5
             pa = get3(PS, ga, st.NEXT_POS, l)
             pb = get3(PS, gb, st.NEXT_POS, l)

@@ -14,8 +14,8 @@ from magica_py.solver import state as st
 from magica_py.solver.constraints.collision import particle_radius
 from magica_py.solver.lanes import get1, get3, get4, put3
 from magica_py.solver.parameters import (
-    PRM_BACKSTOP_DISTANCE_CURVE, PRM_BACKSTOP_RADIUS, PRM_MAX_DISTANCE_CURVE, PRM_MOTION_STIFFNESS, PRM_NORMAL_AXIS,
-    PRM_USE_BACKSTOP, PRM_USE_MAX_DISTANCE, curve_at,
+    PRM_BACKSTOP_RADIUS, PRM_MOTION_STIFFNESS, PRM_NORMAL_AXIS,
+    PRM_USE_BACKSTOP, PRM_USE_MAX_DISTANCE,
 )
 
 MOVE = 0x02
@@ -66,7 +66,7 @@ def solve_motion(x, base_pos, direction, max_distance, use_max, use_backstop,
 
 
 @kernel
-def motion_block(PS, PM, TS, P, BI, topology, b, attenuation):
+def motion_block(PS, PP, TS, P, BI, topology, b, attenuation):
     """D.9 over block b's moving particles (skipped when the block uses neither limit), every
     lane side by side; the move is added to ``velocity_pos`` times ``attenuation``."""
     use_max = P[b, PRM_USE_MAX_DISTANCE] != 0.0
@@ -86,14 +86,12 @@ def motion_block(PS, PM, TS, P, BI, topology, b, attenuation):
         g = g0 + j
         for l in range(w):
             unit = get1(TS, b, st.LENGTH_UNIT, l)   # 1.0 in faithful mode (the reference does not scale them)
-            depth = get1(PM, g, bk.DEPTH, l)
-            d2 = depth * depth
-            r = particle_radius(P, b, depth, unit)
+            r = particle_radius(get1(PP, g, bk.CURVE_RADIUS, l), unit)
             direction = q_rotate(get4(PS, g, st.BASE_ROT, l), axis)
             o = get3(PS, g, st.NEXT_POS, l)
             x = solve_motion(o, get3(PS, g, st.BASE_POS, l), direction,
-                             curve_at(P, b, PRM_MAX_DISTANCE_CURVE, d2) * unit, use_max, use_backstop,
-                             curve_at(P, b, PRM_BACKSTOP_DISTANCE_CURVE, d2) * unit, backstop_radius * unit,
+                             get1(PP, g, bk.CURVE_MAX_DISTANCE, l) * unit, use_max, use_backstop,
+                             get1(PP, g, bk.CURVE_BACKSTOP_DISTANCE, l) * unit, backstop_radius * unit,
                              r, stiffness)
             put3(PS, g, st.NEXT_POS, l, x)
             put3(PS, g, st.VELOCITY_POS, l, v_add(get3(PS, g, st.VELOCITY_POS, l), v_scale(v_sub(x, o), attenuation)))
