@@ -26,6 +26,7 @@ import hashlib
 
 import numpy as np
 
+from magica_py.jit import kernel
 from magica_py.solver.lanes import LANES, QUATERNION, RowTable
 
 # ----------------------------------------------------------------------------- per-lane model tables
@@ -119,6 +120,14 @@ TI_COMPONENT = 1 * LANES             # hierarchy node of the cloth component
 TI_ANCHOR = 2 * LANES                # hierarchy node of the inertia anchor or -1 (parameter inertia.anchor)
 TI_CULLING_REFERENCE = 3 * LANES     # hierarchy node of the culling reference or -1
 TEAM_INT_COUNT = 4
+
+@kernel
+def lane_width(BI, b):
+    """Lanes a stage runs in block b: its width, at most ``LANES``. Bounding the lane loops by
+    the constant ``LANES`` lets LLVM prove that the rows of one item (``LANES`` apart) do not
+    overlap, so the loops vectorise without run-time checks."""
+    return min(BI[b, BI_WIDTH], LANES)
+
 
 # the pools whose items have chunks (slot ranges) per block
 POOLS = ("particle", "link", "edge", "triangle", "bend", "volume", "collider", "topology")

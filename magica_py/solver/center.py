@@ -81,13 +81,14 @@ def bind_row(PM, g, k, l):
     return (PM[g, c + l], PM[g, c + LANES + l], PM[g, c + 2 * LANES + l], PM[g, c + 3 * LANES + l])
 
 
-@kernel
+@kernel(forceinline=False)
 def skin_block(PS, PM, BI, PT, local_to_world, b, l0, l1):
     """C.1: one-bone skinning of every vertex of block b's lanes ``l0 .. l1 - 1`` with the bone
     matrices ``local_to_world`` (this frame's; quality mode's build reset passes the build
     pose's): a read-only pass over the model and the matrices, writing position and rotation.
     Each vertex's bone matrix is first copied next to it (``BONE_MATRIX``; a gather through the
     bone's node), so that the skinning loop reads one particle slot per table."""
+    l1 = min(l1, LANES)
     g0 = BI[b, bk.BI_G0]
     for j in range(BI[b, bk.BI_N]):
         g = g0 + j
@@ -191,7 +192,7 @@ def center_from_sums(position_sum, normal_sum, tangent_sum, count):
             rot_from_normal_tangent(v_normalize(normal_sum), v_normalize(tangent_sum)))
 
 
-@kernel
+@kernel(forceinline=False)
 def component_pose_lane(TS, TM, TI, b, l, world_position, world_rotation, lossy_scale):
     """C.2 component pose of lane l's team (stored in ``TS``): (position, rotation, scale,
     scale ratio)."""
@@ -208,7 +209,7 @@ def component_pose_lane(TS, TM, TI, b, l, world_position, world_rotation, lossy_
     return cpos, crot, cscl, ratio
 
 
-@kernel
+@kernel(forceinline=False)
 def center_pose_lane(PS, PM, BI, topology, b, l, cpos, crot):
     """C.2 center of lane l's team from its skinned pose (the component pose when the team
     has no center-fixed vertex)."""
@@ -230,7 +231,7 @@ def center_pose_lane(PS, PM, BI, topology, b, l, cpos, crot):
     return center_from_sums(sp, sn, st_, cn)
 
 
-@kernel
+@kernel(forceinline=False)
 def center_and_inertia_lane(PS, PM, TS, TM, TI, P, BI, topology, b, l, world_position, world_rotation,
                             lossy_scale, frame_delta_time, now_time_scale, skip_count, running, dt,
                             since_last_step):
@@ -246,7 +247,7 @@ def center_and_inertia_lane(PS, PM, TS, TM, TI, P, BI, topology, b, l, world_pos
                  frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step)
 
 
-@kernel
+@kernel(forceinline=False)
 def inertia_lane(TS, TI, P, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, world_position,
                  world_rotation, frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step):
     """C.4 for lane l's team once its component pose and center (C.2) are known: anchor,
@@ -447,7 +448,7 @@ def shift_history(old_pos, old_position, disp_pos, old_rotation, velocity, pivot
             shift_position(disp_pos, pivot, vec, rot), q_mul(rot, old_rotation), q_rotate(rot, velocity))
 
 
-@kernel
+@kernel(forceinline=False)
 def shift_lane(PS, TS, b, g, l):
     """C.5 inertia shift of lane l of particle slot g (``shift_history`` and the real velocity)."""
     pivot = get3(TS, b, st.OLD_COMPONENT_POS, l)
@@ -464,13 +465,13 @@ def shift_lane(PS, TS, b, g, l):
     put3(PS, g, st.REAL_VELOCITY, l, q_rotate(rot, get3(PS, g, st.REAL_VELOCITY, l)))
 
 
-@kernel
+@kernel(forceinline=False)
 def reset_or_shift_block(PS, TS, BI, b):
     """C.5 for the active lanes of block b: snap the particles to the base pose (Reset) or
     shift their history rigidly. Lane by lane: the lanes take different branches."""
     g0 = BI[b, bk.BI_G0]
     n = BI[b, bk.BI_N]
-    for l in range(BI[b, bk.BI_WIDTH]):
+    for l in range(bk.lane_width(BI, b)):
         if get1(TS, b, st.ACTIVE, l) == 0.0:
             continue
         if get1(TS, b, st.RESET, l) != 0.0:
@@ -481,7 +482,7 @@ def reset_or_shift_block(PS, TS, BI, b):
                 shift_lane(PS, TS, b, g0 + j, l)
 
 
-@kernel
+@kernel(forceinline=False)
 def distance_culling_lane(TS, TI, P, b, l, world_position):
     """H.1 distance culling of lane l's team: returns True when the team is beyond the culling
     length, and updates the fade weight ``DISTANCE_WEIGHT`` (1 inside, 0 at the limit)."""
@@ -501,7 +502,7 @@ def distance_culling_lane(TS, TI, P, b, l, world_position):
     return False
 
 
-@kernel
+@kernel(forceinline=False)
 def end_frame_lane(TS, b, l, running):
     """A.7: remember this frame's component and center, clear the per-frame flags."""
     put3(TS, b, st.OLD_COMPONENT_POS, l, get3(TS, b, st.COMPONENT_POS, l))

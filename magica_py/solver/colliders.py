@@ -30,7 +30,7 @@ def _sign(x):
     return -1.0 if x < 0.0 else 1.0
 
 
-@kernel
+@kernel(forceinline=False)
 def collider_frame_lane(CS, TS, BI, CT, b, l, world_position, world_rotation, lossy_scale):
     """G.2 for the collider slots of lane l's team: this frame's pose and the history update."""
     reset = get1(TS, b, st.RESET, l) != 0.0
@@ -135,13 +135,13 @@ def sphere_bounds(old_pos, now_pos, r):
     return lo, hi
 
 
-@kernel
+@kernel(forceinline=False)
 def collider_step_block(CS, TS, BI, topology, b):
     """G.3 at the start of a step, every collider slot and running lane of block b: step pose,
     local-inertia shift of the old pose, work data (``collider_step_pose``, ``capsule_ends``,
     ``swept_bounds``)."""
     c0 = BI[b, bk.BI_COLLIDER0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     shapes, directions = BI[b, bk.BI_COLLIDER_SHAPE], BI[b, bk.BI_COLLIDER_DIRECTION]
     reverses, aligns = BI[b, bk.BI_COLLIDER_REVERSE], BI[b, bk.BI_COLLIDER_ALIGNED]
     for c in range(BI[b, bk.BI_COLLIDERS]):
@@ -193,18 +193,18 @@ def collider_step_block(CS, TS, BI, topology, b):
                 put3(CS, k, st.START_OLD, l, old_pos)
 
 
-@kernel
+@kernel(forceinline=False)
 def collider_end_step_block(CS, BI, b):
     """G.3 end of step: old = now, every slot and lane of block b."""
     c0 = BI[b, bk.BI_COLLIDER0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     for k in range(c0, c0 + BI[b, bk.BI_COLLIDERS]):
         for l in range(w):
             put3(CS, k, st.C_OLD_POS, l, get3(CS, k, st.NOW_POS, l))
             put4(CS, k, st.C_OLD_ROT, l, get4(CS, k, st.NOW_ROT, l))
 
 
-@kernel
+@kernel(forceinline=False)
 def collider_end_frame_lane(CS, BI, b, l):
     """End of frame of a lane that ran steps: the frame pose becomes the old frame pose."""
     c0 = BI[b, bk.BI_COLLIDER0]

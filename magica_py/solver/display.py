@@ -64,14 +64,14 @@ def display_frame_of(topology, attribute, root_index, j):
     return -1
 
 
-@kernel
+@kernel(forceinline=False)
 def record_display_state_block(PS, TS, BI, topology, b):
     """Quality display, at the end of a step (after D.10): each particle's new state
     (``OLD_POS``) in its display frame at this step (the fixed root's step pose ``NEXT_POS`` /
     ``BASE_ROT``, or the team center ``NOW_WORLD_POS`` / ``NOW_WORLD_ROT``); the previous one
     kept as ``DISPLAY_PREV_LOCAL``."""
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute, root_index = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_ROOT_INDEX]
     for j in range(BI[b, bk.BI_N]):
         g = g0 + j
@@ -105,7 +105,7 @@ def display_interpolated(PS, TS, b, g, gr, l, rooted, alpha):
     return v_add(get3(TS, b, st.FRAME_WORLD_POS, l), q_rotate(get4(TS, b, st.FRAME_WORLD_ROT, l), local))
 
 
-@kernel
+@kernel(forceinline=False)
 def display_block(PS, TS, P, BI, topology, b, dt, quality):
     """E.1 for block b (module docstring); quality mode's collider and edge pass follows in
     ``quality_display.display_constraints_block``. Each lane's clock is in ``TS``
@@ -113,7 +113,7 @@ def display_block(PS, TS, P, BI, topology, b, dt, quality):
     ``quality``: the frame's quality stage switch (None: no team of the scene uses quality
     mode, its interpolation is not compiled)."""
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     n = BI[b, bk.BI_N]
     attribute, root_index = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_ROOT_INDEX]
     time_based = P[b, PRM_TIME_BASED_SMOOTHING] != 0.0
@@ -130,29 +130,40 @@ def display_block(PS, TS, P, BI, topology, b, dt, quality):
                 for l in range(w):
                     put3(PS, g, st.DISP_POS, l, display_interpolated(PS, TS, b, g, gr, l, r >= 0,
                                                                      get1(TS, b, st.DISPLAY_ALPHA, l)))
-    # one pass in particle order (the root read below)
+    # one pass in particle order (a Move particle reads its root's position as written so far:
+    # a Move root's display, the quirk of §E.1), the root's position gathered next to it first
     for j in range(n):
         g = g0 + j
         move = (topology[attribute + j] & MOVE) != 0
         r = topology[root_index + j]
-        gr = g0 + (r if r >= 0 else j)
-        for l in range(w):
+        clamp = move and (not time_based) and r >= 0
+        if clamp:
+            gr = g0 + r
+            for l in range(w):
+                put3(PS, g, st.PARTNER_POS, l, get3(PS, gr, st.POSITION, l))
+        for l in range(w):   # the animated pose kept (E.2 reads it); stores selected, not branched
             pos0 = get3(PS, g, st.POSITION, l)
             rot0 = get4(PS, g, st.ROTATION, l)
-            if move:
-                if time_based:
-                    f = get3(PS, g, st.DISP_POS, l)   # no E.1 clamp: the interpolation is bounded by the states
-                else:
-                    f = display_extrapolated(get3(PS, g, st.OLD_POS, l), get3(PS, g, st.REAL_VELOCITY, l),
-                                             get3(PS, g, st.DISP_POS, l), dt, get1(TS, b, st.DISPLAY_T, l))
-                    if r >= 0:
-                        f = display_clamped(f, get3(PS, gr, st.POSITION, l), pos0)
-                put3(PS, g, st.DISP_POS, l, f)
-                put3(PS, g, st.POSITION, l, v_lerp(pos0, f, get1(TS, b, st.BLEND_WEIGHT, l)))
-            else:
-                put3(PS, g, st.DISP_POS, l, pos0)
-            if get1(TS, b, st.RUNNING, l) != 0.0:
-                put3(PS, g, st.OLD_POSITION, l, pos0)
-                put4(PS, g, st.OLD_ROTATION, l, rot0)
+            running = get1(TS, b, st.RUNNING, l) != 0.0
+            old_position = get3(PS, g, st.OLD_POSITION, l)
+            old_rotation = get4(PS, g, st.OLD_ROTATION, l)
+            put3(PS, g, st.OLD_POSITION, l, pos0 if running else old_position)
+            put4(PS, g, st.OLD_ROTATION, l, rot0 if running else old_rotation)
             put3(PS, g, st.BASE_POS_BUFFER, l, pos0)
             put4(PS, g, st.BASE_ROT_BUFFER, l, rot0)
+        if not move:
+            for l in range(w):
+                put3(PS, g, st.DISP_POS, l, get3(PS, g, st.POSITION, l))
+        elif time_based:   # no E.1 clamp: the interpolation is bounded by the states
+            for l in range(w):
+                put3(PS, g, st.POSITION, l, v_lerp(get3(PS, g, st.POSITION, l), get3(PS, g, st.DISP_POS, l),
+                                                   get1(TS, b, st.BLEND_WEIGHT, l)))
+        else:
+            for l in range(w):
+                pos0 = get3(PS, g, st.POSITION, l)
+                f = display_extrapolated(get3(PS, g, st.OLD_POS, l), get3(PS, g, st.REAL_VELOCITY, l),
+                                         get3(PS, g, st.DISP_POS, l), dt, get1(TS, b, st.DISPLAY_T, l))
+                clamped = display_clamped(f, get3(PS, g, st.PARTNER_POS, l), pos0)
+                f = clamped if clamp else f
+                put3(PS, g, st.DISP_POS, l, f)
+                put3(PS, g, st.POSITION, l, v_lerp(pos0, f, get1(TS, b, st.BLEND_WEIGHT, l)))

@@ -145,7 +145,7 @@ def lane_save_area(max_particles: int, max_colliders: int, threads: int) -> np.n
 
 
 # ----------------------------------------------------------------------------- lanes that do not run
-@kernel
+@kernel(forceinline=False)
 def save_lanes(PS, TS, CS, BI, b, area):
     """Copy block b's particle, team and collider items into ``area`` (one thread's row)."""
     g0 = BI[b, bk.BI_G0]
@@ -161,7 +161,7 @@ def save_lanes(PS, TS, CS, BI, b, area):
         at += CS.shape[1]
 
 
-@kernel
+@kernel(forceinline=False)
 def restore_lane(PS, TS, CS, BI, b, l, area):
     """Write lane l's columns of block b back from ``area`` (``save_lanes``)."""
     g0 = BI[b, bk.BI_G0]
@@ -181,12 +181,12 @@ def restore_lane(PS, TS, CS, BI, b, l, area):
 
 
 # ----------------------------------------------------------------------------- team level
-@kernel
+@kernel(forceinline=False)
 def prepare_lanes(TS, TI, P, BI, blocks, tt, h):
     """Scale suspension (A.4) and distance culling (H.1) of every lane, before the team time."""
     for i in range(blocks.shape[0]):
         b = blocks[i]
-        for l in range(BI[b, bk.BI_WIDTH]):
+        for l in range(bk.lane_width(BI, b)):
             t = TI[b, bk.TI_TEAM + l]
             if t < 0:
                 continue
@@ -231,7 +231,7 @@ def first_frame_continues_build_pose(TS, TM, TI, P, b, l, h):
     return jump < P[b, PRM_TELEPORT_DISTANCE] * ratio and turn < P[b, PRM_TELEPORT_ROTATION]
 
 
-@kernel
+@kernel(forceinline=False)
 def build_reset_lane(PS, PM, TS, TM, TI, P, BI, PT, topology, b, l, h):
     """Quality mode: the Reset of a team built with the system happens at the build (t = 0),
     not at its first frame (docs/quality-mode.md, *start-up*). The particles snap to the
@@ -253,7 +253,7 @@ def build_reset_lane(PS, PM, TS, TM, TI, P, BI, PT, topology, b, l, h):
     put1(TS, b, st.RESET, l, 0.0)  # the first frame is an ordinary frame (time_reset keeps the ramp at 0)
 
 
-@kernel
+@kernel(forceinline=False)
 def begin_frame_prelude_lane(PS, PM, TS, TM, TI, P, BI, PT, topology, tt, h, b, l, t, quality):
     """The team-level start of lane l's frame (team t): running flag, quality mode's
     first-frame build reset. Returns the team time since the last step
@@ -279,7 +279,7 @@ def lane_team(TI, b, l):
     return TI[b, bk.TI_TEAM + l]
 
 
-@kernel
+@kernel(forceinline=False)
 def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones):
     """One simulation step of block b (§D.0 order): every lane at its own frame
     interpolation (``FRAME_INTERPOLATION``)."""
@@ -288,7 +288,7 @@ def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, moti
     ratio = fi.frequency_ratio
     tether_attenuation, distance_attenuation, limit_attenuation, restoration_attenuation, motion_attenuation = \
         step_attenuations(P, b, ratio)
-    for l in range(BI[b, bk.BI_WIDTH]):
+    for l in range(bk.lane_width(BI, b)):
         team_step_lane(TS, TM, P, b, l, dt)
     collider_step_block(CS, TS, BI, topology, b)
     predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, ratio, fi.power_z)
@@ -329,7 +329,7 @@ def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, moti
     collider_end_step_block(CS, BI, b)
 
 
-@kernel
+@kernel(forceinline=False)
 def frozen_lanes(TS, TI, b, w):
     """Does block b have a team that is not simulated this frame (``ACTIVE`` 0)?"""
     for l in range(w):
@@ -338,21 +338,21 @@ def frozen_lanes(TS, TI, b, w):
     return False
 
 
-@kernel
+@kernel(forceinline=False)
 def restore_frozen(PS, TS, CS, TI, BI, b, w, area):
     for l in range(w):
         if lane_team(TI, b, l) >= 0 and get1(TS, b, st.ACTIVE, l) == 0.0:
             restore_lane(PS, TS, CS, BI, b, l, area)
 
 
-@kernel
+@kernel(forceinline=False)
 def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, edge_collision, motion, quality,
                       wind, wind_zones):
     """Block b's frame up to the write-back: its lanes' begin of frame and the steps (each
     lane advancing its own clock, §A.6; the clock of a suspended but enabled team advances
     too). Lanes that do not run keep their state (module docstring)."""
     PS, TS, CS, PM, TM, TI, P, BI, PT, topology = T.PS, T.TS, T.CS, T.PM, T.TM, T.TI, T.P, T.BI, T.PT, T.topology
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     frozen = frozen_lanes(TS, TI, b, w)
     if frozen:
         save_lanes(PS, TS, CS, BI, b, area)
@@ -406,12 +406,12 @@ def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, ed
                     restore_lane(PS, TS, CS, BI, b, l, area)
 
 
-@kernel
+@kernel(forceinline=False)
 def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles):
     """Block b's stages after the steps: guards, E.1-E.4 and A.7 of every active lane (the
     frame's team clocks read per lane); lanes that are not simulated keep their state."""
     PS, TS, CS, PM, TI, P, BI, PT, topology = T.PS, T.TS, T.CS, T.PM, T.TI, T.P, T.BI, T.PT, T.topology
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     dt = fi.dt
     frozen = frozen_lanes(TS, TI, b, w)
     if frozen:
@@ -453,7 +453,7 @@ def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles):
         restore_frozen(PS, TS, CS, TI, BI, b, w, area)
 
 
-@kernel
+@kernel(forceinline=False)
 def _time_frame_update(tt, fi):
     team_time_frame_update(
         tt.active, tt.suspended, tt.update_mode, tt.team_time_scale, tt.time, tt.old_time,
@@ -463,7 +463,7 @@ def _time_frame_update(tt, fi):
         fi.fixed_update_count, fi.global_time_scale, fi.dt, fi.max_steps, fi.timing)
 
 
-@kernel
+@kernel(forceinline=False)
 def _frame_close(tt, h, fi):
     team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
                         tt.now_update_time, tt.old_update_time, tt.frame_update_time,
@@ -471,7 +471,7 @@ def _frame_close(tt, h, fi):
     h.build_pose_pending[0] = 0  # teams added or reset later reset at their first frame
 
 
-@kernel
+@kernel(forceinline=False)
 def frame_counts(T, tt):
     """What the frame did, for the caller's metrics and events: (most steps of a team,
     particle-steps, lanes with a guard code). Integers: the same on every CPU."""
@@ -481,7 +481,7 @@ def frame_counts(T, tt):
     for i in range(T.blocks.shape[0]):
         b = T.blocks[i]
         n = np.int64(T.BI[b, bk.BI_N])
-        for l in range(T.BI[b, bk.BI_WIDTH]):
+        for l in range(bk.lane_width(T.BI, b)):
             t = T.TI[b, bk.TI_TEAM + l]
             if t < 0:
                 continue
@@ -554,7 +554,7 @@ def _least_loaded(wt, workers):
     return best
 
 
-@kernel
+@kernel(forceinline=False)
 def assign_workers(T, tt, wt, workers):
     """``wt.block_worker`` for this frame: the live blocks in order, each to the least loaded of
     ``workers`` threads (ties to the lower thread), a block's load being its particle-steps
@@ -564,7 +564,7 @@ def assign_workers(T, tt, wt, workers):
     for i in range(T.blocks.shape[0]):
         b = T.blocks[i]
         steps = 0
-        for l in range(T.BI[b, bk.BI_WIDTH]):
+        for l in range(bk.lane_width(T.BI, b)):
             t = T.TI[b, bk.TI_TEAM + l]
             if t >= 0:
                 steps = max(steps, tt.update_count[t])

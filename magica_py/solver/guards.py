@@ -37,7 +37,7 @@ def particle_verdict(old_pos, real_velocity, velocity, disp_pos, limit_sq):
     return (not finite), s > limit_sq
 
 
-@kernel
+@kernel(forceinline=False)
 def check_lane(PS, TS, BI, b, l):
     """The guard code of lane l's team after its steps (0 when healthy): one read-only pass
     with the verdicts OR-ed; any non-finite value wins over a speed excess."""

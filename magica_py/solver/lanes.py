@@ -33,7 +33,7 @@ import numpy as np
 
 from magica_py.jit import kernel
 
-LANES = 16   # lanes of a block: 2 AVX-512 or 4 AVX2 vectors of float64
+LANES = 16   # lanes of a block
 
 FLOAT = "float"       # a real value
 QUATERNION = "quat"   # 4 rows (x, y, z, w), identity when fresh

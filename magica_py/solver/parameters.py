@@ -427,13 +427,13 @@ def constraint_stiffness(k, frequency_ratio, power, rate_mode, quality):
     return step_rate(k, frequency_ratio, power, rate_mode)
 
 
-@kernel
+@kernel(forceinline=False)
 def particle_parameters_block(PP, PM, P, BI, b):
     """Block b's depth curves at every particle's depth, every lane (``blocks.PARTICLE_PARAMETERS``):
     the values ``curve_at`` gives, computed when the block's row or a lane changes."""
     g0 = BI[b, bk.BI_G0]
     for g in range(g0, g0 + BI[b, bk.BI_N]):
-        for l in range(BI[b, bk.BI_WIDTH]):
+        for l in range(bk.lane_width(BI, b)):
             depth = PM[g, bk.DEPTH + l]
             PP[g, bk.CURVE_DAMPING + l] = curve_at(P, b, PRM_DAMPING_CURVE, depth)
             PP[g, bk.CURVE_RADIUS + l] = curve_at(P, b, PRM_RADIUS_CURVE, depth)

@@ -648,18 +648,18 @@ def drift_applies(P, b):
     return P[b, PRM_RESTORATION_DRIFT] != 0.0 and mode != INEXT_NONE and mode != INEXT_ITERATIONS
 
 
-@kernel
+@kernel(forceinline=False)
 def drift_begin_block(PS, BI, b):
     """Before the angle pass (D.5/D.6) of a quality block with ``restoration_drift``: keep
     velocity_pos in ``QUALITY_DRIFT``."""
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     for g in range(g0, g0 + BI[b, bk.BI_N]):
         for l in range(w):
             put3(PS, g, st.QUALITY_DRIFT, l, get3(PS, g, st.VELOCITY_POS, l))
 
 
-@kernel
+@kernel(forceinline=False)
 def drift_end_block(PS, BI, topology, b):
     """After the angle pass: ``QUALITY_DRIFT`` = what the pass moved velocity_pos by, i.e. the
     share of its correction it kept out of the velocity (quality mode: ``1 - (1 - attn) 90/f``
@@ -669,7 +669,7 @@ def drift_end_block(PS, BI, topology, b):
     pass (bending, collision, D.4's second pass, motion) and the inextensibility passes see the
     step's motion without it, so they turn into velocity only the stretch that motion made."""
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute = BI[b, bk.BI_ATTRIBUTE]
     for j in range(BI[b, bk.BI_N]):
         g = g0 + j
@@ -717,6 +717,6 @@ def drift_in_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_atten
 
 
 # ---- lane form: being ported (development placeholder; removed before merge)
-@kernel
+@kernel(forceinline=False)
 def quality_end_of_step_block(PS, PM, TS, TM, CS, LM, EDS, P, BI, topology, b, frequency_ratio, power_y, distance_attenuation, drift):
     raise NotImplementedError("quality_end_of_step_block: not ported to the lane form yet")

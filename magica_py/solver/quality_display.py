@@ -255,6 +255,6 @@ def display_constraints_team(m, ps, prm, ts, cs, team, dt):
 
 
 # ---- lane form: being ported (development placeholder; removed before merge)
-@kernel
+@kernel(forceinline=False)
 def display_constraints_block(PS, PM, TS, CS, P, BI, topology, b, dt):
     raise NotImplementedError("display_constraints_block: not ported to the lane form yet")

@@ -12,8 +12,9 @@ import math
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    from_to_rotation, from_to_rotation_unit, q_inverse, q_mul, q_rotate, q_slerp, v_add, v_cross, v_dot,
-    v_length, v_length_sq, v_lerp, v_normalize, v_scale, v_sub,
+    from_to_rotation_select, from_to_rotation_unit, orthogonal_axis_select, q_axis_angle, q_inverse, q_mul,
+    q_rotate, q_slerp, q_slerp_select, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp, v_normalize_select,
+    v_scale, v_sub,
 )
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
@@ -80,6 +81,24 @@ def rot_from_normal_tangent_select(normal, tangent):
 
 
 @kernel
+def swing_select(a, b):
+    """``full_swing(a, b)`` (unit a, b) without a branch, the same bits on every path: its
+    degenerate cases call ``from_to_rotation_unit``, whose general (acos, sincos) branch the
+    very tests that lead there exclude; the half-angle form, the flip and the identity are
+    selected. Used by E.2 and the angle limit (D.5)."""
+    c = v_dot(a, b)
+    c = 1.0 if c > 1.0 else c
+    c = -1.0 if c < -1.0 else c
+    x = v_cross(a, b)
+    w = 1.0 + c
+    inv = 1.0 / math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + w * w)
+    half_angle = (x[0] * inv, x[1] * inv, x[2] * inv, w * inv)
+    opposite = abs(1.0 + c) < 1e-6
+    flip = q_axis_angle(orthogonal_axis_select(a), math.pi * 1.0)
+    return flip if opposite else (IDENTITY if abs(1.0 - c) < 1e-6 else half_angle)
+
+
+@kernel
 def full_swing(a, b):
     """``fromto_v(a, b, 1)`` for unit a, b without trigonometry: the half-angle quaternion
     ``normalize(a x b, 1 + a.b)`` is the same rotation; the reference's degenerate cases
@@ -110,35 +129,40 @@ def line_child_pose(ibq, bp, rest_position, rest_rotation, base_pos_c, base_rot_
     return lp, lq
 
 
-@kernel(inline="always")
+@kernel
 def line_child_rotation(q, lq, tv, cur, zero):
     """E.2: rotation of a moving child: its rest rotation carried by x's rotation q, swung so
-    the rest edge ``tv`` matches the simulated edge ``cur`` (not for a zero-distance child)."""
+    the rest edge ``tv`` matches the simulated edge ``cur`` (not for a zero-distance child).
+    Branch-free (``swing_select``: full_swing's bits)."""
     qc = q_mul(q, lq)
     if not zero:
-        qc = q_mul(full_swing(v_normalize(tv), v_normalize(cur)), qc)
+        qc = q_mul(swing_select(v_normalize_select(tv), v_normalize_select(cur)), qc)
     return qc
 
 
-@kernel(inline="always")
+@kernel
 def line_turn(q, ctv, cv, t):
     """E.2: x's rotation q turned by fraction t from its children's rest directions ``ctv``
-    towards their simulated ones ``cv`` (left as is when either sum is (near) zero)."""
-    if (v_length(ctv) >= 1e-8) & (v_length(cv) >= 1e-8):
-        q = q_mul(from_to_rotation(ctv, cv, t), q)
-    return q
-
-
-@kernel(inline="always")
-def line_blend(bq, q, bw):
-    """E.2: the bone rotation blended from the animated one by ``blend_weight`` bw."""
-    return q if bw == 1.0 else q_slerp(bq, q, bw)
+    towards their simulated ones ``cv`` (left as is when either sum is (near) zero).
+    Branch-free."""
+    turned = q_mul(from_to_rotation_select(ctv, cv, t), q)
+    return turned if ((v_length(ctv) >= 1e-8) & (v_length(cv) >= 1e-8)) else q
 
 
 @kernel
+def line_blend(bq, q, bw):
+    """E.2: the bone rotation blended from the animated one by ``blend_weight`` bw. Branch-free."""
+    blended = q_slerp_select(bq, q, bw)
+    return q if bw == 1.0 else blended
+
+
+@kernel(forceinline=False)
 def line_rotations_block(PS, PM, TS, P, BI, topology, b):
-    """E.2 over the IncludeLine baselines of block b, each bone's children side by side
-    across the lanes (their rest and simulated edges summed in ``CHILD_*_SUM``)."""
+    """E.2 over the IncludeLine baselines of block b, every lane side by side. For each bone
+    x with children, in baseline order: its pose is copied next to each child (``PARENT_*``),
+    each child's rotation and its rest and simulated edges are solved across the lanes
+    (``CHILD_REST_EDGE`` / ``CHILD_EDGE``), the edges are summed at x in child order, and x
+    turns and blends. Each loop touches one or two items, so the lane loops vectorise."""
     if BI[b, bk.BI_HAS_LINES] == 0:
         return
     ri = P[b, PRM_ROTATIONAL_INTERPOLATION]
@@ -146,7 +170,7 @@ def line_rotations_block(PS, PM, TS, P, BI, topology, b):
     a = P[b, PRM_ANIMATION_POSE_RATIO]
     a_zero = a == 0.0
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute = BI[b, bk.BI_ATTRIBUTE]
     child_start, child_count, child_data = BI[b, bk.BI_CHILD_START], BI[b, bk.BI_CHILD_COUNT], BI[b, bk.BI_CHILD_DATA]
     bl_flags, bl_start, bl_count, bl_data = (BI[b, bk.BI_BASELINE_FLAGS], BI[b, bk.BI_BASELINE_START],
@@ -161,32 +185,44 @@ def line_rotations_block(PS, PM, TS, P, BI, topology, b):
             gx = g0 + x
             attr = topology[attribute + x]
             cn = topology[child_count + x]
+            c0 = topology[child_start + x]
             if cn > 0 and (attr & (FIXED | MOVE)) != 0:
-                for l in range(w):
-                    put3(PS, gx, st.CHILD_REST_SUM, l, z)
-                    put3(PS, gx, st.CHILD_EDGE_SUM, l, z)
-                c0 = topology[child_start + x]
+                for k in range(c0, c0 + cn):
+                    gc = g0 + topology[child_data + k]
+                    for l in range(w):   # x's pose next to the child
+                        put4(PS, gc, st.PARENT_ROTATION, l, get4(PS, gx, st.ROTATION, l))
+                        put4(PS, gc, st.PARENT_BASE_ROT, l, get4(PS, gx, st.BASE_ROT_BUFFER, l))
+                        put3(PS, gc, st.PARENT_BASE_POS, l, get3(PS, gx, st.BASE_POS_BUFFER, l))
+                        put3(PS, gc, st.PARENT_POSITION, l, get3(PS, gx, st.POSITION, l))
                 for k in range(c0, c0 + cn):
                     c = topology[child_data + k]
                     gc = g0 + c
                     zero = (topology[attribute + c] & ZERO_DISTANCE) != 0
                     move = (topology[attribute + c] & MOVE) != 0
                     for l in range(w):
-                        q = get4(PS, gx, st.ROTATION, l)
-                        bq = get4(PS, gx, st.BASE_ROT_BUFFER, l)
-                        lp, lq = line_child_pose(q_inverse(bq), get3(PS, gx, st.BASE_POS_BUFFER, l),
+                        q = get4(PS, gc, st.PARENT_ROTATION, l)
+                        lp, lq = line_child_pose(q_inverse(get4(PS, gc, st.PARENT_BASE_ROT, l)),
+                                                 get3(PS, gc, st.PARENT_BASE_POS, l),
                                                  get3(PM, gc, bk.BASELINE_LOCAL_POSITION, l),
                                                  get4(PM, gc, bk.BASELINE_LOCAL_ROTATION, l),
                                                  get3(PS, gc, st.BASE_POS_BUFFER, l),
                                                  get4(PS, gc, st.BASE_ROT_BUFFER, l), a, a_zero)
                         tv = z if zero else q_rotate(q, lp)
-                        put3(PS, gx, st.CHILD_REST_SUM, l, v_add(get3(PS, gx, st.CHILD_REST_SUM, l), tv))
+                        cur = v_sub(get3(PS, gc, st.POSITION, l), get3(PS, gc, st.PARENT_POSITION, l))
+                        put3(PS, gc, st.CHILD_REST_EDGE, l, tv)
+                        put3(PS, gc, st.CHILD_EDGE, l, cur if move else tv)
                         if move:
-                            cur = v_sub(get3(PS, gc, st.POSITION, l), get3(PS, gx, st.POSITION, l))
-                            put3(PS, gx, st.CHILD_EDGE_SUM, l, v_add(get3(PS, gx, st.CHILD_EDGE_SUM, l), cur))
                             put4(PS, gc, st.ROTATION, l, line_child_rotation(q, lq, tv, cur, zero))
-                        else:
-                            put3(PS, gx, st.CHILD_EDGE_SUM, l, v_add(get3(PS, gx, st.CHILD_EDGE_SUM, l), tv))
+                for l in range(w):
+                    put3(PS, gx, st.CHILD_REST_SUM, l, z)
+                    put3(PS, gx, st.CHILD_EDGE_SUM, l, z)
+                for k in range(c0, c0 + cn):   # the sums in child order
+                    gc = g0 + topology[child_data + k]
+                    for l in range(w):
+                        put3(PS, gx, st.CHILD_REST_SUM, l,
+                             v_add(get3(PS, gx, st.CHILD_REST_SUM, l), get3(PS, gc, st.CHILD_REST_EDGE, l)))
+                        put3(PS, gx, st.CHILD_EDGE_SUM, l,
+                             v_add(get3(PS, gx, st.CHILD_EDGE_SUM, l), get3(PS, gc, st.CHILD_EDGE, l)))
                 t = ri if (attr & MOVE) != 0 else rr
                 for l in range(w):
                     q = line_turn(get4(PS, gx, st.ROTATION, l), get3(PS, gx, st.CHILD_REST_SUM, l),
@@ -241,7 +277,7 @@ def vertex_frame_rotation(ns, ts_):
     return valid, look_rotation_select(binormal, nn)
 
 
-@kernel
+@kernel(forceinline=False)
 def triangle_rotations_block(PS, TRS, TRM, BI, topology, b):
     """E.3 over block b: rotation of triangle vertices from their triangles' display normals
     and uv tangents.
@@ -254,7 +290,7 @@ def triangle_rotations_block(PS, TRS, TRM, BI, topology, b):
     if tn_count == 0:
         return
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     t0 = BI[b, bk.BI_TRIANGLE0]
     corners = BI[b, bk.BI_TRIANGLE_CORNERS]
     for tri in range(tn_count):

@@ -56,6 +56,12 @@ CONTACT_NORMAL_SUM = _p("contact_normal_sum", 3, "scratch of D.8 point mode: nor
 CONTACT_NEAR_SUM = _p("contact_near_sum", 3, "scratch of D.8 point mode: normals of the colliders within range")
 BONE_MATRIX = _p("bone_matrix", 12, "scratch of C.1: the first three rows of the bone's local-to-world matrix, "
                  "row major (gathered from the hierarchy)")
+PARENT_ROTATION = _p("parent_rotation", 4, "scratch of E.2: the parent bone's rotation (gathered)", QUATERNION)
+PARENT_BASE_ROT = _p("parent_base_rot", 4, "scratch of E.2: the parent bone's animated rotation (gathered)", QUATERNION)
+PARENT_BASE_POS = _p("parent_base_pos", 3, "m; scratch of E.2: the parent bone's animated position (gathered)")
+PARENT_POSITION = _p("parent_position", 3, "m; scratch of E.2: the parent bone's display position (gathered)")
+CHILD_REST_EDGE = _p("child_rest_edge", 3, "m; scratch of E.2: this child's rest edge from its parent (tv)")
+CHILD_EDGE = _p("child_edge", 3, "m; scratch of E.2: this child's simulated edge (its rest edge when fixed)")
 CHILD_REST_SUM = _p("child_rest_sum", 3, "scratch of E.2: the children's rest edges summed (ctv)")
 CHILD_EDGE_SUM = _p("child_edge_sum", 3, "scratch of E.2: the children's simulated edges summed (cv)")
 CONTACT_MIN_DIST = _p("contact_min_dist", 1, "m; scratch of D.8 point mode: closest distance within range")

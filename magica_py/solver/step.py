@@ -90,7 +90,7 @@ def team_step_values(old_pos, old_rot, old_frame_pos, frame_pos, old_frame_rot, 
             scale_ratio, gravity_dot, gravity_ratio, velocity_weight, blend_weight)
 
 
-@kernel
+@kernel(forceinline=False)
 def team_step_lane(TS, TM, P, b, l, dt):
     """C.3 for lane l's team at the start of a step (the maths: ``team_step_values``), at its
     frame interpolation of this step (``FRAME_INTERPOLATION``, written by the step's A.6)."""
@@ -183,12 +183,12 @@ def damping_keep(damping, frequency_ratio, power_z, rate_mode):
     return saturate(1.0 - step_rate(clamp01(damping), frequency_ratio, power_z, rate_mode))
 
 
-@kernel
+@kernel(forceinline=False)
 def predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, frequency_ratio, power_z):
     """D.1 over block b: animated pose at this step, inertia shift, damping, forces,
     prediction (each lane at its own frame interpolation)."""
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute = BI[b, bk.BI_ATTRIBUTE]
     depth_inertia = P[b, PRM_DEPTH_INERTIA]
     g_dir = (P[b, PRM_GRAVITY_DIRECTION], P[b, PRM_GRAVITY_DIRECTION + 1], P[b, PRM_GRAVITY_DIRECTION + 2])
@@ -247,7 +247,7 @@ def basic_pose_blend(pos, rot, base_pos, base_rot, ratio):
     return v_lerp(pos, base_pos, ratio), q_slerp(rot, base_rot, ratio)
 
 
-@kernel
+@kernel(forceinline=False)
 def step_basic_pose_block(PS, PM, TS, TM, P, BI, topology, b):
     """D.2 over block b: rebuild the rest shape along each baseline and blend it to the
     animated pose."""
@@ -255,7 +255,7 @@ def step_basic_pose_block(PS, PM, TS, TM, P, BI, topology, b):
     if a > 0.99:
         return
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     parent = BI[b, bk.BI_PARENT]
     bl_start, bl_count, bl_data = BI[b, bk.BI_BASELINE_START], BI[b, bk.BI_BASELINE_COUNT], BI[b, bk.BI_BASELINE_DATA]
     for line in range(BI[b, bk.BI_BASELINES]):
@@ -351,12 +351,12 @@ def centrifugal_velocity(vel, next_pos, direction, moving, depth, angular_veloci
     return flung if (angular_velocity > 1e-8 and centrifugal > 1e-8 and moving and radius > 1e-8) else vel
 
 
-@kernel
+@kernel(forceinline=False)
 def end_step_block(PS, PM, TS, P, BI, topology, b, dt, frequency_ratio):
     """D.10 over block b: velocity from positions, static and dynamic friction, speed limit,
     centrifugal term."""
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute = BI[b, bk.BI_ATTRIBUTE]
     mode = int(P[b, PRM_RATE_MODE])
     dynamic = P[b, PRM_FRICTION]

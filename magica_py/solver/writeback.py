@@ -37,7 +37,7 @@ def bone_rotation(rotation, v2t):
     return q_normalize_or_identity(q_mul(rotation, v2t))
 
 
-@kernel
+@kernel(forceinline=False)
 def transform_data_lane(PS, PM, BI, b, l):
     """World transform data of every bone of lane l's team; returns False if any value is
     non-finite."""
@@ -71,7 +71,7 @@ def fixed_bone_local(rotation, parent_world_rotation, has_parent):
     return q_normalize(rotation)
 
 
-@kernel
+@kernel(forceinline=False)
 def write_transforms_lane(PS, BI, PT, topology, b, l, parent_node, world_rotation, lossy_scale,
                           local_position, local_rotation):
     """Write lane l's bones into the hierarchy's local pose arrays (scatters through the

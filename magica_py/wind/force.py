@@ -111,7 +111,7 @@ def zone_wind(main, time, frame, zone_turbulence, turbulence, blend, wind_pos):
     return d[0] * speed, d[1] * speed, d[2] * speed
 
 
-@kernel
+@kernel(forceinline=False)
 def wind_lane(TS, P, b, l, dt):
     """The team part of lane l's wind at this step: zone phases, moving wind, the directions'
     frames (``WIND_ZONE_FRAME``, ``MOVING_WIND_FRAME``). Returns whether the lane's Move
@@ -145,7 +145,7 @@ def wind_lane(TS, P, b, l, dt):
     return True
 
 
-@kernel
+@kernel(forceinline=False)
 def line_wind_lane(TS, b, l, wind_pos, turbulence, blend):
     """Lane l's wind at a root line of phase ``wind_pos``: its zones, then its moving wind."""
     wx = 0.0
@@ -169,7 +169,7 @@ def line_wind_lane(TS, b, l, wind_pos, turbulence, blend):
     return wx, wy, wz
 
 
-@kernel
+@kernel(forceinline=False)
 def wind_block(PS, PM, TS, TI, P, BI, topology, b, dt, wind_zones):
     """§D.1 wind of every lane of block b at this step, after ``predict_block`` (module
     docstring). The zones a lane feels are in its ``WIND_ZONE_*`` rows (selected each frame
@@ -179,7 +179,7 @@ def wind_block(PS, PM, TS, TI, P, BI, topology, b, dt, wind_zones):
     line are mostly consecutive, so each line's wind is computed once per lane (``WIND_LINE``)
     and reused; then the particle loop runs the lanes side by side, a lane without wind
     keeping its values (a select, not an addition of zero: -0.0 stays -0.0)."""
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     runs = False
     for l in range(w):
         lane_runs = wind_lane(TS, P, b, l, dt)

@@ -36,7 +36,7 @@ MAX_ADDITIONS = 3
 SLOTS = st.WIND_SLOTS
 
 
-@kernel
+@kernel(forceinline=False)
 def team_center_lane(TI, BI, PT, topology, b, l, world_position):
     """C.2's center position of lane l's team from this frame's bone poses."""
     n = BI[b, bk.BI_CENTERS]
@@ -80,7 +80,7 @@ def _remove_slot(TS, b, l, zone, count):
     return count
 
 
-@kernel
+@kernel(forceinline=False)
 def select_team_wind(Z, TS, TI, P, BI, PT, topology, b, l, world_position):
     """The zones lane l's team of block b feels this frame (module docstring); ``Z``: the
     packed zone table (``zones.zone_table``)."""
@@ -153,12 +153,12 @@ def select_wind(Z, TS, TI, P, BI, PT, topology, blocks, world_position):
     """``select_team_wind`` for every team of the live blocks (free lanes are skipped)."""
     for k in range(blocks.shape[0]):
         b = blocks[k]
-        for l in range(BI[b, bk.BI_WIDTH]):
+        for l in range(bk.lane_width(BI, b)):
             if TI[b, bk.TI_TEAM + l] >= 0:
                 select_team_wind(Z, TS, TI, P, BI, PT, topology, b, l, world_position)
 
 
-@kernel
+@kernel(forceinline=False)
 def update_wind(Z, TS, TI, P, BI, PT, topology, blocks, world_position, world_rotation, lossy_scale):
     """The per-frame wind: zone world poses, then every team's zones (the solver's arrays:
     ``frame.Tables`` and ``frame.HierarchyArrays``)."""

@@ -22,12 +22,13 @@ import math
 from magica_py.jit import kernel
 from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
-    angle_between_vectors, clamp_angle, inverse_mass_friction, lerp, orthogonal_axis, q_axis_angle, q_inverse,
+    angle_between_vectors, clamp_angle, inverse_mass_friction, lerp, orthogonal_axis_select, q_inverse,
     q_mul, q_rotate, saturate, v_add, v_cross, v_dot, v_length, v_scale, v_sub,
 )
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
 from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
+from magica_py.solver.rotations import swing_select
 from magica_py.solver.parameters import (
     PRM_LIMIT_STIFFNESS, PRM_RATE_MODE, PRM_RESTORATION_GRAVITY_FALLOFF, PRM_USE_ANGLE_LIMIT, PRM_USE_RESTORATION,
     clamp01, step_rate,
@@ -41,22 +42,14 @@ ZERO3 = (0.0, 0.0, 0.0)
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
 
-@kernel(inline="always")
+@kernel
 def swing_rotation(a, b):
-    """``rotations.full_swing(a, b)`` (unit a, b), the same bits on every path, without the
-    branch full_swing can never take: its degenerate cases call ``from_to_rotation_unit``
-    whose general (acos, sincos) branch is excluded by the very tests that led there.
-    Returns (rotation, opposite)."""
+    """``rotations.full_swing(a, b)`` (unit a, b) without a branch (``swing_select``), and
+    whether a and b are opposite. Returns (rotation, opposite)."""
     c = v_dot(a, b)
     c = 1.0 if c > 1.0 else c
     c = -1.0 if c < -1.0 else c
-    x = v_cross(a, b)
-    w = 1.0 + c
-    inv = 1.0 / math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + w * w)
-    half_angle = (x[0] * inv, x[1] * inv, x[2] * inv, w * inv)
-    opposite = abs(1.0 + c) < 1e-6
-    flip = q_axis_angle(orthogonal_axis(a), math.pi * 1.0)
-    return (flip if opposite else (IDENTITY if abs(1.0 - c) < 1e-6 else half_angle)), opposite
+    return swing_select(a, b), abs(1.0 + c) < 1e-6
 
 
 @kernel(inline="always")
@@ -79,7 +72,7 @@ def restoration_offset(a, v, vl, b, t):
     parallel = abs(1.0 - c) < 1e-6
     w = v_sub(b, v_scale(a, c))
     theta = trig.acos_fma(c)
-    w = v_cross(orthogonal_axis(a), a) if opposite else w
+    w = v_cross(orthogonal_axis_select(a), a) if opposite else w
     theta = math.pi if opposite else theta
     k = vl / v_length(w)   # off the chain: ready before the sincos
     s, co = trig.sincos_fma(theta * t)
@@ -237,7 +230,7 @@ def angle_restoration_entry(cp, pp, edge, next_c, vel_c, next_p, vel_p, rest_len
 
 
 # ----------------------------------------------------------------------------- per block
-@kernel
+@kernel(forceinline=False)
 def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_attenuation, restoration_attenuation):
     """D.5/D.6 over every baseline of block b, each entry's lanes side by side.
 
@@ -253,7 +246,7 @@ def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
     falloff = P[b, PRM_RESTORATION_GRAVITY_FALLOFF]
     rate_mode = int(P[b, PRM_RATE_MODE])
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute, parent = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_PARENT]
     bl_start, bl_count, bl_data = BI[b, bk.BI_BASELINE_START], BI[b, bk.BI_BASELINE_COUNT], BI[b, bk.BI_BASELINE_DATA]
     for line in range(BI[b, bk.BI_BASELINES]):

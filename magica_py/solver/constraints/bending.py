@@ -134,7 +134,7 @@ def bending_rate(P, b, frequency_ratio, power_y):
 
 
 # ----------------------------------------------------------------------------- per block
-@kernel
+@kernel(forceinline=False)
 def accumulate_lane(PS, g, l, v, ok):
     """Add contribution v to particle slot g's accumulator in lane l when ok (``accumulated``)."""
     acc, n = accumulated(get3(PS, g, st.ACCUM_VECTOR, l), get1(PS, g, st.ACCUM_COUNT, l), v, ok)
@@ -148,7 +148,7 @@ def bending_inverse_masses(PS, PM, BI, topology, b):
     particle: friction and depth do not change during the routine, and a mesh vertex belongs
     to up to ~8 bend pairs."""
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute = BI[b, bk.BI_ATTRIBUTE]
     for j in range(BI[b, bk.BI_N]):
         g = g0 + j
@@ -158,14 +158,14 @@ def bending_inverse_masses(PS, PM, BI, topology, b):
                  particle_inverse_mass(move, get1(PS, g, st.FRICTION, l), get1(PM, g, bk.DEPTH, l)))
 
 
-@kernel
+@kernel(forceinline=False)
 def bending_block(PS, PM, TS, BM, VM, P, BI, topology, b, frequency_ratio, power_y):
     """D.7 over block b: the dihedral and volume corrections of every pair accumulated in fixed
     point (pairs in order, every lane side by side), then the averages added to the moving
     particles' ``next_pos`` and the accumulators cleared (Jacobi: every pair sees the positions
     the pass started from)."""
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     k = bending_rate(P, b, frequency_ratio, power_y)
     if k >= 0.0:
         bending_inverse_masses(PS, PM, BI, topology, b)
@@ -210,11 +210,11 @@ def bending_block(PS, PM, TS, BM, VM, P, BI, topology, b, frequency_ratio, power
     apply_accumulated_block(PS, BI, topology, b)
 
 
-@kernel
+@kernel(forceinline=False)
 def apply_accumulated_block(PS, BI, topology, b):
     """Add the averaged accumulator to the moving particles' next_pos (``averaged``) and clear it."""
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute = BI[b, bk.BI_ATTRIBUTE]
     for j in range(BI[b, bk.BI_N]):
         g = g0 + j

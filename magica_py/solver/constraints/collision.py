@@ -159,13 +159,13 @@ def solve_point_collider(CS, k, l, shape, x, r, bmin, bmax):
                          get4(CS, k, st.INVERSE_OLD_ROT, l), get4(CS, k, st.NOW_ROT, l))
 
 
-@kernel
+@kernel(forceinline=False)
 def point_collision_block(PS, PP, TS, CS, BI, topology, b):
     """D.8 point mode over block b's moving particles: per particle and collider slot, the
     lanes side by side; the sums of ``point_contact_add`` in scratch rows (``ACCUM3`` push,
     ``CONTACT_*``), then each particle's result."""
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute = BI[b, bk.BI_ATTRIBUTE]
     c0 = BI[b, bk.BI_COLLIDER0]
     shapes = BI[b, bk.BI_COLLIDER_SHAPE]
@@ -296,14 +296,14 @@ def accumulate_push(PS, g, l, v):
     put1(PS, g, st.ACCUM_COUNT, l, get1(PS, g, st.ACCUM_COUNT, l) + 1.0)
 
 
-@kernel
+@kernel(forceinline=False)
 def edge_collision_block(PS, PP, TS, CS, BI, topology, b):
     """D.8 edge mode over block b: per edge (in order) and lane, the edge against every
     collider slot of the lane, its pushes accumulated in fixed point at both ends and its
     contact recorded (friction as a fixed-point max, normals summed); then the sum step.
     The collider tests branch on the lane's data: the lanes run one after another per edge."""
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute = BI[b, bk.BI_ATTRIBUTE]
     pairs = BI[b, bk.BI_EDGE_PAIRS]
     c0 = BI[b, bk.BI_COLLIDER0]

@@ -79,7 +79,7 @@ def distance_particle_terms(PS, PM, PP, P, BI, topology, b, frequency_ratio, pow
     """Every particle's inverse mass of this pass (1/50 when fixed) and its link stiffnesses,
     written to ``INVERSE_MASS``, ``K_VERTICAL``, ``K_HORIZONTAL``."""
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute = BI[b, bk.BI_ATTRIBUTE]
     mode = int(P[b, PRM_RATE_MODE])
     quality = int(P[b, PRM_QUALITY])
@@ -98,12 +98,12 @@ def distance_particle_terms(PS, PM, PP, P, BI, topology, b, frequency_ratio, pow
             put1(PS, g, st.K_HORIZONTAL, l, k_horizontal)
 
 
-@kernel
+@kernel(forceinline=False)
 def distance_block(PS, PM, PP, TS, TM, LM, P, BI, topology, b, frequency_ratio, power_y, attenuation):
     """D.4 over block b (Gauss-Seidel in particle order, every lane side by side)."""
     distance_particle_terms(PS, PM, PP, P, BI, topology, b, frequency_ratio, power_y)
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute = BI[b, bk.BI_ATTRIBUTE]
     link_start, link_count, link_target = (BI[b, bk.BI_DISTANCE_START], BI[b, bk.BI_DISTANCE_COUNT],
                                            BI[b, bk.BI_DISTANCE_TARGET])

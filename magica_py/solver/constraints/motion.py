@@ -65,7 +65,7 @@ def solve_motion(x, base_pos, direction, max_distance, use_max, use_backstop,
     return v_lerp(o, x, stiffness)
 
 
-@kernel
+@kernel(forceinline=False)
 def motion_block(PS, PP, TS, P, BI, topology, b, attenuation):
     """D.9 over block b's moving particles (skipped when the block uses neither limit), every
     lane side by side; the move is added to ``velocity_pos`` times ``attenuation``."""
@@ -77,7 +77,7 @@ def motion_block(PS, PP, TS, P, BI, topology, b, attenuation):
     backstop_radius = P[b, PRM_BACKSTOP_RADIUS]
     stiffness = P[b, PRM_MOTION_STIFFNESS]
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute = BI[b, bk.BI_ATTRIBUTE]
     for j in range(BI[b, bk.BI_N]):
         attr = topology[attribute + j]

@@ -46,13 +46,13 @@ def solve_tether(position, root_position, rest_length, compression_limit, freque
     return corr if active else ZERO3
 
 
-@kernel
+@kernel(forceinline=False)
 def tether_block(PS, P, BI, topology, b, attenuation, frequency_ratio):
     """D.3 over block b's moving particles; ``attenuation`` is the per-step velocity attenuation.
     Frequency-consistent mode (not quality mode, which keeps MagicaCloth2's tether here) converts
     the correction's per-step share by the step (``solve_tether``)."""
     g0 = BI[b, bk.BI_G0]
-    w = BI[b, bk.BI_WIDTH]
+    w = bk.lane_width(BI, b)
     attribute, root_index = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_ROOT_INDEX]
     compression_limit = 1.0 - P[b, PRM_TETHER_COMPRESSION]
     ratio = frequency_ratio if (P[b, PRM_RATE_MODE] != 0.0 and P[b, PRM_QUALITY] == 0.0) else 1.0
