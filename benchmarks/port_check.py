@@ -30,6 +30,9 @@ VARIANTS = {
     "faithful": [],
     "quality": ["parameters.solver.mode=quality"],
     "consistent": ["parameters.solver.rate_mode=frequency_consistent"],
+    # quality mode without the angle constraint (D.5/D.6): the quality passes on their own
+    "quality_no_angle": ["parameters.solver.mode=quality", "parameters.angle_restoration.use=false",
+                         "parameters.angle_limit.use=false"],
 }
 
 
