@@ -6,9 +6,10 @@
 For every scene (``configs/*.yaml`` and ``configs/hard/*.yaml``; those that need
 ``../shared/data`` are skipped when it is absent) and every variant (``faithful``: the file as
 it is; ``quality``: every cloth with ``solver.mode: quality``; ``consistent``: every cloth with
-``solver.rate_mode: frequency_consistent``; ``quality_no_bending``, ``quality_iterations``:
-quality mode without triangle bending, or with the ``iterations`` inextensibility option), the
-scene is loaded twice, the package's ``ClothSystem`` attached to one player and ``tests/reference_solver``'s per-team
+``solver.rate_mode: frequency_consistent``; ``moving_wind``: every cloth with
+``wind.moving_wind: 1``; ``quality_iterations``: quality mode with the ``iterations``
+inextensibility option), the scene is loaded twice, the package's
+``ClothSystem`` attached to one player and ``tests/reference_solver``'s per-team
 ``ClothSystem`` (the solver before the lane form, frozen) to the other, and both run frame by
 frame. After each frame the display positions of every team and the hierarchy's local and
 world poses are compared bit for bit; the first difference is reported with the frame, the
@@ -31,9 +32,13 @@ VARIANTS = {
     "faithful": [],
     "quality": ["parameters.solver.mode=quality"],
     "consistent": ["parameters.solver.rate_mode=frequency_consistent"],
-    # quality mode without triangle bending (D.7: a mesh cloth builds no bend or volume
-    # constraints): the mesh cloths' quality passes while bending is not in lane form
-    "quality_no_bending": ["parameters.solver.mode=quality", "parameters.triangle_bending.stiffness=0"],
+    # stages no showcase scene uses: edge collision (D.8 edge mode), the motion constraint (D.9)
+    "edge": ["collision_mode=edge"],
+    "motion": ["parameters.motion.use_max_distance=true", "parameters.motion.use_backstop=true"],
+    # every cloth a closed mesh: a fan of strands (the character's hair) then has volume pairs (D.7)
+    "loop_mesh": ["connection=sequential_loop_mesh"],
+    # the wind a cloth makes from its own movement (wind.moving_wind)
+    "moving_wind": ["parameters.wind.moving_wind=1.0"],
     # quality mode with the brute-force inextensibility option (D.4 passes, no drift)
     "quality_iterations": ["parameters.solver.mode=quality", "parameters.solver.inextensibility=iterations"],
 }

@@ -43,6 +43,21 @@ BASELINE_LOCAL_ROTATION = _m("baseline_local_rotation", 4, "xyzw; rest rotation 
                              QUATERNION)
 del _m
 
+# the depth curves of a block's parameter row evaluated at each particle's depth (EvaluateCurve,
+# §0.3; ``curve_at``, no clamp): written when a lane is placed or its parameters change
+# (``particle_parameters_block``), so that the stages read them per lane instead of looking the
+# curve up by depth in the step (a gather that stops the lane loops from vectorising)
+PARTICLE_PARAMETERS = RowTable("particle parameters", "particle slot")
+_q = PARTICLE_PARAMETERS.add
+CURVE_DAMPING = _q("damping", 1, "D.1 damping curve (x0.2 applied) at the depth")
+CURVE_RADIUS = _q("radius", 1, "m; D.8 collision radius curve at the depth")
+CURVE_DISTANCE_STIFFNESS = _q("distance_stiffness", 1, "D.4 stiffness curve at the depth")
+CURVE_RESTORATION_STIFFNESS = _q("restoration_stiffness", 1, "D.6 stiffness curve (x0.2 applied) at the depth")
+CURVE_LIMIT_ANGLE = _q("limit_angle", 1, "deg; D.5 limit angle curve at the depth")
+CURVE_MAX_DISTANCE = _q("max_distance", 1, "m; D.9 max distance curve at the depth squared")
+CURVE_BACKSTOP_DISTANCE = _q("backstop_distance", 1, "m; D.9 backstop distance curve at the depth squared")
+del _q
+
 TEAM_MODEL = RowTable("team model", "block")
 INIT_SCALE = TEAM_MODEL.add("init_scale", 3, "component lossy scale at build (B.10)", fill=1.0)
 INIT_LOCAL_GRAVITY = TEAM_MODEL.add("init_local_gravity", 3, "gravity reference in the center frame (C.2)")

@@ -82,28 +82,34 @@ def bind_row(PM, g, k, l):
 
 
 @kernel
-def matrix_row(a, i, k):
-    """Row k of matrix i of a ``(n, 4, 4)`` array, as a tuple."""
-    return (a[i, k, 0], a[i, k, 1], a[i, k, 2], a[i, k, 3])
-
-
-@kernel
 def skin_block(PS, PM, BI, PT, local_to_world, b, l0, l1):
     """C.1: one-bone skinning of every vertex of block b's lanes ``l0 .. l1 - 1`` with the bone
     matrices ``local_to_world`` (this frame's; quality mode's build reset passes the build
-    pose's): a read-only pass over the model and the matrices, writing position and rotation."""
+    pose's): a read-only pass over the model and the matrices, writing position and rotation.
+    Each vertex's bone matrix is first copied next to it (``BONE_MATRIX``; a gather through the
+    bone's node), so that the skinning loop reads one particle slot per table."""
     g0 = BI[b, bk.BI_G0]
     for j in range(BI[b, bk.BI_N]):
         g = g0 + j
         for l in range(l0, l1):
             node = PT[g, l]
-            pos, rot = skin_vertex(matrix_row(local_to_world, node, 0), matrix_row(local_to_world, node, 1),
-                                   matrix_row(local_to_world, node, 2),
+            for k in range(3):
+                for c in range(4):
+                    PS[g, st.BONE_MATRIX + (4 * k + c) * LANES + l] = local_to_world[node, k, c]
+        for l in range(l0, l1):
+            pos, rot = skin_vertex(bone_row(PS, g, 0, l), bone_row(PS, g, 1, l), bone_row(PS, g, 2, l),
                                    bind_row(PM, g, 0, l), bind_row(PM, g, 1, l), bind_row(PM, g, 2, l),
                                    bind_row(PM, g, 3, l), get3(PM, g, bk.LOCAL_POSITION, l),
                                    get3(PM, g, bk.LOCAL_NORMAL, l), get3(PM, g, bk.LOCAL_TANGENT, l))
             put3(PS, g, st.POSITION, l, pos)
             put4(PS, g, st.ROTATION, l, rot)
+
+
+@kernel
+def bone_row(PS, g, k, l):
+    """Row k of lane l's gathered bone matrix (``BONE_MATRIX``) as a 4-tuple."""
+    c = st.BONE_MATRIX + 4 * k * LANES
+    return (PS[g, c + l], PS[g, c + LANES + l], PS[g, c + 2 * LANES + l], PS[g, c + 3 * LANES + l])
 
 
 SMOOTHING_REFERENCE_RATE = 90.0   # 1/s: the frame rate at which the C.4 ratio is taken as is

@@ -55,10 +55,10 @@ from magica_py.solver.constraints.motion import motion_block
 from magica_py.solver.constraints.tether import tether_block
 from magica_py.solver.display import display_block, display_fraction, record_display_state_block
 from magica_py.solver.guards import check_lane, reset_lane_to_base
-from magica_py.solver.lanes import LANES, get1, get3, get4, put1
+from magica_py.solver.lanes import LANES, get1, get3, put1
 from magica_py.solver.parameters import (
     PRM_COLLISION_LAST, PRM_COLLISION_MODE, PRM_INEXTENSIBILITY, PRM_QUALITY, PRM_TELEPORT_DISTANCE,
-    PRM_TELEPORT_ROTATION, PRM_TIME_BASED_SMOOTHING, PRM_WIND_MOVING_WIND,
+    PRM_TELEPORT_ROTATION, PRM_TIME_BASED_SMOOTHING,
 )
 from magica_py.solver.quality import drift_applies, drift_begin_block, drift_end_block, quality_end_of_step_block
 from magica_py.solver.quality_display import display_constraints_block
@@ -70,10 +70,11 @@ from magica_py.wind.force import wind_block
 TimeArrays = namedtuple("TimeArrays", TeamTimeState.FIELDS)
 # the solver's tables as the frame kernel takes them (``system.ClothSystem.tables``):
 # state (PS, TS, CS, TRS triangle and EDS edge scratch), per-lane model (PM, TM, LM link, TRM
-# triangle, BM bend, VM volume), parameters P (one row per block), block ints BI and topology,
+# triangle, BM bend, VM volume), parameters P (one row per block) and PP (its depth curves at
+# each particle: ``blocks.PARTICLE_PARAMETERS``), block ints BI and topology,
 # per-lane hierarchy nodes (PT particles, TI teams, CT collider slots), the live block ids
 Tables = namedtuple("Tables", [
-    "PS", "TS", "CS", "TRS", "EDS", "PM", "TM", "LM", "TRM", "BM", "VM", "P", "BI", "topology", "PT", "TI", "CT",
+    "PS", "TS", "CS", "TRS", "EDS", "PM", "PP", "TM", "LM", "TRM", "BM", "VM", "P", "BI", "topology", "PT", "TI", "CT",
     "blocks"])
 HierarchyArrays = namedtuple("HierarchyArrays", [
     "parent", "local_position", "local_rotation", "world_position", "world_rotation",
@@ -282,7 +283,7 @@ def lane_team(TI, b, l):
 def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones):
     """One simulation step of block b (§D.0 order): every lane at its own frame
     interpolation (``FRAME_INTERPOLATION``)."""
-    PS, TS, CS, PM, TM, P, BI, topology = T.PS, T.TS, T.CS, T.PM, T.TM, T.P, T.BI, T.topology
+    PS, TS, CS, PM, PP, TM, P, BI, topology = T.PS, T.TS, T.CS, T.PM, T.PP, T.TM, T.P, T.BI, T.topology
     dt = fi.dt
     ratio = fi.frequency_ratio
     tether_attenuation, distance_attenuation, limit_attenuation, restoration_attenuation, motion_attenuation = \
@@ -290,18 +291,18 @@ def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, moti
     for l in range(BI[b, bk.BI_WIDTH]):
         team_step_lane(TS, TM, P, b, l, dt)
     collider_step_block(CS, TS, BI, topology, b)
-    predict_block(PS, PM, TS, P, BI, topology, b, dt, ratio, fi.power_z)
+    predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, ratio, fi.power_z)
     if wind is not None:
         wind_block(PS, PM, TS, T.TI, P, BI, topology, b, dt, wind_zones)
     step_basic_pose_block(PS, PM, TS, TM, P, BI, topology, b)
     tether_block(PS, P, BI, topology, b, tether_attenuation, ratio)
-    distance_block(PS, PM, TS, TM, T.LM, P, BI, topology, b, ratio, fi.power_y, distance_attenuation)
+    distance_block(PS, PM, PP, TS, TM, T.LM, P, BI, topology, b, ratio, fi.power_y, distance_attenuation)
     drift = False
     if angle is not None:
         drift = quality is not None and drift_applies(P, b)
         if drift:   # quality mode: the angle pass's kept-out share, a drift the passes do not see
             drift_begin_block(PS, BI, b)
-        angle_block(PS, PM, TS, P, BI, topology, b, ratio, fi.power_w, limit_attenuation, restoration_attenuation)
+        angle_block(PS, PP, TS, P, BI, topology, b, ratio, fi.power_w, limit_attenuation, restoration_attenuation)
         if drift:
             drift_end_block(PS, BI, topology, b)
     if bending is not None:
@@ -310,16 +311,16 @@ def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, moti
     if BI[b, bk.BI_COLLIDERS] > 0:
         if point_collision is not None:
             if P[b, PRM_COLLISION_MODE] == 1.0:
-                point_collision_block(PS, PM, TS, CS, P, BI, topology, b)
+                point_collision_block(PS, PP, TS, CS, BI, topology, b)
         if edge_collision is not None:
             if P[b, PRM_COLLISION_MODE] == 2.0:
-                edge_collision_block(PS, PM, TS, CS, P, BI, topology, b)
-    distance_block(PS, PM, TS, TM, T.LM, P, BI, topology, b, ratio, fi.power_y, distance_attenuation)
+                edge_collision_block(PS, PP, TS, CS, BI, topology, b)
+    distance_block(PS, PM, PP, TS, TM, T.LM, P, BI, topology, b, ratio, fi.power_y, distance_attenuation)
     if motion is not None:
-        motion_block(PS, PM, TS, P, BI, topology, b, motion_attenuation)
+        motion_block(PS, PP, TS, P, BI, topology, b, motion_attenuation)
     if quality is not None:
         if P[b, PRM_INEXTENSIBILITY] != 0.0 or P[b, PRM_COLLISION_LAST] != 0.0:  # quality mode (§D.0)
-            quality_end_of_step_block(PS, PM, TS, TM, CS, T.LM, T.EDS, P, BI, topology, b, ratio, fi.power_y,
+            quality_end_of_step_block(PS, PM, PP, TS, TM, CS, T.LM, T.EDS, P, BI, topology, b, ratio, fi.power_y,
                                       distance_attenuation, drift)
     end_step_block(PS, PM, TS, P, BI, topology, b, dt, ratio)
     if quality is not None:
@@ -430,7 +431,7 @@ def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles):
     display_block(PS, TS, P, BI, topology, b, dt, quality)
     if quality is not None:
         if P[b, PRM_TIME_BASED_SMOOTHING] != 0.0:
-            display_constraints_block(PS, PM, TS, CS, P, BI, topology, b, dt)  # quality mode (§E.1)
+            display_constraints_block(PS, T.PP, TS, CS, P, BI, topology, b, dt)  # quality mode (§E.1)
     if lines is not None:
         line_rotations_block(PS, PM, TS, P, BI, topology, b)
     if triangles is not None:

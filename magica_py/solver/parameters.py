@@ -20,6 +20,7 @@ import math
 import numpy as np
 
 from magica_py.jit import kernel
+from magica_py.solver import blocks as bk
 from magica_py.params import default_parameters
 from magica_py.solver.fields import F64, I32, U8, allocate, make_soa
 from magica_py.kernels import portable
@@ -424,3 +425,31 @@ def constraint_stiffness(k, frequency_ratio, power, rate_mode, quality):
     if rate_mode != 0 and quality == 0:
         return k
     return step_rate(k, frequency_ratio, power, rate_mode)
+
+
+@kernel
+def particle_parameters_block(PP, PM, P, BI, b):
+    """Block b's depth curves at every particle's depth, every lane (``blocks.PARTICLE_PARAMETERS``):
+    the values ``curve_at`` gives, computed when the block's row or a lane changes."""
+    g0 = BI[b, bk.BI_G0]
+    for g in range(g0, g0 + BI[b, bk.BI_N]):
+        for l in range(BI[b, bk.BI_WIDTH]):
+            depth = PM[g, bk.DEPTH + l]
+            PP[g, bk.CURVE_DAMPING + l] = curve_at(P, b, PRM_DAMPING_CURVE, depth)
+            PP[g, bk.CURVE_RADIUS + l] = curve_at(P, b, PRM_RADIUS_CURVE, depth)
+            PP[g, bk.CURVE_DISTANCE_STIFFNESS + l] = curve_at(P, b, PRM_DISTANCE_STIFFNESS_CURVE, depth)
+            PP[g, bk.CURVE_RESTORATION_STIFFNESS + l] = curve_at(P, b, PRM_RESTORATION_STIFFNESS_CURVE, depth)
+            PP[g, bk.CURVE_LIMIT_ANGLE + l] = curve_at(P, b, PRM_LIMIT_ANGLE_CURVE, depth)
+            # D.9 reads its curves at the depth squared
+            PP[g, bk.CURVE_MAX_DISTANCE + l] = curve_at(P, b, PRM_MAX_DISTANCE_CURVE, depth * depth)
+            PP[g, bk.CURVE_BACKSTOP_DISTANCE + l] = curve_at(P, b, PRM_BACKSTOP_DISTANCE_CURVE, depth * depth)
+
+
+@kernel
+def clamp01(v):
+    """``curve_at_clamp01``'s clamp of a curve value."""
+    if v < 0.0:
+        return 0.0
+    if v > 1.0:
+        return 1.0
+    return v

@@ -161,7 +161,7 @@ def ftl_pass_block(PS, BI, topology, b, damping):
 
 
 @kernel
-def ftl_collision_lane(PS, PM, TS, CS, P, BI, topology, b, l):
+def ftl_collision_lane(PS, PP, TS, CS, P, BI, topology, b, l):
     """Follow-the-leader with the colliders, after collision last, for a line cloth (lane l of
     block b): along each baseline, parents first, a child is moved into the ball of its
     step-basic rest length around its (final) parent and out of the team's colliders at this
@@ -193,7 +193,7 @@ def ftl_collision_lane(PS, PM, TS, CS, P, BI, topology, b, l):
             gv = g0 + v
             gp = g0 + p
             hits = (attr & INVALID_OR_NO_COLLISION) == 0
-            r = particle_radius(P, b, get1(PM, gv, bk.DEPTH, l), scale)
+            r = particle_radius(get1(PP, gv, bk.CURVE_RADIUS, l), scale)
             rest = v_length(v_sub(get3(PS, gv, st.STEP_BASIC_POS, l), get3(PS, gp, st.STEP_BASIC_POS, l)))
             parent_pos = get3(PS, gp, st.NEXT_POS, l)
             if hits:
@@ -452,7 +452,7 @@ def edge_projection_lane(PS, PM, EDS, BI, topology, b, l, iterations, contacts):
 
 
 @kernel
-def collision_last_lane(PS, PM, TS, CS, P, BI, topology, b, l, carry):
+def collision_last_lane(PS, PP, TS, CS, BI, topology, b, l, carry):
     """Project every colliding moving particle of lane l of block b out of each collider
     (``collision_last_push``), ``COLLISION_LAST_ROUNDS`` rounds over the colliders so that a
     push out of one collider into another is undone. Friction and normals are left to D.8.
@@ -473,7 +473,7 @@ def collision_last_lane(PS, PM, TS, CS, P, BI, topology, b, l, carry):
         if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
             continue
         g = g0 + j
-        r = particle_radius(P, b, get1(PM, g, bk.DEPTH, l), scale)
+        r = particle_radius(get1(PP, g, bk.CURVE_RADIUS, l), scale)
         x = get3(PS, g, st.NEXT_POS, l)
         start_x = get3(PS, g, st.OLD_POS, l)
         velocity_pos = get3(PS, g, st.VELOCITY_POS, l)
@@ -646,7 +646,7 @@ def quality_restoration_attenuation(P, b, frequency_ratio, converted):
 
 
 @kernel
-def inextensibility_passes(PS, PM, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y,
+def inextensibility_passes(PS, PM, PP, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y,
                            distance_attenuation, mode, mesh, damping):
     """The inextensibility pass ``mode`` (module docstring) over every lane of block b;
     ``mesh``: the block has cross links (``has_cross_links``) and ``ftl_edges`` starts with
@@ -665,11 +665,11 @@ def inextensibility_passes(PS, PM, TS, TM, LM, EDS, P, BI, topology, b, frequenc
         ftl_pass_block(PS, BI, topology, b, damping)
     elif mode == INEXT_ITERATIONS:
         for _ in range(iterations):
-            distance_block(PS, PM, TS, TM, LM, P, BI, topology, b, frequency_ratio, power_y, distance_attenuation)
+            distance_block(PS, PM, PP, TS, TM, LM, P, BI, topology, b, frequency_ratio, power_y, distance_attenuation)
 
 
 @kernel
-def collision_last_rounds_lane(PS, PM, TS, CS, EDS, P, BI, topology, b, l, mode, mesh):
+def collision_last_rounds_lane(PS, PM, PP, TS, CS, EDS, P, BI, topology, b, l, mode, mesh):
     """Collision last of lane l of block b and what follows it (``quality_end_of_step_block``):
     the follow-the-leader with the colliders of a line cloth under an FTL mode, or the further
     rounds of a mesh cloth under ``ftl_edges``."""
@@ -677,9 +677,9 @@ def collision_last_rounds_lane(PS, PM, TS, CS, EDS, P, BI, topology, b, l, mode,
         g0 = BI[b, bk.BI_G0]
         for j in range(BI[b, bk.BI_N]):
             put3(PS, g0 + j, st.PROJECTION_CONTACT, l, ZERO3)
-    pushed = collision_last_lane(PS, PM, TS, CS, P, BI, topology, b, l, True)
+    pushed = collision_last_lane(PS, PP, TS, CS, BI, topology, b, l, True)
     if not mesh and pushed > 0 and (mode == INEXT_FTL or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES):
-        ftl_collision_lane(PS, PM, TS, CS, P, BI, topology, b, l)
+        ftl_collision_lane(PS, PP, TS, CS, P, BI, topology, b, l)
     if mesh:
         iterations = int(P[b, PRM_DISTANCE_ITERATIONS])
         for _ in range(SHAPE_ROUNDS - 1):
@@ -687,11 +687,11 @@ def collision_last_rounds_lane(PS, PM, TS, CS, EDS, P, BI, topology, b, l, mode,
                 break
             for _ in range(iterations):
                 edge_pass_lanes(PS, PM, BI, topology, b, l, l + 1)
-            pushed = collision_last_lane(PS, PM, TS, CS, P, BI, topology, b, l, False)
+            pushed = collision_last_lane(PS, PP, TS, CS, BI, topology, b, l, False)
 
 
 @kernel
-def quality_end_of_step_block(PS, PM, TS, TM, CS, LM, EDS, P, BI, topology, b, frequency_ratio, power_y,
+def quality_end_of_step_block(PS, PM, PP, TS, TM, CS, LM, EDS, P, BI, topology, b, frequency_ratio, power_y,
                               distance_attenuation, drift):
     """The quality passes of block b after D.9 (see the module docstring): the
     inextensibility pass, then collision last. A mesh cloth under ``ftl_edges`` that collides
@@ -712,15 +712,15 @@ def quality_end_of_step_block(PS, PM, TS, TM, CS, LM, EDS, P, BI, topology, b, f
     mode = int(P[b, PRM_INEXTENSIBILITY])
     mesh = mode == INEXT_FTL_EDGES and has_cross_links(BI, topology, b)
     collide = P[b, PRM_COLLISION_LAST] != 0.0 and BI[b, bk.BI_COLLIDERS] > 0 and P[b, PRM_COLLISION_MODE] != 0.0
-    inextensibility_passes(PS, PM, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y,
+    inextensibility_passes(PS, PM, PP, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y,
                            distance_attenuation, mode, mesh, P[b, PRM_FTL_DAMPING])
     if drift:
-        drift_in_block(PS, PM, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y, distance_attenuation,
+        drift_in_block(PS, PM, PP, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y, distance_attenuation,
                        mode, mesh)
     if not collide:
         return
     for l in range(BI[b, bk.BI_WIDTH]):
-        collision_last_rounds_lane(PS, PM, TS, CS, EDS, P, BI, topology, b, l, mode, mesh)
+        collision_last_rounds_lane(PS, PM, PP, TS, CS, EDS, P, BI, topology, b, l, mode, mesh)
 
 
 @kernel
@@ -767,8 +767,8 @@ def drift_end_block(PS, BI, topology, b):
 
 
 @kernel
-def drift_in_block(PS, PM, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y, distance_attenuation, mode,
-                   mesh):
+def drift_in_block(PS, PM, PP, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y, distance_attenuation,
+                   mode, mesh):
     """The drift put back into next_pos and velocity_pos after the inextensibility pass, then
     the pass again (no DFTL reaction; a line cloth's tether and FTL only, a mesh cloth's without
     the edge projection) over the drifted positions with velocity_pos moved with every
@@ -794,7 +794,7 @@ def drift_in_block(PS, PM, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio,
     # a line cloth's edges are its parent links, which follow-the-leader alone brings within
     # their rest lengths: its edge passes are left out here (the tether and FTL remain)
     drift_mode = INEXT_FTL_TETHER if (mode == INEXT_FTL_EDGES and not mesh) else mode
-    inextensibility_passes(PS, PM, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y,
+    inextensibility_passes(PS, PM, PP, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y,
                            distance_attenuation, drift_mode, False, 0.0)
     for j in range(n):
         if (topology[attribute + j] & MOVE) == 0:

@@ -132,7 +132,7 @@ def safe_fraction(e0, de, bound):
 
 
 @kernel
-def display_constraints_lane(PS, PM, TS, CS, P, BI, topology, b, l, dt):
+def display_constraints_lane(PS, PP, TS, CS, P, BI, topology, b, l, dt):
     """Quality display of lane l of block b after E.1 (``display.display_block``): the
     interpolated display in ``POSITION`` (every edge within its bound,
     ``display_edge_bound``) moved towards a target that is out of the colliders at this
@@ -186,7 +186,7 @@ def display_constraints_lane(PS, PM, TS, CS, P, BI, topology, b, l, dt):
             parent_pos = get3(PS, gp, st.POSITION, l)
             x = get3(PS, gv, st.POSITION, l)
             hits = collide and (attr & INVALID_OR_NO_COLLISION) == 0
-            r = particle_radius(P, b, get1(PM, gv, bk.DEPTH, l), scale)
+            r = particle_radius(get1(PP, gv, bk.CURVE_RADIUS, l), scale)
             for _ in range(DISPLAY_PASSES):
                 if hits:
                     for c in range(colliders):
@@ -269,7 +269,7 @@ def display_constraints_lane(PS, PM, TS, CS, P, BI, topology, b, l, dt):
 
 
 @kernel
-def display_constraints_block(PS, PM, TS, CS, P, BI, topology, b, dt):
+def display_constraints_block(PS, PP, TS, CS, P, BI, topology, b, dt):
     """The quality display (``display_constraints_lane``) of every lane of block b."""
     for l in range(BI[b, bk.BI_WIDTH]):
-        display_constraints_lane(PS, PM, TS, CS, P, BI, topology, b, l, dt)
+        display_constraints_lane(PS, PP, TS, CS, P, BI, topology, b, l, dt)

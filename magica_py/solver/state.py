@@ -54,6 +54,8 @@ ACCUM3 = _p("accum3", 3, "m; scratch: a correction summed over a particle's link
 ACCUM_N = _p("accum_n", 1, "scratch: the number of links summed in accum3")
 CONTACT_NORMAL_SUM = _p("contact_normal_sum", 3, "scratch of D.8 point mode: normals of the colliders penetrated")
 CONTACT_NEAR_SUM = _p("contact_near_sum", 3, "scratch of D.8 point mode: normals of the colliders within range")
+BONE_MATRIX = _p("bone_matrix", 12, "scratch of C.1: the first three rows of the bone's local-to-world matrix, "
+                 "row major (gathered from the hierarchy)")
 CHILD_REST_SUM = _p("child_rest_sum", 3, "scratch of E.2: the children's rest edges summed (ctv)")
 CHILD_EDGE_SUM = _p("child_edge_sum", 3, "scratch of E.2: the children's simulated edges summed (cv)")
 CONTACT_MIN_DIST = _p("contact_min_dist", 1, "m; scratch of D.8 point mode: closest distance within range")
@@ -190,6 +192,12 @@ WIND_ZONE_TURBULENCE = _t("wind_zone_turbulence", WIND_SLOTS, "the zone's turbul
 MOVING_WIND_MAIN = _t("moving_wind_main", 1, "m/s; wind from the team's own movement at this step (0: none)")
 MOVING_WIND_TIME = _t("moving_wind_time", 1, "phase time of the moving wind")
 WIND_FELT = _t("wind_felt", 3, "m/s^2; mean wind acceleration over the Move particles at the last step")
+# wind (wind.force.wind_block): the lane's part of a step, kept for its particle loop
+WIND_RUNS = _t("wind_runs", 1, "1: the lane's particles take wind at this step (wind_lane)", INTEGER)
+WIND_ZONE_FRAME = _t("wind_zone_frame", 4 * WIND_SLOTS, "direction_angles (cos x, sin x, cos y, sin y) of each "
+                     "slot's direction at this step (4 rows per slot)")
+MOVING_WIND_FRAME = _t("moving_wind_frame", 4, "direction_angles of the moving wind's direction at this step")
+WIND_LINE = _t("wind_line", 3, "m/s; wind at the root line of the particle being pushed (scratch)")
 del _t
 
 COLLIDER = RowTable("collider state", "collider slot")

@@ -24,10 +24,10 @@ from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
 from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
 from magica_py.solver.parameters import (
-    PRM_BLEND_WEIGHT, PRM_CENTRIFUGAL_ACCELERATION, PRM_DAMPING_CURVE, PRM_DEPTH_INERTIA, PRM_FRICTION, PRM_GRAVITY,
+    PRM_BLEND_WEIGHT, PRM_CENTRIFUGAL_ACCELERATION, PRM_DEPTH_INERTIA, PRM_FRICTION, PRM_GRAVITY,
     PRM_GRAVITY_DIRECTION, PRM_GRAVITY_FALLOFF, PRM_LOCAL_INERTIA, PRM_LOCAL_MOVEMENT_SPEED_LIMIT,
     PRM_LOCAL_ROTATION_SPEED_LIMIT, PRM_ANIMATION_POSE_RATIO, PRM_PARTICLE_SPEED_LIMIT, PRM_RATE_MODE,
-    PRM_STABILIZATION_TIME, curve_at_clamp01, step_keep, step_rate, step_share,
+    PRM_STABILIZATION_TIME, clamp01, step_keep, step_rate, step_share,
 )
 
 MOVE = 0x02
@@ -177,14 +177,14 @@ def predict_move_shifted(old_pos, velocity, depth, old_world_pos, iv, iq, veloci
 
 
 @kernel
-def damping_keep_at(P, b, depth, frequency_ratio, power_z):
-    """D.1's velocity factor at a depth: saturate(1 - step rate of the damping curve)."""
-    damp = curve_at_clamp01(P, b, PRM_DAMPING_CURVE, depth)
-    return saturate(1.0 - step_rate(damp, frequency_ratio, power_z, int(P[b, PRM_RATE_MODE])))
+def damping_keep(damping, frequency_ratio, power_z, rate_mode):
+    """D.1's velocity factor of a particle whose damping curve value is ``damping``:
+    saturate(1 - step rate of the clamped damping)."""
+    return saturate(1.0 - step_rate(clamp01(damping), frequency_ratio, power_z, rate_mode))
 
 
 @kernel
-def predict_block(PS, PM, TS, P, BI, topology, b, dt, frequency_ratio, power_z):
+def predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, frequency_ratio, power_z):
     """D.1 over block b: animated pose at this step, inertia shift, damping, forces,
     prediction (each lane at its own frame interpolation)."""
     g0 = BI[b, bk.BI_G0]
@@ -193,6 +193,7 @@ def predict_block(PS, PM, TS, P, BI, topology, b, dt, frequency_ratio, power_z):
     depth_inertia = P[b, PRM_DEPTH_INERTIA]
     g_dir = (P[b, PRM_GRAVITY_DIRECTION], P[b, PRM_GRAVITY_DIRECTION + 1], P[b, PRM_GRAVITY_DIRECTION + 2])
     g_mag = P[b, PRM_GRAVITY]
+    rate_mode = int(P[b, PRM_RATE_MODE])
     for j in range(BI[b, bk.BI_N]):
         g = g0 + j
         move = (topology[attribute + j] & MOVE) != 0
@@ -225,7 +226,8 @@ def predict_block(PS, PM, TS, P, BI, topology, b, dt, frequency_ratio, power_z):
                 get3(PS, g, st.OLD_POS, l), get3(PS, g, st.VELOCITY, l), depth, get3(TS, b, st.OLD_WORLD_POS, l),
                 get3(TS, b, st.INERTIA_VECTOR, l), get4(TS, b, st.INERTIA_ROTATION, l),
                 get3(TS, b, st.STEP_VECTOR, l), get4(TS, b, st.STEP_ROTATION, l), depth_inertia,
-                get1(TS, b, st.VELOCITY_WEIGHT, l), damping_keep_at(P, b, depth, frequency_ratio, power_z), gravity,
+                get1(TS, b, st.VELOCITY_WEIGHT, l),
+                damping_keep(get1(PP, g, bk.CURVE_DAMPING, l), frequency_ratio, power_z, rate_mode), gravity,
                 int(get1(TS, b, st.EXTERNAL_FORCE_MODE, l)), get3(TS, b, st.EXTERNAL_FORCE, l), scale, dt)
             put3(PS, g, st.VELOCITY, l, velocity)
             put3(PS, g, st.VELOCITY_POS, l, velocity_pos)

@@ -41,7 +41,7 @@ from magica_py.params import default_parameters
 from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, update_mode_code
 from magica_py.solver import state as st
 from magica_py.solver.blocks import (
-    BI_COLLIDERS, BI_N, LANES, TI_ANCHOR, TI_CULLING_REFERENCE, BlockLayout,
+    BI_COLLIDERS, BI_N, LANES, PARTICLE_PARAMETERS, TI_ANCHOR, TI_CULLING_REFERENCE, BlockLayout,
 )
 from magica_py.solver.colliders import collider_shapes, fill_slots
 from magica_py.solver.frame import (
@@ -50,7 +50,7 @@ from magica_py.solver.frame import (
 )
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
 from magica_py.solver.parameters import (
-    PARAMETER_COUNT, TeamParameters, allocate_parameters, packed_row, write_row,
+    PARAMETER_COUNT, allocate_parameters, packed_row, particle_parameters_block, write_row,
 )
 from magica_py.solver.fields import grow
 from magica_py.solver.views import TableView, team_model
@@ -134,6 +134,7 @@ class ClothSystem:
         self.EDS = st.EDGE_STATE.allocate(0)
         self.TS = st.TEAM.allocate(0)
         self.P = np.zeros((0, PARAMETER_COUNT))
+        self.PP = PARTICLE_PARAMETERS.allocate(0)
         self.time_state = TeamTimeState.allocate(team_count)
         for t, (spec, model) in enumerate(zip(self.specs, self.models)):
             self._place(t, spec, model)
@@ -175,9 +176,16 @@ class ClothSystem:
                 fill_slots(self.CS, items["collider"], lane, self.colliders, indices)
         else:
             self._write_lane_state(team, state)
+        self._write_block_parameters(team)
+
+    def _write_block_parameters(self, team: int) -> None:
+        """Team ``team``'s parameters into its block: the block's row of ``P`` (shared by its
+        lanes), the lane's transform-valued parameters, the depth curves ``PP`` of the block."""
+        b, lane = self.layout.place(team)
         self.P[b] = packed_row(self.parameters, team)
         self.layout.team_ints[b, TI_ANCHOR + lane] = int(self.parameters.anchor_transform[team])
         self.layout.team_ints[b, TI_CULLING_REFERENCE + lane] = int(self.parameters.culling_reference[team])
+        particle_parameters_block(self.PP, self.layout.particle_model, self.P, self.layout.block_ints, b)
 
     def _fit_state(self) -> None:
         """The state tables at the layout's capacities (old rows kept, new rows fresh)."""
@@ -190,6 +198,7 @@ class ClothSystem:
 
         for name, table, pool in _STATE_TABLES:
             setattr(self, name, fit(getattr(self, name), table, self.layout.capacity(pool)))
+        self.PP = fit(self.PP, PARTICLE_PARAMETERS, self.layout.capacity("particle"))
         self.TS = fit(self.TS, st.TEAM, self.layout.block_count)
         if self.P.shape[0] < self.layout.block_count:
             grown = np.zeros((max(self.layout.block_count, 2 * self.P.shape[0]), PARAMETER_COUNT))
@@ -337,7 +346,7 @@ class ClothSystem:
         self._views()
         lay = self.layout
         blocks = np.asarray([b for b, blk in enumerate(lay.blocks) if blk is not None], dtype=np.int32)
-        self.tables = Tables(self.PS, self.TS, self.CS, self.TRS, self.EDS, lay.particle_model, lay.team_model,
+        self.tables = Tables(self.PS, self.TS, self.CS, self.TRS, self.EDS, lay.particle_model, self.PP, lay.team_model,
                              lay.link_model, lay.triangle_model, lay.bend_model, lay.volume_model, self.P,
                              lay.block_ints, lay.topology, lay.particle_transform, lay.team_ints,
                              lay.collider_transform, blocks)
@@ -523,9 +532,7 @@ class ClothSystem:
             self._move_if_needed(t)
             b, lane = self.layout.place(t)
             moved = moved or self.layout.blocks[b].key != before
-            self.P[b] = packed_row(self.parameters, t)
-            self.layout.team_ints[b, TI_ANCHOR + lane] = int(self.parameters.anchor_transform[t])
-            self.layout.team_ints[b, TI_CULLING_REFERENCE + lane] = int(self.parameters.culling_reference[t])
+            self._write_block_parameters(t)
         if moved:
             self._tables_changed()
         self.stages = self.stage_switches()  # a changed parameter may need another stage
@@ -602,9 +609,7 @@ class ClothSystem:
             self._move_if_needed(t)
             b, lane = self.layout.place(t)
             moved = moved or self.layout.blocks[b].key != before
-            self.P[b] = packed_row(self.parameters, t)
-            self.layout.team_ints[b, TI_ANCHOR + lane] = int(self.parameters.anchor_transform[t])
-            self.layout.team_ints[b, TI_CULLING_REFERENCE + lane] = int(self.parameters.culling_reference[t])
+            self._write_block_parameters(t)
         for t, lane_state in state["lanes"].items():
             self._write_lane_state(t, lane_state)
         if self.wind is not None and state.get("wind") is not None:

@@ -29,8 +29,8 @@ from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
 from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
 from magica_py.solver.parameters import (
-    PRM_LIMIT_ANGLE_CURVE, PRM_LIMIT_STIFFNESS, PRM_RATE_MODE, PRM_RESTORATION_GRAVITY_FALLOFF,
-    PRM_RESTORATION_STIFFNESS_CURVE, PRM_USE_ANGLE_LIMIT, PRM_USE_RESTORATION, curve_at, curve_at_clamp01, step_rate,
+    PRM_LIMIT_STIFFNESS, PRM_RATE_MODE, PRM_RESTORATION_GRAVITY_FALLOFF, PRM_USE_ANGLE_LIMIT, PRM_USE_RESTORATION,
+    clamp01, step_rate,
 )
 
 MOVE = 0x02
@@ -89,16 +89,10 @@ def restoration_offset(a, v, vl, b, t):
 
 # ----------------------------------------------------------------------------- per element
 @kernel
-def limit_angle_at(P, b, depth):
-    """D.5 limit angle (rad) of a particle of block b at ``depth``."""
-    return math.radians(curve_at(P, b, PRM_LIMIT_ANGLE_CURVE, depth))
-
-
-@kernel
-def restoration_rate_at(P, b, depth, frequency_ratio, power_w):
-    """D.6 restoration stiffness of this step at ``depth``, before the team's gravity factor."""
-    kr = curve_at_clamp01(P, b, PRM_RESTORATION_STIFFNESS_CURVE, depth)
-    return saturate(step_rate(kr, frequency_ratio, power_w, int(P[b, PRM_RATE_MODE])))
+def restoration_rate(curve, frequency_ratio, power_w, rate_mode):
+    """D.6 restoration stiffness of this step of a particle whose stiffness curve value is
+    ``curve``, before the team's gravity factor."""
+    return saturate(step_rate(clamp01(curve), frequency_ratio, power_w, rate_mode))
 
 
 @kernel
@@ -244,7 +238,7 @@ def angle_restoration_entry(cp, pp, edge, next_c, vel_c, next_p, vel_p, rest_len
 
 # ----------------------------------------------------------------------------- per block
 @kernel
-def angle_block(PS, PM, TS, P, BI, topology, b, frequency_ratio, power_w, limit_attenuation, restoration_attenuation):
+def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_attenuation, restoration_attenuation):
     """D.5/D.6 over every baseline of block b, each entry's lanes side by side.
 
     The inverse mass (friction does not change in this routine), the restoration stiffness
@@ -257,6 +251,7 @@ def angle_block(PS, PM, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
         return
     limit_stiffness = P[b, PRM_LIMIT_STIFFNESS]
     falloff = P[b, PRM_RESTORATION_GRAVITY_FALLOFF]
+    rate_mode = int(P[b, PRM_RATE_MODE])
     g0 = BI[b, bk.BI_G0]
     w = BI[b, bk.BI_WIDTH]
     attribute, parent = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_PARENT]
@@ -284,15 +279,15 @@ def angle_block(PS, PM, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
                 put3(PS, gc, st.ANGLE_LOCAL_POS, l, local_pos)
                 put4(PS, gc, st.ANGLE_LOCAL_ROT, l, local_rot)
                 put3(PS, gc, st.ANGLE_REST_VECTOR, l, rest_vector)
-                depth = get1(PM, gc, bk.DEPTH, l)
                 if use_restoration:  # the rest direction does not change over the iterations
                     put1(PS, gc, st.ANGLE_REST_LENGTH, l, rest_length)
                     put3(PS, gc, st.ANGLE_REST_DIRECTION, l, rest_direction)
                     gravity_factor = restoration_gravity_factor(falloff, get1(TS, b, st.GRAVITY_DOT, l))
                     put1(PS, gc, st.ANGLE_RESTORATION_K, l,
-                         restoration_rate_at(P, b, depth, frequency_ratio, power_w) * gravity_factor)
+                         restoration_rate(get1(PP, gc, bk.CURVE_RESTORATION_STIFFNESS, l), frequency_ratio, power_w,
+                                          rate_mode) * gravity_factor)
                 if use_limit:
-                    max_angle = limit_angle_at(P, b, depth)
+                    max_angle = math.radians(get1(PP, gc, bk.CURVE_LIMIT_ANGLE, l))
                     put1(PS, gc, st.ANGLE_LIMIT, l, max_angle)
                     put1(PS, gc, st.ANGLE_LIMIT_COS, l, trig.cos(max_angle))
         for k in range(ITERATIONS):

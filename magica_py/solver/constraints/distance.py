@@ -19,8 +19,7 @@ from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
 from magica_py.solver.lanes import get1, get3, put1, put3
 from magica_py.solver.parameters import (
-    PRM_ANIMATION_POSE_RATIO, PRM_DISTANCE_STIFFNESS_CURVE, PRM_QUALITY, PRM_RATE_MODE, constraint_stiffness,
-    curve_at_clamp01,
+    PRM_ANIMATION_POSE_RATIO, PRM_QUALITY, PRM_RATE_MODE, clamp01, constraint_stiffness,
 )
 
 MOVE = 0x02
@@ -67,22 +66,23 @@ def distance_apply(position, velocity_pos, acc, n, attenuation):
 
 
 @kernel
-def distance_stiffness(P, b, depth, frequency_ratio, power_y):
-    """(vertical, horizontal) per-step stiffness of a particle at ``depth`` in block b."""
-    k = curve_at_clamp01(P, b, PRM_DISTANCE_STIFFNESS_CURVE, depth)
-    mode = int(P[b, PRM_RATE_MODE])
-    quality = int(P[b, PRM_QUALITY])
+def distance_stiffness(curve, frequency_ratio, power_y, mode, quality):
+    """(vertical, horizontal) per-step stiffness of a particle whose stiffness curve value is
+    ``curve``."""
+    k = clamp01(curve)
     return (saturate(constraint_stiffness(k, frequency_ratio, power_y, mode, quality)),
             saturate(constraint_stiffness(k * 0.5, frequency_ratio, power_y, mode, quality)))
 
 
 @kernel
-def distance_particle_terms(PS, PM, P, BI, topology, b, frequency_ratio, power_y):
+def distance_particle_terms(PS, PM, PP, P, BI, topology, b, frequency_ratio, power_y):
     """Every particle's inverse mass of this pass (1/50 when fixed) and its link stiffnesses,
     written to ``INVERSE_MASS``, ``K_VERTICAL``, ``K_HORIZONTAL``."""
     g0 = BI[b, bk.BI_G0]
     w = BI[b, bk.BI_WIDTH]
     attribute = BI[b, bk.BI_ATTRIBUTE]
+    mode = int(P[b, PRM_RATE_MODE])
+    quality = int(P[b, PRM_QUALITY])
     for j in range(BI[b, bk.BI_N]):
         g = g0 + j
         if (topology[attribute + j] & MOVE) == 0:
@@ -92,15 +92,16 @@ def distance_particle_terms(PS, PM, P, BI, topology, b, frequency_ratio, power_y
         for l in range(w):
             depth = get1(PM, g, bk.DEPTH, l)
             put1(PS, g, st.INVERSE_MASS, l, inverse_mass_friction_depth(get1(PS, g, st.FRICTION, l), depth))
-            k_vertical, k_horizontal = distance_stiffness(P, b, depth, frequency_ratio, power_y)
+            k_vertical, k_horizontal = distance_stiffness(get1(PP, g, bk.CURVE_DISTANCE_STIFFNESS, l), frequency_ratio,
+                                                          power_y, mode, quality)
             put1(PS, g, st.K_VERTICAL, l, k_vertical)
             put1(PS, g, st.K_HORIZONTAL, l, k_horizontal)
 
 
 @kernel
-def distance_block(PS, PM, TS, TM, LM, P, BI, topology, b, frequency_ratio, power_y, attenuation):
+def distance_block(PS, PM, PP, TS, TM, LM, P, BI, topology, b, frequency_ratio, power_y, attenuation):
     """D.4 over block b (Gauss-Seidel in particle order, every lane side by side)."""
-    distance_particle_terms(PS, PM, P, BI, topology, b, frequency_ratio, power_y)
+    distance_particle_terms(PS, PM, PP, P, BI, topology, b, frequency_ratio, power_y)
     g0 = BI[b, bk.BI_G0]
     w = BI[b, bk.BI_WIDTH]
     attribute = BI[b, bk.BI_ATTRIBUTE]

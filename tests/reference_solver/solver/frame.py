@@ -26,7 +26,7 @@ from numba import prange
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import load3, load4, q_angle, v_length, v_sub
-from magica_py.runtime.team_time import TeamTimeState, team_time_begin_step_team, team_time_end_frame, \
+from reference_solver.runtime.team_time import TeamTimeState, team_time_begin_step_team, team_time_end_frame, \
     team_time_frame_update
 from reference_solver.solver.attenuations import step_attenuations
 from reference_solver.solver.center import (

@@ -33,7 +33,7 @@ import numba
 import numpy as np
 
 from magica_py.params import default_parameters
-from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, update_mode_code
+from reference_solver.runtime.team_time import SimulationTimeSettings, TeamTimeState, update_mode_code
 from reference_solver.solver.colliders import fill_slots
 from reference_solver.solver.fields import F64
 from reference_solver.solver.frame import (
