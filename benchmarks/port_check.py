@@ -7,8 +7,9 @@ For every scene (``configs/*.yaml`` and ``configs/hard/*.yaml``; those that need
 ``../shared/data`` are skipped when it is absent) and every variant (``faithful``: the file as
 it is; ``quality``: every cloth with ``solver.mode: quality``; ``consistent``: every cloth with
 ``solver.rate_mode: frequency_consistent``; ``moving_wind``: every cloth with
-``wind.moving_wind: 1``), the scene is loaded twice, the package's
-``ClothSystem`` attached to one player and ``tests/reference_solver``'s per-team
+``wind.moving_wind: 1``; ``quality_iterations``, ``quality_edge``: quality mode with the
+``iterations`` inextensibility option, or with collision_mode edge), the scene is loaded
+twice, the package's ``ClothSystem`` attached to one player and ``tests/reference_solver``'s per-team
 ``ClothSystem`` (the solver before the lane form, frozen) to the other, and both run frame by
 frame. After each frame the display positions of every team and the hierarchy's local and
 world poses are compared bit for bit; the first difference is reported with the frame, the
@@ -38,6 +39,10 @@ VARIANTS = {
     "loop_mesh": ["connection=sequential_loop_mesh"],
     # the wind a cloth makes from its own movement (wind.moving_wind)
     "moving_wind": ["parameters.wind.moving_wind=1.0"],
+    # quality mode with the brute-force inextensibility option (D.4 passes, no drift)
+    "quality_iterations": ["parameters.solver.mode=quality", "parameters.solver.inextensibility=iterations"],
+    # quality mode after D.8 edge mode (collision last follows edge collision)
+    "quality_edge": ["parameters.solver.mode=quality", "collision_mode=edge"],
 }
 
 

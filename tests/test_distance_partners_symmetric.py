@@ -1,6 +1,6 @@
 """The distance constraint's partner lists (docs/solver.md §B.9, §D.4) are symmetric: when q is
 one of p's partners, p is one of q's, with the same signed rest length. Quality mode's display
-(``quality_display.display_constraints_team``, step 2) sees each link from its moving ends only and
+(``quality_display.display_constraints_block``, step 2) sees each link from its moving ends only and
 relies on it, and D.4's Gauss-Seidel pass treats both ends of a link alike. Checked on the
 build of every connection mode the configs use: line chains, a fan of strands, a looped mesh
 skirt, a VRM avatar's spring bones and a wind sheet."""

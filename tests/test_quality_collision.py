@@ -81,7 +81,7 @@ def state_edge_stretch(bq, name, params, duration=2.0):
 def test_a_root_passing_through_a_sphere_stretches_only_its_own_edge_and_the_display_stays_outside(bq):
     """The root passes inside the sphere: the state cannot keep its first edge and stay out
     of it, and collision wins there (7.1 %); the chain's other edges are held by the
-    collider-aware follow-the-leader after collision last (``quality.ftl_collision_team``;
+    collider-aware follow-the-leader after collision last (``quality.ftl_collision_lane``;
     before it: 24.1 % and 5.3 % on the first two edges). The quality display, within the
     lengths of the states it interpolates (tests/test_quality_display.py), shows no moving
     particle deeper inside the sphere than the state has one (0; only the fixed root, which

@@ -320,7 +320,7 @@ def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, moti
         motion_block(PS, PP, TS, P, BI, topology, b, motion_attenuation)
     if quality is not None:
         if P[b, PRM_INEXTENSIBILITY] != 0.0 or P[b, PRM_COLLISION_LAST] != 0.0:  # quality mode (§D.0)
-            quality_end_of_step_block(PS, PM, TS, TM, CS, T.LM, T.EDS, P, BI, topology, b, ratio, fi.power_y,
+            quality_end_of_step_block(PS, PM, PP, TS, TM, CS, T.LM, T.EDS, P, BI, topology, b, ratio, fi.power_y,
                                       distance_attenuation, drift)
     end_step_block(PS, PM, TS, P, BI, topology, b, dt, ratio)
     if quality is not None:
@@ -431,7 +431,7 @@ def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles):
     display_block(PS, TS, P, BI, topology, b, dt, quality)
     if quality is not None:
         if P[b, PRM_TIME_BASED_SMOOTHING] != 0.0:
-            display_constraints_block(PS, PM, TS, CS, P, BI, topology, b, dt)  # quality mode (§E.1)
+            display_constraints_block(PS, T.PP, TS, CS, P, BI, topology, b, dt)  # quality mode (§E.1)
     if lines is not None:
         line_rotations_block(PS, PM, TS, P, BI, topology, b)
     if triangles is not None:
