@@ -54,7 +54,7 @@ from magica_py.solver.constraints.distance import distance_block
 from magica_py.solver.constraints.motion import motion_block
 from magica_py.solver.constraints.tether import tether_block
 from magica_py.solver.display import display_block, display_fraction, record_display_state_block
-from magica_py.solver.guards import check_lane, reset_lane_to_base
+from magica_py.solver.guards import check_block, lane_guard_code, reset_lane_to_base
 from magica_py.solver.lanes import LANES, get1, get3, put1
 from magica_py.solver.parameters import (
     PRM_COLLISION_LAST, PRM_COLLISION_MODE, PRM_INEXTENSIBILITY, PRM_QUALITY, PRM_TELEPORT_DISTANCE,
@@ -64,7 +64,7 @@ from magica_py.solver.quality import drift_applies, drift_begin_block, drift_end
 from magica_py.solver.quality_display import display_constraints_block
 from magica_py.solver.rotations import line_rotations_block, triangle_rotations_block
 from magica_py.solver.step import end_step_block, predict_block, step_basic_pose_block, team_step_lane
-from magica_py.solver.writeback import transform_data_lane, write_transforms_lane
+from magica_py.solver.writeback import transform_block, write_transforms_lane
 from magica_py.wind.force import wind_block
 
 TimeArrays = namedtuple("TimeArrays", TeamTimeState.FIELDS)
@@ -416,11 +416,12 @@ def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles):
     frozen = frozen_lanes(TS, TI, b, w)
     if frozen:
         save_lanes(PS, TS, CS, BI, b, area)
+    check_block(PS, TS, BI, b)
     for l in range(w):
         t = lane_team(TI, b, l)
         if t < 0 or get1(TS, b, st.ACTIVE, l) == 0.0:
             continue
-        code = check_lane(PS, TS, BI, b, l)
+        code = lane_guard_code(TS, b, l)
         if code != 0:
             reset_lane_to_base(PS, TS, BI, b, l)
             put1(TS, b, st.GUARD_CODE, l, float(code))
@@ -436,13 +437,13 @@ def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles):
         line_rotations_block(PS, PM, TS, P, BI, topology, b)
     if triangles is not None:
         triangle_rotations_block(PS, T.TRS, T.TRM, BI, topology, b)
+    transform_block(PS, PM, TS, BI, PT, topology, b, h.parent, h.world_rotation, h.lossy_scale)
     for l in range(w):
         t = lane_team(TI, b, l)
         if t < 0 or get1(TS, b, st.ACTIVE, l) == 0.0:
             continue
-        if transform_data_lane(PS, PM, BI, b, l):
-            write_transforms_lane(PS, BI, PT, topology, b, l, h.parent, h.world_rotation, h.lossy_scale,
-                                  h.local_position, h.local_rotation)
+        if get1(TS, b, st.TRANSFORM_OK, l) != 0.0:
+            write_transforms_lane(PS, BI, PT, topology, b, l, h.local_position, h.local_rotation)
         else:
             reset_lane_to_base(PS, TS, BI, b, l)
             put1(TS, b, st.GUARD_CODE, l, 1.0)
@@ -545,29 +546,33 @@ def simulate_frame_parallel(T, tt, h, frame_values, area, wind_zones, wt, angle,
     return frame_counts(T, tt)
 
 
-@kernel
-def _least_loaded(wt, workers):
-    best = 0
-    for w in range(1, workers):
-        if wt.worker_load[w] < wt.worker_load[best]:
-            best = w
-    return best
-
-
 @kernel(forceinline=False)
 def assign_workers(T, tt, wt, workers):
-    """``wt.block_worker`` for this frame: the live blocks in order, each to the least loaded of
-    ``workers`` threads (ties to the lower thread), a block's load being its particle-steps
-    (its particles times the steps of its busiest lane, plus one for the frame stages)."""
+    """``wt.block_worker`` for this frame: the live blocks cut into ``workers`` runs of
+    consecutive blocks of about equal load (a block's load: its particles times the lanes it
+    uses times the steps of its busiest lane, plus one for the frame stages). Consecutive
+    blocks on one thread keep each thread's writes (particle and team rows, team clocks, the
+    bones written back) in one region of memory, away from the other threads'."""
+    total = np.int64(0)
+    for i in range(T.blocks.shape[0]):
+        total += block_load(T, tt, T.blocks[i])
     for w in range(workers):
         wt.worker_load[w] = 0
+    done = np.int64(0)
     for i in range(T.blocks.shape[0]):
         b = T.blocks[i]
-        steps = 0
-        for l in range(bk.lane_width(T.BI, b)):
-            t = T.TI[b, bk.TI_TEAM + l]
-            if t >= 0:
-                steps = max(steps, tt.update_count[t])
-        w = _least_loaded(wt, workers)
+        w = min(workers - 1, int((done * workers) // max(total, 1)))
+        load = block_load(T, tt, b)
         wt.block_worker[b] = w
-        wt.worker_load[w] += np.int64(T.BI[b, bk.BI_N]) * np.int64(T.BI[b, bk.BI_LANES_USED]) * np.int64(steps + 1)
+        wt.worker_load[w] += load
+        done += load
+
+
+@kernel
+def block_load(T, tt, b):
+    steps = 0
+    for l in range(bk.lane_width(T.BI, b)):
+        t = T.TI[b, bk.TI_TEAM + l]
+        if t >= 0:
+            steps = max(steps, tt.update_count[t])
+    return np.int64(T.BI[b, bk.BI_N]) * np.int64(T.BI[b, bk.BI_LANES_USED]) * np.int64(steps + 1)

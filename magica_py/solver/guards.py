@@ -38,20 +38,31 @@ def particle_verdict(old_pos, real_velocity, velocity, disp_pos, limit_sq):
 
 
 @kernel(forceinline=False)
-def check_lane(PS, TS, BI, b, l):
-    """The guard code of lane l's team after its steps (0 when healthy): one read-only pass
-    with the verdicts OR-ed; any non-finite value wins over a speed excess."""
-    # quality mode: the bound follows the cloth's length unit too (1.0 in faithful mode)
-    limit_sq = speed_limit_sq(get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l))
+def check_block(PS, TS, BI, b):
+    """Every lane's guard verdicts after its steps, side by side: ``GUARD_NON_FINITE`` and
+    ``GUARD_TOO_FAST`` (1 when any particle of the lane is non-finite / faster than the bound;
+    read by ``guard_code``). One read-only pass, the verdicts OR-ed."""
     g0 = BI[b, bk.BI_G0]
-    non_finite = False
-    too_fast = False
+    w = bk.lane_width(BI, b)
+    for l in range(w):
+        put1(TS, b, st.GUARD_NON_FINITE_SEEN, l, 0.0)
+        put1(TS, b, st.GUARD_TOO_FAST_SEEN, l, 0.0)
     for g in range(g0, g0 + BI[b, bk.BI_N]):
-        bad, fast = particle_verdict(get3(PS, g, st.OLD_POS, l), get3(PS, g, st.REAL_VELOCITY, l),
-                                     get3(PS, g, st.VELOCITY, l), get3(PS, g, st.DISP_POS, l), limit_sq)
-        non_finite = non_finite | bad
-        too_fast = too_fast | fast
-    return guard_code(non_finite, too_fast)
+        for l in range(w):
+            # quality mode: the bound follows the cloth's length unit too (1.0 in faithful mode)
+            limit_sq = speed_limit_sq(get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l))
+            bad, fast = particle_verdict(get3(PS, g, st.OLD_POS, l), get3(PS, g, st.REAL_VELOCITY, l),
+                                         get3(PS, g, st.VELOCITY, l), get3(PS, g, st.DISP_POS, l), limit_sq)
+            put1(TS, b, st.GUARD_NON_FINITE_SEEN, l, 1.0 if (bad | (get1(TS, b, st.GUARD_NON_FINITE_SEEN, l) != 0.0))
+                 else 0.0)
+            put1(TS, b, st.GUARD_TOO_FAST_SEEN, l, 1.0 if (fast | (get1(TS, b, st.GUARD_TOO_FAST_SEEN, l) != 0.0))
+                 else 0.0)
+
+
+@kernel
+def lane_guard_code(TS, b, l):
+    """The guard code of lane l after ``check_block`` (0 when healthy; non-finite wins)."""
+    return guard_code(get1(TS, b, st.GUARD_NON_FINITE_SEEN, l) != 0.0, get1(TS, b, st.GUARD_TOO_FAST_SEEN, l) != 0.0)
 
 
 @kernel

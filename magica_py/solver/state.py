@@ -62,6 +62,10 @@ PARENT_BASE_POS = _p("parent_base_pos", 3, "m; scratch of E.2: the parent bone's
 PARENT_POSITION = _p("parent_position", 3, "m; scratch of E.2: the parent bone's display position (gathered)")
 CHILD_REST_EDGE = _p("child_rest_edge", 3, "m; scratch of E.2: this child's rest edge from its parent (tv)")
 CHILD_EDGE = _p("child_edge", 3, "m; scratch of E.2: this child's simulated edge (its rest edge when fixed)")
+LOCAL_OUT_POSITION = _p("local_out_position", 3, "m; scratch of E.4: the local position the bone is written with")
+LOCAL_OUT_ROTATION = _p("local_out_rotation", 4, "xyzw; scratch of E.4: the local rotation the bone is written with",
+                        QUATERNION)
+PARENT_HAS_NODE = _p("parent_has_node", 1, "scratch of E.4: 1 when a fixed bone has a parent node")
 CHILD_REST_SUM = _p("child_rest_sum", 3, "scratch of E.2: the children's rest edges summed (ctv)")
 CHILD_EDGE_SUM = _p("child_edge_sum", 3, "scratch of E.2: the children's simulated edges summed (cv)")
 CONTACT_MIN_DIST = _p("contact_min_dist", 1, "m; scratch of D.8 point mode: closest distance within range")
@@ -130,6 +134,11 @@ ENABLED = _t("enabled", 1, "1: component enabled (lane in use)", INTEGER)
 CULLED = _t("culled", 1, "1: distance culled", INTEGER)
 SCALE_SUSPENDED = _t("scale_suspended", 1, "1: component scale below 1e-6 (A.4)", INTEGER)
 GUARD_CODE = _t("guard_code", 1, "0 ok, 1 non-finite, 2 speed bound exceeded (guards.py)", INTEGER)
+GUARD_NON_FINITE_SEEN = _t("guard_non_finite_seen", 1, "1: a particle of the team is non-finite (E.5 check, this frame)",
+                           INTEGER)
+GUARD_TOO_FAST_SEEN = _t("guard_too_fast_seen", 1, "1: a particle of the team is above the speed bound (E.5 check)",
+                         INTEGER)
+TRANSFORM_OK = _t("transform_ok", 1, "1: every value of the team's transform data is finite (E.4, this frame)", INTEGER)
 STEP_RUNS = _t("step_runs", 1, "1: the team runs the block's current step (A.6, begin of each step)", INTEGER)
 FRAME_INTERPOLATION = _t("frame_interpolation", 1, "[0,1]: the team's frame interpolation at this step (A.6)")
 DISPLAY_T = _t("display_t", 1, "[0,1]: E.1's frame interpolation of the display (the frame, before the end stages)")

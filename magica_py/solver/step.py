@@ -17,7 +17,7 @@ from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     lerp, q_angle, q_from_to, q_to_angle_axis,
     clamp_length, depth_mass, project_on_plane, q_mul,
-    q_normalize, q_rotate, q_slerp, saturate, v_add, v_cross,
+    q_normalize, q_normalize_select, q_rotate, q_slerp, q_slerp_select, saturate, v_add, v_cross,
     v_dot, v_length, v_length_sq, v_lerp, v_mul, v_normalize, v_scale, v_sub,
 )
 from magica_py.solver import blocks as bk
@@ -186,7 +186,10 @@ def damping_keep(damping, frequency_ratio, power_z, rate_mode):
 @kernel(forceinline=False)
 def predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, frequency_ratio, power_z):
     """D.1 over block b: animated pose at this step, inertia shift, damping, forces,
-    prediction (each lane at its own frame interpolation)."""
+    prediction (each lane at its own frame interpolation). The lane loops take the
+    branch-free forms (``*_select``: the same bits); where every lane is at the frame's last
+    step (t = 1) the animated rotation needs no slerp, and without depth inertia the step's
+    inertia needs no mix: those loops leave that work out."""
     g0 = BI[b, bk.BI_G0]
     w = bk.lane_width(BI, b)
     attribute = BI[b, bk.BI_ATTRIBUTE]
@@ -194,24 +197,30 @@ def predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, frequency_ratio, power
     g_dir = (P[b, PRM_GRAVITY_DIRECTION], P[b, PRM_GRAVITY_DIRECTION + 1], P[b, PRM_GRAVITY_DIRECTION + 2])
     g_mag = P[b, PRM_GRAVITY]
     rate_mode = int(P[b, PRM_RATE_MODE])
+    last = True   # every lane at t = 1
+    for l in range(w):
+        last = last & (get1(TS, b, st.FRAME_INTERPOLATION, l) == 1.0)
     for j in range(BI[b, bk.BI_N]):
         g = g0 + j
         move = (topology[attribute + j] & MOVE) != 0
-        for l in range(w):
-            t = get1(TS, b, st.FRAME_INTERPOLATION, l)
-            old_position = get3(PS, g, st.OLD_POSITION, l)
-            position = get3(PS, g, st.POSITION, l)
-            rotation = get4(PS, g, st.ROTATION, l)
-            if t == 1.0:  # the last step of a frame: predict_base_pose's select, without the slerp
-                base_pos = v_lerp(old_position, position, t)
-                base_rot = rotation
-            else:
-                base_pos, base_rot = predict_base_pose(old_position, position, get4(PS, g, st.OLD_ROTATION, l),
-                                                       rotation, t)
-            put3(PS, g, st.BASE_POS, l, base_pos)
-            put4(PS, g, st.BASE_ROT, l, base_rot)
-            put3(PS, g, st.STEP_BASIC_POS, l, base_pos)
-            put4(PS, g, st.STEP_BASIC_ROT, l, base_rot)
+        if last:
+            for l in range(w):
+                base_pos = v_lerp(get3(PS, g, st.OLD_POSITION, l), get3(PS, g, st.POSITION, l), 1.0)
+                put3(PS, g, st.BASE_POS, l, base_pos)
+                put3(PS, g, st.STEP_BASIC_POS, l, base_pos)
+                put4(PS, g, st.BASE_ROT, l, get4(PS, g, st.ROTATION, l))
+                put4(PS, g, st.STEP_BASIC_ROT, l, get4(PS, g, st.ROTATION, l))
+        else:
+            for l in range(w):
+                t = get1(TS, b, st.FRAME_INTERPOLATION, l)
+                rotation = get4(PS, g, st.ROTATION, l)
+                base_pos = v_lerp(get3(PS, g, st.OLD_POSITION, l), get3(PS, g, st.POSITION, l), t)
+                slerped = q_normalize_select(q_slerp_select(get4(PS, g, st.OLD_ROTATION, l), rotation, t))
+                base_rot = rotation if t == 1.0 else slerped   # predict_base_pose's paths
+                put3(PS, g, st.BASE_POS, l, base_pos)
+                put4(PS, g, st.BASE_ROT, l, base_rot)
+                put3(PS, g, st.STEP_BASIC_POS, l, base_pos)
+                put4(PS, g, st.STEP_BASIC_ROT, l, base_rot)
         if not move:
             for l in range(w):
                 base_pos = get3(PS, g, st.BASE_POS, l)
@@ -222,11 +231,17 @@ def predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, frequency_ratio, power
             depth = get1(PM, g, bk.DEPTH, l)
             gravity = v_scale(g_dir, g_mag * get1(TS, b, st.GRAVITY_RATIO, l))
             scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)   # forces follow the scale
-            velocity, velocity_pos, next_pos = predict_move(
+            iv = get3(TS, b, st.INERTIA_VECTOR, l)
+            iq = get4(TS, b, st.INERTIA_ROTATION, l)
+            if depth_inertia != 0.0:   # predict_move's depth-inertia mix, where k != 0
+                k = depth_inertia * (1.0 - depth * depth)
+                mixed_v = v_lerp(iv, get3(TS, b, st.STEP_VECTOR, l), k)
+                mixed_q = q_slerp_select(iq, get4(TS, b, st.STEP_ROTATION, l), k)
+                iv = mixed_v if k != 0.0 else iv
+                iq = mixed_q if k != 0.0 else iq
+            velocity, velocity_pos, next_pos = predict_move_shifted(
                 get3(PS, g, st.OLD_POS, l), get3(PS, g, st.VELOCITY, l), depth, get3(TS, b, st.OLD_WORLD_POS, l),
-                get3(TS, b, st.INERTIA_VECTOR, l), get4(TS, b, st.INERTIA_ROTATION, l),
-                get3(TS, b, st.STEP_VECTOR, l), get4(TS, b, st.STEP_ROTATION, l), depth_inertia,
-                get1(TS, b, st.VELOCITY_WEIGHT, l),
+                iv, iq, get1(TS, b, st.VELOCITY_WEIGHT, l),
                 damping_keep(get1(PP, g, bk.CURVE_DAMPING, l), frequency_ratio, power_z, rate_mode), gravity,
                 int(get1(TS, b, st.EXTERNAL_FORCE_MODE, l)), get3(TS, b, st.EXTERNAL_FORCE, l), scale, dt)
             put3(PS, g, st.VELOCITY, l, velocity)

@@ -14,7 +14,7 @@ from magica_py.jit import kernel
 from magica_py.kernels.math3d import q_inverse, q_mul, q_normalize, q_rotate, v_sub
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
-from magica_py.solver.lanes import get3, get4, put3, put4
+from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
 from magica_py.solver.rotations import q_normalize_or_identity
 
 FIXED = 0x01
@@ -37,21 +37,6 @@ def bone_rotation(rotation, v2t):
     return q_normalize_or_identity(q_mul(rotation, v2t))
 
 
-@kernel(forceinline=False)
-def transform_data_lane(PS, PM, BI, b, l):
-    """World transform data of every bone of lane l's team; returns False if any value is
-    non-finite."""
-    ok = True
-    g0 = BI[b, bk.BI_G0]
-    for g in range(g0, g0 + BI[b, bk.BI_N]):
-        pos = get3(PS, g, st.POSITION, l)
-        rot = bone_rotation(get4(PS, g, st.ROTATION, l), get4(PM, g, bk.VERTEX_TO_TRANSFORM_ROTATION, l))
-        put3(PS, g, st.TRANSFORM_POSITION, l, pos)
-        put4(PS, g, st.TRANSFORM_ROTATION, l, rot)
-        ok = ok & finite3(pos) & finite4(rot)
-    return ok
-
-
 @kernel(inline="always")
 def moving_bone_local(parent_rotation, parent_position, rotation, position, parent_scale):
     """E.4: local (position, rotation) of a moving bone under its parent particle's bone pose,
@@ -72,10 +57,64 @@ def fixed_bone_local(rotation, parent_world_rotation, has_parent):
 
 
 @kernel(forceinline=False)
-def write_transforms_lane(PS, BI, PT, topology, b, l, parent_node, world_rotation, lossy_scale,
-                          local_position, local_rotation):
-    """Write lane l's bones into the hierarchy's local pose arrays (scatters through the
-    bones' hierarchy nodes)."""
+def transform_block(PS, PM, TS, BI, PT, topology, b, parent_node, world_rotation, lossy_scale):
+    """E.4's world transform data of every bone of block b, every lane side by side, and the
+    local pose each bone will be written with (``LOCAL_OUT_*``): a moving bone's relative to
+    its parent particle's transform, a fixed bone's rotation under its parent node's current
+    world rotation (the hierarchy's values it needs gathered next to it first). Each lane's
+    ``TRANSFORM_OK`` is 1 when every value of its transform data is finite."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute, parent = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_PARENT]
+    for l in range(w):
+        put1(TS, b, st.TRANSFORM_OK, l, 1.0)
+    for j in range(BI[b, bk.BI_N]):
+        g = g0 + j
+        for l in range(w):
+            pos = get3(PS, g, st.POSITION, l)
+            rot = bone_rotation(get4(PS, g, st.ROTATION, l), get4(PM, g, bk.VERTEX_TO_TRANSFORM_ROTATION, l))
+            put3(PS, g, st.TRANSFORM_POSITION, l, pos)
+            put4(PS, g, st.TRANSFORM_ROTATION, l, rot)
+            ok = get1(TS, b, st.TRANSFORM_OK, l) != 0.0
+            put1(TS, b, st.TRANSFORM_OK, l, 1.0 if (ok & finite3(pos) & finite4(rot)) else 0.0)
+    for j in range(BI[b, bk.BI_N]):
+        attr = topology[attribute + j]
+        g = g0 + j
+        if (attr & MOVE) != 0:
+            pp = topology[parent + j]
+            if pp < 0:
+                continue
+            gp = g0 + pp
+            for l in range(w):   # the parent's transform and its node's scale next to the bone
+                node = PT[gp, l]
+                put3(PS, g, st.PARTNER_POS, l, get3(PS, gp, st.TRANSFORM_POSITION, l))
+                put4(PS, g, st.PARENT_ROTATION, l, get4(PS, gp, st.TRANSFORM_ROTATION, l))
+                put3(PS, g, st.PARTNER_BASE, l, (lossy_scale[node, 0], lossy_scale[node, 1], lossy_scale[node, 2]))
+            for l in range(w):
+                lp, lq = moving_bone_local(get4(PS, g, st.PARENT_ROTATION, l), get3(PS, g, st.PARTNER_POS, l),
+                                           get4(PS, g, st.TRANSFORM_ROTATION, l), get3(PS, g, st.TRANSFORM_POSITION, l),
+                                           get3(PS, g, st.PARTNER_BASE, l))
+                put3(PS, g, st.LOCAL_OUT_POSITION, l, lp)
+                put4(PS, g, st.LOCAL_OUT_ROTATION, l, lq)
+        elif (attr & FIXED) != 0:
+            for l in range(w):   # the parent node's world rotation next to the bone (identity: no parent)
+                up = parent_node[PT[g, l]]
+                q = (world_rotation[up, 0], world_rotation[up, 1], world_rotation[up, 2], world_rotation[up, 3]) \
+                    if up >= 0 else (0.0, 0.0, 0.0, 1.0)
+                put4(PS, g, st.PARENT_ROTATION, l, q)
+                PS[g, st.PARENT_HAS_NODE + l] = 1.0 if up >= 0 else 0.0
+            for l in range(w):
+                rot = get4(PS, g, st.TRANSFORM_ROTATION, l)
+                under = fixed_bone_local(rot, get4(PS, g, st.PARENT_ROTATION, l), True)
+                alone = fixed_bone_local(rot, rot, False)
+                put4(PS, g, st.LOCAL_OUT_ROTATION, l, under if PS[g, st.PARENT_HAS_NODE + l] != 0.0 else alone)
+
+
+@kernel(forceinline=False)
+def write_transforms_lane(PS, BI, PT, topology, b, l, local_position, local_rotation):
+    """Write lane l's bones (``transform_block``'s local poses) into the hierarchy's local pose
+    arrays: a scatter through the bones' hierarchy nodes; invalid bones and a moving bone
+    without a parent particle are left alone."""
     g0 = BI[b, bk.BI_G0]
     attribute, parent = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_PARENT]
     for j in range(BI[b, bk.BI_N]):
@@ -83,26 +122,14 @@ def write_transforms_lane(PS, BI, PT, topology, b, l, parent_node, world_rotatio
         g = g0 + j
         node = PT[g, l]
         if (attr & MOVE) != 0:
-            pp = topology[parent + j]
-            if pp < 0:
+            if topology[parent + j] < 0:
                 continue
-            gp = g0 + pp
-            pnode = PT[gp, l]
-            lp, lq = moving_bone_local(get4(PS, gp, st.TRANSFORM_ROTATION, l), get3(PS, gp, st.TRANSFORM_POSITION, l),
-                                       get4(PS, g, st.TRANSFORM_ROTATION, l), get3(PS, g, st.TRANSFORM_POSITION, l),
-                                       (lossy_scale[pnode, 0], lossy_scale[pnode, 1], lossy_scale[pnode, 2]))
+            lp = get3(PS, g, st.LOCAL_OUT_POSITION, l)
             local_position[node, 0] = lp[0]
             local_position[node, 1] = lp[1]
             local_position[node, 2] = lp[2]
-            for c in range(4):
-                local_rotation[node, c] = lq[c]
-        elif (attr & FIXED) != 0:
-            up = parent_node[node]
-            rot = get4(PS, g, st.TRANSFORM_ROTATION, l)
-            if up >= 0:
-                q = fixed_bone_local(rot, (world_rotation[up, 0], world_rotation[up, 1], world_rotation[up, 2],
-                                           world_rotation[up, 3]), True)
-            else:
-                q = fixed_bone_local(rot, rot, False)
-            for c in range(4):
-                local_rotation[node, c] = q[c]
+        elif (attr & FIXED) == 0:
+            continue
+        lq = get4(PS, g, st.LOCAL_OUT_ROTATION, l)
+        for c in range(4):
+            local_rotation[node, c] = lq[c]
