@@ -279,7 +279,7 @@ def lane_team(TI, b, l):
     return TI[b, bk.TI_TEAM + l]
 
 
-@kernel(forceinline=False)
+@kernel(forceinline=False, inline="always")
 def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones):
     """One simulation step of block b (§D.0 order): every lane at its own frame
     interpolation (``FRAME_INTERPOLATION``)."""
@@ -345,7 +345,7 @@ def restore_frozen(PS, TS, CS, TI, BI, b, w, area):
             restore_lane(PS, TS, CS, BI, b, l, area)
 
 
-@kernel(forceinline=False)
+@kernel(forceinline=False, inline="always")
 def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, edge_collision, motion, quality,
                       wind, wind_zones):
     """Block b's frame up to the write-back: its lanes' begin of frame and the steps (each
@@ -406,7 +406,7 @@ def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, ed
                     restore_lane(PS, TS, CS, BI, b, l, area)
 
 
-@kernel(forceinline=False)
+@kernel(forceinline=False, inline="always")
 def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles):
     """Block b's stages after the steps: guards, E.1-E.4 and A.7 of every active lane (the
     frame's team clocks read per lane); lanes that are not simulated keep their state."""
