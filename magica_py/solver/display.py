@@ -9,7 +9,7 @@ With ``solver.time_based_smoothing`` on (quality mode) the display is built from
 step states, each carried in its *display frame* (the particle's fixed root at that step, or
 the team center for a particle without one) and shown in that frame's pose of this frame
 (docs/quality-mode.md, *Display*). ``L_k(p) = root_rot_k^-1 (x_k(p) - root_pos_k)`` is
-recorded at the end of step k (``record_display_state_team``), and
+recorded at the end of step k (``record_display_state_block``), and
 
     shown(p, s) = root_pos + root_rot * lerp(L_{k-1}(p), L_k(p), s)
 
@@ -18,7 +18,7 @@ latency. A rotation keeps lengths and a lerp of two vectors is no longer
 than the longer of them, so in the interpolated display an edge between two particles of the
 same root (or of roots moving rigidly together) is never longer than in one of the two
 states: it shows no stretch the state does not have, at any render rate, and it is a function
-of time only. ``display_team`` writes it; ``quality_display.display_constraints_team`` then moves it out of
+of time only. ``display_block`` writes it; ``quality_display.display_constraints_block`` then moves it out of
 the colliders at this frame's pose as far as the edge bounds allow.
 """
 from __future__ import annotations
