@@ -53,6 +53,7 @@ class RowTable:
         self.fields: dict[str, tuple[int, int, str, str]] = {}   # name -> (first row, rows, kind, doc)
         self.rows = 0
         self.fill: dict[str, float] = {}
+        self._fresh = None   # fresh_row's result, made on first use
 
     def add(self, name: str, size: int, doc: str, kind: str = FLOAT, fill: float | None = None) -> int:
         if name in self.fields:
@@ -60,6 +61,7 @@ class RowTable:
         if kind == QUATERNION and size != 4:
             raise ValueError(f"{self.name}: quaternion field {name!r} must have 4 rows")
         self.fields[name] = (self.rows, size, kind, doc)
+        self._fresh = None
         if fill is not None:
             self.fill[name] = float(fill)
         self.rows += size
@@ -76,26 +78,33 @@ class RowTable:
     def size(self, name: str) -> int:
         return self.fields[name][1]
 
+    def fresh_row(self) -> np.ndarray:
+        """One item's fresh values, every lane: zeros, identity quaternions, declared fills
+        (read-only; made once)."""
+        if self._fresh is not None:
+            return self._fresh
+        row = np.zeros(self.width)
+        for name, (first, size, kind, _doc) in self.fields.items():
+            fill = self.fill.get(name, 0.0)
+            for r in range(size):
+                row[(first + r) * LANES:(first + r + 1) * LANES] = 1.0 if (kind == QUATERNION and r == 3) else fill
+        row.flags.writeable = False
+        self._fresh = row
+        return row
+
     def allocate(self, items: int) -> np.ndarray:
         """A fresh table of ``items`` items: zeros, identity quaternions, declared fills."""
-        table = np.zeros((items, self.width))
-        for name in self.fields:
-            self.reset_field(table, name, slice(None))
+        table = np.empty((items, self.width))
+        table[:] = self.fresh_row()
         return table
 
-    def reset_field(self, table: np.ndarray, name: str, items, lanes=slice(None)) -> None:
-        """Field ``name`` of ``items`` (an index or slice) and ``lanes`` back to its fresh value."""
-        first, size, kind, _doc = self.fields[name]
-        fill = self.fill.get(name, 0.0)
-        for r in range(size):
-            value = 1.0 if (kind == QUATERNION and r == 3) else fill
-            cols = np.arange(LANES)[lanes] + (first + r) * LANES
-            table[items, cols] = value
-
     def reset_lanes(self, table: np.ndarray, items, lanes) -> None:
-        """Every field of ``items`` for ``lanes`` (an index, slice or list) to its fresh value."""
-        for name in self.fields:
-            self.reset_field(table, name, items, lanes)
+        """Every field of ``items`` (an index, slice or array) for ``lanes`` (an index, slice or
+        list) back to its fresh value."""
+        lanes = np.atleast_1d(np.arange(LANES)[lanes])
+        cols = (np.arange(self.rows)[:, None] * LANES + lanes[None, :]).ravel()
+        rows = np.atleast_1d(np.arange(table.shape[0])[items])
+        table[np.ix_(rows, cols)] = self.fresh_row()[cols]
 
     def view(self, table: np.ndarray, name: str, items, lane: int) -> np.ndarray:
         """Field ``name`` of ``items`` for one lane as an (n,) or (n, size) float64 array (a copy)."""

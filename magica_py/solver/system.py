@@ -162,7 +162,8 @@ class ClothSystem:
         indices = self._collider_indices(spec)
         shapes = collider_shapes(self.colliders, indices) if indices else []
         nodes = [int(self.colliders.transform[ci]) for ci in indices]
-        got = self.layout.add(model, self._key_extra(team), shapes, nodes, team=team)
+        row = packed_row(self.parameters, team)
+        got = self.layout.add(model, row.tobytes(), shapes, nodes, team=team)
         assert got == team
         self._fit_state()
         b, lane = self.layout.place(team)
@@ -176,13 +177,14 @@ class ClothSystem:
                 fill_slots(self.CS, items["collider"], lane, self.colliders, indices)
         else:
             self._write_lane_state(team, state)
-        self._write_block_parameters(team)
+        self._write_block_parameters(team, row)
 
-    def _write_block_parameters(self, team: int) -> None:
+    def _write_block_parameters(self, team: int, row=None) -> None:
         """Team ``team``'s parameters into its block: the block's row of ``P`` (shared by its
-        lanes), the lane's transform-valued parameters, the depth curves ``PP`` of the block."""
+        lanes; ``row``: the team's ``packed_row`` when known), the lane's transform-valued
+        parameters, the depth curves ``PP`` of the block."""
         b, lane = self.layout.place(team)
-        self.P[b] = packed_row(self.parameters, team)
+        self.P[b] = packed_row(self.parameters, team) if row is None else row
         self.layout.team_ints[b, TI_ANCHOR + lane] = int(self.parameters.anchor_transform[team])
         self.layout.team_ints[b, TI_CULLING_REFERENCE + lane] = int(self.parameters.culling_reference[team])
         particle_parameters_block(self.PP, self.layout.particle_model, self.P, self.layout.block_ints, b)
