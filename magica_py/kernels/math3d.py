@@ -574,3 +574,30 @@ def from_to_rotation_unit_select(a, b, t):
 def from_to_rotation_select(a, b, t):
     """``from_to_rotation`` without a branch."""
     return from_to_rotation_unit_select(v_normalize_select(a), v_normalize_select(b), t)
+
+
+@kernel
+def angle_between_vectors_select(a, b):
+    """``angle_between_vectors`` without a branch."""
+    la = v_length(a)
+    lb = v_length(b)
+    c = v_dot(a, b) / (la * lb)
+    c = 1.0 if c > 1.0 else c
+    c = -1.0 if c < -1.0 else c
+    angle = trig.acos(c)
+    return 0.0 if (la < 1e-12 or lb < 1e-12) else angle
+
+
+@kernel
+def clamp_angle_select(direction, base, max_angle):
+    """``clamp_angle`` without a branch."""
+    d = v_normalize_select(direction)
+    b = v_normalize_select(base)
+    c = v_dot(d, b)
+    c = 1.0 if c > 1.0 else c
+    c = -1.0 if c < -1.0 else c
+    alpha = trig.acos(c)
+    axis = orthogonal_axis_select(d) if abs(1.0 + c) < 1e-6 else v_normalize_select(v_cross(d, b))
+    turned = q_rotate(q_axis_angle(axis, alpha - max_angle), direction)
+    keep = (alpha <= max_angle) or (not (abs(1.0 + c) < 1e-6) and abs(1.0 - c) < 1e-6)
+    return direction if keep else turned

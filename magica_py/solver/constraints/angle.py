@@ -22,7 +22,7 @@ import math
 from magica_py.jit import kernel
 from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
-    angle_between_vectors, clamp_angle, inverse_mass_friction, lerp, orthogonal_axis_select, q_inverse,
+    angle_between_vectors_select, clamp_angle_select, inverse_mass_friction, lerp, orthogonal_axis_select, q_inverse,
     q_mul, q_rotate, saturate, v_add, v_cross, v_dot, v_length, v_scale, v_sub,
 )
 from magica_py.solver import blocks as bk
@@ -164,16 +164,22 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     edge = v_scale(v, 1.0 + s)
     edge_length = vl * (1.0 + s)
     edge_unit = vn
-    if violated:
-        rescaled = v_scale(vn, lc)
-        alpha = angle_between_vectors(rescaled, tn)
-        if alpha > max_angle:
-            turn = v_sub(clamp_angle(rescaled, tn, lerp(alpha, max_angle, stiffness)), rescaled)
-            dp = v_scale(turn, -LIMIT_PIVOT * wp)
-            dc = v_scale(v_add(v_scale(v, stretch), v_scale(turn, 1.0 - LIMIT_PIVOT)), wc)
-            edge = v_add(v, v_sub(dc, dp) if p_move else dc)
-            edge_length = v_length(edge)
-            edge_unit = v_scale(edge, 1.0 / edge_length)
+    # the violation's path, computed either way and selected (branch-free: the lane loop
+    # vectorises; the same bits as the reference's branches)
+    rescaled = v_scale(vn, lc)
+    alpha = angle_between_vectors_select(rescaled, tn)
+    turn = v_sub(clamp_angle_select(rescaled, tn, lerp(alpha, max_angle, stiffness)), rescaled)
+    limited_dp = v_scale(turn, -LIMIT_PIVOT * wp)
+    limited_dc = v_scale(v_add(v_scale(v, stretch), v_scale(turn, 1.0 - LIMIT_PIVOT)), wc)
+    limited_edge = v_add(v, v_sub(limited_dc, limited_dp) if p_move else limited_dc)
+    limited_length = v_length(limited_edge)
+    limited_unit = v_scale(limited_edge, 1.0 / limited_length)
+    limited = violated & (alpha > max_angle)
+    dp = limited_dp if limited else dp
+    dc = limited_dc if limited else dc
+    edge = limited_edge if limited else edge
+    edge_length = limited_length if limited else edge_length
+    edge_unit = limited_unit if limited else edge_unit
     solved_c = v_add(cp, dc)
     solved_vel_c = v_add(vel_c, v_scale(dc, attenuation))
     solved_p = v_add(pp, dp) if p_move else pp
