@@ -53,13 +53,6 @@ def scene_paths(names):
     return paths
 
 
-def overrides_for(path, variant):
-    from magica_py.config.document import load_document
-
-    doc = load_document(path) if False else None  # noqa: F841 (the cloth count comes from the scene below)
-    return VARIANTS[variant]
-
-
 def load(path, variant, frames):
     from magica_py.config import load_scene
 

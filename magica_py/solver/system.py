@@ -673,3 +673,20 @@ class ClothSystem:
         def resolve(name):
             return int(self.hierarchy.index(name))
         write_row(self.parameters, team, self.team_parameters[team], self.collision_modes[team], resolve)
+
+    # queries for tests and sinks
+    def collider_slots(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What each collider slot of ``collider_state`` is (team order, ``model.team_collider_start``
+        / ``team_collider_count`` ranges): ``(team, collider_index, shape)``, (S,) int32 each: the
+        slot's team, its collider's index in the scene's ``ColliderSet`` (slot k of a team is
+        its cloth's k-th collider, §G.3), and that collider's shape (0 sphere, 1 capsule, 2 plane)."""
+        team, index = [], []
+        for t in self.live_teams:
+            indices = self._collider_indices(self.specs[t])
+            team += [t] * len(indices)
+            index += indices
+        team = np.asarray(team, dtype=np.int32)
+        index = np.asarray(index, dtype=np.int32)
+        shape = (np.asarray(self.colliders.shape, dtype=np.int32)[index] if index.size
+                 else np.zeros(0, dtype=np.int32))
+        return team, index, shape
