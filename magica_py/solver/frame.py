@@ -14,7 +14,7 @@ and give the same bits.
 not simulated this frame (disabled, culled, scale-suspended: ``ACTIVE`` 0) or that runs
 fewer steps than its neighbours (another time scale, a reset clock) keeps its state: its
 columns are copied aside before the block's frame (or step) and written back after it
-(``save_lanes`` / ``restore_lanes``), and the stages that write outside the tables (the
+(``save_lane`` / ``restore_lane``), and the stages that write outside the tables (the
 write-back, the guards' events) skip it. A free lane (no team) is computed and ignored.
 
 **Only the stages a scene uses are compiled.** The optional stages are switched by plain
@@ -138,46 +138,60 @@ def worker_table(block_capacity: int, threads: int) -> WorkerTable:
     return WorkerTable(np.full(max(block_capacity, 1), -1, dtype=np.int32), np.zeros(max(threads, 1), dtype=np.int64))
 
 
+# rows of the tables a lane's save copies (module constants: the kernels read them as constants)
+PS_ROWS = st.PARTICLE.rows
+TS_ROWS = st.TEAM.rows
+CS_ROWS = st.COLLIDER.rows
+
+
 def lane_save_area(max_particles: int, max_colliders: int, threads: int) -> np.ndarray:
-    """Scratch of ``save_lanes``: per thread, one block's particle, team and collider items."""
-    width = max_particles * st.PARTICLE.width + st.TEAM.width + max_colliders * st.COLLIDER.width
+    """Scratch of ``save_lane``: per thread, every lane of one block's particle, team and
+    collider items (``LANES`` lanes of ``max_particles`` particle slots and ``max_colliders``
+    collider slots)."""
+    width = LANES * (max_particles * PS_ROWS + TS_ROWS + max_colliders * CS_ROWS)
     return np.zeros((max(threads, 1), max(width, 1)))
 
 
 # ----------------------------------------------------------------------------- lanes that do not run
 @kernel(forceinline=False)
-def save_lanes(PS, TS, CS, BI, b, area):
-    """Copy block b's particle, team and collider items into ``area`` (one thread's row)."""
+def save_lane(PS, TS, CS, BI, b, l, area):
+    """Copy lane l's columns of block b's particle, team and collider items into its part of
+    ``area`` (one thread's row; lane l's part starts at ``l`` times a lane's size)."""
+    n = BI[b, bk.BI_N]
     g0 = BI[b, bk.BI_G0]
     c0 = BI[b, bk.BI_COLLIDER0]
-    at = 0
-    for g in range(g0, g0 + BI[b, bk.BI_N]):
-        area[at:at + PS.shape[1]] = PS[g]
-        at += PS.shape[1]
-    area[at:at + TS.shape[1]] = TS[b]
-    at += TS.shape[1]
+    at = l * (n * PS_ROWS + TS_ROWS + BI[b, bk.BI_COLLIDERS] * CS_ROWS)
+    for g in range(g0, g0 + n):
+        for r in range(PS_ROWS):
+            area[at] = PS[g, r * LANES + l]
+            at += 1
+    for r in range(TS_ROWS):
+        area[at] = TS[b, r * LANES + l]
+        at += 1
     for k in range(c0, c0 + BI[b, bk.BI_COLLIDERS]):
-        area[at:at + CS.shape[1]] = CS[k]
-        at += CS.shape[1]
+        for r in range(CS_ROWS):
+            area[at] = CS[k, r * LANES + l]
+            at += 1
 
 
 @kernel(forceinline=False)
 def restore_lane(PS, TS, CS, BI, b, l, area):
-    """Write lane l's columns of block b back from ``area`` (``save_lanes``)."""
+    """Write lane l's columns of block b back from ``area`` (``save_lane``)."""
+    n = BI[b, bk.BI_N]
     g0 = BI[b, bk.BI_G0]
     c0 = BI[b, bk.BI_COLLIDER0]
-    at = 0
-    for g in range(g0, g0 + BI[b, bk.BI_N]):
-        for c in range(l, PS.shape[1], LANES):
-            PS[g, c] = area[at + c]
-        at += PS.shape[1]
-    for c in range(l, TS.shape[1], LANES):
-        TS[b, c] = area[at + c]
-    at += TS.shape[1]
+    at = l * (n * PS_ROWS + TS_ROWS + BI[b, bk.BI_COLLIDERS] * CS_ROWS)
+    for g in range(g0, g0 + n):
+        for r in range(PS_ROWS):
+            PS[g, r * LANES + l] = area[at]
+            at += 1
+    for r in range(TS_ROWS):
+        TS[b, r * LANES + l] = area[at]
+        at += 1
     for k in range(c0, c0 + BI[b, bk.BI_COLLIDERS]):
-        for c in range(l, CS.shape[1], LANES):
-            CS[k, c] = area[at + c]
-        at += CS.shape[1]
+        for r in range(CS_ROWS):
+            CS[k, r * LANES + l] = area[at]
+            at += 1
 
 
 # ----------------------------------------------------------------------------- team level
@@ -339,6 +353,13 @@ def frozen_lanes(TS, TI, b, w):
 
 
 @kernel(forceinline=False)
+def save_frozen(PS, TS, CS, TI, BI, b, w, area):
+    for l in range(w):
+        if lane_team(TI, b, l) >= 0 and get1(TS, b, st.ACTIVE, l) == 0.0:
+            save_lane(PS, TS, CS, BI, b, l, area)
+
+
+@kernel(forceinline=False)
 def restore_frozen(PS, TS, CS, TI, BI, b, w, area):
     for l in range(w):
         if lane_team(TI, b, l) >= 0 and get1(TS, b, st.ACTIVE, l) == 0.0:
@@ -355,7 +376,7 @@ def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, ed
     w = bk.lane_width(BI, b)
     frozen = frozen_lanes(TS, TI, b, w)
     if frozen:
-        save_lanes(PS, TS, CS, BI, b, area)
+        save_frozen(PS, TS, CS, TI, BI, b, w, area)
     for l in range(w):
         t = lane_team(TI, b, l)
         if t >= 0 and get1(TS, b, st.ACTIVE, l) != 0.0:
@@ -397,7 +418,10 @@ def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, ed
         if runs == 0:
             continue
         if idle > 0:
-            save_lanes(PS, TS, CS, BI, b, area)
+            for l in range(w):
+                t = lane_team(TI, b, l)
+                if t >= 0 and not (get1(TS, b, st.ACTIVE, l) != 0.0 and tt.step_running[t]):
+                    save_lane(PS, TS, CS, BI, b, l, area)
         run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones)
         if idle > 0:
             for l in range(w):
@@ -415,7 +439,7 @@ def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles):
     dt = fi.dt
     frozen = frozen_lanes(TS, TI, b, w)
     if frozen:
-        save_lanes(PS, TS, CS, BI, b, area)
+        save_frozen(PS, TS, CS, TI, BI, b, w, area)
     check_block(PS, TS, BI, b)
     for l in range(w):
         t = lane_team(TI, b, l)

@@ -88,7 +88,8 @@ def team_model(models, collider_counts) -> TeamModel:
 
 class _Gather:
     """Index arrays that take one field of a packed table to team order: ``items`` (K,) the
-    table rows and ``lanes`` (K,) the lanes, one entry per item in team order."""
+    table rows and ``lanes`` (K,) the lanes, one entry per item in team order. A field's flat
+    indices are made once per field (``np.take`` of them is one pass over the values)."""
 
     def __init__(self, table, items: np.ndarray, lanes: np.ndarray, owner, valid=None):
         self._table = table
@@ -96,21 +97,34 @@ class _Gather:
         self._lanes = lanes
         self._owner = owner
         self._valid = valid   # entries with no item (a removed team) read as 0
+        self._flat: dict[tuple[str, int], np.ndarray] = {}
+
+    def _indices(self, name, width):
+        key = (name, width)
+        flat = self._flat.get(key)
+        if flat is None:
+            first, size, _kind, _doc = self._table.fields[name]
+            cols = (first + np.arange(size))[None, :] * LANES + self._lanes[:, None]
+            flat = self._items[:, None] * width + cols
+            self._flat[key] = flat
+        return flat
 
     def read(self, name):
-        first, size, _kind, _doc = self._table.fields[name]
         array = self._owner()
-        cols = (first + np.arange(size))[None, :] * LANES + self._lanes[:, None]
-        out = array[self._items[:, None], cols] if len(self._items) else np.zeros((0, size))
+        size = self._table.fields[name][1]
+        if not len(self._items):
+            out = np.zeros((0, size))
+        else:
+            out = np.take(array.reshape(-1), self._indices(name, array.shape[1]))
         if self._valid is not None:
             out[~self._valid] = 0.0
         return out[:, 0].copy() if size == 1 else out
 
     def write(self, name, values):
-        first, size, _kind, _doc = self._table.fields[name]
         array = self._owner()
-        cols = (first + np.arange(size))[None, :] * LANES + self._lanes[:, None]
-        array[self._items[:, None], cols] = np.asarray(values, dtype=np.float64).reshape(len(self._items), size)
+        size = self._table.fields[name][1]
+        flat = self._indices(name, array.shape[1])
+        array.reshape(-1)[flat] = np.asarray(values, dtype=np.float64).reshape(len(self._items), size)
 
 
 class TableView:
