@@ -24,7 +24,9 @@ from magica_py.solver import blocks as bk
 from magica_py.solver.constraints.angle import angle_block
 from magica_py.solver.constraints.bending import DONT_MOVE_INVERSE_MASS, FIXED_POINT, bending_block, solve_dihedral
 from magica_py.solver.frame import simulate_frame
-from magica_py.solver.parameters import PRM_RESTORATION_STIFFNESS_CURVE, constraint_stiffness, curve_at_clamp01, step_rate
+from magica_py.solver.parameters import (
+    PRM_RESTORATION_STIFFNESS_CURVE, constraint_stiffness, curve_at_clamp01, step_rate,
+)
 from magica_py.solver.rotations import triangle_frame_from, triangle_rotations_block
 from magica_py.solver.system import ClothSystem
 
