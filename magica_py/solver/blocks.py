@@ -303,10 +303,9 @@ class BlockLayout:
 
     def place(self, team: int) -> tuple[int, int]:
         """(block, lane) of a live team."""
-        b = self.team_block[team]
-        if b < 0:
+        if not 0 <= team < len(self.team_block) or self.team_block[team] < 0:
             raise KeyError(f"no cloth team {team}")
-        return b, self.team_lane[team]
+        return self.team_block[team], self.team_lane[team]
 
     def particle_slots(self, team: int) -> np.ndarray:
         """The particle slots (g) of a team, in particle order."""
@@ -381,6 +380,7 @@ class BlockLayout:
         PARTICLE_MODEL.reset_lanes(self.particle_model, g, lane)
         TEAM_MODEL.reset_lanes(self.team_model, b, lane)
         self.particle_transform[g, lane] = 0
+        self.collider_transform[self._rows(b, "collider"), lane] = 0
         self.team_ints[b, lane::LANES] = -1
         if not block.used:
             for pool, (start, count) in block.chunks.items():

@@ -449,37 +449,50 @@ def shift_history(old_pos, old_position, disp_pos, old_rotation, velocity, pivot
 
 
 @kernel(forceinline=False)
-def shift_lane(PS, TS, b, g, l):
-    """C.5 inertia shift of lane l of particle slot g (``shift_history`` and the real velocity)."""
-    pivot = get3(TS, b, st.OLD_COMPONENT_POS, l)
-    vec = get3(TS, b, st.FRAME_SHIFT_VECTOR, l)
-    rot = get4(TS, b, st.FRAME_SHIFT_ROTATION, l)
-    a, c_, d, r, u = shift_history(get3(PS, g, st.OLD_POS, l), get3(PS, g, st.OLD_POSITION, l),
-                                   get3(PS, g, st.DISP_POS, l), get4(PS, g, st.OLD_ROTATION, l),
-                                   get3(PS, g, st.VELOCITY, l), pivot, vec, rot)
-    put3(PS, g, st.OLD_POS, l, a)
-    put3(PS, g, st.OLD_POSITION, l, c_)
-    put3(PS, g, st.DISP_POS, l, d)
-    put4(PS, g, st.OLD_ROTATION, l, r)
-    put3(PS, g, st.VELOCITY, l, u)
-    put3(PS, g, st.REAL_VELOCITY, l, q_rotate(rot, get3(PS, g, st.REAL_VELOCITY, l)))
-
-
-@kernel(forceinline=False)
 def reset_or_shift_block(PS, TS, BI, b):
-    """C.5 for the active lanes of block b: snap the particles to the base pose (Reset) or
-    shift their history rigidly. Lane by lane: the lanes take different branches."""
+    """C.5 for the active lanes of block b: the lanes with an inertia shift move their
+    particles' history rigidly, side by side (``shift_history``; the other lanes keep theirs,
+    selected); then each lane with Reset snaps its particles to the base pose
+    (``snap_lane_to_base_pose``)."""
     g0 = BI[b, bk.BI_G0]
     n = BI[b, bk.BI_N]
-    for l in range(bk.lane_width(BI, b)):
-        if get1(TS, b, st.ACTIVE, l) == 0.0:
-            continue
-        if get1(TS, b, st.RESET, l) != 0.0:
-            for j in range(n):
-                snap_lane_to_base_pose(PS, g0 + j, l)
-        elif get1(TS, b, st.INERTIA_SHIFT, l) != 0.0:
-            for j in range(n):
-                shift_lane(PS, TS, b, g0 + j, l)
+    w = bk.lane_width(BI, b)
+    any_shift = False
+    for l in range(w):
+        any_shift = any_shift | (lane_shifts(TS, b, l))
+    if any_shift:
+        for g in range(g0, g0 + n):
+            for l in range(w):
+                shift = lane_shifts(TS, b, l)
+                pivot = get3(TS, b, st.OLD_COMPONENT_POS, l)
+                vec = get3(TS, b, st.FRAME_SHIFT_VECTOR, l)
+                rot = get4(TS, b, st.FRAME_SHIFT_ROTATION, l)
+                old_pos = get3(PS, g, st.OLD_POS, l)
+                old_position = get3(PS, g, st.OLD_POSITION, l)
+                disp_pos = get3(PS, g, st.DISP_POS, l)
+                old_rotation = get4(PS, g, st.OLD_ROTATION, l)
+                velocity = get3(PS, g, st.VELOCITY, l)
+                real_velocity = get3(PS, g, st.REAL_VELOCITY, l)
+                a, c_, d, r, u = shift_history(old_pos, old_position, disp_pos, old_rotation, velocity, pivot, vec,
+                                               rot)
+                rv = q_rotate(rot, real_velocity)
+                put3(PS, g, st.OLD_POS, l, a if shift else old_pos)
+                put3(PS, g, st.OLD_POSITION, l, c_ if shift else old_position)
+                put3(PS, g, st.DISP_POS, l, d if shift else disp_pos)
+                put4(PS, g, st.OLD_ROTATION, l, r if shift else old_rotation)
+                put3(PS, g, st.VELOCITY, l, u if shift else velocity)
+                put3(PS, g, st.REAL_VELOCITY, l, rv if shift else real_velocity)
+    for l in range(w):
+        if get1(TS, b, st.ACTIVE, l) != 0.0 and get1(TS, b, st.RESET, l) != 0.0:
+            for g in range(g0, g0 + n):
+                snap_lane_to_base_pose(PS, g, l)
+
+
+@kernel
+def lane_shifts(TS, b, l):
+    """Does lane l shift its particles' history this frame (active, no Reset, a shift)?"""
+    return (get1(TS, b, st.ACTIVE, l) != 0.0) & (get1(TS, b, st.RESET, l) == 0.0) & \
+        (get1(TS, b, st.INERTIA_SHIFT, l) != 0.0)
 
 
 @kernel(forceinline=False)

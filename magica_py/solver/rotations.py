@@ -176,6 +176,9 @@ def line_rotations_block(PS, PM, TS, P, BI, topology, b):
     bl_flags, bl_start, bl_count, bl_data = (BI[b, bk.BI_BASELINE_FLAGS], BI[b, bk.BI_BASELINE_START],
                                              BI[b, bk.BI_BASELINE_COUNT], BI[b, bk.BI_BASELINE_DATA])
     z = (0.0, 0.0, 0.0)
+    blend = False   # a lane whose blend weight is not 1 (line_blend is the identity at 1: its slerp left out)
+    for l in range(w):
+        blend = blend | (get1(TS, b, st.BLEND_WEIGHT, l) != 1.0)
     for line in range(BI[b, bk.BI_BASELINES]):
         if (topology[bl_flags + line] & INCLUDE_LINE) == 0:
             continue
@@ -227,9 +230,8 @@ def line_rotations_block(PS, PM, TS, P, BI, topology, b):
                 for l in range(w):
                     q = line_turn(get4(PS, gx, st.ROTATION, l), get3(PS, gx, st.CHILD_REST_SUM, l),
                                   get3(PS, gx, st.CHILD_EDGE_SUM, l), t)
-                    put4(PS, gx, st.ROTATION, l,
-                         line_blend(get4(PS, gx, st.BASE_ROT_BUFFER, l), q, get1(TS, b, st.BLEND_WEIGHT, l)))
-            else:
+                    put4(PS, gx, st.ROTATION, l, q)
+            if blend:
                 for l in range(w):
                     put4(PS, gx, st.ROTATION, l, line_blend(get4(PS, gx, st.BASE_ROT_BUFFER, l),
                                                             get4(PS, gx, st.ROTATION, l),
