@@ -228,6 +228,65 @@ def test_plan_levels_and_chunks_are_independent(threads, width):
     assert_same_bits(world_state(h), reference_propagate(h))
 
 
+def _plan_trees(parent, plan):
+    """Top node of every plan node (its ancestor whose parent is outside the plan)."""
+    inside = np.zeros(parent.shape[0], dtype=bool)
+    inside[plan.nodes] = True
+    top = np.arange(parent.shape[0])
+    for i in plan.nodes:                               # parents before children
+        p = parent[i]
+        if p >= 0 and inside[p]:
+            top[i] = top[p]
+    return top
+
+
+@pytest.mark.parametrize("threads,tile", [(1, 1), (1, 7), (2, 30), (3, 200), (2, 10_000)])
+def test_tiles_hold_whole_plan_trees_level_by_level_and_are_warmed_whole(threads, tile):
+    """Tiles (consecutive plan trees computed level by level together, after a warm-up read of
+    their rows) keep every plan tree in one tile, hold at most ``tile`` nodes unless one tree is
+    larger, run their segments in depth order and read every node of theirs in the warm-up;
+    the results keep the reference bits."""
+    rng = np.random.default_rng(13)
+    h = random_forest(rng, 1500, 25)
+    for nodes in (None, rng.choice(h.count, 40, replace=False)):
+        plan = build_plan(h.parent, nodes, threads, 50, tile)
+        top = _plan_trees(h.parent, plan)
+        tiles = plan.tile_segments.size - 1
+        assert plan.chunk_tiles[0] == 0 and plan.chunk_tiles[-1] == tiles
+        assert np.all(np.diff(plan.chunk_tiles) >= 0)
+        tile_of = np.full(h.count, -1)
+        for t in range(tiles):
+            s0, s1 = plan.tile_segments[t], plan.tile_segments[t + 1]
+            members = plan.order[plan.segment_start[s0]:plan.segment_start[s1]]
+            tile_of[members] = t
+            depth = [int(_depth(h.parent, plan, plan.order[plan.segment_start[g]]))
+                     for g in range(s0, s1)]
+            assert depth == sorted(depth)              # level by level inside the tile
+            trees = np.unique(top[members])
+            if trees.size > 1:
+                assert members.size <= tile
+            warmed = np.zeros(h.count, dtype=bool)
+            for w in range(plan.tile_warm[t], plan.tile_warm[t + 1]):
+                warmed[plan.warm_start[w]:plan.warm_stop[w]] = True
+            assert warmed[members].all()
+        placed = plan.order
+        for i in placed:                               # a plan tree never spans two tiles
+            assert tile_of[i] == tile_of[top[i]] or top[i] in plan.roots
+        perturb(rng, h, plan.nodes)
+        plan.run(h)
+        assert_same_bits(world_state(h), reference_propagate(h))
+
+
+def _depth(parent, plan, i):
+    inside = np.zeros(parent.shape[0], dtype=bool)
+    inside[plan.nodes] = True
+    d = 0
+    while parent[i] >= 0 and inside[parent[i]]:
+        i = parent[i]
+        d += 1
+    return d
+
+
 def test_closure_of_no_nodes_is_empty_and_a_bad_index_is_named():
     rng = np.random.default_rng(1)
     h = random_forest(rng, 50, 2)
