@@ -16,7 +16,7 @@ from magica_py.runtime.phases import Phase, System
 from magica_py.runtime.player import Player, default_schedule
 from magica_py.scene.animation import Animation
 from magica_py.scene.hierarchy import BoneSpec, TransformHierarchy
-from magica_py.scene.propagation import SEGMENT_WIDTH, build_plan, subtree_closure
+from magica_py.scene.propagation import LANE_BLOCK, SEGMENT_WIDTH, build_plan, subtree_closure
 
 
 # ----------------------------------------------------------------------------- slow reference
@@ -285,6 +285,28 @@ def _depth(parent, plan, i):
         i = parent[i]
         d += 1
     return d
+
+
+@pytest.mark.parametrize("width", [1, 3, 13, 64])
+def test_lanes_past_a_segment_are_computed_and_never_written(width):
+    """The lane loop runs whole vectors: a segment whose lane count is not a multiple of
+    ``LANE_BLOCK`` computes the lanes past it from stale scratch rows; they are never
+    scattered, so every node outside the plan keeps its pose and every node in it gets the
+    reference bits."""
+    rng = np.random.default_rng(17)
+    h = chain_forest(rng, 70, rng.integers(1, 9, 70))
+    nodes = np.flatnonzero([n.startswith("c") and n.endswith("_1") for n in h.names])
+    plan = build_plan(h.parent, nodes, 1, width, 97)
+    assert (np.diff(plan.segment_start) % LANE_BLOCK != 0).any()
+    outside = np.setdiff1d(np.arange(h.count), plan.nodes)
+    for _ in range(2):
+        before = world_state(h)
+        perturb(rng, h, plan.nodes)
+        plan.run(h)
+        after = world_state(h)
+        for a, b in zip(after, before):
+            np.testing.assert_array_equal(a[outside], b[outside])
+        assert_same_bits(after, reference_propagate(h))
 
 
 def test_closure_of_no_nodes_is_empty_and_a_bad_index_is_named():

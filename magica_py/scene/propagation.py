@@ -21,8 +21,9 @@ are the same bits; only the order of independent nodes changes:
   nodes): every parent is final before its level starts and the nodes of a level do not
   depend on each other. A level is cut into **segments** of at most ``SEGMENT_WIDTH`` (512)
   nodes; a segment's local poses are gathered into structure-of-arrays scratch rows, computed
-  in one loop that LLVM vectorises across the lanes (``compose_lanes``) and scattered back to
-  the hierarchy's arrays. The parents' matrices and
+  in one loop that LLVM vectorises across the lanes (``compose_lanes``, whole vectors of
+  ``LANE_BLOCK`` lanes: the lanes past the segment compute from stale rows and are never
+  written back) and scattered back to the hierarchy's arrays. The parents' matrices and
   rotations come either from the hierarchy (gathered) or, when the segment's parents are lane
   for lane the nodes of the tile's segment one level up (a forest of chains: strands, tails,
   the light scene), straight from that segment's output rows;
@@ -74,6 +75,9 @@ SEGMENT_WIDTH = 512
 # dozen bones the call with the plan's lane arrays costs more than the nodes themselves
 # (a single 8-bone tail: two calls a frame, ~2 us each)
 SMALL_PLAN = 256
+# lanes computed together by the vectorised loop (8 doubles: AVX-512; two vectors with AVX2):
+# a segment's lane count is rounded up to a multiple of it
+LANE_BLOCK = 8
 # scratch rows are padded so that rows do not sit a multiple of 4 KiB apart (cache set
 # conflicts between the row streams of a segment)
 _ROW_PAD = 8
@@ -337,7 +341,10 @@ def propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_tiles
             else:
                 gather_parents(order, k0, k1, parent, world_rotation, local_to_world, gathered)
                 parents = gathered
-            compose_lanes(k1 - k0, inputs, parents, outputs)
+            # whole vectors: the lanes past the segment compute from stale rows and are not
+            # scattered (a scalar remainder lane costs about as much as a vector of 8)
+            compose_lanes((k1 - k0 + LANE_BLOCK - 1) // LANE_BLOCK * LANE_BLOCK, inputs, parents,
+                          outputs)
             scatter_lanes(order, k0, k1, world_position, world_rotation, lossy_scale,
                           local_to_world, outputs)
     lanes[lanes.shape[0] - 1] = warmed
