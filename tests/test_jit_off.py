@@ -112,7 +112,7 @@ def test_tail_orbit_runs_bounds_checked_and_compiles_only_the_stages_it_uses(tmp
     assert out.returncode == 0, out.stderr[-3000:]
     checked = json.loads(out.stdout.strip().splitlines()[-1])
     compiled = set(checked["compiled"])
-    assert {"simulate_frame", "run_step", "predict_block", "distance_block", "angle_block",
+    assert {"simulate_frame", "predict_block", "distance_block", "angle_block",
             "line_rotations_block"} <= compiled
     assert not compiled & set(UNUSED_BY_TAIL_ORBIT), sorted(compiled & set(UNUSED_BY_TAIL_ORBIT))
     assert np.array(checked["positions"]).tobytes() == np.array(_run(False)["positions"]).tobytes()
