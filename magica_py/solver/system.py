@@ -45,8 +45,8 @@ from magica_py.solver.blocks import (
 )
 from magica_py.solver.colliders import collider_shapes, fill_slots
 from magica_py.solver.frame import (
-    StageSwitches, Tables, frame_input_values, hierarchy_arrays, lane_save_area, simulate_frame,
-    simulate_frame_parallel, time_arrays, worker_table,
+    StageSwitches, Tables, frame_arguments, frame_entry, frame_entry_parallel, frame_input_values, hierarchy_arrays,
+    lane_save_area, time_arrays, worker_table,
 )
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
 from magica_py.solver.parameters import (
@@ -644,10 +644,10 @@ class ClothSystem:
         """One numba call per frame: the serial or the parallel kernel, with the stage switches;
         returns the frame's counts (``frame.frame_counts``)."""
         zones = self._wind_zones()
+        arrays = frame_arguments(self.tables, self._time, self._hierarchy)
         if self.parallel:
-            return simulate_frame_parallel(self.tables, self._time, self._hierarchy, fi, self._save_area, zones,
-                                           self._workers, *self.stages)
-        return simulate_frame(self.tables, self._time, self._hierarchy, fi, self._save_area, zones, *self.stages)
+            return frame_entry_parallel(*arrays, fi, self._save_area, zones, *self._workers, *self.stages)
+        return frame_entry(*arrays, fi, self._save_area, zones, *self.stages)
 
     def _parameter(self, team, key, default):
         params = self.team_parameters[team]
