@@ -35,13 +35,13 @@ from magica_py.solver.constraints.distance import distance_block
 from magica_py.solver.constraints.motion import motion_block
 from magica_py.solver.constraints.tether import tether_block
 from magica_py.solver.display import display_block
-from magica_py.solver.guards import check_lane
+from magica_py.solver.guards import check_block
 from magica_py.solver.lanes import get1
 from magica_py.solver.parameters import PRM_COLLISION_LAST, PRM_COLLISION_MODE, PRM_INEXTENSIBILITY
 from magica_py.solver.quality import quality_end_of_step_block
 from magica_py.solver.rotations import line_rotations_block, triangle_rotations_block
 from magica_py.solver.step import end_step_block, predict_block, step_basic_pose_block, team_step_lane
-from magica_py.solver.writeback import transform_data_lane, write_transforms_lane
+from magica_py.solver.writeback import transform_block, write_transforms_lane
 from magica_py.wind.force import wind_block
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -195,9 +195,7 @@ def _guards_display(T, h, q, zones, calls):
     for _call in range(calls):
         for i in range(T.blocks.shape[0]):
             b = T.blocks[i]
-            for l in range(bk.lane_width(T.BI, b)):
-                if T.TI[b, bk.TI_TEAM + l] >= 0 and get1(T.TS, b, st.ACTIVE, l) != 0.0:
-                    check_lane(T.PS, T.TS, T.BI, b, l)
+            check_block(T.PS, T.TS, T.BI, b)
             display_block(T.PS, T.TS, T.P, T.BI, T.topology, b, DT, q)
 
 
@@ -220,11 +218,10 @@ def _write_back(T, h, q, zones, calls):
     for _call in range(calls):
         for i in range(T.blocks.shape[0]):
             b = T.blocks[i]
+            transform_block(T.PS, T.PM, T.TS, T.BI, T.PT, T.topology, b, h.parent, h.world_rotation, h.lossy_scale)
             for l in range(bk.lane_width(T.BI, b)):
-                if T.TI[b, bk.TI_TEAM + l] >= 0 and get1(T.TS, b, st.ACTIVE, l) != 0.0:
-                    if transform_data_lane(T.PS, T.PM, T.BI, b, l):
-                        write_transforms_lane(T.PS, T.BI, T.PT, T.topology, b, l, h.parent, h.world_rotation,
-                                              h.lossy_scale, h.local_position, h.local_rotation)
+                if T.TI[b, bk.TI_TEAM + l] >= 0 and get1(T.TS, b, st.TRANSFORM_OK, l) != 0.0:
+                    write_transforms_lane(T.PS, T.BI, T.PT, T.topology, b, l, h.local_position, h.local_rotation)
 
 
 # (label, driver wrapper, the StageSwitches entry that compiles it in the frame or None: always)
