@@ -3,7 +3,8 @@
 1. one 1,000-bone cloth: 40 strands x 25 bones, sequential loop mesh, after a warm-up build;
 2. a 100-character crowd: 100 copies of a character with a 40x25 skirt (loop mesh), two
    8-bone hair strands (line) and a 12-bone tail (line), every cloth built and added to the
-   solver's ``SolverLayout`` (the chunked global model) -- once building every cloth from scratch, once with a ``ModelCache``
+   solver's ``blocks.BlockLayout`` (teams of one structure grouped into blocks, one per lane,
+   their per-lane model packed) -- once building every cloth from scratch, once with a ``ModelCache``
    (instanced rigs reuse one build; the models are bit-identical to fresh builds).
 Prints the best of several repeats (wall time, ms).  Targets: < 50 ms and < 2 s.
 """
@@ -15,8 +16,8 @@ import time
 from dataclasses import dataclass, field
 
 from magica_py.build import ModelCache, build_cloth
-from magica_py.solver.layout import SolverLayout
 from magica_py.scene.hierarchy import BoneSpec, TransformHierarchy
+from magica_py.solver.blocks import BlockLayout
 
 
 @dataclass(frozen=True)
@@ -86,10 +87,10 @@ def main():
     specs = [s for c in range(100) for s in character_specs(crowd, f"c{c}_")]
 
     def build_crowd(cache):
-        layout = SolverLayout()
+        layout = BlockLayout()
         for spec in specs:
             layout.add(build_cloth(crowd, spec, cache))
-        return layout.model()
+        return layout
 
     bones_per_character = 40 * 25 + 2 * 8 + 12
     t_fresh, c_fresh = best_of(lambda: build_crowd(None), 2)

@@ -2,20 +2,21 @@
 
     python benchmarks/bench_frame_overhead.py orchestration [--scene light_chains]
     python benchmarks/bench_frame_overhead.py update [--scene light_chains] [--frames 300]
-    python benchmarks/bench_frame_overhead.py tuple-call [--arrays 350]
+    python benchmarks/bench_frame_overhead.py tuple-call [--arrays 350] [--scene light_chains]
 
-``orchestration``: the per-team bookkeeping of ``solver/frame.py`` around the stages (scale
+``orchestration``: the bookkeeping of ``solver/frame.py`` around the stages (scale
 suspension and culling, one step's team time, one step's attenuations, the quality prelude,
-the frame-end bookkeeping, the frame counts) over every live team from one numba loop each,
-best of 20 calls, after 30 frames of the scene.
+the check for lanes that do not run and the save of a block's lanes, the frame-end
+bookkeeping, the frame counts) over every live block and lane (the lane form,
+``solver/lanes.py``) from one numba loop each, best of 20 calls, after 30 frames of the scene.
 
 ``update``: the UPDATE phase (drivers and hierarchy propagation) per frame with and without
 the cloth system attached: the same plan over the same nodes, so the difference is the
 hierarchy coming back from memory after the cloth kernel.
 
 ``tuple-call``: the cost of calling a numba function whose argument is a tuple of tuples of
-arrays (the alternative to the StructRef tables, ``solver/tables.py``): numba types every
-array on every call.
+arrays (numba types every array on every call), and of one whose argument is the scene's
+``frame.Tables`` (the namedtuple of packed tables the frame kernel takes).
 """
 from __future__ import annotations
 
@@ -45,60 +46,97 @@ def _player(scene_name: str, cloth: bool):
 
 
 def orchestration(scene_name: str) -> None:
+    from magica_py.runtime.team_time import team_time_begin_step_team
+    from magica_py.solver import blocks as bk
     from magica_py.solver import frame as F
+    from magica_py.solver import state as st
     from magica_py.solver.attenuations import step_attenuations
+    from magica_py.solver.center import end_frame_lane
+    from magica_py.solver.colliders import collider_end_frame_lane
+    from magica_py.solver.lanes import put1
 
     player, system = _player(scene_name, True)
     player.run(30)
-    m, ps, prm, ts, cs, tt, h = system.kernel_tables()
-    live = system.model.live_teams
+    T, tt, h = system.tables, system._time, system._hierarchy
+    area = system._save_area[0]
     values = F.frame_input_values()
     values[:13] = (1 / 60, 1 / 60, 0.02, 0, 1.0, 1 / 90, 3, 0, 1.0, 1.0, 1.0, 1.0, 1)
 
     @numba.njit
-    def attenuations(prm, live):
+    def attenuations(T):
         s = 0.0
-        for i in range(live.shape[0]):
-            s += step_attenuations(prm, live[i], 1.0)[0]
+        for i in range(T.blocks.shape[0]):
+            s += step_attenuations(T.P, T.blocks[i], 1.0)[0]
         return s
 
     @numba.njit
-    def prepare(m, ts, prm, tt, h):
-        F.prepare_teams(m, ts, prm, tt, h)
+    def prepare(T, tt, h):
+        F.prepare_lanes(T.TS, T.TI, T.P, T.BI, T.blocks, tt, h)
 
     @numba.njit
-    def begin_step(tt, values, live):
+    def begin_step(T, tt, values):
         fi = F.frame_inputs(values)
-        for i in range(live.shape[0]):
-            F._begin_step_team(tt, fi, 0, live[i])
+        for i in range(T.blocks.shape[0]):
+            b = T.blocks[i]
+            for l in range(bk.lane_width(T.BI, b)):
+                t = T.TI[b, bk.TI_TEAM + l]
+                if t >= 0:
+                    team_time_begin_step_team(0, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
+                                              tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt,
+                                              fi.timing)
+                    put1(T.TS, b, st.FRAME_INTERPOLATION, l, tt.frame_interpolation[t])
 
     @numba.njit
-    def frame_end(ts, cs, tt, live):
-        for i in range(live.shape[0]):
-            t = live[i]
-            F.end_frame_team(ts, t, tt.running[t])
-            F.collider_end_frame_team(cs, ts, t, tt.running[t])
+    def frozen(T):
+        n = 0
+        for i in range(T.blocks.shape[0]):
+            b = T.blocks[i]
+            n += F.frozen_lanes(T.TS, T.TI, b, bk.lane_width(T.BI, b))
+        return n
 
     @numba.njit
-    def prelude(m, ps, prm, ts, tt, h, live):
+    def save(T, area):
+        for i in range(T.blocks.shape[0]):
+            F.save_lanes(T.PS, T.TS, T.CS, T.BI, T.blocks[i], area)
+
+    @numba.njit
+    def frame_end(T, tt):
+        for i in range(T.blocks.shape[0]):
+            b = T.blocks[i]
+            for l in range(bk.lane_width(T.BI, b)):
+                t = T.TI[b, bk.TI_TEAM + l]
+                if t >= 0:
+                    end_frame_lane(T.TS, b, l, tt.running[t])
+                    if tt.running[t]:
+                        collider_end_frame_lane(T.CS, T.BI, b, l)
+
+    @numba.njit
+    def prelude(T, tt, h):
         s = 0.0
-        for i in range(live.shape[0]):
-            s += F.begin_frame_prelude_team(m, ps, prm, ts, tt, h, live[i], None)
+        for i in range(T.blocks.shape[0]):
+            b = T.blocks[i]
+            for l in range(bk.lane_width(T.BI, b)):
+                t = T.TI[b, bk.TI_TEAM + l]
+                if t >= 0:
+                    s += F.begin_frame_prelude_lane(T.PS, T.PM, T.TS, T.TM, T.TI, T.P, T.BI, T.PT, T.topology, tt, h,
+                                                    b, l, t, None)
         return s
 
     @numba.njit
-    def counts(m, ts, tt):
-        return F.frame_counts(m, ts, tt)
+    def counts(T, tt):
+        return F.frame_counts(T, tt)
 
-    cases = [("scale suspension and culling (per frame)", lambda: prepare(m, ts, prm, tt, h)),
-             ("team time of one step", lambda: begin_step(tt, values, live)),
-             ("attenuations of one step", lambda: attenuations(prm, live)),
-             ("frame prelude (per frame)", lambda: prelude(m, ps, prm, ts, tt, h, live)),
-             ("frame-end bookkeeping (per frame)", lambda: frame_end(ts, cs, tt, live)),
-             ("frame counts (per frame)", lambda: counts(m, ts, tt))]
+    cases = [("scale suspension and culling (per frame)", lambda: prepare(T, tt, h)),
+             ("team time of one step", lambda: begin_step(T, tt, values)),
+             ("attenuations of one step", lambda: attenuations(T)),
+             ("frame prelude (per frame)", lambda: prelude(T, tt, h)),
+             ("lanes that do not run: check (per frame)", lambda: frozen(T)),
+             ("lanes that do not run: save every block", lambda: save(T, area)),
+             ("frame-end bookkeeping (per frame)", lambda: frame_end(T, tt)),
+             ("frame counts (per frame)", lambda: counts(T, tt))]
     for _name, fn in cases:
         fn()
-    print(f"{scene_name}: {live.shape[0]} teams, best of 20 calls")
+    print(f"{scene_name}: {len(system.live_teams)} teams in {T.blocks.shape[0]} blocks, best of 20 calls")
     for name, fn in cases:
         best = 1e9
         for _ in range(20):
@@ -122,7 +160,7 @@ def update(scene_name: str, frames: int) -> None:
         print(f"{scene_name}, {'with' if cloth else 'without'} the cloth system: us per frame {per_frame}")
 
 
-def tuple_call(arrays: int) -> None:
+def tuple_call(arrays: int, scene_name: str) -> None:
     kinds = (lambda: np.zeros((100, 3)), lambda: np.zeros(100, dtype=np.int32), lambda: np.zeros((10, 3, 4)))
     flat = [kinds[i % 3]() for i in range(arrays)]
     groups = tuple(tuple(flat[i::7]) for i in range(7))
@@ -131,12 +169,24 @@ def tuple_call(arrays: int) -> None:
     def first(g):
         return g[0][0][0, 0]
 
+    @numba.njit
+    def block_count(T):
+        return T.blocks.shape[0]
+
+    _player_, system = _player(scene_name, True)
+    tables = system.tables
     first(groups)
+    block_count(tables)
     for _ in range(3):
         t0 = time.perf_counter()
         for _ in range(2000):
             first(groups)
-        print(f"a tuple of 7 tuples of {arrays} arrays in all: {(time.perf_counter() - t0) / 2000 * 1e6:.1f} us a call")
+        t1 = time.perf_counter()
+        for _ in range(2000):
+            block_count(tables)
+        t2 = time.perf_counter()
+        print(f"a tuple of 7 tuples of {arrays} arrays in all: {(t1 - t0) / 2000 * 1e6:.1f} us a call; "
+              f"{scene_name}'s frame.Tables ({len(tables)} fields): {(t2 - t1) / 2000 * 1e6:.1f} us a call")
 
 
 def main(argv=None) -> int:
@@ -151,7 +201,7 @@ def main(argv=None) -> int:
     elif args.part == "update":
         update(args.scene, args.frames)
     else:
-        tuple_call(args.arrays)
+        tuple_call(args.arrays, args.scene)
     return 0
 
 

@@ -9,7 +9,7 @@ For each scene (``configs/<name>.yaml``): load, build the ``ClothSystem``, attac
 player's frame minus nothing: there is no sink), each phase, the cloth kernel and the
 hierarchy propagation; and particle-steps per second of the cloth kernel (particles x steps
 run / kernel time) and of the whole frame. ``--stages`` adds the stage profile of
-``bench_stages.py`` (each stage kernel alone over every team, per call and per particle).
+``bench_stages.py`` (each stage driver alone over every block, per call and per particle).
 """
 from __future__ import annotations
 
@@ -77,9 +77,11 @@ def main(argv=None) -> int:
             print(f"   {k:22s} {v:9.1f} us")
         print(f"   particle-steps/s: kernel {r['kernel_pss']:.3g}, whole frame {r['frame_pss']:.3g}")
         if r["profile"]:
-            print(f"   stage profile (each stage alone over all teams, min of 7 x 10 calls):")
-            for kind, stage, sec in r["profile"]:
-                print(f"     {kind:5s} {stage:28s} {sec * 1e6:9.1f} us  {sec * 1e9 / r['particles']:7.1f} ns/particle")
+            from bench_stages import format_profile
+
+            print("   stage profile (each stage alone over every block, min of 7 x 10 calls):")
+            for line in format_profile(r["profile"], r["particles"]):
+                print("     " + line)
     return 0
 
 

@@ -11,7 +11,7 @@ alone (its stage is compiled in only with wind: ``StageSwitches.wind``). After a
 ``--frames`` frames record the solver's ``cloth.kernel`` (the frame kernel plus the wind's
 per-frame zone selection, which runs inside the same timer); the median per-frame time of
 each is reported and the wind's share ``(wind - calm) / wind``, and the per-frame zone
-selection (``WindField.update``) and the wind stage (``wind_team`` over every team, x1.5 steps a
+selection (``WindField.update``) and the wind stage (``wind_block`` over every block, x1.5 steps a
 frame at 60 fps / 90 Hz, in one compiled loop) timed alone: their sum over the wind run's
 kernel is the direct share, less exposed to the machine's load than the difference.
 
@@ -38,7 +38,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from magica_py.jit import kernel  # noqa: E402
-from magica_py.wind.force import wind_team  # noqa: E402
+from magica_py.wind.force import wind_block  # noqa: E402
 
 WIND = ("wind=[{name: breeze, mode: global, main: 3, turbulence: 1, direction: [1, 0, 0]},"
         " {name: area, mode: sphere, radius: 6, position: [0, 1, 0], main: 4, turbulence: 1, direction: [0, 0, -1]}]")
@@ -48,11 +48,12 @@ STEPS_PER_FRAME = 1.5      # 60 fps, 90 Hz
 
 
 @kernel
-def _wind_steps(m, ps, prm, ts, reps, dt):
-    """``wind_team`` for every live team, ``reps`` times (the wind stage alone)."""
+def _wind_steps(T, wind_zones, reps, dt):
+    """``wind_block`` for every live block, ``reps`` times (the wind stage alone); ``T``: the
+    system's ``frame.Tables``."""
     for _ in range(reps):
-        for i in range(m.live_teams.shape[0]):
-            wind_team(m, ps, prm, ts, m.live_teams[i], dt)
+        for i in range(T.blocks.shape[0]):
+            wind_block(T.PS, T.PM, T.TS, T.TI, T.P, T.BI, T.topology, T.blocks[i], dt, wind_zones)
 
 
 def _system(path, overrides, frames):
@@ -87,15 +88,15 @@ def cost(args) -> None:
             for label, (player, _system_, medians) in runs.items():
                 medians.append(statistics.median(_kernel_times(player, args.frames)))
         system = runs["wind"][1]
-        tables = system.kernel_tables()
+        tables = system.tables
+        zones = system._wind_zones()
         t0 = time.perf_counter()
         for _ in range(args.frames):
             system.select_wind()
         update = (time.perf_counter() - t0) / args.frames
-        m, ps, prm, ts = tables[:4]
-        _wind_steps(m, ps, prm, ts, 1, 1.0 / 90.0)     # compile
+        _wind_steps(tables, zones, 1, 1.0 / 90.0)     # compile
         t0 = time.perf_counter()
-        _wind_steps(m, ps, prm, ts, args.frames * 3, 1.0 / 90.0)
+        _wind_steps(tables, zones, args.frames * 3, 1.0 / 90.0)
         stage = (time.perf_counter() - t0) / (args.frames * 3) * STEPS_PER_FRAME
         calm = statistics.median(runs["calm"][2])
         wind = statistics.median(runs["wind"][2])

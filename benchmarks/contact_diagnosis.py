@@ -4,10 +4,12 @@
 The suite (``magica_py.bench.mocap_suite``) reads, at the end of a step, the particles whose
 sphere lies within one radius of a collider carried by a bone. This script reruns a case in
 pure Python (``NUMBA_DISABLE_JIT=1``: no compile, ~10 s per Godette run) with hooks around
-D.8 (``point_collision_team``), quality mode's collision last (``collision_last_team``) and its
-follow-the-leader with the colliders (``ftl_collision_team``): it records, per step and
-particle, how far each of them moved it, with the state, velocity and friction after the
-step and the collider slots' pose. For every reading of the suite it then knows the gap to the
+D.8 (``point_collision_block`` / ``edge_collision_block``), quality mode's collision last
+(``collision_last_lane``) and its follow-the-leader with the colliders (``ftl_collision_lane``):
+it records, per step and particle, how far each of them moved it, with the state, velocity and
+friction after the step and the collider slots' pose. The solver steps a block of teams at a
+time (``frame.run_step``, the lane form): after a block's step, each team of the block that ran
+it gets the step's record, read through the system's team-ordered views. For every reading of the suite it then knows the gap to the
 collider at that step's end and the step before (mm and share of the radius), whether
 collision moved the particle in that step or the step before, and its normal velocity at the
 start and end of the step. The solver's results are those of the JIT build (same code, same
@@ -49,26 +51,34 @@ import magica_py.solver.constraints.angle as A  # noqa: E402
 import magica_py.solver.frame as F  # noqa: E402
 import magica_py.solver.quality as Q  # noqa: E402
 
+import magica_py.solver.blocks as B  # noqa: E402
+import magica_py.solver.state as ST  # noqa: E402
+from magica_py.solver.lanes import get1  # noqa: E402
+
 MISSES = ("backflip_godette", "roll_godette", "spin_godette")
 PASSES = ("d8", "cl", "ftl")
+COLLIDER_FIELDS = ("start_new", "end_new", "radius_start", "radius_end", "plane_normal", "scale_suspend")
 _moves = {}
 STEPS: dict = {}                          # team -> list of per-step records
+SYSTEM = []                               # the ClothSystem being diagnosed (its views read the packed state)
 
 
 def _mover(fn, key):
+    """``fn`` (a stage driver) with the moves it makes to every particle's next_pos (team order)
+    added to ``_moves[key]``."""
     def wrapped(*args):
-        ps = args[1]
-        before = np.array(ps.next_pos, copy=True)
+        before = SYSTEM[0].particles.next_pos
         out = fn(*args)
-        move = np.asarray(ps.next_pos) - before
+        move = SYSTEM[0].particles.next_pos - before
         _moves[key] = move if key not in _moves else _moves[key] + move
         return out
     return wrapped
 
 
-F.point_collision_team = _mover(F.point_collision_team, "d8")
-Q.collision_last_team = _mover(Q.collision_last_team, "cl")
-Q.ftl_collision_team = _mover(Q.ftl_collision_team, "ftl")
+F.point_collision_block = _mover(F.point_collision_block, "d8")
+F.edge_collision_block = _mover(F.edge_collision_block, "d8")
+Q.collision_last_lane = _mover(Q.collision_last_lane, "cl")
+Q.ftl_collision_lane = _mover(Q.ftl_collision_lane, "ftl")
 _run_step = F.run_step
 _restoration_offset = A.restoration_offset
 
@@ -85,18 +95,23 @@ def _offset(*args):
 A.restoration_offset = _offset
 
 
-def _step(m, ps, prm, ts, cs, tt, t, *rest):
+def _step(T, tt, b, *rest):
+    """``run_step`` of block b, recorded for each of its teams that runs this step (the others'
+    lanes are put back by the caller afterwards)."""
+    system = SYSTEM[0]
     _moves.clear()
-    v_before = np.array(ps.velocity, copy=True)
-    _run_step(m, ps, prm, ts, cs, tt, t, *rest)
+    v_before = system.particles.velocity
+    _run_step(T, tt, b, *rest)
     zero = np.zeros_like(v_before)
     record = {key: _moves.get(key, zero) for key in PASSES}
-    record.update(pos=np.array(ps.old_pos, copy=True), vel=np.array(ps.velocity, copy=True), v_before=v_before,
-                  friction=np.array(ps.friction, copy=True),
-                  colliders={f: np.array(getattr(cs, f), copy=True) for f in
-                             ("shape", "start_new", "end_new", "radius_start", "radius_end", "plane_normal",
-                              "scale_suspend")})
-    STEPS.setdefault(int(t), []).append(record)
+    ps = system.particles
+    record.update(pos=ps.old_pos, vel=ps.velocity, v_before=v_before, friction=ps.friction,
+                  colliders={f: getattr(system.collider_state, f) for f in COLLIDER_FIELDS})
+    record["colliders"]["shape"] = system.collider_slots()[2]
+    for lane in range(B.lane_width(T.BI, b)):
+        t = int(T.TI[b, B.TI_TEAM + lane])
+        if t >= 0 and get1(T.TS, b, ST.ACTIVE, lane) != 0.0 and tt.step_running[t]:
+            STEPS.setdefault(t, []).append(record)
 
 
 F.run_step = _step
@@ -120,6 +135,7 @@ def diagnose(name: str, mode: str, fps: float) -> list[dict]:
     part at the end of a step) in one run, with what the hooks saw."""
     p = _prepare(name, mode, fps)
     scene, player, system = p.scene, p.player, p.system
+    SYSTEM[:] = [system]
     h = scene.hierarchy
     nodes, _geometry, pairs = rest_geometry(p)
     n = nodes.shape[0]
@@ -144,13 +160,13 @@ def diagnose(name: str, mode: str, fps: float) -> list[dict]:
         shapes_now = scene.colliders.world_shapes(h)
         if count() > before and i > 0:
             ts = system.teams
-            radius = base * (np.asarray(ts.scale_ratio) * np.asarray(ts.length_unit))[team]
+            radius = base * (ts.scale_ratio * ts.length_unit)[team]
             last = {f: np.zeros((n, 3)) for f in ("pos", "prev", "vel", "v_before") + PASSES + tuple("p" + k for k in PASSES)}
             friction = np.zeros(n)
             sphere, sphere_prev = np.full(pi.shape[0], -np.inf), np.full(pi.shape[0], np.nan)
             normal = np.zeros((pi.shape[0], 3))
             # each team's last step (and the one before) against its own collider slots as they
-            # were after that step: the teams run one after the other within a frame
+            # were after that step: the blocks run one after the other within a frame
             for tm, steps in STEPS.items():
                 sel = team == tm
                 mine = sel[pi]

@@ -63,8 +63,9 @@ def measure(scene: str, fps: float, mode: str, duration: float | None, parameter
         # the two step states the display interpolates: the last (old_pos) and the one before
         # (old_pos - real_velocity dt, D.10's definition), which at render rates below the
         # frequency ends inside the frame
-        es_state = np.maximum(M.edge_stretch(np.asarray(ps.old_pos[:n]), geometry),
-                              M.edge_stretch(np.asarray(ps.old_pos[:n] - ps.real_velocity[:n] * dt), geometry))
+        old_pos = ps.old_pos   # the view gathers a copy of the packed state: once per frame
+        es_state = np.maximum(M.edge_stretch(old_pos[:n], geometry),
+                              M.edge_stretch(old_pos[:n] - ps.real_velocity[:n] * dt, geometry))
         for j, t in enumerate(teams):
             sel = (edge_team == t) & vertical
             shown[i, j] = es_shown[sel].max(initial=0.0)

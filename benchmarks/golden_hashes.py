@@ -16,8 +16,12 @@ The inputs of the solver are hashed stage by stage too, so that a difference say
 comes from (docs/determinism.md):
 
 * ``scene``: the rest pose after loading (rig generators, importers) and the collider set;
-* ``model``: every field of the built solver model (the build: proxy mesh, baselines,
-  constraint data), one hash per field;
+* ``model``: every field of the built cloth models (the build: proxy mesh, baselines,
+  constraint data), one hash per field, taken of the teams' build models
+  (``ClothSystem.models``) concatenated with global indices as the per-team solver's
+  ``SolverModel`` did when the hashes were written (``solver_model``: its layout code,
+  frozen in ``tests/reference_solver/solver/layout.py``), so that the stored hashes still
+  name the build field that changed;
 * ``animation``: the hierarchy's world pose after ``--frames`` frames of animation alone
   (drivers, clips and propagation, no cloth).
 
@@ -73,6 +77,21 @@ def _model_hashes(model) -> dict[str, str]:
     return out
 
 
+def solver_model(models):
+    """The teams' build models (``ClothSystem.models``) as one ``SolverModel`` of global
+    indices, the form the ``model`` stage hashes were written from: the per-team solver's
+    layout (``tests/reference_solver/solver/layout.py``, frozen; the lane-form solver keeps
+    the build models per team and packs them per block instead)."""
+    if str(ROOT / "tests") not in sys.path:
+        sys.path.insert(0, str(ROOT / "tests"))
+    from reference_solver.solver.layout import SolverLayout
+
+    layout = SolverLayout()
+    for model in models:
+        layout.add(model)
+    return layout.model()
+
+
 def scene_hashes(name: str, frames: int = 200, config_dir: pathlib.Path = ROOT / "configs") -> dict:
     from magica_py.config import load_scene
     from magica_py.runtime.player import Player
@@ -90,7 +109,7 @@ def scene_hashes(name: str, frames: int = 200, config_dir: pathlib.Path = ROOT /
     rest = _sha(*_pose(h), h.lossy_scale, c.center, c.radius, c.end_radius, c.length)
     player = Player.for_scene(scene)
     system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player)
-    model = _model_hashes(system.model)
+    model = _model_hashes(solver_model(system.models))
     player.run(frames)
     return {"particles": _sha(system.particles.position),
             "bones": _sha(*_pose(h)),

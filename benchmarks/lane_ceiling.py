@@ -1,26 +1,26 @@
-"""How far a lane layout could take the light scene with numba's documented features (issue 15).
+"""The lane form against the team-by-team solver and a packed ceiling, on one stage (issue 15).
 
     python benchmarks/lane_ceiling.py [--reps 20]
 
-One stage, distance (D.4: two passes a step, the light scene's largest per-step stage),
-measured four ways on the light scene (``configs/light_chains.yaml``, 1,000 chains of 16
-particles, after 20 frames):
+This script first measured how far a *hypothetical* lane layout could take the light scene;
+the solver now runs in that layout (``solver/lanes.py``), so it measures the solver's own
+stage. One stage, distance (D.4: two passes a step, the light scene's largest per-step stage),
+on the light scene (``configs/light_chains.yaml``, 1,000 chains of 16 particles, after 20
+frames), three ways:
 
-1. **team by team**: the solver's ``distance_team`` over every team, as the frame runs it;
-2. **lane by lane, solver layout**: the same per-element code, particle j of every team side
-   by side (the loop order of a lane form) on the solver's own arrays. It gives the same bits
-   (checked). It answers whether the stage is latency-bound (a chain's particles depend on each
-   other, independent chains side by side would overlap that latency): it is not if it is
-   not faster;
-3. **packed lanes, per-particle helpers**: a reduced distance pass (parent and child link,
-   depth masses, 30 % of the correction into ``velocity_pos``; no stiffness curve, friction,
-   rest-length blend or zero-distance links: less work than the solver's) over a packed
-   array ``S[row, j, lane]`` (one base pointer: LLVM needs no alias information to vectorise
-   across lanes), written through a per-link helper as the solver's stages are;
-4. **packed lanes, one loop body**: the same arithmetic written out in the loop.
+1. **team by team**: the per-team solver before the lane form (``tests/reference_solver``,
+   frozen), its ``distance_team`` over every team, on its own run of the scene;
+2. **lane form**: the solver's ``distance_block`` over every block (teams of one structure
+   side by side, one per lane), as ``frame.run_step`` calls it. Both runs are checked to hold
+   the same bits before the pass and after it (team-ordered ``next_pos`` and ``velocity_pos``);
+3. **packed ceiling**: a reduced distance pass (parent and child link, depth masses, 30 % of
+   the correction into ``velocity_pos``; no stiffness curve, friction, rest-length blend or
+   zero-distance links: less work than the solver's) over a packed array ``S[row, j, lane]``,
+   written out in one loop body (and through a per-link helper): what the arithmetic alone
+   costs when the lane loop vectorises.
 
 For each: time per pass over the 16,000 particles, ns per particle, and the number of packed
-ymm / zmm arithmetic instructions in its machine code (0: the loop stayed scalar). The light
+ymm / zmm arithmetic instructions in its machine code (0: the loops stayed scalar). The light
 scene's kernel bound (2x numpy, about 0.4 ms a frame) is ~17 ns per particle-step for every
 stage together; a step runs this stage twice.
 """
@@ -37,67 +37,35 @@ import numpy as np
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
 
 from magica_py.jit import JIT_OPTIONS  # noqa: E402
-from magica_py.kernels.math3d import inverse_mass_friction_depth, load3, store3, v_add, v_scale, v_sub  # noqa: E402
-from magica_py.solver.constraints.distance import (  # noqa: E402
-    FIX_MASS, MOVE, ZERO3, distance_apply, distance_link, distance_rest_length, distance_stiffness, distance_team,
-)
+from magica_py.solver.attenuations import step_attenuations  # noqa: E402
+from magica_py.solver.constraints.distance import distance_block  # noqa: E402
 
 OPTIONS = dict(JIT_OPTIONS, cache=False)
 NX, VPX, REST, DEPTH, ROWS = 0, 3, 6, 7, 8      # packed rows: next_pos, velocity_pos, rest, depth
 
 
-@numba.njit(**OPTIONS)
-def teams_in_turn(m, ps, prm, ts, live):
-    for t in live:
-        distance_team(m, ps, prm, ts, t, 1.0, 1.0, 0.3)
+def reference_pass():
+    """The per-team solver's pass over every team (compiled on first use)."""
+    from reference_solver.solver.constraints.distance import distance_team
+
+    @numba.njit(**OPTIONS)
+    def teams_in_turn(m, ps, prm, ts, live):
+        for t in live:
+            distance_team(m, ps, prm, ts, t, 1.0, 1.0, 0.3)
+
+    return teams_in_turn, distance_team
 
 
 @numba.njit(**OPTIONS)
-def lanes_solver_layout(m, ps, prm, ts, live):
-    """``distance_team``'s body with the loops swapped: particle j of every team, then j + 1."""
-    attribute, depth_of, friction = m.attribute, m.depth, ps.friction
-    distance_start, distance_count, distance_target, distance_rest = (
-        m.distance_start, m.distance_count, m.distance_target, m.distance_rest)
-    next_pos_a, base_pos_a, velocity_pos_a = ps.next_pos, ps.base_pos, ps.velocity_pos
-    tps, tpc = m.team_particle_start, m.team_particle_count
-    most = 0
-    for team in live:
-        most = max(most, tpc[team])
-    for j in range(most):
-        for team in live:
-            if j >= tpc[team]:
-                continue
-            p = tps[team] + j
-            if (attribute[p] & MOVE) == 0:
-                continue
-            a = prm.animation_pose_ratio[team]
-            s = m.team_init_scale[team, 0] * ts.scale_ratio[team]
-            depth = depth_of[p]
-            w_p = inverse_mass_friction_depth(friction[p], depth)
-            k_vertical, k_horizontal = distance_stiffness(prm, team, depth, 1.0, 1.0)
-            pp = load3(next_pos_a, p)
-            bp = load3(base_pos_a, p)
-            acc = ZERO3
-            n = 0
-            for link in range(distance_start[p], distance_start[p] + distance_count[p]):
-                q = distance_target[link]
-                r = distance_rest[link]
-                qp = load3(next_pos_a, q)
-                if r == 0.0:
-                    acc = v_scale(v_sub(qp, pp), 0.5)
-                    n += 1
-                    continue
-                w_q = 1.0 / FIX_MASS if (attribute[q] & MOVE) == 0 else inverse_mass_friction_depth(friction[q], depth_of[q])
-                rest = distance_rest_length(r, s, bp, load3(base_pos_a, q), a)
-                corr, ok = distance_link(pp, qp, rest, w_p, w_q, k_vertical if r > 0.0 else k_horizontal)
-                if ok:
-                    acc = v_add(acc, corr)
-                    n += 1
-            next_pos, velocity_pos = distance_apply(pp, load3(velocity_pos_a, p), acc, n, 0.3)
-            store3(next_pos_a, p, next_pos)
-            store3(velocity_pos_a, p, velocity_pos)
+def blocks_in_turn(T):
+    """``distance_block`` over every block, with the step's attenuation as ``run_step`` takes it."""
+    for i in range(T.blocks.shape[0]):
+        b = T.blocks[i]
+        _tether, distance, _limit, _restoration, _motion = step_attenuations(T.P, b, 1.0)
+        distance_block(T.PS, T.PM, T.PP, T.TS, T.TM, T.LM, T.P, T.BI, T.topology, b, 1.0, 1.0, distance)
 
 
 @numba.njit(**OPTIONS)
@@ -160,8 +128,20 @@ def packed_one_body(S):
 
 
 def packed_ops(fn) -> int:
-    asm = "\n".join(fn.inspect_asm(sig) for sig in fn.signatures)
-    return len(re.findall(r"\bv(?:sqrt|div|mul|add|sub|fmadd\w*|fnmadd\w*)pd\s+[^\n]*%[yz]mm", asm))
+    """Packed ymm / zmm arithmetic instructions in ``fn``'s machine code for the signatures it
+    was called with. A kernel loaded from numba's cache has no code to inspect: its Python
+    function is compiled again (no cache) for the same signatures and that code is counted
+    (the callees it inlines included, those it calls not)."""
+    def asm_of(dispatcher):
+        return "\n".join(dispatcher.inspect_asm(sig) for sig in dispatcher.signatures)
+
+    if getattr(fn, "_cache_hits", None) and sum(fn._cache_hits.values()):
+        options = {k: v for k, v in fn.targetoptions.items() if k != "nopython"}
+        fresh = numba.njit(**options)(fn.py_func)
+        for sig in fn.signatures:
+            fresh.compile(sig)
+        fn = fresh
+    return len(re.findall(r"\bv(?:sqrt|div|mul|add|sub|fmadd\w*|fnmadd\w*)pd\s+[^\n]*%[yz]mm", asm_of(fn)))
 
 
 def best_of(fn, reset, reps):
@@ -178,33 +158,51 @@ def best_of(fn, reset, reps):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reps", type=int, default=20)
+    ap.add_argument("--scene", default="light_chains")
+    ap.add_argument("--frames", type=int, default=20)
     args = ap.parse_args(argv)
     from magica_py.config import load_scene
     from magica_py.runtime.player import Player
     from magica_py.solver.system import ClothSystem
+    from reference_solver.solver.system import ClothSystem as ReferenceSystem
 
-    scene = load_scene(ROOT / "configs" / "light_chains.yaml")
-    player = Player.for_scene(scene)
-    system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings, parallel=False).attach(player)
-    player.run(20)
-    m, ps, prm, ts, _cs, _tt, _h = system.kernel_tables()
-    live = system.model.live_teams
-    arrays = (system.particles.next_pos, system.particles.velocity_pos)
-    saved = [a.copy() for a in arrays]
+    def run(cls):
+        scene = load_scene(ROOT / "configs" / f"{args.scene}.yaml")
+        player = Player.for_scene(scene)
+        system = cls(scene.hierarchy, scene.cloths, scene.colliders, scene.settings, parallel=False).attach(player)
+        player.run(args.frames)
+        return system
 
-    def reset():
-        for a, s in zip(arrays, saved):
+    lanes, ref = run(ClothSystem), run(ReferenceSystem)
+    T = lanes.tables
+    m, ps, prm, ts, _cs, _tt, _h = ref.kernel_tables()
+    live = ref.model.live_teams
+    teams_in_turn, distance_team = reference_pass()
+
+    def state(system):
+        return system.particles.next_pos, system.particles.velocity_pos
+
+    same_before = all(np.array_equal(a, b) for a, b in zip(state(lanes), state(ref)))
+    saved_ps = T.PS.copy()
+    saved_ref = [a.copy() for a in (ref.particles.next_pos, ref.particles.velocity_pos)]
+
+    def reset_lanes():
+        T.PS[:] = saved_ps
+
+    def reset_ref():
+        for a, s in zip((ref.particles.next_pos, ref.particles.velocity_pos), saved_ref):
             a[:] = s
 
+    blocks_in_turn(T)
     teams_in_turn(m, ps, prm, ts, live)
-    by_team = [a.copy() for a in arrays]
-    reset()
-    lanes_solver_layout(m, ps, prm, ts, live)
-    same = all(np.array_equal(a, b) for a, b in zip(arrays, by_team))
-    n = int(system.model.team_particle_count.sum())
+    same_after = all(np.array_equal(a, b) for a, b in zip(state(lanes), state(ref)))
+    reset_lanes()
+    reset_ref()
+
+    n = int(lanes.model.team_particle_count.sum())
     chains, per = len(live), n // max(len(live), 1)
     S0 = np.zeros((ROWS, per, chains))
-    S0[NX:NX + 3] = system.particles.next_pos.T.reshape(3, chains, per).transpose(0, 2, 1)
+    S0[NX:NX + 3] = lanes.particles.next_pos.T.reshape(3, chains, per).transpose(0, 2, 1)
     S0[VPX:VPX + 3] = S0[NX:NX + 3]
     S0[REST] = 0.05
     S0[DEPTH] = (np.arange(per) / (per - 1))[:, None]
@@ -213,17 +211,18 @@ def main(argv=None) -> int:
     def reset_packed():
         S[:] = S0
 
-    rows = [("team by team (the solver today)", lambda: teams_in_turn(m, ps, prm, ts, live), reset, teams_in_turn),
-            ("lane by lane, solver layout", lambda: lanes_solver_layout(m, ps, prm, ts, live), reset, lanes_solver_layout),
-            ("packed lanes, per-link helper", lambda: packed_helpers(S), reset_packed, packed_helpers),
-            ("packed lanes, one loop body", lambda: packed_one_body(S), reset_packed, packed_one_body)]
+    rows = [("team by team (per-team solver)", lambda: teams_in_turn(m, ps, prm, ts, live), reset_ref, distance_team),
+            ("lane form (distance_block)", lambda: blocks_in_turn(T), reset_lanes, distance_block),
+            ("packed ceiling, per-link helper", lambda: packed_helpers(S), reset_packed, packed_helpers),
+            ("packed ceiling, one loop body", lambda: packed_one_body(S), reset_packed, packed_one_body)]
     load = pathlib.Path("/proc/loadavg").read_text().split()[0]
-    print(f"distance pass over {n} particles ({chains} chains); min of {args.reps}; load {load}")
+    print(f"distance pass over {n} particles ({chains} chains in {T.blocks.shape[0]} blocks); min of {args.reps}; "
+          f"load {load}")
     for name, fn, rs, kern in rows:
         t = best_of(fn, rs, args.reps)
         print(f"  {name:32s} {t * 1e6:8.1f} us  {t / n * 1e9:6.2f} ns/particle  packed ops {packed_ops(kern)}")
-    print(f"lane order gives the solver's bits: {same}")
-    return 0
+    print(f"the lane form holds the per-team solver's bits: before the pass {same_before}, after it {same_after}")
+    return 0 if same_before and same_after else 1
 
 
 if __name__ == "__main__":

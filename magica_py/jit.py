@@ -17,7 +17,7 @@ import os
 import numba
 
 CACHE = os.environ.get("MAGICA_NO_CACHE", "0") != "1"
-JIT_OPTIONS = {"cache": CACHE, "fastmath": False, "error_model": "numpy", "nogil": True}
+JIT_OPTIONS = {"cache": CACHE, "fastmath": False, "error_model": "numpy", "nogil": True, "forceinline": True, "boundscheck": False}
 
 
 def kernel(fn=None, **overrides):

@@ -3,7 +3,8 @@ small line-mode scene with point collision, written independently of the numba k
 (its own quaternion maths, Python loops over particles) to check them to float tolerance.
 
 ``naive_step(model, state, params, team_state, colliders, team, frame_interpolation, dt)``
-works on dicts of numpy arrays copied from the solver tables and updates them in place.
+works on dicts of numpy arrays copied from the solver's team-ordered views and the team's
+build model (``tests/test_solver_naive.py``: ``naive_inputs``) and updates them in place.
 Scope: MagicaCloth2 rate mode, no bending/volume, no edge collision, no external force.
 """
 from __future__ import annotations

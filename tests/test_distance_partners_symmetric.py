@@ -1,6 +1,6 @@
 """The distance constraint's partner lists (docs/solver.md §B.9, §D.4) are symmetric: when q is
 one of p's partners, p is one of q's, with the same signed rest length. Quality mode's display
-(``quality_display.display_constraints_team``, step 2) sees each link from its moving ends only and
+(``quality_display.display_constraints_block``, step 2) sees each link from its moving ends only and
 relies on it, and D.4's Gauss-Seidel pass treats both ends of a link alike. Checked on the
 build of every connection mode the configs use: line chains, a fan of strands, a looped mesh
 skirt, a VRM avatar's spring bones and a wind sheet."""
@@ -12,15 +12,20 @@ import pytest
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
-def links(model):
-    start = np.asarray(model.distance_start)
-    count = np.asarray(model.distance_count)
-    target = np.asarray(model.distance_target)
-    rest = np.asarray(model.distance_rest)
+def links(models):
+    """{(team, p, q): signed rest length} of every distance link of the teams' build models
+    (``ClothSystem.models``, team-local particle indices), the lists the solver's blocks take."""
     pairs = {}
-    for p in range(start.shape[0]):
-        for link in range(start[p], start[p] + count[p]):
-            pairs[(p, int(target[link]))] = float(rest[link])
+    for t, model in enumerate(models):
+        if model is None:
+            continue
+        start = np.asarray(model.distance_start)
+        count = np.asarray(model.distance_count)
+        target = np.asarray(model.distance_target)
+        rest = np.asarray(model.distance_rest)
+        for p in range(start.shape[0]):
+            for link in range(start[p], start[p] + count[p]):
+                pairs[(t, p, int(target[link]))] = float(rest[link])
     return pairs
 
 
@@ -32,9 +37,9 @@ def test_distance_partner_lists_are_symmetric_with_equal_rest_lengths(config):
 
     scene = load_scene(ROOT / "configs" / config)
     system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings)
-    pairs = links(system.model)
+    pairs = links(system.models)
     assert pairs, "no distance link built"
-    asymmetric = [(p, q) for (p, q) in pairs if (q, p) not in pairs]
+    asymmetric = [(t, p, q) for (t, p, q) in pairs if (t, q, p) not in pairs]
     assert not asymmetric, f"{config}: links without their reverse, e.g. {asymmetric[:5]}"
-    unequal = [(p, q) for (p, q), r in pairs.items() if pairs[(q, p)] != r]
+    unequal = [(t, p, q) for (t, p, q), r in pairs.items() if pairs[(t, q, p)] != r]
     assert not unequal, f"{config}: reverse links with another rest length, e.g. {unequal[:5]}"

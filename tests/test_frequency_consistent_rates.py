@@ -11,15 +11,17 @@ from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.constraints.tether import solve_tether
 from magica_py.solver.constraints.distance import distance_stiffness
 from magica_py.solver.parameters import (
-    allocate_parameters, constraint_stiffness, step_keep, step_rate, step_share, write_row,
+    PRM_RATE_MODE, PRM_RESTORATION_ATTENUATION, allocate_parameters, constraint_stiffness, packed_row, step_keep,
+    step_rate, step_share, write_row,
 )
 from magica_py.solver.step import dynamic_friction_brake, dynamic_friction_keep, static_friction_step
 
 
 def row(**overrides):
+    """The kernels' parameter table (one block row) of a tail with ``overrides``."""
     table = allocate_parameters(1)
     write_row(table, 0, resolve_parameters("tail", overrides, where="test"))
-    return table
+    return packed_row(table, 0)[None, :]
 
 
 FC = {"solver.rate_mode": "frequency_consistent"}
@@ -39,7 +41,7 @@ def test_frequency_consistent_attenuations_at_180_hz():
 
 def test_attenuations_are_magica_bits_at_90_hz_and_in_magica_mode():
     for table, ratio in ((row(**FC), 1.0), (row(), 1.0), (row(), 0.5), (row(), 0.25)):
-        assert step_attenuations(table, 0, ratio) == (0.7, 0.3, 0.9, table.restoration_attenuation[0], 0.95)
+        assert step_attenuations(table, 0, ratio) == (0.7, 0.3, 0.9, table[0, PRM_RESTORATION_ATTENUATION], 0.95)
 
 
 def test_step_conversions():
@@ -93,7 +95,9 @@ def test_projection_stiffness_is_a_per_step_strength():
     assert constraint_stiffness(0.5, 0.25, 1.0, 1, 0) == 0.5
     assert constraint_stiffness(0.5, 0.25, 1.0, 1, 1) == pytest.approx(1.0 - 0.5 ** 0.25, rel=1e-14)
     assert constraint_stiffness(0.5, 0.25, 0.5, 0, 0) == 0.25
-    fc = row(**FC, **{"distance.stiffness": 0.8})
-    assert distance_stiffness(fc, 0, 0.5, 0.125, 1.0) == (0.8, 0.4)
-    faithful = row(**{"distance.stiffness": 0.8})
-    assert distance_stiffness(faithful, 0, 0.5, 0.125, 0.5) == (0.4, 0.2)
+    fc = row(**FC)
+    assert fc[0, PRM_RATE_MODE] == 1.0
+    assert distance_stiffness(0.8, 0.5, 0.125, int(fc[0, PRM_RATE_MODE]), 0) == (0.8, 0.4)
+    faithful = row()
+    assert distance_stiffness(0.8, 0.5, 0.125, int(faithful[0, PRM_RATE_MODE]), 0) == (0.1, 0.05)
+    assert distance_stiffness(0.8, 1.0, 0.5, int(faithful[0, PRM_RATE_MODE]), 0) == (0.4, 0.2)

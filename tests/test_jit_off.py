@@ -90,11 +90,13 @@ with event.install_listener("numba:compile", Names()):
 print(json.dumps({"positions": result.cloths["tail"].positions.tolist(), "compiled": sorted(compiled)}))
 """
 # the optional stages tail_orbit (line mode, angle restoration, no collider, no motion
-# constraint, faithful mode) does not use: never compiled
-UNUSED_BY_TAIL_ORBIT = ("bending_team", "apply_accumulated", "point_collision_team", "edge_collision_team",
-                        "motion_team", "quality_end_of_step", "build_reset_team", "display_constraints_team",
-                        "triangle_rotations_team", "wind_team", "record_display_state_team",
-                        "display_interpolated")
+# constraint, faithful mode, no wind: ``ClothSystem.stages`` has angle and lines only) does not
+# use: their lane-form drivers are never compiled (a None switch prunes the call, frame.py)
+UNUSED_BY_TAIL_ORBIT = ("bending_block", "apply_accumulated_block", "point_collision_block", "edge_collision_block",
+                        "motion_block", "quality_end_of_step_block", "drift_begin_block", "drift_end_block",
+                        "ftl_collision_lane", "edge_projection_lane", "collision_last_lane", "build_reset_lane",
+                        "display_constraints_block", "record_display_state_block", "display_interpolated",
+                        "triangle_rotations_block", "wind_block")
 
 
 def test_tail_orbit_runs_bounds_checked_and_compiles_only_the_stages_it_uses(tmp_path):
@@ -110,6 +112,7 @@ def test_tail_orbit_runs_bounds_checked_and_compiles_only_the_stages_it_uses(tmp
     assert out.returncode == 0, out.stderr[-3000:]
     checked = json.loads(out.stdout.strip().splitlines()[-1])
     compiled = set(checked["compiled"])
-    assert {"simulate_frame", "predict_team", "distance_team", "angle_team", "line_rotations_team"} <= compiled
+    assert {"simulate_frame", "predict_block", "distance_block", "angle_block",
+            "line_rotations_block"} <= compiled
     assert not compiled & set(UNUSED_BY_TAIL_ORBIT), sorted(compiled & set(UNUSED_BY_TAIL_ORBIT))
     assert np.array(checked["positions"]).tobytes() == np.array(_run(False)["positions"]).tobytes()

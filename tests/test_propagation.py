@@ -16,7 +16,7 @@ from magica_py.runtime.phases import Phase, System
 from magica_py.runtime.player import Player, default_schedule
 from magica_py.scene.animation import Animation
 from magica_py.scene.hierarchy import BoneSpec, TransformHierarchy
-from magica_py.scene.propagation import SEGMENT_WIDTH, build_plan, subtree_closure
+from magica_py.scene.propagation import LANE_BLOCK, SEGMENT_WIDTH, build_plan, subtree_closure
 
 
 # ----------------------------------------------------------------------------- slow reference
@@ -226,6 +226,87 @@ def test_plan_levels_and_chunks_are_independent(threads, width):
     perturb(rng, h, np.arange(h.count))
     plan.run(h)                                        # scratch rows sized for the width
     assert_same_bits(world_state(h), reference_propagate(h))
+
+
+def _plan_trees(parent, plan):
+    """Top node of every plan node (its ancestor whose parent is outside the plan)."""
+    inside = np.zeros(parent.shape[0], dtype=bool)
+    inside[plan.nodes] = True
+    top = np.arange(parent.shape[0])
+    for i in plan.nodes:                               # parents before children
+        p = parent[i]
+        if p >= 0 and inside[p]:
+            top[i] = top[p]
+    return top
+
+
+@pytest.mark.parametrize("threads,tile", [(1, 1), (1, 7), (2, 30), (3, 200), (2, 10_000)])
+def test_tiles_hold_whole_plan_trees_level_by_level_and_are_warmed_whole(threads, tile):
+    """Tiles (consecutive plan trees computed level by level together, after a warm-up read of
+    their rows) keep every plan tree in one tile, hold at most ``tile`` nodes unless one tree is
+    larger, run their segments in depth order and read every node of theirs in the warm-up;
+    the results keep the reference bits."""
+    rng = np.random.default_rng(13)
+    h = random_forest(rng, 1500, 25)
+    for nodes in (None, rng.choice(h.count, 40, replace=False)):
+        plan = build_plan(h.parent, nodes, threads, 50, tile)
+        top = _plan_trees(h.parent, plan)
+        tiles = plan.tile_segments.size - 1
+        assert plan.chunk_tiles[0] == 0 and plan.chunk_tiles[-1] == tiles
+        assert np.all(np.diff(plan.chunk_tiles) >= 0)
+        tile_of = np.full(h.count, -1)
+        for t in range(tiles):
+            s0, s1 = plan.tile_segments[t], plan.tile_segments[t + 1]
+            members = plan.order[plan.segment_start[s0]:plan.segment_start[s1]]
+            tile_of[members] = t
+            depth = [int(_depth(h.parent, plan, plan.order[plan.segment_start[g]]))
+                     for g in range(s0, s1)]
+            assert depth == sorted(depth)              # level by level inside the tile
+            trees = np.unique(top[members])
+            if trees.size > 1:
+                assert members.size <= tile
+            warmed = np.zeros(h.count, dtype=bool)
+            for w in range(plan.tile_warm[t], plan.tile_warm[t + 1]):
+                warmed[plan.warm_start[w]:plan.warm_stop[w]] = True
+            assert warmed[members].all()
+        placed = plan.order
+        for i in placed:                               # a plan tree never spans two tiles
+            assert tile_of[i] == tile_of[top[i]] or top[i] in plan.roots
+        perturb(rng, h, plan.nodes)
+        plan.run(h)
+        assert_same_bits(world_state(h), reference_propagate(h))
+
+
+def _depth(parent, plan, i):
+    inside = np.zeros(parent.shape[0], dtype=bool)
+    inside[plan.nodes] = True
+    d = 0
+    while parent[i] >= 0 and inside[parent[i]]:
+        i = parent[i]
+        d += 1
+    return d
+
+
+@pytest.mark.parametrize("width", [1, 3, 13, 64])
+def test_lanes_past_a_segment_are_computed_and_never_written(width):
+    """The lane loop runs whole vectors: a segment whose lane count is not a multiple of
+    ``LANE_BLOCK`` computes the lanes past it from stale scratch rows; they are never
+    scattered, so every node outside the plan keeps its pose and every node in it gets the
+    reference bits."""
+    rng = np.random.default_rng(17)
+    h = chain_forest(rng, 70, rng.integers(1, 9, 70))
+    nodes = np.flatnonzero([n.startswith("c") and n.endswith("_1") for n in h.names])
+    plan = build_plan(h.parent, nodes, 1, width, 97)
+    assert (np.diff(plan.segment_start) % LANE_BLOCK != 0).any()
+    outside = np.setdiff1d(np.arange(h.count), plan.nodes)
+    for _ in range(2):
+        before = world_state(h)
+        perturb(rng, h, plan.nodes)
+        plan.run(h)
+        after = world_state(h)
+        for a, b in zip(after, before):
+            np.testing.assert_array_equal(a[outside], b[outside])
+        assert_same_bits(after, reference_propagate(h))
 
 
 def test_closure_of_no_nodes_is_empty_and_a_bad_index_is_named():

@@ -81,7 +81,7 @@ def state_edge_stretch(bq, name, params, duration=2.0):
 def test_a_root_passing_through_a_sphere_stretches_only_its_own_edge_and_the_display_stays_outside(bq):
     """The root passes inside the sphere: the state cannot keep its first edge and stay out
     of it, and collision wins there (7.1 %); the chain's other edges are held by the
-    collider-aware follow-the-leader after collision last (``quality.ftl_collision_team``;
+    collider-aware follow-the-leader after collision last (``quality.ftl_collision_lane``;
     before it: 24.1 % and 5.3 % on the first two edges). The quality display, within the
     lengths of the states it interpolates (tests/test_quality_display.py), shows no moving
     particle deeper inside the sphere than the state has one (0; only the fixed root, which
@@ -131,7 +131,7 @@ def test_the_display_stays_outside_a_capsule_the_root_passes_through(bq, tmp_pat
     most 1 % of the particle radius deep (measured 0.064 mm; 32.3 mm before the bounded push
     and the common move): the local sphere is exact for a sphere, within a fraction of a
     millimetre for a capsule. The capsule is static, so its segment at the last step
-    (``ColliderState.start_new`` / ``end_new``) is its pose for the display too; the same run
+    (``system.collider_state.start_new`` / ``end_new``) is its pose for the display too; the same run
     with collision last disabled enters it."""
     path = capsule_scene(bq, tmp_path)
 
@@ -164,21 +164,26 @@ def test_the_display_stays_outside_a_capsule_the_root_passes_through(bq, tmp_pat
 def test_inside_old_pose_oracle():
     """The "was already inside" test of collision last: sphere, tapered capsule and plane at
     their previous-step pose, with the particle radius and the 1 um tolerance."""
-    from collections import namedtuple
-
+    from magica_py.solver import state as st
     from magica_py.solver.quality import inside_old_pose
 
-    C = namedtuple("C", "shape start_old end_old radius_start radius_end plane_normal")
-    cs = C(np.array([0, 1, 2], np.int8),
-           np.array([[0.0, 0, 0], [0, 0, 0], [0, 0, 0]]),
-           np.array([[0.0, 0, 0], [1, 0, 0], [0, 0, 0]]),
-           np.array([0.5, 0.2, 0.0]), np.array([0.5, 0.1, 0.0]),
-           np.array([[0.0, 1, 0], [0, 1, 0], [0, 1, 0]]))
+    # three collider slots (sphere, tapered capsule along x, plane y = 0) of lane 0
+    cs = st.COLLIDER.allocate(3)
+    shape = (0, 1, 2)
+    for name, values in (("start_old", [[0.0, 0, 0], [0, 0, 0], [0, 0, 0]]),
+                         ("end_old", [[0.0, 0, 0], [1, 0, 0], [0, 0, 0]]),
+                         ("radius_start", [0.5, 0.2, 0.0]), ("radius_end", [0.5, 0.1, 0.0]),
+                         ("plane_normal", [[0.0, 1, 0], [0, 1, 0], [0, 1, 0]])):
+        st.COLLIDER.write(cs, name, slice(None), 0, values)
+
+    def inside(k, x, r):
+        return inside_old_pose(cs, k, 0, shape[k], x, r)
+
     r = 0.02
-    assert inside_old_pose(cs, 0, (0.5, 0.0, 0.0), r)             # inside sphere + radius
-    assert not inside_old_pose(cs, 0, (0.52, 0.0, 0.0), r)        # on the surface: not inside
-    assert inside_old_pose(cs, 1, (1.0, 0.11, 0.0), r)            # capsule end radius 0.1 + 0.02
-    assert not inside_old_pose(cs, 1, (1.0, 0.13, 0.0), r)
-    assert inside_old_pose(cs, 1, (0.0, 0.2, 0.0), r)             # start radius 0.2
-    assert inside_old_pose(cs, 2, (5.0, 0.01, 3.0), r)            # plane y = 0, within r
-    assert not inside_old_pose(cs, 2, (5.0, 0.03, 3.0), r)
+    assert inside(0, (0.5, 0.0, 0.0), r)             # inside sphere + radius
+    assert not inside(0, (0.52, 0.0, 0.0), r)        # on the surface: not inside
+    assert inside(1, (1.0, 0.11, 0.0), r)            # capsule end radius 0.1 + 0.02
+    assert not inside(1, (1.0, 0.13, 0.0), r)
+    assert inside(1, (0.0, 0.2, 0.0), r)             # start radius 0.2
+    assert inside(2, (5.0, 0.01, 3.0), r)            # plane y = 0, within r
+    assert not inside(2, (5.0, 0.03, 3.0), r)

@@ -1,7 +1,7 @@
 """A line cloth pushed by a collider keeps its edges (issue 16, docs/quality-mode.md *A chain
 pushed by a collider*): quality mode's collision last pushes particles out of the colliders
 after the inextensibility passes; for a line cloth the follow-the-leader pass then runs again
-with the colliders (``quality.ftl_collision_team``), so that a pushed particle's edges pull the
+with the colliders (``quality.ftl_collision_lane``), so that a pushed particle's edges pull the
 free end of the chain instead of being left stretched.
 
 The scene is the shape of Godette's hair on the backflip (docs/STABILITY.md): a two-bone

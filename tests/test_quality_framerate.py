@@ -82,7 +82,7 @@ def test_build_reset_is_used_only_when_the_first_frame_continues_the_build_pose(
         for params in (bq.QUALITY, bq.FAITHFUL):
             p = prepare(bq.variant((path, {}, 0.1), "first", params, fps=60))
             p.player.step()
-            flags[name, bool(params)] = int(p.system._hierarchy.ramp_from_build[0])
+            flags[name, bool(params)] = int(p.system.teams.ramp_from_build[0])
             assert p.system._hierarchy.build_pose_pending[0] == 0
     assert flags == {("jump", True): 0, ("jump", False): 0, ("matched", True): 1, ("matched", False): 0}
 

@@ -83,34 +83,35 @@ def test_mean_velocity_weight_is_the_time_average_of_the_ramp():
 def test_time_based_smoothing_does_not_depend_on_how_time_is_cut_into_frames():
     """Constant component velocity: the felt displacement over 1/30 s is the same whether the
     time comes as one frame or as 8 frames of 1/240 s, and matches the exact filter integral."""
-    from collections import namedtuple
-
     import numpy as np
 
+    from magica_py.solver import state as st
     from magica_py.solver.center import time_based_smoothing
 
-    Team = namedtuple("Team", ["smoothing_velocity"])
+    def smoothed(ts):   # the lane's filter state (lane 0 of block 0)
+        return st.TEAM.view(ts, "smoothing_velocity", 0, 0)[0]
+
     v = np.array([1.5, 0.0, -0.5])
     s = 0.4
     tau = smoothing_time_constant(s)
     totals = []
     for frames in (1, 4, 8):
-        ts = Team(np.zeros((1, 3)))
+        ts = st.TEAM.allocate(1)
         h = (1.0 / 30.0) / frames
         felt = np.zeros(3)
         for _ in range(frames):
-            felt += np.array(time_based_smoothing(ts, 0, tuple(v * h), h, s, -1.0))
+            felt += np.array(time_based_smoothing(ts, 0, 0, tuple(v * h), h, s, -1.0))
         totals.append(felt)
         # filter state after 1/30 s: v (1 - exp(-t/tau))
-        assert ts.smoothing_velocity[0] == pytest.approx(v * (1 - math.exp(-(1 / 30) / tau)), abs=1e-12)
+        assert smoothed(ts) == pytest.approx(v * (1 - math.exp(-(1 / 30) / tau)), abs=1e-12)
     T = 1.0 / 30.0
     exact = v * (T - tau * (1.0 - math.exp(-T / tau)))     # integral of v (1 - exp(-t/tau))
     for felt in totals:
         assert felt == pytest.approx(exact, abs=1e-12)
     # the speed limit caps the input velocity (m/s)
-    ts = Team(np.zeros((1, 3)))
-    time_based_smoothing(ts, 0, tuple(v * 10.0), 10.0, s, 1.0)
-    assert np.linalg.norm(ts.smoothing_velocity[0]) == pytest.approx(1.0, rel=1e-9)
+    ts = st.TEAM.allocate(1)
+    time_based_smoothing(ts, 0, 0, tuple(v * 10.0), 10.0, s, 1.0)
+    assert np.linalg.norm(smoothed(ts)) == pytest.approx(1.0, rel=1e-9)
 
 
 def test_switches_written_in_yaml_are_not_read_as_booleans():

@@ -1,7 +1,7 @@
 """Skirts that keep their shape in quality mode (issue 16 item 3, docs/quality-mode.md *Long
 chains and skirts*).
 
-* Oracles of the edge projection (``quality.edge_projection_team``) on a hand-made ring: a
+* Oracles of the edge projection (``quality.edge_projection_lane``) on a hand-made ring: a
   ring stretched uniformly (the slowest mode of its edges for Gauss-Seidel passes) comes
   back to its rest lengths in one projection, where two Gauss-Seidel passes leave most of the
   stretch; with a contact direction, the pushed particle does not move along it.
@@ -13,7 +13,6 @@ chains and skirts*).
 import importlib.util
 import math
 import pathlib
-from collections import namedtuple
 
 import numpy as np
 import pytest
@@ -24,30 +23,51 @@ SPIN = str(ROOT / "configs" / "hard" / "mocap_spin.yaml")
 N = 12          # strands of the ring
 RADIUS = 0.2    # m
 
-M = namedtuple("M", "team_edge_start team_edge_count edges attribute depth team_particle_start "
-                    "team_particle_count")
-P = namedtuple("P", "step_basic_pos next_pos friction projection_inverse_mass projection_gather "
-                    "projection_contact edge_normal edge_lambda edge_residual edge_direction edge_product "
-                    "edge_diagonal edge_compliance edge_active")
 
-
-def ring(stretch: float):
+class Ring:
     """A horizontal ring of N moving particles (depth 1: equal masses) at rest radius RADIUS,
-    its positions scaled by 1 + stretch; edges (i, i + 1) around it."""
-    angles = 2.0 * np.pi * np.arange(N) / N
-    rest = np.stack([RADIUS * np.cos(angles), np.zeros(N), RADIUS * np.sin(angles)], axis=1)
-    edges = np.array([[i, (i + 1) % N] for i in range(N)], np.int32)
-    m = M(np.array([0], np.int32), np.array([N], np.int32), edges, np.full(N, 0x02, np.uint8), np.ones(N),
-          np.array([0], np.int32), np.array([N], np.int32))
-    ps = P(rest, rest * (1.0 + stretch), np.zeros(N), np.zeros(N), np.zeros((N, 3)), np.zeros((N, 3)),
-           np.zeros((N, 3)), np.zeros(N), np.zeros(N), np.zeros(N), np.zeros(N), np.zeros(N), np.zeros(N), np.zeros(N, np.int32))
-    return m, ps
+    edges (i, i + 1) around it, in lane 0 of a hand-made block (``hand_blocks.HandBlock``);
+    ``next_pos`` / ``projection_contact`` are set per particle, the drivers run on the block."""
+
+    def __init__(self, stretch: float, attribute=None):
+        from hand_blocks import HandBlock
+
+        angles = 2.0 * np.pi * np.arange(N) / N
+        self.rest = np.stack([RADIUS * np.cos(angles), np.zeros(N), RADIUS * np.sin(angles)], axis=1)
+        self.edges = np.array([[i, (i + 1) % N] for i in range(N)], np.int32)
+        self.hb = HandBlock(attribute=np.full(N, 0x02, np.uint8) if attribute is None else attribute,
+                            edges=self.edges)
+        self.hb.write("step_basic_pos", self.rest)
+        self.hb.write("next_pos", self.rest * (1.0 + stretch))
+        self.hb.write("friction", np.zeros(N))
+
+    @property
+    def next_pos(self):
+        return self.hb.read("next_pos")
+
+    def set(self, field, values):
+        self.hb.write(field, values)
+
+    def project(self, iterations, contacts):
+        """One edge projection (``quality.edge_projection_lane``)."""
+        from magica_py.solver.quality import edge_projection_lane
+
+        hb = self.hb
+        return edge_projection_lane(hb.PS, hb.PM, hb.EDS, hb.BI, hb.topology, hb.b, hb.lane, iterations, contacts)
+
+    def edge_pass(self):
+        """One Gauss-Seidel edge pass (``quality.edge_pass_lanes``)."""
+        from magica_py.solver.quality import edge_pass_lanes
+
+        hb = self.hb
+        edge_pass_lanes(hb.PS, hb.PM, hb.BI, hb.topology, hb.b, hb.lane, hb.lane + 1)
 
 
-def edge_stretch(m, ps):
-    e = m.edges
-    length = np.linalg.norm(ps.next_pos[e[:, 1]] - ps.next_pos[e[:, 0]], axis=1)
-    rest = np.linalg.norm(ps.step_basic_pos[e[:, 1]] - ps.step_basic_pos[e[:, 0]], axis=1)
+def edge_stretch(ring):
+    e = ring.edges
+    x = ring.next_pos
+    length = np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1)
+    rest = np.linalg.norm(ring.rest[e[:, 1]] - ring.rest[e[:, 0]], axis=1)
     return length / rest - 1.0
 
 
@@ -57,20 +77,20 @@ def test_a_uniformly_stretched_ring_comes_back_in_one_projection():
     exact after one iteration up to the 0.1 % compliance; a uniform scaling is exact under
     the linearisation); two Gauss-Seidel edge passes leave > 3 % (each removes ~13 % of this
     mode on a 12-particle ring: 2 sin^2(pi/12))."""
-    from magica_py.solver.quality import PROJECTION_ITERATIONS, edge_pass_team, edge_projection_team
+    from magica_py.solver.quality import PROJECTION_ITERATIONS
 
-    m, ps = ring(0.05)
-    edge_projection_team(m, ps, 0, PROJECTION_ITERATIONS, False)
-    s = edge_stretch(m, ps)
+    ring = Ring(0.05)
+    assert ring.project(PROJECTION_ITERATIONS, False)
+    s = edge_stretch(ring)
     assert np.abs(s).max() < 5e-4
-    assert np.allclose(ps.next_pos[:, 1], 0.0)        # moved radially in its plane
-    radius = np.linalg.norm(ps.next_pos, axis=1)
+    assert np.allclose(ring.next_pos[:, 1], 0.0)        # moved radially in its plane
+    radius = np.linalg.norm(ring.next_pos, axis=1)
     assert radius == pytest.approx(np.full(N, radius.mean()), rel=1e-9)   # still a circle
 
-    m, ps = ring(0.05)
+    ring = Ring(0.05)
     for _ in range(2):
-        edge_pass_team(m, ps, 0)
-    assert edge_stretch(m, ps).max() > 0.03
+        ring.edge_pass()
+    assert edge_stretch(ring).max() > 0.03
     assert 2 * math.sin(math.pi / N) ** 2 == pytest.approx(0.134, abs=1e-3)
 
 
@@ -79,18 +99,17 @@ def test_the_projection_leaves_short_edges_and_fixed_particles_alone():
     ring with one fixed particle is left at 0.9 % by 4 iterations: the ring now has to
     shift towards the fixed particle, a mode the truncated solve leaves partly to the
     Gauss-Seidel passes that follow it)."""
-    from magica_py.solver.quality import edge_projection_team
-
-    m, ps = ring(-0.05)
-    before = ps.next_pos.copy()
-    edge_projection_team(m, ps, 0, 4, False)
-    assert np.array_equal(ps.next_pos, before)
-    m, ps = ring(0.05)
-    m.attribute[0] = 0x01   # fixed
-    x0 = ps.next_pos[0].copy()
-    edge_projection_team(m, ps, 0, 4, False)
-    assert np.array_equal(ps.next_pos[0], x0)
-    assert np.abs(edge_stretch(m, ps)).max() < 0.01
+    ring = Ring(-0.05)
+    before = ring.next_pos
+    ring.project(4, False)
+    assert np.array_equal(ring.next_pos, before)
+    attribute = np.full(N, 0x02, np.uint8)
+    attribute[0] = 0x01   # fixed
+    ring = Ring(0.05, attribute)
+    x0 = ring.next_pos[0]
+    ring.project(4, False)
+    assert np.array_equal(ring.next_pos[0], x0)
+    assert np.abs(edge_stretch(ring)).max() < 0.01
 
 
 def test_a_pushed_particle_slides_along_its_push_plane_and_its_neighbours_give_way():
@@ -99,19 +118,22 @@ def test_a_pushed_particle_slides_along_its_push_plane_and_its_neighbours_give_w
     neighbours move in towards it. Edges at their rest length join the solve (kept from
     stretching), so the give spreads around the ring, one edge further per iteration: 4
     iterations leave < 2 %, 8 leave < 0.2 %."""
-    from magica_py.solver.quality import edge_projection_team
-
     for iterations, bound in ((4, 0.02), (8, 0.002)):
-        m, ps = ring(0.0)
-        out = ps.next_pos[0] / np.linalg.norm(ps.next_pos[0])
-        ps.next_pos[0] += 0.02 * out
-        ps.projection_contact[0] = out
-        before = ps.next_pos.copy()
-        assert edge_stretch(m, ps).max() > 0.066
-        edge_projection_team(m, ps, 0, iterations, True)
-        assert abs(float((ps.next_pos[0] - before[0]) @ out)) < 1e-12
-        assert edge_stretch(m, ps).max() < bound
-        assert np.linalg.norm(ps.next_pos[1] - before[1]) > 5e-3
+        ring = Ring(0.0)
+        x = ring.next_pos
+        out = x[0] / np.linalg.norm(x[0])
+        x[0] += 0.02 * out
+        ring.set("next_pos", x)
+        contact = np.zeros((N, 3))
+        contact[0] = out
+        ring.set("projection_contact", contact)
+        before = ring.next_pos
+        assert edge_stretch(ring).max() > 0.066
+        ring.project(iterations, True)
+        after = ring.next_pos
+        assert abs(float((after[0] - before[0]) @ out)) < 1e-12
+        assert edge_stretch(ring).max() < bound
+        assert np.linalg.norm(after[1] - before[1]) > 5e-3
 
 
 @pytest.fixture(scope="module")
@@ -140,26 +162,29 @@ def test_no_skirt_particle_ends_a_step_inside_a_thigh_or_the_floor():
 
     p = prepare(Variant("spin", SPIN, parameters={"solver.mode": "quality"}, fps=90.0, duration=1.8))
     system = p.system
-    m, ps, cs = system.model, system.particles, system.collider_state
+    m, ps, view = system.model, system.particles, system.collider_state
     team = [getattr(s, "name", "") for s in system.specs].index("skirt")
     start, count = int(m.team_particle_start[team]), int(m.team_particle_count[team])
     idx = np.arange(start, start + count)
     idx = idx[(np.asarray(m.attribute)[idx] & 0x02) != 0]
     radius = M.particle_radius(m, system.parameters)[idx]
-    slots = [k for k in range(cs.team.shape[0]) if cs.team[k] == team]
-    assert sorted(int(cs.shape[k]) for k in slots) == [1, 1, 2]   # two thigh capsules and the floor
+    slot_team, _index, shape = system.collider_slots()
+    slots = [k for k in range(slot_team.shape[0]) if slot_team[k] == team]
+    assert sorted(int(shape[k]) for k in slots) == [1, 1, 2]   # two thigh capsules and the floor
     deepest = 0.0
     for _ in range(p.frames):
         p.player.step()
         x = ps.old_pos[idx]
+        cs = {name: getattr(view, name) for name in ("start_new", "end_new", "plane_normal", "radius_start",
+                                                     "radius_end")}   # the slots after the step
         for k in slots:
-            if cs.shape[k] == 2:
-                depth = radius - (x - cs.start_new[k]) @ cs.plane_normal[k]
+            if shape[k] == 2:
+                depth = radius - (x - cs["start_new"][k]) @ cs["plane_normal"][k]
             else:
-                a, b = cs.start_new[k], cs.end_new[k]
+                a, b = cs["start_new"][k], cs["end_new"][k]
                 ab = b - a
                 t = np.clip(((x - a) @ ab) / float(ab @ ab), 0.0, 1.0)
-                reach = cs.radius_start[k] + (cs.radius_end[k] - cs.radius_start[k]) * t + radius
+                reach = cs["radius_start"][k] + (cs["radius_end"][k] - cs["radius_start"][k]) * t + radius
                 depth = reach - np.linalg.norm(x - (a + t[:, None] * ab), axis=1)
             deepest = max(deepest, float(depth.max()))
     assert deepest <= 1e-5

@@ -54,63 +54,65 @@ def test_follow_the_leader_alone_keeps_chain_edges_at_rest_length(bq):
 
 
 def test_ftl_pass_oracle():
-    """One FTL pass on a hand-made 3-particle chain: each stretched edge is shortened to its
-    rest length by moving the child only, and the parent gets the DFTL reaction velocity."""
-    from collections import namedtuple
+    """One FTL pass (``ftl_pass_block``) on a hand-made 3-particle chain: each stretched edge is
+    shortened to its rest length by moving the child only, and the parent gets the DFTL
+    reaction velocity."""
+    from hand_blocks import HandBlock
 
-    from magica_py.solver.quality import ftl_pass
+    from magica_py.solver.quality import ftl_pass_block
 
-    M = namedtuple("M", "team_baseline_start team_baseline_count baseline_start baseline_count "
-                        "baseline_data attribute parent")
-    P = namedtuple("P", "step_basic_pos next_pos velocity_pos")
-    m = M(np.array([0], np.int32), np.array([1], np.int32), np.array([0], np.int32), np.array([3], np.int32),
-          np.array([0, 1, 2], np.int32), np.array([1, 2, 2], np.uint8), np.array([-1, 0, 1], np.int32))
-    ps = P(np.array([[0.0, 0, 0], [0, -1, 0], [0, -2, 0]]),        # rest: 1 m edges
-           np.array([[0.0, 0, 0], [0, -1.5, 0], [0.5, -2.5, 0]]),  # stretched
-           np.zeros((3, 3)))
-    ftl_pass(m, ps, 0, 0.9)
-    assert ps.next_pos[1] == pytest.approx([0, -1, 0])
-    d = ps.next_pos[2] - ps.next_pos[1]
+    hb = HandBlock(attribute=[1, 2, 2], parent=[-1, 0, 1], baselines=[[0, 1, 2]])
+    hb.write("step_basic_pos", [[0.0, 0, 0], [0, -1, 0], [0, -2, 0]])    # rest: 1 m edges
+    hb.write("next_pos", [[0.0, 0, 0], [0, -1.5, 0], [0.5, -2.5, 0]])    # stretched
+    hb.write("velocity_pos", np.zeros((3, 3)))
+    ftl_pass_block(hb.PS, hb.BI, hb.topology, hb.b, 0.9)
+    next_pos, velocity_pos = hb.read("next_pos"), hb.read("velocity_pos")
+    assert next_pos[1] == pytest.approx([0, -1, 0])
+    d = next_pos[2] - next_pos[1]
     assert np.linalg.norm(d) == pytest.approx(1.0)
     # child 2 moved from (0.5,-2.5) to a point 1 m from (0,-1) on the line to it
     expected = np.array([0, -1, 0]) + np.array([0.5, -1.5, 0]) / np.linalg.norm([0.5, -1.5, 0])
-    assert ps.next_pos[2] == pytest.approx(expected)
+    assert next_pos[2] == pytest.approx(expected)
     # DFTL: particle 1 (moving parent of 2) gets velocity_pos += 0.9 x the correction of 2
     move2 = expected - np.array([0.5, -2.5, 0])
-    assert ps.velocity_pos[1] == pytest.approx(0.9 * move2)
-    assert ps.velocity_pos[0] == pytest.approx([0, 0, 0])   # fixed parent: no velocity
+    assert velocity_pos[1] == pytest.approx(0.9 * move2)
+    assert velocity_pos[0] == pytest.approx([0, 0, 0])   # fixed parent: no velocity
 
 
 def test_edge_pass_and_tight_tether_oracles():
-    """Hand cases: the unilateral edge projection moves both ends by their inverse-mass share
-    (fixed ends stay), leaves short edges alone; the tight tether clamps the root distance."""
-    from collections import namedtuple
+    """Hand cases: the unilateral edge projection (``edge_pass_lanes``) moves both ends by their
+    inverse-mass share (fixed ends stay), leaves short edges alone; the tight tether
+    (``tight_tether_block``) clamps the root distance."""
+    from hand_blocks import HandBlock
 
     from magica_py.kernels.math3d import inverse_mass_friction_depth
-    from magica_py.solver.quality import edge_pass_team, tight_tether_team
+    from magica_py.solver.parameters import PRM_TETHER_LIMIT
+    from magica_py.solver.quality import edge_pass_lanes, tight_tether_block
 
-    M = namedtuple("M", "team_edge_start team_edge_count edges attribute depth team_particle_start "
-                        "team_particle_count root_index")
-    P = namedtuple("P", "step_basic_pos next_pos friction")
-    R = namedtuple("R", "tether_limit")
-    m = M(np.array([0], np.int32), np.array([2], np.int32), np.array([[0, 1], [1, 2]], np.int32),
-          np.array([1, 2, 2], np.uint8), np.array([0.0, 0.5, 1.0]), np.array([0], np.int32),
-          np.array([3], np.int32), np.array([-1, 0, 0], np.int32))
     rest = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
-    ps = P(rest.copy(), np.array([[0.0, 0, 0], [1.2, 0, 0], [2.0, 0, 0]]), np.zeros(3))
-    edge_pass_team(m, ps, 0)
+
+    def chain(next_pos):
+        hb = HandBlock(attribute=[1, 2, 2], root_index=[-1, 0, 0], depth=[0.0, 0.5, 1.0], edges=[[0, 1], [1, 2]])
+        hb.write("step_basic_pos", rest)
+        hb.write("next_pos", next_pos)
+        hb.write("friction", np.zeros(3))
+        return hb
+
+    hb = chain([[0.0, 0, 0], [1.2, 0, 0], [2.0, 0, 0]])
+    edge_pass_lanes(hb.PS, hb.PM, hb.BI, hb.topology, hb.b, hb.lane, hb.lane + 1)
     # edge 0-1: fixed 0, so particle 1 takes the whole 0.2 m: back to x = 1.0
-    assert ps.next_pos[1] == pytest.approx([1.0, 0, 0])
+    assert hb.read("next_pos")[1] == pytest.approx([1.0, 0, 0])
     # edge 1-2 was 0.8 m long before (compressed): untouched by the first edge's move, now 1.0
-    assert ps.next_pos[2] == pytest.approx([2.0, 0, 0])
-    ps = P(rest.copy(), np.array([[0.0, 0, 0], [1.0, 0, 0], [2.4, 0, 0]]), np.zeros(3))
-    edge_pass_team(m, ps, 0)
+    assert hb.read("next_pos")[2] == pytest.approx([2.0, 0, 0])
+    hb = chain([[0.0, 0, 0], [1.0, 0, 0], [2.4, 0, 0]])
+    edge_pass_lanes(hb.PS, hb.PM, hb.BI, hb.topology, hb.b, hb.lane, hb.lane + 1)
     w1 = inverse_mass_friction_depth(0.0, 0.5)
     w2 = inverse_mass_friction_depth(0.0, 1.0)
-    assert ps.next_pos[1, 0] == pytest.approx(1.0 + 0.4 * w1 / (w1 + w2))
-    assert ps.next_pos[2, 0] == pytest.approx(2.4 - 0.4 * w2 / (w1 + w2))
+    assert hb.read("next_pos")[1, 0] == pytest.approx(1.0 + 0.4 * w1 / (w1 + w2))
+    assert hb.read("next_pos")[2, 0] == pytest.approx(2.4 - 0.4 * w2 / (w1 + w2))
     # tight tether: particle 2 at 3 m from its root (rest 2 m, limit 1 %): pulled to 2.02 m
-    ps = P(rest.copy(), np.array([[0.0, 0, 0], [1.0, 0, 0], [0.0, 3.0, 0]]), np.zeros(3))
-    tight_tether_team(m, ps, R(np.array([0.01])), 0)
-    assert ps.next_pos[2] == pytest.approx([0.0, 2.02, 0])
-    assert ps.next_pos[1] == pytest.approx([1.0, 0, 0])      # within its limit: untouched
+    hb = chain([[0.0, 0, 0], [1.0, 0, 0], [0.0, 3.0, 0]])
+    hb.P[hb.b, PRM_TETHER_LIMIT] = 0.01
+    tight_tether_block(hb.PS, hb.P, hb.BI, hb.topology, hb.b)
+    assert hb.read("next_pos")[2] == pytest.approx([0.0, 2.02, 0])
+    assert hb.read("next_pos")[1] == pytest.approx([1.0, 0, 0])      # within its limit: untouched

@@ -1,6 +1,9 @@
 """Capturing and restoring the simulation state (runtime/snapshot.py) is exact: the frames
 after a restore give the bits the frames after the capture gave, and a fork restored into a
-second player built from the same scene continues the same run."""
+second player built from the same scene continues the same run. Snapshots are taken team by
+team (``ClothSystem.capture_state``), so they restore into a system whose teams are grouped
+into blocks otherwise (a team moved by a parameter change, a candidate with other
+parameters)."""
 import hashlib
 import pathlib
 
@@ -15,8 +18,8 @@ from magica_py.solver.system import ClothSystem
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
-def make_player(name: str):
-    scene = load_scene(ROOT / "configs" / f"{name}.yaml")
+def make_player(name: str, overrides=()):
+    scene = load_scene(ROOT / "configs" / f"{name}.yaml", list(overrides))
     player = Player.for_scene(scene)
     system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player)
     return player, system
@@ -157,3 +160,66 @@ def test_a_snapshot_survives_pickling_into_another_process():
     player.restore(snapshot)
     player.run(4)
     assert state_hash(player, system) == first
+
+
+THREE = ["rigs[0].instances.count=3"]   # the crowd's character three times: hair#0-2, skirt#0-2
+
+
+def test_a_restore_after_a_team_moved_to_another_block_moves_it_back_and_repeats_the_frames():
+    player, system = make_player("crowd", THREE)
+    hair = system.teams_of("hair#1")[0]
+    home = system.layout.place(hair)
+    player.run(8)
+    snapshot = player.capture()
+    player.run(10)
+    first = state_hash(player, system)
+    player.restore(snapshot)
+    system.set_parameter("hair#1", "damping", 0.3)
+    assert system.layout.place(hair)[0] != home[0]            # a block of its own
+    player.run(5)
+    player.restore(snapshot)
+    assert system.layout.place(hair) == home                  # back beside the other hairs
+    player.run(10)
+    assert state_hash(player, system) == first
+
+
+def test_a_model_keeping_restore_into_a_system_grouped_otherwise_continues_each_team_bit_for_bit():
+    """The reference runs hair#1 with another damping (a block of its own); the candidate
+    keeps the scene's parameters (the three hairs in one block). After the restore every team
+    holds the reference's state bit for bit; teams are independent, so every team whose
+    parameters are the same in both then repeats the reference's frames bit for bit."""
+    from magica_py.solver import state as st
+
+    reference, ref_system = make_player("crowd", THREE)
+    ref_system.set_parameter("hair#1", "damping", 0.3)
+    reference.run(12)
+    snapshot = reference.capture()
+    candidate, system = make_player("crowd", THREE)
+    candidate.run(3)
+    hairs = [system.teams_of(f"hair#{i}")[0] for i in range(3)]
+    assert len({system.layout.place(t)[0] for t in hairs}) == 1
+    assert len({ref_system.layout.place(t)[0] for t in hairs}) == 2
+    own_damping = system.parameters.damping_curve.copy()
+    candidate.restore(snapshot, keep_model=True)
+    assert candidate.frame == 12
+    assert np.array_equal(system.parameters.damping_curve, own_damping)
+    assert len({system.layout.place(t)[0] for t in hairs}) == 1   # its own grouping kept
+    for t in ref_system.live_teams:
+        for field in st.PARTICLE.fields:
+            assert system.read_particles(t, field).tobytes() == ref_system.read_particles(t, field).tobytes(), \
+                (system.team_names[t], field)
+        for field in st.TEAM.fields:
+            assert np.atleast_1d(system.read_team(t, field)).tobytes() == \
+                np.atleast_1d(ref_system.read_team(t, field)).tobytes(), (system.team_names[t], field)
+    same = [t for t in ref_system.live_teams if t != hairs[1]]
+    h, ref_h = candidate.scene.hierarchy, reference.scene.hierarchy
+    nodes = np.concatenate([system.models[t].transform_index for t in same])
+    differed = False
+    for frame in range(10):
+        candidate.step()
+        reference.step()
+        for t in same:
+            assert system.positions(t).tobytes() == ref_system.positions(t).tobytes(), (frame, system.team_names[t])
+        assert h.world_position[nodes].tobytes() == ref_h.world_position[nodes].tobytes(), frame
+        differed |= system.positions(hairs[1]).tobytes() != ref_system.positions(hairs[1]).tobytes()
+    assert differed                                              # hair#1 runs its own damping

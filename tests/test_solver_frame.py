@@ -91,7 +91,9 @@ def test_frequency_consistent_mode_changes_results_away_from_90_hz():
 def test_non_finite_particles_reset_the_team_and_never_reach_a_transform():
     s, h = chain_system(bones=5, length=0.5, direction=(0.0, 0.0, -1.0))
     run(s, 30)
-    s.particles.old_pos[2] = np.nan
+    old_pos = s.read_particles(0, "old_pos")
+    old_pos[2] = np.nan
+    s.write_particles(0, "old_pos", old_pos)          # the views are copies: write through the system
     events = []
     s.step_frame(1.0 / 60.0, events=events)
     assert events == [("cloth_reset", {"cloth": "tail", "team": 0, "reason": "non-finite particle state"})]
@@ -104,7 +106,9 @@ def test_non_finite_particles_reset_the_team_and_never_reach_a_transform():
 def test_a_particle_far_beyond_the_speed_bound_resets_the_team():
     s, h = chain_system(bones=5, length=0.5, direction=(0.0, 0.0, -1.0))
     run(s, 30)
-    s.particles.old_pos[3] += (50.0, 0.0, 0.0)
+    old_pos = s.read_particles(0, "old_pos")
+    old_pos[3] += (50.0, 0.0, 0.0)
+    s.write_particles(0, "old_pos", old_pos)
     events = []
     s.step_frame(1.0 / 60.0, events=events)
     assert [e[1]["reason"] for e in events] == ["particle speed above the guard bound"]

@@ -1,6 +1,11 @@
 """The speed work keeps the maths bit for bit (issue 4 "Speed"): each hoisted or cached
-quantity equals, exactly, what the reference-order evaluation gives. The golden hashes of the
-showcase scenes are checked by tests/test_quality_faithful_unchanged.py."""
+quantity equals, exactly, what the reference-order evaluation gives; and a scene compiles and
+calls only the optional stages its cloths use. The golden hashes of the showcase scenes are
+checked by tests/test_quality_faithful_unchanged.py, the lane form against the per-team
+reference by tests/test_lane_equivalence.py.
+
+The stage drivers are called here on the tables of a real ``ClothSystem`` (``system.tables``),
+one block at a time; the system's state is put back after each call."""
 from __future__ import annotations
 
 import math
@@ -12,27 +17,20 @@ import pytest
 
 from magica_py.config import load_scene
 from magica_py.kernels.math3d import (
-    inverse_mass_friction_depth, load3, lerp, q_look_rotation, v_add, v_cross, v_dot, v_length,
-    v_normalize, v_scale,
+    inverse_mass_friction_depth, lerp, q_look_rotation, v_add, v_cross, v_dot, v_length, v_normalize, v_scale,
 )
 from magica_py.runtime.player import Player
-from magica_py.solver.constraints.angle import angle_team
-from magica_py.solver.constraints.bending import DONT_MOVE_INVERSE_MASS, bending_team, solve_dihedral
-from magica_py.solver.parameters import curve_at_clamp01, step_rate
-from magica_py.solver.rotations import triangle_frame_from, triangle_rotations_team
+from magica_py.solver import blocks as bk
+from magica_py.solver.constraints.angle import angle_block
+from magica_py.solver.constraints.bending import DONT_MOVE_INVERSE_MASS, FIXED_POINT, bending_block, solve_dihedral
+from magica_py.solver.frame import simulate_frame
+from magica_py.solver.parameters import (
+    PRM_RESTORATION_STIFFNESS_CURVE, constraint_stiffness, curve_at_clamp01, step_rate,
+)
+from magica_py.solver.rotations import triangle_frame_from, triangle_rotations_block
 from magica_py.solver.system import ClothSystem
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
-
-
-@numba.njit
-def triangle_frame(m, ps, tri):
-    """Normal and uv tangent of triangle ``tri`` at the display positions (0 when degenerate)."""
-    return triangle_frame_from(load3(ps.position, m.triangles[tri, 0]), load3(ps.position, m.triangles[tri, 1]),
-                               load3(ps.position, m.triangles[tri, 2]),
-                               (m.triangle_uv[tri, 0, 0], m.triangle_uv[tri, 0, 1]),
-                               (m.triangle_uv[tri, 1, 0], m.triangle_uv[tri, 1, 1]),
-                               (m.triangle_uv[tri, 2, 0], m.triangle_uv[tri, 2, 1]))
 
 
 @pytest.fixture(scope="module")
@@ -49,29 +47,56 @@ def _team(system, name):
     return system.team_names.index(name)
 
 
+class _StateKept:
+    """Puts the system's state tables back (in place) when the block leaves."""
+
+    def __init__(self, system):
+        self.system = system
+
+    def __enter__(self):
+        s = self.system
+        self.saved = {name: getattr(s, name).copy() for name in ("PS", "TS", "CS", "TRS", "EDS")}
+        return self
+
+    def __exit__(self, *exc):
+        for name, a in self.saved.items():
+            getattr(self.system, name)[...] = a
+
+
 def test_triangle_frames_computed_once_equal_the_per_vertex_pair_evaluation(walk):
     s = walk
-    m, ps = s.model, s.particles
     team = _team(s, "skirt")
-    assert m.team_triangle_count[team] > 0
-    tables = s.kernel_tables()
-    before = ps.rotation.copy()
-    triangle_rotations_team(tables[0], tables[1], team)
-    got = ps.rotation.copy()
-    ps.rotation[...] = before
-    # reference order: the frame of each (vertex, triangle) pair evaluated on the spot
-    sl = s.team_particles(team)
+    model = s.models[team]
+    assert len(model.triangles) > 0
+    T = s.tables
+    b, lane, g = s.team_slots(team)
+    tri = s.layout.slots(team)["triangle"]
+    uv = bk.TRIANGLE_MODEL.view(T.TRM, "triangle_uv", tri, lane)      # (triangles, 6)
+    before = s.read_particles(team, "rotation")
+    position = s.read_particles(team, "position")
+    with _StateKept(s):
+        triangle_rotations_block(T.PS, T.TRS, T.TRM, T.BI, T.topology, np.int32(b))
+        got = s.read_particles(team, "rotation")
+    assert s.read_particles(team, "rotation").tobytes() == before.tobytes()   # state put back
+
+    def frame(t):
+        a, bb, c = (int(v) for v in model.triangles[t])
+        return triangle_frame_from(tuple(position[a]), tuple(position[bb]), tuple(position[c]),
+                                   (uv[t, 0], uv[t, 1]), (uv[t, 2], uv[t, 3]), (uv[t, 4], uv[t, 5]))
+
+    # reference order: the frame of each (vertex, triangle) pair evaluated on the spot, the
+    # rotation from the normalised sums (the pre-select form of the helpers)
     changed = 0
-    for p in range(sl.start, sl.stop):
-        n = int(m.vertex_triangle_count[p])
+    for p in range(model.particle_count):
+        n = int(model.vertex_triangle_count[p])
         if n == 0:
             assert np.array_equal(got[p], before[p])
             continue
         ns = (0.0, 0.0, 0.0)
         ts_ = (0.0, 0.0, 0.0)
-        for k in range(int(m.vertex_triangle_start[p]), int(m.vertex_triangle_start[p]) + n):
-            tn, tt = triangle_frame(tables[0], tables[1], int(m.vertex_triangle_data[k]))
-            flip = int(m.vertex_triangle_flip[k])
+        for k in range(int(model.vertex_triangle_start[p]), int(model.vertex_triangle_start[p]) + n):
+            tn, tt = frame(int(model.vertex_triangle_data[k]))
+            flip = int(model.vertex_triangle_flip[k])
             ns = v_add(ns, v_scale(tn, -1.0 if flip & 1 else 1.0))
             ts_ = v_add(ts_, v_scale(tt, -1.0 if flip & 2 else 1.0))
         expected = before[p]
@@ -86,64 +111,81 @@ def test_triangle_frames_computed_once_equal_the_per_vertex_pair_evaluation(walk
 
 def test_bending_with_per_pass_inverse_masses_equals_per_pair_masses(walk):
     s = walk
-    m, ps, prm = s.model, s.particles, s.parameters
     team = _team(s, "skirt")
-    assert m.team_bend_count[team] > 0
-    tables = s.kernel_tables()
-    ps.accum_vector[...] = 0.0
-    ps.accum_count[...] = 0
-    bending_team(tables[0], tables[1], tables[2], tables[3], team, 1.0, 1.0)
-    got = ps.accum_vector.copy(), ps.accum_count.copy()
-    ps.accum_vector[...] = 0.0
-    ps.accum_count[...] = 0
+    model = s.models[team]
+    assert len(model.bend_vertices) > 0
+    assert len(getattr(model, "volume_vertices", ())) == 0   # the skirt preset builds no volume pairs
+    T = s.tables
+    b, lane, g = s.team_slots(team)
+    next_pos = s.read_particles(team, "next_pos")
+    friction = s.read_particles(team, "friction")
+    assert not s.read_particles(team, "accum_count").any()  # the accumulators are clear between passes
+    with _StateKept(s):
+        bending_block(T.PS, T.PM, T.TS, T.BM, T.VM, T.P, T.BI, T.topology, np.int32(b), 1.0, 1.0)
+        got = s.read_particles(team, "next_pos")
+        assert not s.read_particles(team, "accum_count").any()   # and cleared after it
 
     def w(v):
-        if (m.attribute[v] & 0x02) == 0:
+        if (model.attribute[v] & 0x02) == 0:
             return DONT_MOVE_INVERSE_MASS
-        return inverse_mass_friction_depth(float(ps.friction[v]), float(m.depth[v]))
+        return inverse_mass_friction_depth(float(friction[v]), float(model.depth[v]))
 
-    k = min(max(step_rate(float(prm.bending_stiffness[team]), 1.0, 1.0, int(prm.rate_mode[team])), 0.0), 1.0)
-    acc = np.zeros_like(ps.accum_vector)
-    cnt = np.zeros_like(ps.accum_count)
-    b0 = int(m.team_bend_start[team])
-    for b in range(b0, b0 + int(m.team_bend_count[team])):
-        v = [int(x) for x in m.bend_vertices[b]]
-        ok, *corr = solve_dihedral(*(tuple(ps.next_pos[i]) for i in v), *(w(i) for i in v),
-                                   float(m.bend_rest_angle[b]), float(m.bend_sign[b]), k)
+    prm = s.parameters
+    k = min(max(constraint_stiffness(float(prm.bending_stiffness[team]), 1.0, 1.0, int(prm.rate_mode[team]),
+                                     int(prm.quality[team])), 0.0), 1.0)
+    assert k == min(max(step_rate(float(prm.bending_stiffness[team]), 1.0, 1.0, 0), 0.0), 1.0)   # faithful
+    acc = np.zeros((model.particle_count, 3))
+    cnt = np.zeros(model.particle_count, dtype=np.int64)
+    rest = bk.BEND_MODEL.view(T.BM, "bend_rest_angle", s.layout.slots(team)["bend"], lane)
+    sign = bk.BEND_MODEL.view(T.BM, "bend_sign", s.layout.slots(team)["bend"], lane)
+    np.testing.assert_array_equal(rest, model.bend_rest_angle)
+    for e in range(len(model.bend_vertices)):
+        v = [int(x) for x in model.bend_vertices[e]]
+        ok, *corr = solve_dihedral(*(tuple(next_pos[i]) for i in v), *(w(i) for i in v),
+                                   float(rest[e]), float(sign[e]), k)
         if ok:
             for i, c in zip(v, corr):
-                acc[i] += [float(math.trunc(x * 1e6)) for x in c]
+                acc[i] += [float(math.trunc(x * FIXED_POINT)) for x in c]
                 cnt[i] += 1
-    assert m.team_volume_count[team] == 0  # the skirt preset builds no volume pairs
-    assert np.array_equal(got[0], acc) and np.array_equal(got[1], cnt)
+    expected = next_pos.copy()
+    for p in range(model.particle_count):
+        if (model.attribute[p] & 0x02) and cnt[p] > 0:
+            scale = 1.0 / (cnt[p] * FIXED_POINT)
+            expected[p] = next_pos[p] + acc[p] * scale
     assert cnt.sum() > 0 and np.abs(acc).max() > 0
+    assert got.tobytes() == expected.tobytes()
 
 
 def test_restoration_stiffness_and_rest_direction_buffers_equal_the_per_iteration_values(walk):
     s = walk
-    m, ps, prm, ts = s.model, s.particles, s.parameters, s.teams
-    tables = s.kernel_tables()
+    prm = s.parameters
+    T = s.tables
     for name in ("hair", "skirt"):
         team = _team(s, name)
+        model = s.models[team]
         assert prm.use_restoration[team]
-        saved = {f: getattr(ps, f).copy() for f in ("next_pos", "velocity_pos", "angle_rotation")}
-        angle_team(tables[0], tables[1], tables[2], tables[3], team, 1.0, 1.0, 0.9, 0.8)
-        for f, a in saved.items():
-            getattr(ps, f)[...] = a
-        gravity_factor = lerp(1.0 - float(prm.restoration_gravity_falloff[team]), 1.0, float(ts.gravity_dot[team]))
+        b, lane, g = s.team_slots(team)
+        with _StateKept(s):
+            angle_block(T.PS, T.PP, T.TS, T.P, T.BI, T.topology, np.int32(b), 1.0, 1.0, 0.9, 0.8)
+            k_buffer = s.read_particles(team, "angle_restoration_k")
+            length_buffer = s.read_particles(team, "angle_rest_length")
+            direction_buffer = s.read_particles(team, "angle_rest_direction")
+            basic = s.read_particles(team, "step_basic_pos")      # not written by the angle pass
+        gravity_factor = lerp(1.0 - float(prm.restoration_gravity_falloff[team]), 1.0,
+                              float(s.read_team(team, "gravity_dot")))
         checked = 0
-        b0 = int(m.team_baseline_start[team])
-        for b in range(b0, b0 + int(m.team_baseline_count[team])):
-            e0 = int(m.baseline_start[b])
-            for e in range(e0 + 1, e0 + int(m.baseline_count[b])):
-                c = int(m.baseline_data[e])
-                kr = curve_at_clamp01(prm.restoration_stiffness_curve, team, float(m.depth[c]))
+        for line in range(len(model.baseline_start)):
+            e0 = int(model.baseline_start[line])
+            for e in range(e0 + 1, e0 + int(model.baseline_count[line])):
+                c = int(model.baseline_data[e])
+                # the curve looked up by depth (what each iteration would do), not the cached PP
+                kr = curve_at_clamp01(T.P, b, PRM_RESTORATION_STIFFNESS_CURVE, float(model.depth[c]))
                 expected = min(max(step_rate(kr, 1.0, 1.0, int(prm.rate_mode[team])), 0.0), 1.0) * gravity_factor
-                assert ps.angle_restoration_k[c] == expected
+                assert k_buffer[c] == expected
                 # the rest direction, hoisted out of the iterations: |bv| and bv / |bv|
-                bv = tuple(ps.step_basic_pos[c] - ps.step_basic_pos[int(m.parent[c])])
-                assert ps.angle_rest_length[c] == v_length(bv)
-                assert tuple(ps.angle_rest_direction[c]) == v_scale(bv, 1.0 / v_length(bv))
+                bv = tuple(basic[c] - basic[int(model.parent[c])])
+                assert length_buffer[c] == v_length(bv)
+                assert tuple(direction_buffer[c]) == v_scale(bv, 1.0 / v_length(bv))
                 checked += 1
         assert checked > 10
 
@@ -169,3 +211,47 @@ def test_baselines_list_every_parent_before_its_child(config):
                 assert int(m.parent[data[k]]) in data[:k]
                 checked += 1
     assert checked > 0
+
+
+ON = 1
+# the optional stages each showcase's cloths use (frame.StageSwitches), from the configs:
+# tail_orbit is one line-mode tail with angle restoration and no collider; the character's
+# skirt is a sequential loop mesh (bending, triangles) with point-mode colliders
+STAGES = {
+    "tail_orbit": dict(angle=ON, bending=None, point_collision=None, edge_collision=None, motion=None,
+                       quality=None, lines=ON, triangles=None, wind=None),
+    "character_walk": dict(angle=ON, bending=ON, point_collision=ON, edge_collision=None, motion=None,
+                           quality=None, lines=ON, triangles=ON, wind=None),
+}
+
+
+@pytest.mark.parametrize("config", sorted(STAGES))
+def test_a_scene_switches_on_only_the_stages_its_cloths_use(config):
+    """``ClothSystem.stages`` (the frame kernel's ``StageSwitches``) names the stages a scene
+    needs; the others are passed as None, so numba prunes their calls before typing them (the
+    compile events of tests/test_jit_off.py show they are never compiled)."""
+    scene = load_scene(ROOT / "configs" / f"{config}.yaml")
+    player = Player.for_scene(scene)
+    system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player)
+    assert system.stages._asdict() == STAGES[config]
+    player.run(2)
+    # the frame kernel was typed with exactly these switches: None where a stage is unused
+    switches = tuple(numba.types.none if v is None else numba.typeof(v) for v in system.stages)
+    assert any(tuple(sig[-len(switches):]) == switches for sig in simulate_frame.signatures), \
+        simulate_frame.signatures
+
+
+def test_a_runtime_change_switches_a_stage_on_and_off():
+    scene = load_scene(ROOT / "configs" / "character_walk.yaml")
+    system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings)
+    assert system.stages.edge_collision is None and system.stages.motion is None
+    system.set_parameter("skirt", "collider_collision.mode", "edge")
+    assert system.stages.edge_collision == ON and system.stages.point_collision == ON   # the hair still points
+    system.set_parameter("hair", "collider_collision.mode", "edge")
+    assert system.stages.point_collision is None
+    system.set_parameter("hair", "motion.use_max_distance", True)
+    assert system.stages.motion == ON
+    system.set_parameter("hair", "motion.use_max_distance", False)
+    assert system.stages.motion is None
+    system.remove_cloth(_team(system, "skirt"))
+    assert system.stages.bending is None and system.stages.triangles is None and system.stages.lines == ON

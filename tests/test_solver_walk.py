@@ -14,8 +14,9 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 def stretch(system, team):
     """(max edge stretch, max root-distance stretch) of one team's display positions, as
     fractions of the build lengths (parent edges and particle-to-root distances)."""
-    m = system.model
-    sl = system.team_particles(team)
+    m = system.model   # team-ordered: the team's particles are one range of the views
+    start = int(m.team_particle_start[team])
+    sl = slice(start, start + int(m.team_particle_count[team]))
     idx = np.arange(sl.start, sl.stop)
     pos = system.particles.position
     scale = np.linalg.norm(m.team_init_scale[team]) / np.sqrt(3.0)

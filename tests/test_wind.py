@@ -12,7 +12,7 @@ from magica_py import solver
 from magica_py.config.errors import ConfigError
 from magica_py.config.load import load_scene_text
 from magica_py.runtime.player import Player
-from magica_py.wind.force import direction_angles, wind_team, zone_wind
+from magica_py.wind.force import direction_angles, wind_block, zone_wind
 
 CHAIN = """
 scene: {{fps: {fps}, frames: 30, simulation_frequency: {frequency}}}
@@ -103,7 +103,8 @@ def _selected(system):
     system.select_wind()
     ts = system.teams
     n = int(ts.wind_zone_count[0])
-    return {system.wind.names[ts.wind_zone_id[0, s]]: (ts.wind_zone_main[0, s], ts.wind_zone_direction[0, s].copy(),
+    direction = ts.wind_zone_direction[0].reshape(-1, 3)   # x, y, z rows of slot 0, then slot 1, ...
+    return {system.wind.names[ts.wind_zone_id[0, s]]: (ts.wind_zone_main[0, s], direction[s],
                                                       ts.wind_zone_time[0, s]) for s in range(n)}
 
 
@@ -130,7 +131,7 @@ def test_smallest_containing_area_zone_wins_additive_zones_add_weak_and_disabled
 def test_a_zone_keeps_its_phase_while_it_is_felt_and_restarts_after_a_gap():
     system = _system(scene_text(SELECTION))
     _selected(system)
-    system.teams.wind_zone_time[0, :] = 7.0
+    system.write_team(0, "wind_zone_time", [7.0] * 4)
     assert all(v[2] == 7.0 for v in _selected(system).values())
     system.wind.set_zone("small", enabled=False)
     chosen = _selected(system)
@@ -151,18 +152,21 @@ wind:
   - {name: breeze, main: 5, turbulence: 0, direction: [1, 0, 0]}
 """, parameters="{wind: {influence: 0.5, depth_weight: 1.0}}"))
     system.select_wind()
-    m, ps, prm, ts = system.kernel_tables()[:4]
-    p = system.particles
-    p.velocity[:] = 0.0
-    p.next_pos[:] = 0.0
-    p.friction[:] = 0.0
-    p.friction[3] = 0.25
-    system.teams.scale_ratio[0] = 1.0
+    n = len(system.model.depth)
+    friction = np.zeros(n)
+    friction[3] = 0.25
+    system.write_particles(0, "velocity", np.zeros((n, 3)))
+    system.write_particles(0, "next_pos", np.zeros((n, 3)))
+    system.write_particles(0, "friction", friction)
+    system.write_team(0, "scale_ratio", 1.0)
     dt = 1.0 / 90.0
-    wind_team(m, ps, prm, ts, 0, dt)
+    T = system.tables
+    b, _lane = system.layout.place(0)
+    wind_block(T.PS, T.PM, T.TS, T.TI, T.P, T.BI, T.topology, b, dt, system._wind_zones())
+    p = system.particles
     depth = system.model.depth
     moving = (system.model.attribute & 0x02) != 0
-    expected = np.where(moving, 5.0 * 0.5 * (1.0 - p.friction) * depth * depth * dt, 0.0)
+    expected = np.where(moving, 5.0 * 0.5 * (1.0 - friction) * depth * depth * dt, 0.0)
     np.testing.assert_allclose(p.velocity[:, 0], expected, rtol=1e-14, atol=0)
     np.testing.assert_allclose(p.next_pos[:, 0], expected * dt, rtol=1e-14, atol=0)
     # y and z: the direction (1, 0, 0) rebuilt from its Euler angles (cos 90 degrees ~ 6e-17)

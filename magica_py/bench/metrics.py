@@ -46,7 +46,7 @@ class ChainGeometry:
 
 
 def chain_geometry(model, rest_positions: np.ndarray) -> ChainGeometry:
-    """Geometry of a ``solver.layout.SolverModel`` (global indices) at ``rest_positions``
+    """Geometry of a ``solver.views.TeamModel`` (``ClothSystem.model``: global indices) at ``rest_positions``
     (N,3): the world positions of ``model.transform_index`` at the rest pose."""
     rest = np.asarray(rest_positions, dtype=np.float64)
     n = rest.shape[0]

@@ -154,20 +154,22 @@ class StepColliders:
     suspended: np.ndarray       # (S,) bool: skipped this step (scale ~ 0)
 
 
-def step_collider_shapes(collider_state, slots: int) -> StepColliders:
-    cs = collider_state
-    return StepColliders(np.asarray(cs.shape[:slots]), np.asarray(cs.start_new[:slots]),
-                         np.asarray(cs.start_new[:slots]), np.asarray(cs.end_new[:slots]),
-                         np.asarray(cs.radius_start[:slots]), np.asarray(cs.radius_end[:slots]),
-                         np.asarray(cs.plane_normal[:slots]), np.asarray(cs.scale_suspend[:slots]) != 0)
+def step_collider_shapes(system, slots: int) -> StepColliders:
+    """The first ``slots`` collider slots of ``system`` (``ClothSystem.collider_state``, team
+    order) at the pose of its last step; each field gathered once."""
+    cs = system.collider_state
+    _team, _index, shape = system.collider_slots()
+    start = cs.start_new[:slots]
+    return StepColliders(shape[:slots], start, start, cs.end_new[:slots], cs.radius_start[:slots],
+                         cs.radius_end[:slots], cs.plane_normal[:slots], cs.scale_suspend[:slots] != 0)
 
 
 def slot_pairs(system, pairs) -> np.ndarray:
-    """The solver slot of each (particle, scene collider) pair of ``variants.colliding_pairs``."""
-    cs = system.collider_state
+    """The solver slot of each (particle, scene collider) pair of ``variants.colliding_pairs``
+    (an index of ``collider_state``: ``ClothSystem.collider_slots``)."""
+    slot_team, slot_collider, _shape = system.collider_slots()
     team = np.asarray(system.model.particle_team, dtype=np.int64)
-    slots = int((np.asarray(system.teams.collider_start) + np.asarray(system.teams.collider_count)).max(initial=0))
-    slot_of = {(int(cs.team[k]), int(cs.collider_index[k])): k for k in range(slots)}
+    slot_of = {(int(t), int(c)): k for k, (t, c) in enumerate(zip(slot_team, slot_collider))}
     return np.array([slot_of[(int(team[p]), int(c))] for p, c in zip(*pairs)], dtype=np.int64)
 
 
@@ -224,7 +226,6 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
     model = system.model
     h = scene.hierarchy
     nodes, geometry, pairs = rest_geometry(p)
-    n = nodes.shape[0]
     team = geometry.team
     kind_of_team = np.array([cloth_kind(getattr(spec, "name", "")) for spec in system.specs])
     kind = kind_of_team[team]                                    # (N,) per particle
@@ -258,7 +259,9 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
         dt = times[i] - previous_time
         now = h.world_position[nodes].copy()
         shapes_now = scene.colliders.world_shapes(h)
-        finite &= bool(np.isfinite(now).all() and np.isfinite(ps.old_pos[:n]).all() and np.isfinite(ps.velocity[:n]).all())
+        old_pos = ps.old_pos          # the view gathers a copy of the packed state: once per frame
+        velocity = ps.velocity
+        finite &= bool(np.isfinite(now).all() and np.isfinite(old_pos).all() and np.isfinite(velocity).all())
         resets += sum(1 for kind_, _ in ctx.events if kind_ == "cloth_reset")
         shown_edge = M.edge_stretch(now, geometry)
         shown_root = M.root_distance_stretch(now, geometry)
@@ -270,8 +273,8 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
         if stepped:
             # the last step's state and the one before it (D.10: old - real_velocity dt), the
             # two the quality display interpolates
-            state = np.asarray(ps.old_pos[:n]).copy()
-            before = state - np.asarray(ps.real_velocity[:n]) * step_dt
+            state = old_pos
+            before = state - ps.real_velocity * step_dt
             state_edge = np.maximum(M.edge_stretch(state, geometry), M.edge_stretch(before, geometry))
             state_root = np.maximum(M.root_distance_stretch(state, geometry), M.root_distance_stretch(before, geometry))
         for k in kinds:
@@ -285,7 +288,7 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
         if stepped and slot_count:
             # frame 0 has no body velocity: the previous pose is the build pose, which a capture's
             # first frame jumps away from
-            _contacts(system, state, radius_base, keep, step_pairs, slot_count, collider_index,
+            _contacts(system, state, velocity, radius_base, keep, step_pairs, slot_count, collider_index,
                       body_pair if i > 0 else np.zeros_like(body_pair), kind, shapes_before, shapes_now, dt,
                       times[i], out)
         previous, previous_time, shapes_before = now, times[i], shapes_now
@@ -298,17 +301,17 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
                     times, speed)
 
 
-def _contacts(system, state, radius_base, keep, step_pairs, slot_count, collider_index, body_pair, kind,
+def _contacts(system, state, velocity, radius_base, keep, step_pairs, slot_count, collider_index, body_pair, kind,
               shapes_before, shapes_now, dt, t, out) -> None:
     """Penetration and ejection at the end of this frame's last step, into ``out``."""
     ts = system.teams
     team = np.asarray(system.model.particle_team, dtype=np.int64)
-    radius = radius_base * (np.asarray(ts.scale_ratio) * np.asarray(ts.length_unit))[team]
-    shapes = step_collider_shapes(system.collider_state, slot_count)
+    radius = radius_base * (ts.scale_ratio * ts.length_unit)[team]
+    shapes = step_collider_shapes(system, slot_count)
     pi = step_pairs[0]
     sphere, normal = M.pair_contacts(state, radius, step_pairs, shapes)       # (P,) m, (P,3)
     centre = sphere - radius[pi]
-    pushed = pushed_by_collision(np.asarray(system.particles.friction)[pi], keep[pi])
+    pushed = pushed_by_collision(system.particles.friction[pi], keep[pi])
     near, in_contact = contact_pairs(sphere, radius[pi], pushed)
     touching = near & body_pair                   # the first readings: within one radius of a body part
     if touching.any():
@@ -316,7 +319,7 @@ def _contacts(system, state, radius_base, keep, step_pairs, slot_count, collider
         points = state[tp]
         vb = M.rigid_point_velocity(points, (shapes_before.position[tc], shapes_before.rotation[tc]),
                                     (shapes_now.position[tc], shapes_now.rotation[tc]), dt)
-        v = np.asarray(system.particles.velocity)[tp]
+        v = velocity[tp]
         relative, excess, outward = M.ejection_speeds(v, vb, normal[touching])
         strict = in_contact[touching]             # of those, the ones in contact (touching or pushed)
     for k, r in out.items():

@@ -177,14 +177,29 @@ def prepare(variant: Variant) -> Prepared:
     s = scene.settings
     frequency = int(variant.frequency or s.simulation_frequency)
     set_frequency(system, frequency, steps_needed(s, frequency))
-    for name, value in variant.raw_parameters.items():
-        column = getattr(system.parameters, name)
-        column[...] = value
+    if variant.raw_parameters:
+        apply_raw_parameters(system, variant.raw_parameters)
     if variant.duration is not None:
         frames = _frames_for(s, variant.duration)
     else:
         frames = s.frame_count() or int(round(10.0 / s.nominal_frame_time()))
     return Prepared(scene, player, system, int(frames), frequency)
+
+
+def apply_raw_parameters(system, raw: dict) -> None:
+    """Write ``raw`` (parameter-table field -> value, every team) into ``system``'s parameter
+    table past validation. The kernels read the table packed per block (``ClothSystem.P``), so
+    the values go in through the system's own path for a parameter table that changed: a
+    ``capture_state`` whose table is edited, written back with ``restore_state`` (before the
+    first frame the state itself is unchanged; a team whose row no longer matches its block's
+    moves to a block of its kind)."""
+    state = system.capture_state()
+    table = state["tables"]["parameters"]
+    for name, value in raw.items():
+        if name not in table:
+            raise KeyError(f"raw parameter {name!r}: no such field of the solver's parameter table")
+        table[name][...] = value
+    system.restore_state(state)
 
 
 def _frames_for(settings, duration: float) -> int:
@@ -276,8 +291,9 @@ def run_variant(variant: Variant, record_positions: bool = True, progress=None,
         if positions is not None:
             positions[i] = now
         tip_track[i] = now[tips]
+        velocity = ps.velocity   # the view gathers a copy of the packed state: once per frame
         bad = not (np.isfinite(now).all() and np.isfinite(ps.position).all()
-                   and np.isfinite(ps.velocity).all() and np.isfinite(ps.next_pos).all())
+                   and np.isfinite(velocity).all() and np.isfinite(ps.next_pos).all())
         non_finite[i] = bad
         es = M.edge_stretch(now, geometry)
         if es.size:
@@ -288,7 +304,7 @@ def run_variant(variant: Variant, record_positions: bool = True, progress=None,
         root_stretch[i] = rs.max() if rs.size else 0.0
         if has_colliders:
             shapes = scene.colliders.world_shapes(h)
-            ratio = np.asarray(system.teams.component_scale_ratio)
+            ratio = system.teams.component_scale_ratio
             radius = radius_base * np.where(ratio > 0, ratio, 1.0)[geometry.team]
             penetration[i] = M.penetration_depth(now, radius, pairs, shapes).max()
         dt = times[i] - previous_time
@@ -296,7 +312,7 @@ def run_variant(variant: Variant, record_positions: bool = True, progress=None,
             display_step[i] = float(np.linalg.norm(now - previous, axis=1).max(initial=0.0))
             if dt > 1e-12:
                 display_speed[i] = display_step[i] / dt
-        state_speed[i] = float(np.sqrt((ps.velocity * ps.velocity).sum(axis=1)).max(initial=0.0))
+        state_speed[i] = float(np.sqrt((velocity * velocity).sum(axis=1)).max(initial=0.0))
         previous = now.copy()
         previous_time = times[i]
         for kind, payload in ctx.events:

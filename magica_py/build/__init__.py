@@ -1,6 +1,6 @@
 """BoneCloth build path (docs/solver.md §B): root bones -> RenderSetupData -> VirtualMesh -> proxy mesh ->
-constraint data -> read-only ``ClothModel`` (the solver's ``layout.SolverLayout`` concatenates
-the models of a scene into teams).
+constraint data -> read-only ``ClothModel`` (the solver's ``blocks.BlockLayout`` places each
+model, one team, in a block of teams of its kind).
 
 ``build_cloth(hierarchy, spec)`` duck-types ``spec`` (a ``ClothSpec``): it reads ``name``,
 ``root_bones``, ``component``, ``connection_mode``, ``parameters`` (a mapping of dotted keys;

@@ -499,3 +499,105 @@ def inverse_mass_friction_depth(friction, depth):
 def matrix_row(a, i, k):
     """Row k of matrix i of a ``(n, 4, 4)`` array, as a tuple."""
     return (a[i, k, 0], a[i, k, 1], a[i, k, 2], a[i, k, 3])
+
+
+# ----------------------------------------------------------------------------- select forms
+# The same functions as above with every path computed and the answer selected (no branch):
+# the same bits on every path, and a lane loop calling them vectorises. They cost every path's
+# work, so the lane-inner stages use them where the paths are cheap or the expensive one is the
+# common one; scalar code keeps the branching forms.
+
+@kernel
+def v_normalize_select(a):
+    """``v_normalize`` without a branch."""
+    n = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    inv = 1.0 / max(n, 1e-300)   # a zero vector: discarded below (and no 1/0 with the JIT off)
+    small = n < 1e-12
+    return (0.0 if small else a[0] * inv, 0.0 if small else a[1] * inv, 0.0 if small else a[2] * inv)
+
+
+@kernel
+def q_normalize_select(q):
+    """``q_normalize`` without a branch."""
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    inv = 1.0 / max(n, 1e-300)   # a zero quaternion: discarded below
+    small = n < 1e-12
+    return (0.0 if small else q[0] * inv, 0.0 if small else q[1] * inv,
+            0.0 if small else q[2] * inv, 1.0 if small else q[3] * inv)
+
+
+@kernel
+def orthogonal_axis_select(a):
+    """``orthogonal_axis`` without a branch."""
+    first = v_cross(a, (0.0, 1.0, 0.0)) if (a[0] > a[1] and a[0] > a[2]) else v_cross(a, (1.0, 0.0, 0.0))
+    second = v_cross(a, (0.0, 1.0, 0.0))
+    third = v_cross(a, (0.0, 0.0, 1.0))
+    fallback = third if v_length_sq(second) < 1e-12 else second
+    return v_normalize_select(fallback if v_length_sq(first) < 1e-12 else first)
+
+
+@kernel
+def q_slerp_select(q1, q2, t):
+    """``q_slerp`` without a branch (both of its paths computed)."""
+    d = q_dot(q1, q2)
+    negative = d < 0.0
+    b = (-q2[0], -q2[1], -q2[2], -q2[3]) if negative else q2
+    d = -d if negative else d
+    angle = trig.acos(d)
+    w1 = trig.sin((1.0 - t) * angle)
+    w2 = trig.sin(t * angle)
+    inv_s = 1.0 / trig.sin(angle)
+    far = q_normalize_select(((q1[0] * w1 + b[0] * w2) * inv_s, (q1[1] * w1 + b[1] * w2) * inv_s,
+                              (q1[2] * w1 + b[2] * w2) * inv_s, (q1[3] * w1 + b[3] * w2) * inv_s))
+    near = q_normalize_select((q1[0] + (b[0] - q1[0]) * t, q1[1] + (b[1] - q1[1]) * t,
+                               q1[2] + (b[2] - q1[2]) * t, q1[3] + (b[3] - q1[3]) * t))
+    use_far = d < 0.9995
+    return (far[0] if use_far else near[0], far[1] if use_far else near[1], far[2] if use_far else near[2],
+            far[3] if use_far else near[3])
+
+
+@kernel
+def from_to_rotation_unit_select(a, b, t):
+    """``from_to_rotation_unit`` without a branch."""
+    c = v_dot(a, b)
+    c = 1.0 if c > 1.0 else c
+    c = -1.0 if c < -1.0 else c
+    opposite = q_axis_angle(orthogonal_axis_select(a), math.pi * t)
+    general = q_axis_angle(v_normalize_select(v_cross(a, b)), trig.acos(c) * t)
+    is_opposite = abs(1.0 + c) < 1e-6
+    is_parallel = abs(1.0 - c) < 1e-6
+    q = ((0.0, 0.0, 0.0, 1.0) if is_parallel else general)
+    return opposite if is_opposite else q
+
+
+@kernel
+def from_to_rotation_select(a, b, t):
+    """``from_to_rotation`` without a branch."""
+    return from_to_rotation_unit_select(v_normalize_select(a), v_normalize_select(b), t)
+
+
+@kernel
+def angle_between_vectors_select(a, b):
+    """``angle_between_vectors`` without a branch."""
+    la = v_length(a)
+    lb = v_length(b)
+    c = v_dot(a, b) / (la * lb)
+    c = 1.0 if c > 1.0 else c
+    c = -1.0 if c < -1.0 else c
+    angle = trig.acos(c)
+    return 0.0 if (la < 1e-12 or lb < 1e-12) else angle
+
+
+@kernel
+def clamp_angle_select(direction, base, max_angle):
+    """``clamp_angle`` without a branch."""
+    d = v_normalize_select(direction)
+    b = v_normalize_select(base)
+    c = v_dot(d, b)
+    c = 1.0 if c > 1.0 else c
+    c = -1.0 if c < -1.0 else c
+    alpha = trig.acos(c)
+    axis = orthogonal_axis_select(d) if abs(1.0 + c) < 1e-6 else v_normalize_select(v_cross(d, b))
+    turned = q_rotate(q_axis_angle(axis, alpha - max_angle), direction)
+    keep = (alpha <= max_angle) or (not (abs(1.0 + c) < 1e-6) and abs(1.0 - c) < 1e-6)
+    return direction if keep else turned

@@ -76,13 +76,13 @@ def acos(x):
     x = -1.0 if x < -1.0 else x
     ax = abs(x)
     big = ax > 0.5
-    # |x| > 1/2: asin of sqrt((1 - |x|) / 2), exact argument (1 - |x| is exact there)
-    z = math.sqrt((1.0 - ax) * 0.5) if big else x
+    # |x| > 1/2: asin of sqrt((1 - |x|) / 2), exact argument (1 - |x| is exact there); the
+    # root is taken either way and selected (a conditional root is a call, not an instruction)
+    root = math.sqrt((1.0 - ax) * 0.5)
+    z = root if big else x
     a = _asin_small(z)
-    if big:
-        r = 2.0 * a
-        return r if x > 0.0 else PI - r
-    return HALF_PI - a
+    r = 2.0 * a
+    return (r if x > 0.0 else PI - r) if big else HALF_PI - a
 
 
 @kernel
@@ -196,12 +196,11 @@ def acos_fma(x):
     x = -1.0 if x < -1.0 else x
     ax = abs(x)
     big = ax > 0.5
-    z = math.sqrt((1.0 - ax) * 0.5) if big else x
+    root = math.sqrt((1.0 - ax) * 0.5)   # taken either way and selected (as in ``acos``)
+    z = root if big else x
     a = _asin_small_fma(z)
-    if big:
-        r = 2.0 * a
-        return r if x > 0.0 else PI - r
-    return HALF_PI - a
+    r = 2.0 * a
+    return (r if x > 0.0 else PI - r) if big else HALF_PI - a
 
 
 _S0, _S1, _S2, _S3 = -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0

@@ -8,9 +8,9 @@ numbers read off a Unity scene carry over unchanged.
 
 Nodes are stored parents-before-children, so one forward pass (``propagate_world``, a numba
 kernel) updates every world pose. Per frame, ``propagate(plan)`` runs a precomputed
-``scene.propagation.PropagationPlan``: only the subtrees of the nodes that move, by depth
-level with the nodes of a level computed side by side, over ``threads`` threads, with the
-same bits as the forward pass.
+``scene.propagation.PropagationPlan``: only the subtrees of the nodes that move, in tiles of
+whole trees whose pose rows are read into the cache first, by depth level with the nodes of a
+level computed side by side, over ``threads`` threads, with the same bits as the forward pass.
 
 **Deferred propagation.** ``propagate_later(plan)`` marks the plan's nodes stale instead of
 computing them, as Unity does with the transforms a job writes: their world pose is computed

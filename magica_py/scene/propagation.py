@@ -1,5 +1,5 @@
-"""World-pose propagation over a precomputed plan: by depth level, lanes side by side, threads
-over independent trees.
+"""World-pose propagation over a precomputed plan: tiles of whole trees by depth level, lanes
+side by side, threads over independent trees.
 
 A ``PropagationPlan`` is built once for a set of nodes (``TransformHierarchy.plan``: every
 node, or the subtrees of the nodes that move, e.g. the animated and the cloth bones) and
@@ -10,36 +10,50 @@ are the same bits; only the order of independent nodes changes:
 * the plan's nodes are split into **chunks** of whole top-level trees (the hierarchy's roots),
   balanced by node count; chunks share no node and no parent, so they run on separate
   threads (``threads`` > 1, numba ``prange``);
-* inside a chunk the nodes go by **depth level** (depth counted from the plan's own top
+* a chunk's **plan trees** (a node whose parent is outside the plan, with its descendants in
+  the plan) are grouped, in index order, into **tiles** of at most ``TILE_NODES`` nodes (a
+  larger tree is a tile of its own). A tile starts with a **warm-up**: every cache line of its
+  nodes' rows of the seven pose arrays is read once, array by array in address order
+  (``warm_rows``), so that the hardware prefetcher streams them in; the level order below
+  touches them scattered, and after the cloth kernel has gone through the caches each first
+  touch would otherwise wait for memory on its own;
+* inside a tile the nodes go by **depth level** (depth counted from the plan's own top
   nodes): every parent is final before its level starts and the nodes of a level do not
-  depend on each other. A level is cut into **segments** of at most ``SEGMENT_WIDTH`` (512) nodes;
-  a segment's local poses are gathered into structure-of-arrays scratch rows, computed in one
-  loop that LLVM vectorises across the lanes (``compose_lanes``) and scattered back to the
-  hierarchy's arrays. The parents' matrices and rotations come either from the hierarchy
-  (gathered) or, when the segment's parents are lane for lane the nodes of the segment one
-  level up (a forest of chains: strands, tails, the light scene), straight from that
-  segment's output rows;
-* hierarchy roots (parent -1) of the plan are done first, one by one (``propagate_node``).
+  depend on each other. A level is cut into **segments** of at most ``SEGMENT_WIDTH`` (512)
+  nodes; a segment's local poses are gathered into structure-of-arrays scratch rows, computed
+  in one loop that LLVM vectorises across the lanes (``compose_lanes``, whole vectors of
+  ``LANE_BLOCK`` lanes: the lanes past the segment compute from stale rows and are never
+  written back) and scattered back to the hierarchy's arrays. The parents' matrices and
+  rotations come either from the hierarchy (gathered) or, when the segment's parents are lane
+  for lane the nodes of the tile's segment one level up (a forest of chains: strands, tails,
+  the light scene), straight from that segment's output rows;
+* hierarchy roots (parent -1) of the plan are done first in their chunk, one by one
+  (``propagate_node``).
 
 The plan never writes the constant bottom row ``(0, 0, 0, 1)`` of ``local_to_world``: the
 hierarchy's constructor writes it with its first full pass and nothing else changes it.
 
-Arrays of a plan (k nodes in the plan, r of them hierarchy roots, s segments, c chunks, L
-output slots, R = 26 + 19 L scratch rows):
+Arrays of a plan (k nodes in the plan, r of them hierarchy roots, s segments, t tiles, w
+warm-up runs, c chunks, L output slots, R = 26 + 19 L scratch rows):
 
 ====================  ===================  ==============================================
 field                 shape                meaning
 ====================  ===================  ==============================================
 roots                 (r,) int32           hierarchy roots in the plan, chunk by chunk
 chunk_roots           (c + 1,) int64       chunk j's roots: roots[chunk_roots[j]:chunk_roots[j+1]]
-order                 (k - r,) int32       the other nodes, chunk by chunk, level by level
+order                 (k - r,) int32       the other nodes, tile by tile, level by level
 segment_start         (s + 1,) int64       segment g: order[segment_start[g]:segment_start[g+1]]
-chunk_segments        (c + 1,) int64       chunk j's segments
+chunk_tiles           (c + 1,) int64       chunk j's tiles
+tile_segments         (t + 1,) int64       tile i's segments (``chunk_segments``: chunk j's)
+tile_warm             (t + 1,) int64       tile i's warm-up runs
+warm_start, warm_stop (w,) int64           run u: nodes warm_start[u]:warm_stop[u] (a tile's
+                                           nodes, gaps of at most ``WARM_GAP`` closed)
 segment_slot          (s,) int32           output slot segment g writes
 parent_slot           (s,) int32           slot holding g's parents lane for lane, or -1
-scratch               (c, R * S) float64   per chunk, rows of S = ``LANE_STRIDE`` lanes: 10
-                                           input rows (local pose), 16 gathered parent rows
-                                           (output layout), then L slots of 19 output rows
+scratch               (c, R * S + 1)       per chunk, rows of S = ``LANE_STRIDE`` lanes: 10
+                      float64              input rows (local pose), 16 gathered parent rows
+                                           (output layout), then L slots of 19 output rows;
+                                           the last cell keeps the warm-up's sum
 ====================  ===================  ==============================================
 """
 from __future__ import annotations
@@ -61,6 +75,9 @@ SEGMENT_WIDTH = 512
 # dozen bones the call with the plan's lane arrays costs more than the nodes themselves
 # (a single 8-bone tail: two calls a frame, ~2 us each)
 SMALL_PLAN = 256
+# lanes computed together by the vectorised loop (8 doubles: AVX-512; two vectors with AVX2):
+# a segment's lane count is rounded up to a multiple of it
+LANE_BLOCK = 8
 # scratch rows are padded so that rows do not sit a multiple of 4 KiB apart (cache set
 # conflicts between the row streams of a segment)
 _ROW_PAD = 8
@@ -75,6 +92,13 @@ LANE_OUTPUT = 19
 LANE_PARENT = 16
 # first output row of a chunk's scratch (after the input and the gathered parent rows)
 OUTPUT_ROW = LANE_INPUT + LANE_PARENT
+# nodes per tile: consecutive plan trees computed level by level together, small enough that
+# their rows of the hierarchy's pose arrays (288 bytes a node) stay in the L2 cache between
+# the tile's levels
+TILE_NODES = 1024
+# gaps of at most this many nodes between a tile's nodes are read by the warm-up pass too (one
+# sequential run instead of several short ones)
+WARM_GAP = 8
 
 
 # ----------------------------------------------------------------------------- per node
@@ -245,12 +269,56 @@ def _slot_rows(lanes, slot):
     return lanes[first:first + LANE_OUTPUT * LANE_STRIDE]
 
 
+@kernel(inline="always")
+def _warm_span(rows, lo, hi):
+    """One read per cache line of ``rows[lo:hi]`` (a flat view), summed. A plain sum: without
+    fastmath LLVM keeps it a chain of scalar loads (an integer fold would be vectorised into
+    gathers, which fetch the lines half as fast here)."""
+    acc = 0.0
+    for k in range(lo, hi, 8):
+        acc += rows[k]
+    if hi > lo:
+        acc += rows[hi - 1]
+    return acc
+
+
 @kernel
-def propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segments, segment_slot,
-                    parent_slot, scratch, parent, local_position, local_rotation, local_scale,
-                    world_position, world_rotation, lossy_scale, local_to_world):
-    """One chunk of a plan: its hierarchy roots, then its segments in order; a segment whose
-    parents are lane for lane the nodes of an earlier segment (``parent_slot`` >= 0) reads
+def warm_rows(warm_start, warm_stop, w0, w1, local_position, local_rotation, local_scale,
+              world_position, world_rotation, lossy_scale, local_to_world):
+    """Read every cache line of the pose rows of nodes ``warm_start[w]:warm_stop[w]`` (w in
+    w0..w1), array by array in address order, before a tile's levels run: the level order
+    touches a tile's rows scattered, so that each first touch would wait for memory on its own;
+    read in sequence, the hardware prefetcher streams them into the cache. Returns the sum of
+    the values read (stored by the caller, so that the reads are kept)."""
+    acc = 0.0
+    lp = local_position.reshape(-1)
+    lr = local_rotation.reshape(-1)
+    ls = local_scale.reshape(-1)
+    wp = world_position.reshape(-1)
+    wr = world_rotation.reshape(-1)
+    sc = lossy_scale.reshape(-1)
+    m = local_to_world.reshape(-1)
+    for w in range(w0, w1):
+        a = warm_start[w]
+        b = warm_stop[w]
+        acc += _warm_span(lp, 3 * a, 3 * b)
+        acc += _warm_span(lr, 4 * a, 4 * b)
+        acc += _warm_span(ls, 3 * a, 3 * b)
+        acc += _warm_span(m, 16 * a, 16 * b)
+        acc += _warm_span(wp, 3 * a, 3 * b)
+        acc += _warm_span(wr, 4 * a, 4 * b)
+        acc += _warm_span(sc, 3 * a, 3 * b)
+    return acc
+
+
+@kernel
+def propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_tiles, tile_segments,
+                    tile_warm, warm_start, warm_stop, segment_slot, parent_slot, scratch, parent,
+                    local_position, local_rotation, local_scale, world_position, world_rotation,
+                    lossy_scale, local_to_world):
+    """One chunk of a plan: its hierarchy roots, then its tiles in order, each after a warm-up
+    read of its rows (``warm_rows``), its segments level by level; a segment whose parents are
+    lane for lane the nodes of the tile's segment one level up (``parent_slot`` >= 0) reads
     their results from that segment's output rows."""
     for k in range(chunk_roots[chunk], chunk_roots[chunk + 1]):
         propagate_node(roots[k], parent, local_position, local_rotation, local_scale,
@@ -258,45 +326,54 @@ def propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segme
     lanes = scratch[chunk]
     inputs = lanes[:LANE_INPUT * LANE_STRIDE]
     gathered = lanes[LANE_INPUT * LANE_STRIDE:OUTPUT_ROW * LANE_STRIDE]
-    for g in range(chunk_segments[chunk], chunk_segments[chunk + 1]):
-        k0 = segment_start[g]
-        k1 = segment_start[g + 1]
-        gather_local(order, k0, k1, local_position, local_rotation, local_scale, inputs)
-        outputs = _slot_rows(lanes, segment_slot[g])
-        if parent_slot[g] >= 0:
-            parents = _slot_rows(lanes, parent_slot[g])
-        else:
-            gather_parents(order, k0, k1, parent, world_rotation, local_to_world, gathered)
-            parents = gathered
-        compose_lanes(k1 - k0, inputs, parents, outputs)
-        scatter_lanes(order, k0, k1, world_position, world_rotation, lossy_scale, local_to_world,
-                      outputs)
+    warmed = 0.0
+    for t in range(chunk_tiles[chunk], chunk_tiles[chunk + 1]):
+        warmed += warm_rows(warm_start, warm_stop, tile_warm[t], tile_warm[t + 1], local_position,
+                            local_rotation, local_scale, world_position, world_rotation,
+                            lossy_scale, local_to_world)
+        for g in range(tile_segments[t], tile_segments[t + 1]):
+            k0 = segment_start[g]
+            k1 = segment_start[g + 1]
+            gather_local(order, k0, k1, local_position, local_rotation, local_scale, inputs)
+            outputs = _slot_rows(lanes, segment_slot[g])
+            if parent_slot[g] >= 0:
+                parents = _slot_rows(lanes, parent_slot[g])
+            else:
+                gather_parents(order, k0, k1, parent, world_rotation, local_to_world, gathered)
+                parents = gathered
+            # whole vectors: the lanes past the segment compute from stale rows and are not
+            # scattered (a scalar remainder lane costs about as much as a vector of 8)
+            compose_lanes((k1 - k0 + LANE_BLOCK - 1) // LANE_BLOCK * LANE_BLOCK, inputs, parents,
+                          outputs)
+            scatter_lanes(order, k0, k1, world_position, world_rotation, lossy_scale,
+                          local_to_world, outputs)
+    lanes[lanes.shape[0] - 1] = warmed
 
 
 @kernel
-def propagate_plan_serial(roots, chunk_roots, order, segment_start, chunk_segments, segment_slot,
-                          parent_slot, scratch, parent, local_position, local_rotation,
-                          local_scale, world_position, world_rotation, lossy_scale,
-                          local_to_world):
+def propagate_plan_serial(roots, chunk_roots, order, segment_start, chunk_tiles, tile_segments,
+                          tile_warm, warm_start, warm_stop, segment_slot, parent_slot, scratch,
+                          parent, local_position, local_rotation, local_scale, world_position,
+                          world_rotation, lossy_scale, local_to_world):
     """Every chunk of a plan in turn (one thread)."""
     for chunk in range(chunk_roots.shape[0] - 1):
-        propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segments,
-                        segment_slot, parent_slot, scratch, parent, local_position,
-                        local_rotation, local_scale, world_position, world_rotation, lossy_scale,
-                        local_to_world)
+        propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_tiles,
+                        tile_segments, tile_warm, warm_start, warm_stop, segment_slot,
+                        parent_slot, scratch, parent, local_position, local_rotation,
+                        local_scale, world_position, world_rotation, lossy_scale, local_to_world)
 
 
 @kernel(parallel=True)
-def propagate_plan_parallel(roots, chunk_roots, order, segment_start, chunk_segments,
-                            segment_slot, parent_slot, scratch, parent, local_position,
-                            local_rotation, local_scale, world_position, world_rotation,
-                            lossy_scale, local_to_world):
+def propagate_plan_parallel(roots, chunk_roots, order, segment_start, chunk_tiles, tile_segments,
+                            tile_warm, warm_start, warm_stop, segment_slot, parent_slot, scratch,
+                            parent, local_position, local_rotation, local_scale, world_position,
+                            world_rotation, lossy_scale, local_to_world):
     """The chunks of a plan on numba's threads (chunks share no node: same bits as serial)."""
     for chunk in prange(chunk_roots.shape[0] - 1):
-        propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_segments,
-                        segment_slot, parent_slot, scratch, parent, local_position,
-                        local_rotation, local_scale, world_position, world_rotation, lossy_scale,
-                        local_to_world)
+        propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_tiles,
+                        tile_segments, tile_warm, warm_start, warm_stop, segment_slot,
+                        parent_slot, scratch, parent, local_position, local_rotation,
+                        local_scale, world_position, world_rotation, lossy_scale, local_to_world)
 
 
 @kernel
@@ -313,27 +390,39 @@ class PropagationPlan:
     """The nodes to update and the order to update them in (module docstring); built by
     ``build_plan``, run by ``run`` against the hierarchy arrays it was built for."""
 
-    def __init__(self, roots, chunk_roots, order, segment_start, chunk_segments, segment_slot,
-                 parent_slot, slots, nodes, threads, width):
+    def __init__(self, roots, chunk_roots, order, segment_start, chunk_tiles, tile_segments,
+                 tile_warm, warm_start, warm_stop, segment_slot, parent_slot, slots, nodes,
+                 threads, width):
         self.roots = roots
         self.chunk_roots = chunk_roots
         self.order = order
         self.segment_start = segment_start
-        self.chunk_segments = chunk_segments
+        self.chunk_tiles = chunk_tiles
+        self.tile_segments = tile_segments
+        self.tile_warm = tile_warm
+        self.warm_start = warm_start
+        self.warm_stop = warm_stop
         self.segment_slot = segment_slot
         self.parent_slot = parent_slot
         self.nodes = nodes              # (k,) int32 sorted: every node the plan updates
         self.threads = threads          # threads it was built for (``chunks`` <= threads)
+        self.width = width
         chunks = max(chunk_roots.shape[0] - 1, 1)
         # per chunk one flat row block: input rows, gathered parent rows, then two levels of
-        # output slots (the level being computed and the one above it)
+        # output slots (the level being computed and the one above it), and one cell that keeps
+        # the warm-up reads
         rows = OUTPUT_ROW + LANE_OUTPUT * max(slots, 1)
-        self.scratch = np.zeros((chunks, rows * LANE_STRIDE))
+        self.scratch = np.zeros((chunks, rows * LANE_STRIDE + 1))
         self._covers = weakref.WeakKeyDictionary()   # other plan -> self.covers(other)
 
     @property
     def chunks(self) -> int:
         return self.chunk_roots.shape[0] - 1
+
+    @property
+    def chunk_segments(self) -> np.ndarray:
+        """(c + 1,) chunk j's segments: ``chunk_segments[j]:chunk_segments[j + 1]``."""
+        return self.tile_segments[self.chunk_tiles]
 
     @property
     def size(self) -> int:
@@ -362,10 +451,10 @@ class PropagationPlan:
                              world_position, world_rotation, lossy_scale, local_to_world)
             return
         fn = propagate_plan_parallel if self.chunks > 1 else propagate_plan_serial
-        fn(self.roots, self.chunk_roots, self.order, self.segment_start, self.chunk_segments,
-           self.segment_slot, self.parent_slot, self.scratch, parent, local_position,
-           local_rotation, local_scale, world_position, world_rotation, lossy_scale,
-           local_to_world)
+        fn(self.roots, self.chunk_roots, self.order, self.segment_start, self.chunk_tiles,
+           self.tile_segments, self.tile_warm, self.warm_start, self.warm_stop, self.segment_slot,
+           self.parent_slot, self.scratch, parent, local_position, local_rotation, local_scale,
+           world_position, world_rotation, lossy_scale, local_to_world)
 
 
 def subtree_closure(parent: np.ndarray, nodes) -> np.ndarray:
@@ -390,22 +479,26 @@ def _mark_descendants(parent, mark):
             mark[i] = True
 
 
-def build_plan(parent: np.ndarray, nodes, threads: int = 1,
-               width: int = SEGMENT_WIDTH) -> PropagationPlan:
+def build_plan(parent: np.ndarray, nodes, threads: int = 1, width: int = SEGMENT_WIDTH,
+               tile: int = TILE_NODES) -> PropagationPlan:
     """The plan that updates ``nodes`` and their descendants (``nodes=None``: every node) of a
-    hierarchy with parents-before-children ``parent``, split into at most ``threads`` chunks
-    and segments of at most ``width`` lanes."""
+    hierarchy with parents-before-children ``parent``, split into at most ``threads`` chunks,
+    tiles of about ``tile`` nodes and segments of at most ``width`` lanes."""
     if int(threads) < 1 or not 1 <= int(width) <= SEGMENT_WIDTH:
         raise ValueError(f"propagation plan: expected threads >= 1 and 1 <= width <= "
                          f"{SEGMENT_WIDTH}, got {threads}, {width}")
+    if int(tile) < 1:
+        raise ValueError(f"propagation plan: expected tile >= 1 (nodes), got {tile}")
     n = parent.shape[0]
     members = np.arange(n, dtype=np.int32) if nodes is None else subtree_closure(parent, nodes)
     in_plan = np.zeros(n, dtype=bool)
     in_plan[members] = True
-    # depth from the plan's top nodes and the hierarchy root (tree) of every node
+    # depth from the plan's top nodes, the hierarchy root (tree) and the plan's top node of
+    # every node
     depth = np.zeros(n, dtype=np.int64)
     tree = np.zeros(n, dtype=np.int64)
-    _depth_and_tree(parent, in_plan, depth, tree)
+    top = np.zeros(n, dtype=np.int64)
+    _depth_and_tree(parent, in_plan, depth, tree, top)
     m_tree = tree[members]
     # chunks: whole trees, contiguous in index order, about members / threads nodes each
     chunks = max(1, min(int(threads), int(np.unique(m_tree).size) if members.size else 1))
@@ -416,51 +509,99 @@ def build_plan(parent: np.ndarray, nodes, threads: int = 1,
         tree_chunk = np.minimum((before * chunks) // members.size, chunks - 1)
         chunk = tree_chunk[np.searchsorted(trees, m_tree)]
         chunks = int(tree_chunk.max()) + 1
+    tile_of = _tiles(chunk, top[members], int(tile))
+    tiles = int(tile_of.max()) + 1 if members.size else 0
     is_root = parent[members] < 0
     roots = members[is_root]
     chunk_roots = np.searchsorted(chunk[is_root], np.arange(chunks + 1)).astype(np.int64)
     rest = members[~is_root]
     rest_chunk = chunk[~is_root]
+    rest_tile = tile_of[~is_root]
     rest_depth = depth[rest]
-    key = np.lexsort((rest, rest_depth, rest_chunk))
+    key = np.lexsort((rest, rest_depth, rest_tile))
     order = rest[key].astype(np.int32)
-    rest_chunk = rest_chunk[key]
+    rest_tile = rest_tile[key]
     rest_depth = rest_depth[key]
-    # segments: a new one where the chunk or the depth changes or the width is reached
+    # segments: a new one where the tile or the depth changes or the width is reached
     starts = [0]
     for k in range(1, order.size + 1):
-        if k == order.size or rest_chunk[k] != rest_chunk[k - 1] or rest_depth[k] != rest_depth[k - 1] \
+        if k == order.size or rest_tile[k] != rest_tile[k - 1] or rest_depth[k] != rest_depth[k - 1] \
                 or k - starts[-1] >= width:
             starts.append(k)
-    first = np.asarray(starts[:-1], dtype=np.int64)
-    seg_chunk = rest_chunk[first]
+    starts = np.asarray(starts, dtype=np.int64)
+    first = starts[:-1]
+    seg_tile = rest_tile[first]
     seg_depth = rest_depth[first]
-    chunk_segments = np.searchsorted(seg_chunk, np.arange(chunks + 1)).astype(np.int64)
-    slot, parent_slot, slots = _output_slots(parent, order, np.asarray(starts, dtype=np.int64),
-                                             seg_chunk, seg_depth)
-    return PropagationPlan(roots.astype(np.int32), chunk_roots, order,
-                           np.asarray(starts, dtype=np.int64), chunk_segments, slot, parent_slot,
+    tile_chunk = np.zeros(tiles, dtype=np.int64)
+    tile_chunk[tile_of] = chunk
+    chunk_tiles = np.searchsorted(tile_chunk, np.arange(chunks + 1)).astype(np.int64)
+    tile_segments = np.searchsorted(seg_tile, np.arange(tiles + 1)).astype(np.int64)
+    slot, parent_slot, slots = _output_slots(parent, order, starts, seg_tile, seg_depth)
+    tile_warm, warm_start, warm_stop = _warm_runs(members, tile_of, tiles)
+    return PropagationPlan(roots.astype(np.int32), chunk_roots, order, starts, chunk_tiles,
+                           tile_segments, tile_warm, warm_start, warm_stop, slot, parent_slot,
                            slots, members, int(threads), int(width))
 
 
-def _output_slots(parent, order, starts, seg_chunk, seg_depth):
-    """Output rows of each segment: segment s of a level (s-th of its chunk and depth) writes
+def _tiles(chunk, top, size):
+    """Tile of each plan node (``chunk`` and ``top`` per node, members in index order): the plan
+    trees (a top node and its plan descendants) of a chunk in the order of their top nodes,
+    grouped into tiles of at most ``size`` nodes (a larger tree is a tile of its own); tiles are
+    numbered chunk by chunk."""
+    tile_of = np.zeros(chunk.size, dtype=np.int64)
+    if chunk.size == 0:
+        return tile_of
+    trees, first, inverse, counts = np.unique(top, return_index=True, return_inverse=True,
+                                              return_counts=True)
+    tree_chunk = chunk[first]
+    by_chunk = np.lexsort((trees, tree_chunk))         # trees chunk by chunk, by top node
+    tree_tile = np.zeros(trees.size, dtype=np.int64)
+    current, filled, last_chunk = -1, size, -1
+    for t in by_chunk:
+        if tree_chunk[t] != last_chunk or filled + counts[t] > size:
+            current += 1
+            filled = 0
+            last_chunk = tree_chunk[t]
+        tree_tile[t] = current
+        filled += counts[t]
+    return tree_tile[inverse]
+
+
+def _warm_runs(members, tile_of, tiles):
+    """Index ranges a tile's warm-up reads: its nodes in runs, gaps of at most ``WARM_GAP``
+    nodes closed (CSR ``tile_warm`` over ``warm_start`` / ``warm_stop``)."""
+    by_tile = np.lexsort((members, tile_of))
+    nodes = members[by_tile].astype(np.int64)
+    node_tile = tile_of[by_tile]
+    cut = np.ones(nodes.size, dtype=bool)
+    if nodes.size:
+        cut[1:] = (node_tile[1:] != node_tile[:-1]) | (nodes[1:] - nodes[:-1] > WARM_GAP + 1)
+    begin = np.flatnonzero(cut)
+    end = np.append(begin[1:], nodes.size).astype(np.int64) - 1
+    warm_start = nodes[begin]
+    warm_stop = nodes[end] + 1 if nodes.size else np.zeros(0, dtype=np.int64)
+    tile_warm = np.searchsorted(node_tile[begin], np.arange(tiles + 1)).astype(np.int64)
+    return tile_warm, warm_start, warm_stop
+
+
+def _output_slots(parent, order, starts, seg_tile, seg_depth):
+    """Output rows of each segment: segment s of a level (s-th of its tile and depth) writes
     slot ``(depth % 2) * per_level + s``, which stays untouched during the next level. A segment
     whose parents are, lane for lane, the nodes of the same-numbered segment one level up (a
     forest of chains) reads them from there (``parent_slot``); -1: gather from the hierarchy."""
-    count = seg_chunk.size
+    count = seg_tile.size
     slot = np.zeros(count, dtype=np.int32)
     parent_slot = np.full(count, -1, dtype=np.int32)
     index_in_level = np.zeros(count, dtype=np.int64)
     where: dict[tuple[int, int, int], int] = {}
     for g in range(count):
-        if g > 0 and seg_chunk[g] == seg_chunk[g - 1] and seg_depth[g] == seg_depth[g - 1]:
+        if g > 0 and seg_tile[g] == seg_tile[g - 1] and seg_depth[g] == seg_depth[g - 1]:
             index_in_level[g] = index_in_level[g - 1] + 1
-        where[(int(seg_chunk[g]), int(seg_depth[g]), int(index_in_level[g]))] = g
+        where[(int(seg_tile[g]), int(seg_depth[g]), int(index_in_level[g]))] = g
     per_level = int(index_in_level.max()) + 1 if count else 1
     for g in range(count):
         slot[g] = (seg_depth[g] % 2) * per_level + index_in_level[g]
-        up = where.get((int(seg_chunk[g]), int(seg_depth[g]) - 1, int(index_in_level[g])))
+        up = where.get((int(seg_tile[g]), int(seg_depth[g]) - 1, int(index_in_level[g])))
         if up is None:
             continue
         lanes = parent[order[starts[g]:starts[g + 1]]]
@@ -471,12 +612,18 @@ def _output_slots(parent, order, starts, seg_chunk, seg_depth):
 
 
 @kernel
-def _depth_and_tree(parent, in_plan, depth, tree):
+def _depth_and_tree(parent, in_plan, depth, tree, top):
     for i in range(parent.shape[0]):
         p = parent[i]
         if p < 0:
             tree[i] = i
             depth[i] = 0
+            top[i] = i
         else:
             tree[i] = tree[p]
-            depth[i] = depth[p] + 1 if in_plan[p] else 0
+            if in_plan[p]:
+                depth[i] = depth[p] + 1
+                top[i] = top[p]
+            else:
+                depth[i] = 0
+                top[i] = i

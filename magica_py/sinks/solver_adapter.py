@@ -1,14 +1,17 @@
 """Snapshot provider over the solver's ``ClothSystem`` (magica_py/solver/system.py).
 
-The solver keeps every team's particles in one SoA (``system.particles``), teams contiguous
-in team order, so the sink copies one (P, 3) array per frame whatever the number of cloths.
-What is read (all world space, after LATE_UPDATE):
+The solver keeps its state in packed lane tables (``solver/lanes.py``); its team-ordered view
+``system.particles`` gathers one field of every live team's particles into one (P, 3) array,
+teams contiguous in team order, so the sink gathers each field once per frame whatever the
+number of cloths (a cloth's frame is a slice of it). What is read (all world space, after
+LATE_UPDATE):
 
 * ``particles.position``        display positions (docs/solver.md §E.1 overwrites the base pose with them)
 * ``particles.base_pos_buffer`` the animated base pose of this frame (§C.1, kept for §E.2)
 * ``time_state.update_count``   steps each team ran this frame (§A.4)
 
-Topology comes from the solver model (``system.model``, global indices, per-team ranges) and
+Topology comes from the team-ordered model (``system.model``, a ``views.TeamModel``: global
+indices, per-team ranges; a removed cloth has no particles) and
 the per-team radius curve (``system.parameters.radius_curve``, evaluated at each particle's
 depth as §D.8 does, without the scale ratio).
 """
@@ -84,11 +87,13 @@ class ClothSystemSnapshots:
 
     def cloth_frames(self) -> list[ClothFrame]:
         s, m = self.system, self.system.model
+        position = s.particles.position          # one gather per field for every cloth
+        base = s.particles.base_pos_buffer
         frames = []
         for t in range(len(s.team_names)):
             start, count = int(m.team_particle_start[t]), int(m.team_particle_count[t])
             sl = slice(start, start + count)
-            frames.append(ClothFrame(positions=s.particles.position[sl], base_positions=s.particles.base_pos_buffer[sl],
+            frames.append(ClothFrame(positions=position[sl], base_positions=base[sl],
                                      steps=int(s.time_state.update_count[t])))
         return frames
 

@@ -7,7 +7,7 @@
   the main speed (``ARROW_M_PER_M_PER_S`` metres of arrow per m/s; a radial zone: six arrows
   out of its centre; a disabled zone: no arrow).
 * ``metrics/wind/<cloth>/felt_m_per_s2``: per cloth (team), the length of the mean wind
-  acceleration its Move particles felt at the frame's last step (``TeamState.wind_felt``:
+  acceleration its Move particles felt at the frame's last step (``system.teams.wind_felt``:
   zones and moving wind, after influence, friction and depth weight), a time series.
 
 The frame's data (``WindFrame``) is copied by the recorder from the cloth system's wind field
@@ -44,7 +44,7 @@ class WindFrame:
 def wind_frame(system) -> WindFrame | None:
     """The frame's wind of a ``ClothSystem`` (None without wind zones and moving wind)."""
     wind = getattr(system, "wind", None)
-    felt = system.teams.wind_felt
+    felt = system.teams.wind_felt   # (teams, 3) by team id, gathered from the packed team state
     if wind is None:
         if not (system.parameters.wind_moving_wind > 0.01).any():
             return None

@@ -19,7 +19,7 @@ from magica_py.solver.constraints.angle import LIMIT_ATTENUATION
 from magica_py.solver.constraints.distance import VELOCITY_ATTENUATION as DISTANCE_ATTENUATION
 from magica_py.solver.constraints.motion import VELOCITY_ATTENUATION as MOTION_ATTENUATION
 from magica_py.solver.constraints.tether import VELOCITY_ATTENUATION as TETHER_ATTENUATION
-from magica_py.solver.parameters import step_keep, step_rate, step_share
+from magica_py.solver.parameters import PRM_RATE_MODE, PRM_RESTORATION_ATTENUATION, step_keep, step_rate, step_share
 from magica_py.solver.quality import (
     quality_distance_attenuation, quality_hard_attenuation, quality_restoration_attenuation,
 )
@@ -35,16 +35,14 @@ def restoration_step_attenuation(attenuation, frequency_ratio, rate_mode):
 
 
 @kernel
-def step_attenuations(prm, team, frequency_ratio):
-    """(tether, distance, angle limit, angle restoration, motion) attenuations of a step."""
-    mode = prm.rate_mode[team]
+def step_attenuations(P, b, frequency_ratio):
+    """(tether, distance, angle limit, angle restoration, motion) attenuations of a step of block b."""
+    mode = int(P[b, PRM_RATE_MODE])
     ratio = frequency_ratio
-    tether = quality_hard_attenuation(prm, team, ratio, TETHER_ATTENUATION,
-                                      step_keep(TETHER_ATTENUATION, ratio, mode))
-    distance = quality_distance_attenuation(prm, team, step_rate(DISTANCE_ATTENUATION, ratio, 1.0, mode))
-    limit = quality_hard_attenuation(prm, team, ratio, LIMIT_ATTENUATION, step_keep(LIMIT_ATTENUATION, ratio, mode))
+    tether = quality_hard_attenuation(P, b, ratio, TETHER_ATTENUATION, step_keep(TETHER_ATTENUATION, ratio, mode))
+    distance = quality_distance_attenuation(P, b, step_rate(DISTANCE_ATTENUATION, ratio, 1.0, mode))
+    limit = quality_hard_attenuation(P, b, ratio, LIMIT_ATTENUATION, step_keep(LIMIT_ATTENUATION, ratio, mode))
     restoration = quality_restoration_attenuation(
-        prm, team, ratio, restoration_step_attenuation(prm.restoration_attenuation[team], ratio, mode))
-    motion = quality_hard_attenuation(prm, team, ratio, MOTION_ATTENUATION,
-                                      step_keep(MOTION_ATTENUATION, ratio, mode))
+        P, b, ratio, restoration_step_attenuation(P[b, PRM_RESTORATION_ATTENUATION], ratio, mode))
+    motion = quality_hard_attenuation(P, b, ratio, MOTION_ATTENUATION, step_keep(MOTION_ATTENUATION, ratio, mode))
     return tether, distance, limit, restoration, motion

@@ -1,28 +1,38 @@
-"""Per-frame team stages before the steps (docs/solver.md §C.1, §C.2, §C.4, §C.5, §H.1).
+"""Per-frame team stages before the steps (docs/solver.md §C.1, §C.2, §C.4, §C.5, §H.1, §A.7).
 
-``skin_team`` (C.1) computes every particle's animated base pose from the bones read this
-frame; ``center_and_inertia_team`` (C.2 + C.4) the center, anchor, teleport test, movement
-smoothing, world inertia and speed limits, producing the frame shift; ``reset_or_shift_team``
-(C.5) applies the reset or the shift to the particle history.
+``skin_block`` (C.1) computes every particle's animated base pose from the bones read this
+frame; ``center_and_inertia_lane`` (C.2 + C.4) the center, anchor, teleport test, movement
+smoothing, world inertia and speed limits of one lane's team, producing the frame shift;
+``reset_or_shift_block`` (C.5) applies the reset or the shift to the particle history.
+
+Every function works on one block ``b`` of the packed tables (``solver/lanes.py``): particle
+stages loop over the block's particles and, innermost, its lanes (vectorised across teams);
+team stages run lane by lane (``*_lane``: a team's branches differ from its neighbours').
 """
 from __future__ import annotations
 
 import math
 
-
 from magica_py.jit import kernel
+from magica_py.kernels import portable
 from magica_py.kernels.math3d import (
-    matrix_row,
-    clamp_length, lerp, load3, load4, q_angle, q_from_to, q_inverse, q_mul, q_normal_axis,
-    q_rotate, q_slerp, q_tangent_axis, rot_from_normal_tangent, saturate, shift_position,
-    store3, store4, unlerp, v_add, v_length, v_lerp, v_normalize, v_scale, v_sub,
+    clamp_length, lerp, q_angle, q_from_to, q_inverse, q_mul, q_normal_axis, q_rotate, q_slerp,
+    q_tangent_axis, rot_from_normal_tangent, saturate, shift_position, unlerp, v_add, v_length, v_lerp,
+    v_normalize, v_scale, v_sub,
+)
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import LANES, get1, get3, get4, put1, put3, put4
+from magica_py.solver.parameters import (
+    PRM_ANCHOR_INERTIA, PRM_CULLING_FADE_RATIO, PRM_CULLING_LENGTH, PRM_MOVEMENT_SMOOTHING,
+    PRM_MOVEMENT_SPEED_LIMIT, PRM_QUALITY, PRM_ROTATION_SPEED_LIMIT, PRM_STABILIZATION_TIME,
+    PRM_TELEPORT_DISTANCE, PRM_TELEPORT_MODE, PRM_TELEPORT_ROTATION, PRM_TIME_BASED_SMOOTHING, PRM_WORLD_INERTIA,
+    length_unit,
 )
 from magica_py.solver.rotations import normalize_or_zero, rot_from_normal_tangent_select
-from magica_py.kernels import portable
-from magica_py.solver.parameters import length_unit
 
-MOVE = 0x02
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
+ZERO3 = (0.0, 0.0, 0.0)
 TELEPORT_RESET = 1
 TELEPORT_KEEP = 2
 
@@ -65,22 +75,42 @@ def skin_vertex(l0, l1, l2, b0, b1, b2, b3, local_position, local_normal, local_
 
 
 @kernel
-def skin_team(m, ps, local_to_world, team):
-    """C.1: one-bone skinning of every vertex with this frame's bone matrices (a read-only pass
-    over the model and the bone matrices, writing position and rotation)."""
-    node_of, bind = m.transform_index, m.skin_bind_pose
-    local_position, local_normal, local_tangent = m.local_position, m.local_normal, m.local_tangent
-    position, rotation = ps.position, ps.rotation
-    start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        node = node_of[p]
-        pos, rot = skin_vertex(matrix_row(local_to_world, node, 0), matrix_row(local_to_world, node, 1),
-                               matrix_row(local_to_world, node, 2),
-                               matrix_row(bind, p, 0), matrix_row(bind, p, 1), matrix_row(bind, p, 2),
-                               matrix_row(bind, p, 3),
-                               load3(local_position, p), load3(local_normal, p), load3(local_tangent, p))
-        store3(position, p, pos)
-        store4(rotation, p, rot)
+def bind_row(PM, g, k, l):
+    """Row k of lane l's bind pose (``blocks.SKIN_BIND_POSE``, row major) as a 4-tuple."""
+    c = bk.SKIN_BIND_POSE + 4 * k * LANES
+    return (PM[g, c + l], PM[g, c + LANES + l], PM[g, c + 2 * LANES + l], PM[g, c + 3 * LANES + l])
+
+
+@kernel(forceinline=False)
+def skin_block(PS, PM, BI, PT, local_to_world, b, l0, l1):
+    """C.1: one-bone skinning of every vertex of block b's lanes ``l0 .. l1 - 1`` with the bone
+    matrices ``local_to_world`` (this frame's; quality mode's build reset passes the build
+    pose's): a read-only pass over the model and the matrices, writing position and rotation.
+    Each vertex's bone matrix is first copied next to it (``BONE_MATRIX``; a gather through the
+    bone's node), so that the skinning loop reads one particle slot per table."""
+    l1 = min(l1, LANES)
+    g0 = BI[b, bk.BI_G0]
+    for j in range(BI[b, bk.BI_N]):
+        g = g0 + j
+        for l in range(l0, l1):
+            node = PT[g, l]
+            for k in range(3):
+                for c in range(4):
+                    PS[g, st.BONE_MATRIX + (4 * k + c) * LANES + l] = local_to_world[node, k, c]
+        for l in range(l0, l1):
+            pos, rot = skin_vertex(bone_row(PS, g, 0, l), bone_row(PS, g, 1, l), bone_row(PS, g, 2, l),
+                                   bind_row(PM, g, 0, l), bind_row(PM, g, 1, l), bind_row(PM, g, 2, l),
+                                   bind_row(PM, g, 3, l), get3(PM, g, bk.LOCAL_POSITION, l),
+                                   get3(PM, g, bk.LOCAL_NORMAL, l), get3(PM, g, bk.LOCAL_TANGENT, l))
+            put3(PS, g, st.POSITION, l, pos)
+            put4(PS, g, st.ROTATION, l, rot)
+
+
+@kernel
+def bone_row(PS, g, k, l):
+    """Row k of lane l's gathered bone matrix (``BONE_MATRIX``) as a 4-tuple."""
+    c = st.BONE_MATRIX + 4 * k * LANES
+    return (PS[g, c + l], PS[g, c + LANES + l], PS[g, c + 2 * LANES + l], PS[g, c + 3 * LANES + l])
 
 
 SMOOTHING_REFERENCE_RATE = 90.0   # 1/s: the frame rate at which the C.4 ratio is taken as is
@@ -98,35 +128,35 @@ def smoothing_time_constant(s):
 
 
 @kernel
-def time_based_smoothing(ts, team, delta, frame_delta_time, s, speed_limit):
+def time_based_smoothing(TS, b, l, delta, frame_delta_time, s, speed_limit):
     """Quality-mode C.4 smoothing: the smoothed component velocity is an exponential filter
     with the time constant of ``smoothing_time_constant(s)``, integrated exactly over the frame
     for the frame's mean velocity (piecewise constant input), every frame with time.
 
-    After a reset the filter state is NaN (set by the reset branch below) and starts in steady
-    state, ``sv0 = v``: the cloth is not made to feel a velocity ramp that would start at the
-    reset frame's time, i.e. at a different time at each frame rate (tail: 1.25 -> 0.83 % of
-    frame-rate spread over the whole run).
+    After a reset the filter state is NaN (set by the reset branch of ``inertia_lane``) and
+    starts in steady state, ``sv0 = v``: the cloth is not made to feel a velocity ramp that
+    would start at the reset frame's time, i.e. at a different time at each frame rate (tail:
+    1.25 -> 0.83 % of frame-rate spread over the whole run).
 
     Returns the displacement the cloth feels this frame (the rest is shifted rigidly) and
-    updates ``ts.smoothing_velocity``; independent of how the time is cut into frames for a
-    constant input, first order in the frame time otherwise."""
+    updates the lane's ``SMOOTHING_VELOCITY``; independent of how the time is cut into frames
+    for a constant input, first order in the frame time otherwise."""
     h = frame_delta_time
     if h <= 0.0:
-        return (0.0, 0.0, 0.0)
+        return ZERO3
     v = v_scale(delta, 1.0 / h)
     if speed_limit >= 0.0:
         v = clamp_length(v, speed_limit)
     tau = smoothing_time_constant(s)
-    sv0 = load3(ts.smoothing_velocity, team)
+    sv0 = get3(TS, b, st.SMOOTHING_VELOCITY, l)
     if math.isnan(sv0[0]):  # first frame after a reset: the filter starts in steady state
         sv0 = v
     if tau <= 0.0:
-        store3(ts.smoothing_velocity, team, v)
+        put3(TS, b, st.SMOOTHING_VELOCITY, l, v)
         return v_scale(v, h)
     decay = portable.exp(-h / tau)
     lag = v_sub(sv0, v)
-    store3(ts.smoothing_velocity, team, v_add(v, v_scale(lag, decay)))
+    put3(TS, b, st.SMOOTHING_VELOCITY, l, v_add(v, v_scale(lag, decay)))
     # integral over the frame of v + (sv0 - v) exp(-t/tau)
     return v_add(v_scale(v, h), v_scale(lag, tau * (1.0 - decay)))
 
@@ -150,7 +180,7 @@ def mean_velocity_weight(w0, stabilization_time, span):
 @kernel
 def center_fixed_terms(position, rotation, bind_rotation):
     """C.2 terms of one center-fixed vertex: its position and the normal and tangent axes of
-    ``rotation * bind_rotation`` (summed over the fixed list by ``center_pose_team``). Branch-free."""
+    ``rotation * bind_rotation`` (summed over the fixed list by ``center_pose_lane``). Branch-free."""
     q = q_mul(rotation, bind_rotation)
     return position, q_normal_axis(q), q_tangent_axis(q)
 
@@ -162,158 +192,158 @@ def center_from_sums(position_sum, normal_sum, tangent_sum, count):
             rot_from_normal_tangent(v_normalize(normal_sum), v_normalize(tangent_sum)))
 
 
-@kernel
-def component_pose_team(m, ts, team, world_position, world_rotation, lossy_scale):
-    """C.2 component pose of one team (stored in ``ts``): (position, rotation, scale, scale ratio)."""
-    comp = m.team_component_transform[team]
-    cpos = load3(world_position, comp)
-    crot = load4(world_rotation, comp)
-    cscl = load3(lossy_scale, comp)
-    store3(ts.component_pos, team, cpos)
-    store4(ts.component_rot, team, crot)
-    store3(ts.component_scale, team, cscl)
-    init_len = v_length(load3(m.team_init_scale, team))
+@kernel(forceinline=False)
+def component_pose_lane(TS, TM, TI, b, l, world_position, world_rotation, lossy_scale):
+    """C.2 component pose of lane l's team (stored in ``TS``): (position, rotation, scale,
+    scale ratio)."""
+    comp = TI[b, bk.TI_COMPONENT + l]
+    cpos = (world_position[comp, 0], world_position[comp, 1], world_position[comp, 2])
+    crot = (world_rotation[comp, 0], world_rotation[comp, 1], world_rotation[comp, 2], world_rotation[comp, 3])
+    cscl = (lossy_scale[comp, 0], lossy_scale[comp, 1], lossy_scale[comp, 2])
+    put3(TS, b, st.COMPONENT_POS, l, cpos)
+    put4(TS, b, st.COMPONENT_ROT, l, crot)
+    put3(TS, b, st.COMPONENT_SCALE, l, cscl)
+    init_len = v_length(get3(TM, b, bk.INIT_SCALE, l))
     ratio = v_length(cscl) / init_len if init_len > 0.0 else 1.0
-    ts.component_scale_ratio[team] = ratio
+    put1(TS, b, st.COMPONENT_SCALE_RATIO, l, ratio)
     return cpos, crot, cscl, ratio
 
 
-@kernel
-def center_pose_team(m, ps, team, cpos, crot):
-    """C.2 center of one team from its skinned pose in the team rows (the component pose when
-    the team has no center-fixed vertex)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_bind_rotation, m_center_fixed, ps_position = m.bind_rotation, m.center_fixed, ps.position
-    ps_rotation = ps.rotation
-    c0 = m.team_center_start[team]
-    cn = m.team_center_count[team]
+@kernel(forceinline=False)
+def center_pose_lane(PS, PM, BI, topology, b, l, cpos, crot):
+    """C.2 center of lane l's team from its skinned pose (the component pose when the team
+    has no center-fixed vertex)."""
+    cn = BI[b, bk.BI_CENTERS]
     if cn == 0:
         return cpos, crot
-    sp = (0.0, 0.0, 0.0)
-    sn = (0.0, 0.0, 0.0)
-    st = (0.0, 0.0, 0.0)
-    for k in range(c0, c0 + cn):
-        f = m_center_fixed[k]
-        pos, nor, tan = center_fixed_terms(load3(ps_position, f), load4(ps_rotation, f), load4(m_bind_rotation, f))
+    g0 = BI[b, bk.BI_G0]
+    at = BI[b, bk.BI_CENTER_FIXED]
+    sp = ZERO3
+    sn = ZERO3
+    st_ = ZERO3
+    for k in range(cn):
+        g = g0 + topology[at + k]
+        pos, nor, tan = center_fixed_terms(get3(PS, g, st.POSITION, l), get4(PS, g, st.ROTATION, l),
+                                           get4(PM, g, bk.BIND_ROTATION, l))
         sp = v_add(sp, pos)
         sn = v_add(sn, nor)
-        st = v_add(st, tan)
-    return center_from_sums(sp, sn, st, cn)
+        st_ = v_add(st_, tan)
+    return center_from_sums(sp, sn, st_, cn)
 
 
-@kernel
-def center_and_inertia_team(m, ps, prm, ts, team, world_position, world_rotation, lossy_scale,
-                            frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step=0.0):
-    """C.2 and C.4 for one team: center, anchor, teleport, smoothing, world inertia, shift.
+@kernel(forceinline=False)
+def center_and_inertia_lane(PS, PM, TS, TM, TI, P, BI, topology, b, l, world_position, world_rotation,
+                            lossy_scale, frame_delta_time, now_time_scale, skip_count, running, dt,
+                            since_last_step):
+    """C.2 and C.4 for lane l's team: center, anchor, teleport, smoothing, world inertia, shift.
 
     ``since_last_step``: team time (s) from the last step to the start of this frame; quality
     mode uses it to read the stabilisation ramp, which C.3 advances per step, in continuous
     time (the ramp at the frame's start, not at the last step before it)."""
-    cpos, crot, cscl, ratio = component_pose_team(m, ts, team, world_position, world_rotation, lossy_scale)
-    center_pos, center_rot = center_pose_team(m, ps, team, cpos, crot)
-    ts.length_unit[team] = length_unit(m, prm, team)
-    inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot, world_position, world_rotation,
+    cpos, crot, cscl, ratio = component_pose_lane(TS, TM, TI, b, l, world_position, world_rotation, lossy_scale)
+    center_pos, center_rot = center_pose_lane(PS, PM, BI, topology, b, l, cpos, crot)
+    put1(TS, b, st.LENGTH_UNIT, l, length_unit(P[b, PRM_QUALITY], get3(TM, b, bk.INIT_SCALE, l)))
+    inertia_lane(TS, TI, P, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, world_position, world_rotation,
                  frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step)
 
 
-@kernel
-def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot, world_position, world_rotation,
-                 frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step):
-    """C.4 for one team once its component pose and center (C.2) are known: anchor, teleport,
-    smoothing, world inertia, speed limits, the frame shift (see ``center_and_inertia_team``)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    prm_time_based_smoothing, ts_frame_shift_vector = prm.time_based_smoothing, ts.frame_shift_vector
-    ts_now_world_pos, ts_old_frame_world_pos = ts.now_world_pos, ts.old_frame_world_pos
-    ts_old_frame_world_scale, ts_old_world_pos = ts.old_frame_world_scale, ts.old_world_pos
-    ts_smoothing_velocity = ts.smoothing_velocity
-    store3(ts.frame_world_pos, team, center_pos)
-    store4(ts.frame_world_rot, team, center_rot)
-    store3(ts.frame_world_scale, team, cscl)
+@kernel(forceinline=False)
+def inertia_lane(TS, TI, P, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, world_position,
+                 world_rotation, frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step):
+    """C.4 for lane l's team once its component pose and center (C.2) are known: anchor,
+    teleport, smoothing, world inertia, speed limits, the frame shift (see
+    ``center_and_inertia_lane``)."""
+    time_based = P[b, PRM_TIME_BASED_SMOOTHING] != 0.0
+    unit = get1(TS, b, st.LENGTH_UNIT, l)
+    put3(TS, b, st.FRAME_WORLD_POS, l, center_pos)
+    put4(TS, b, st.FRAME_WORLD_ROT, l, center_rot)
+    put3(TS, b, st.FRAME_WORLD_SCALE, l, cscl)
 
-    pivot = load3(ts.old_component_pos, team)      # raw previous component position
+    pivot = get3(TS, b, st.OLD_COMPONENT_POS, l)      # raw previous component position
     old_pos = pivot
-    old_rot = load4(ts.old_component_rot, team)
-    reset = ts.reset[team] != 0
+    old_rot = get4(TS, b, st.OLD_COMPONENT_ROT, l)
+    reset = get1(TS, b, st.RESET, l) != 0.0
     shift = False
     # 1. anchor
-    anchor_delta = (0.0, 0.0, 0.0)
+    anchor_delta = ZERO3
     anchor_rot = IDENTITY
-    anchor = prm.anchor_transform[team]
+    anchor = TI[b, bk.TI_ANCHOR + l]
     if anchor >= 0:
-        apos = load3(world_position, anchor)
-        arot = load4(world_rotation, anchor)
-        if reset or ts.anchor_valid[team] == 0:
-            store3(ts.anchor_component_local_pos, team, q_rotate(q_inverse(arot), v_sub(cpos, apos)))
-            store4(ts.old_anchor_rot, team, arot)
-            ts.anchor_valid[team] = 1
-        anchor_center = v_add(apos, q_rotate(arot, load3(ts.anchor_component_local_pos, team)))
-        a = prm.anchor_inertia[team]
+        apos = (world_position[anchor, 0], world_position[anchor, 1], world_position[anchor, 2])
+        arot = (world_rotation[anchor, 0], world_rotation[anchor, 1], world_rotation[anchor, 2],
+                world_rotation[anchor, 3])
+        if reset or get1(TS, b, st.ANCHOR_VALID, l) == 0.0:
+            put3(TS, b, st.ANCHOR_COMPONENT_LOCAL_POS, l, q_rotate(q_inverse(arot), v_sub(cpos, apos)))
+            put4(TS, b, st.OLD_ANCHOR_ROT, l, arot)
+            put1(TS, b, st.ANCHOR_VALID, l, 1.0)
+        anchor_center = v_add(apos, q_rotate(arot, get3(TS, b, st.ANCHOR_COMPONENT_LOCAL_POS, l)))
+        a = P[b, PRM_ANCHOR_INERTIA]
         anchor_delta = v_scale(v_sub(anchor_center, old_pos), 1.0 - a)
-        anchor_rot = q_slerp(IDENTITY, q_from_to(load4(ts.old_anchor_rot, team), arot), 1.0 - a)
+        anchor_rot = q_slerp(IDENTITY, q_from_to(get4(TS, b, st.OLD_ANCHOR_ROT, l), arot), 1.0 - a)
         old_pos = v_add(old_pos, anchor_delta)
         old_rot = q_mul(anchor_rot, old_rot)
-        store4(ts.old_anchor_rot, team, arot)
+        put4(TS, b, st.OLD_ANCHOR_ROT, l, arot)
         shift = True
     else:
-        ts.anchor_valid[team] = 0
+        put1(TS, b, st.ANCHOR_VALID, l, 0.0)
     # 2. teleport
-    keep = ts.keep_teleport[team] != 0
-    mode = prm.teleport_mode[team]
+    keep = get1(TS, b, st.KEEP_TELEPORT, l) != 0.0
+    mode = int(P[b, PRM_TELEPORT_MODE])
     if mode != 0 and not reset:
         delta = v_length(v_sub(cpos, old_pos))
         angle = math.degrees(q_angle(old_rot, crot))
-        if delta >= prm.teleport_distance[team] * ratio * ts.length_unit[team] or angle >= prm.teleport_rotation[team]:
+        if delta >= P[b, PRM_TELEPORT_DISTANCE] * ratio * unit or angle >= P[b, PRM_TELEPORT_ROTATION]:
             if mode == TELEPORT_RESET:
                 reset = True
-                ts.reset[team] = 1
+                put1(TS, b, st.RESET, l, 1.0)
             elif mode == TELEPORT_KEEP:
                 keep = True
-                ts.keep_teleport[team] = 1
+                put1(TS, b, st.KEEP_TELEPORT, l, 1.0)
     # 3. movement smoothing
-    smooth_delta = (0.0, 0.0, 0.0)
-    s = prm.movement_smoothing[team]
-    limit = prm.movement_speed_limit[team]
+    smooth_delta = ZERO3
+    s = P[b, PRM_MOVEMENT_SMOOTHING]
+    limit = P[b, PRM_MOVEMENT_SPEED_LIMIT]
     if s >= 1e-6 and not reset and not keep:
-        if prm_time_based_smoothing[team] != 0:
-            felt = time_based_smoothing(ts, team, v_sub(cpos, old_pos), frame_delta_time, s,
-                                        limit * ratio * ts.length_unit[team] if limit >= 0.0 else -1.0)
+        if time_based:
+            felt = time_based_smoothing(TS, b, l, v_sub(cpos, old_pos), frame_delta_time, s,
+                                        limit * ratio * unit if limit >= 0.0 else -1.0)
             smooth_pos = v_sub(cpos, felt)
         else:
-            if math.isnan(ts_smoothing_velocity[team, 0]):  # quality switched off after a reset
-                store3(ts_smoothing_velocity, team, (0.0, 0.0, 0.0))
+            if math.isnan(get1(TS, b, st.SMOOTHING_VELOCITY, l)):  # quality switched off after a reset
+                put3(TS, b, st.SMOOTHING_VELOCITY, l, ZERO3)
             if running:
-                v = (0.0, 0.0, 0.0)
+                v = ZERO3
                 if frame_delta_time > 0.0:
                     v = v_scale(v_sub(cpos, old_pos), 1.0 / frame_delta_time)
                 if limit >= 0.0:
                     v = clamp_length(v, limit * ratio)
                 a = saturate((1.0 - s) ** 3 * 0.99 + 0.01)
-                store3(ts_smoothing_velocity, team, v_lerp(load3(ts_smoothing_velocity, team), v, a))
-            smooth_pos = v_sub(cpos, v_scale(load3(ts_smoothing_velocity, team), frame_delta_time))
+                put3(TS, b, st.SMOOTHING_VELOCITY, l, v_lerp(get3(TS, b, st.SMOOTHING_VELOCITY, l), v, a))
+            smooth_pos = v_sub(cpos, v_scale(get3(TS, b, st.SMOOTHING_VELOCITY, l), frame_delta_time))
         smooth_delta = v_sub(smooth_pos, old_pos)
         old_pos = smooth_pos
         shift = True
     # 4. reset: every history value becomes the current one
     if reset:
-        for c in range(3):
-            ts_old_frame_world_pos[team, c] = center_pos[c]
-            ts_now_world_pos[team, c] = center_pos[c]
-            ts_old_world_pos[team, c] = center_pos[c]
-            ts_old_frame_world_scale[team, c] = cscl[c]
-            ts_smoothing_velocity[team, c] = math.nan if prm_time_based_smoothing[team] != 0 else 0.0
-            ts_frame_shift_vector[team, c] = 0.0
-        store4(ts.old_frame_world_rot, team, center_rot)
-        store4(ts.now_world_rot, team, center_rot)
-        store4(ts.old_world_rot, team, center_rot)
-        store4(ts.frame_shift_rotation, team, IDENTITY)
-        ts.inertia_shift[team] = 0
-        ts.frame_moving_speed[team] = 0.0
-        store3(ts.frame_moving_direction, team, (0.0, 0.0, 0.0))
+        put3(TS, b, st.OLD_FRAME_WORLD_POS, l, center_pos)
+        put3(TS, b, st.NOW_WORLD_POS, l, center_pos)
+        put3(TS, b, st.OLD_WORLD_POS, l, center_pos)
+        put3(TS, b, st.OLD_FRAME_WORLD_SCALE, l, cscl)
+        sv = math.nan if time_based else 0.0
+        put3(TS, b, st.SMOOTHING_VELOCITY, l, (sv, sv, sv))
+        put3(TS, b, st.FRAME_SHIFT_VECTOR, l, ZERO3)
+        put4(TS, b, st.OLD_FRAME_WORLD_ROT, l, center_rot)
+        put4(TS, b, st.NOW_WORLD_ROT, l, center_rot)
+        put4(TS, b, st.OLD_WORLD_ROT, l, center_rot)
+        put4(TS, b, st.FRAME_SHIFT_ROTATION, l, IDENTITY)
+        put1(TS, b, st.INERTIA_SHIFT, l, 0.0)
+        put1(TS, b, st.FRAME_MOVING_SPEED, l, 0.0)
+        put3(TS, b, st.FRAME_MOVING_DIRECTION, l, ZERO3)
     else:
         # 5. world shift
         shift_vec = v_sub(cpos, old_pos)
         shift_rot = q_from_to(old_rot, crot)
-        ms = 1.0 - prm.world_inertia[team]
+        ms = 1.0 - P[b, PRM_WORLD_INERTIA]
         rs = ms
         if keep:
             ms = 1.0
@@ -327,13 +357,13 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
         if frame_delta_time > 0.0:
             if limit >= 0.0:
                 speed = v_length(v_sub(cpos, work_pos)) / frame_delta_time
-                limit_s = limit * ratio * ts.length_unit[team]
+                limit_s = limit * ratio * unit
                 if speed > limit_s:
                     k = saturate((speed - limit_s) / speed)
                     ms = lerp(ms, 1.0, k)
                     work_pos = v_lerp(work_pos, cpos, k)
                     shift = True
-            rlimit = prm.rotation_speed_limit[team]
+            rlimit = P[b, PRM_ROTATION_SPEED_LIMIT]
             if rlimit >= 0.0:
                 speed = math.degrees(q_angle(work_rot, crot)) / frame_delta_time
                 if speed > rlimit:
@@ -344,10 +374,11 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
         o = 0.0
         if skip_count > 0 and frame_delta_time * now_time_scale > 0.0:
             o = lerp(o, 1.0, saturate(skip_count * dt / (frame_delta_time * now_time_scale)))
-        if ts.velocity_weight[team] < 1.0:
-            w = ts.velocity_weight[team]
-            if prm_time_based_smoothing[team] != 0:
-                stab = prm.stabilization_time[team]
+        vw = get1(TS, b, st.VELOCITY_WEIGHT, l)
+        if vw < 1.0:
+            w = vw
+            if time_based:
+                stab = P[b, PRM_STABILIZATION_TIME]
                 if stab > 1e-6:  # the ramp in continuous time: it rose since the last step too
                     w = saturate(w + max(since_last_step, 0.0) / stab)
                 w = mean_velocity_weight(w, stab, frame_delta_time * now_time_scale)
@@ -363,56 +394,50 @@ def inertia_team(prm, ts, team, cpos, crot, cscl, ratio, center_pos, center_rot,
         if shift:
             vec = v_add(v_add(v_scale(shift_vec, ms), anchor_delta), smooth_delta)
             rot = q_mul(anchor_rot, q_slerp(IDENTITY, shift_rot, rs))
-            store3(ts_frame_shift_vector, team, vec)
-            store4(ts.frame_shift_rotation, team, rot)
-            store3(ts_old_frame_world_pos, team, shift_position(load3(ts_old_frame_world_pos, team), pivot, vec, rot))
-            store4(ts.old_frame_world_rot, team, q_mul(rot, load4(ts.old_frame_world_rot, team)))
-            store3(ts_now_world_pos, team, shift_position(load3(ts_now_world_pos, team), pivot, vec, rot))
-            store4(ts.now_world_rot, team, q_mul(rot, load4(ts.now_world_rot, team)))
-            ts.inertia_shift[team] = 1
+            put3(TS, b, st.FRAME_SHIFT_VECTOR, l, vec)
+            put4(TS, b, st.FRAME_SHIFT_ROTATION, l, rot)
+            put3(TS, b, st.OLD_FRAME_WORLD_POS, l,
+                 shift_position(get3(TS, b, st.OLD_FRAME_WORLD_POS, l), pivot, vec, rot))
+            put4(TS, b, st.OLD_FRAME_WORLD_ROT, l, q_mul(rot, get4(TS, b, st.OLD_FRAME_WORLD_ROT, l)))
+            put3(TS, b, st.NOW_WORLD_POS, l, shift_position(get3(TS, b, st.NOW_WORLD_POS, l), pivot, vec, rot))
+            put4(TS, b, st.NOW_WORLD_ROT, l, q_mul(rot, get4(TS, b, st.NOW_WORLD_ROT, l)))
+            put1(TS, b, st.INERTIA_SHIFT, l, 1.0)
         # 6. wind bookkeeping
         speed = 0.0
         if frame_delta_time > 0.0 and now_time_scale > 1e-6:
             speed = v_length(v_sub(cpos, work_pos)) / frame_delta_time / now_time_scale
-        ts.frame_moving_speed[team] = speed
+        put1(TS, b, st.FRAME_MOVING_SPEED, l, speed)
         moving = v_sub(cpos, work_pos)
         moving_length = v_length(moving)
-        store3(ts.frame_moving_direction, team,
-               v_scale(moving, 1.0 / moving_length) if moving_length > 1e-6 else (0.0, 0.0, 0.0))
+        put3(TS, b, st.FRAME_MOVING_DIRECTION, l,
+             v_scale(moving, 1.0 / moving_length) if moving_length > 1e-6 else ZERO3)
     # 7. reset consequences
-    if reset or ts.time_reset[team] != 0:
-        ts.velocity_weight[team] = 0.0 if prm.stabilization_time[team] > 1e-6 else 1.0
-        ts.blend_weight[team] = ts.velocity_weight[team]
+    if reset or get1(TS, b, st.TIME_RESET, l) != 0.0:
+        vw = 0.0 if P[b, PRM_STABILIZATION_TIME] > 1e-6 else 1.0
+        put1(TS, b, st.VELOCITY_WEIGHT, l, vw)
+        put1(TS, b, st.BLEND_WEIGHT, l, vw)
 
 
 @kernel
-def snap_particles_to_base_pose(ps, start, end):
-    """C.5 Reset of particles [start, end): every position history at this frame's animated
-    pose, velocities, friction and collision normals zero (also used by the guards)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    ps_base_pos, ps_base_rot, ps_collision_normal = ps.base_pos, ps.base_rot, ps.collision_normal
-    ps_disp_pos, ps_friction, ps_next_pos, ps_old_pos = ps.disp_pos, ps.friction, ps.next_pos, ps.old_pos
-    ps_old_position, ps_old_rotation, ps_position = ps.old_position, ps.old_rotation, ps.position
-    ps_real_velocity, ps_rotation, ps_static_friction = ps.real_velocity, ps.rotation, ps.static_friction
-    ps_velocity, ps_velocity_pos, ps_display_history = ps.velocity, ps.velocity_pos, ps.display_history
-    for p in range(start, end):
-        pos = load3(ps_position, p)
-        rot = load4(ps_rotation, p)
-        for c in range(3):
-            ps_next_pos[p, c] = pos[c]
-            ps_old_pos[p, c] = pos[c]
-            ps_base_pos[p, c] = pos[c]
-            ps_old_position[p, c] = pos[c]
-            ps_velocity_pos[p, c] = pos[c]
-            ps_disp_pos[p, c] = pos[c]
-            ps_velocity[p, c] = 0.0
-            ps_real_velocity[p, c] = 0.0
-            ps_collision_normal[p, c] = 0.0
-        store4(ps_base_rot, p, rot)
-        store4(ps_old_rotation, p, rot)
-        ps_friction[p] = 0.0
-        ps_static_friction[p] = 0.0
-        ps_display_history[p] = 0   # quality display: no step state since the reset
+def snap_lane_to_base_pose(PS, g, l):
+    """C.5 Reset of lane l of particle slot g: every position history at this frame's
+    animated pose, velocities, friction and collision normals zero (also used by the guards)."""
+    pos = get3(PS, g, st.POSITION, l)
+    rot = get4(PS, g, st.ROTATION, l)
+    put3(PS, g, st.NEXT_POS, l, pos)
+    put3(PS, g, st.OLD_POS, l, pos)
+    put3(PS, g, st.BASE_POS, l, pos)
+    put3(PS, g, st.OLD_POSITION, l, pos)
+    put3(PS, g, st.VELOCITY_POS, l, pos)
+    put3(PS, g, st.DISP_POS, l, pos)
+    put3(PS, g, st.VELOCITY, l, ZERO3)
+    put3(PS, g, st.REAL_VELOCITY, l, ZERO3)
+    put3(PS, g, st.COLLISION_NORMAL, l, ZERO3)
+    put4(PS, g, st.BASE_ROT, l, rot)
+    put4(PS, g, st.OLD_ROTATION, l, rot)
+    put1(PS, g, st.FRICTION, l, 0.0)
+    put1(PS, g, st.STATIC_FRICTION, l, 0.0)
+    put1(PS, g, st.DISPLAY_HISTORY, l, 0.0)   # quality display: no step state since the reset
 
 
 @kernel
@@ -423,82 +448,87 @@ def shift_history(old_pos, old_position, disp_pos, old_rotation, velocity, pivot
             shift_position(disp_pos, pivot, vec, rot), q_mul(rot, old_rotation), q_rotate(rot, velocity))
 
 
-@kernel
-def shift_particle(old_pos, old_position, disp_pos, old_rotation, velocity, real_velocity, pivot, vec, rot):
-    """C.5 inertia shift of one particle's history (``shift_history``) and its real velocity."""
-    a, b, c, r, u = shift_history(old_pos, old_position, disp_pos, old_rotation, velocity, pivot, vec, rot)
-    return a, b, c, r, u, q_rotate(rot, real_velocity)
+@kernel(forceinline=False)
+def reset_or_shift_block(PS, TS, BI, b):
+    """C.5 for the active lanes of block b: the lanes with an inertia shift move their
+    particles' history rigidly, side by side (``shift_history``; the other lanes keep theirs,
+    selected); then each lane with Reset snaps its particles to the base pose
+    (``snap_lane_to_base_pose``)."""
+    g0 = BI[b, bk.BI_G0]
+    n = BI[b, bk.BI_N]
+    w = bk.lane_width(BI, b)
+    any_shift = False
+    for l in range(w):
+        any_shift = any_shift | (lane_shifts(TS, b, l))
+    if any_shift:
+        for g in range(g0, g0 + n):
+            for l in range(w):
+                shift = lane_shifts(TS, b, l)
+                pivot = get3(TS, b, st.OLD_COMPONENT_POS, l)
+                vec = get3(TS, b, st.FRAME_SHIFT_VECTOR, l)
+                rot = get4(TS, b, st.FRAME_SHIFT_ROTATION, l)
+                old_pos = get3(PS, g, st.OLD_POS, l)
+                old_position = get3(PS, g, st.OLD_POSITION, l)
+                disp_pos = get3(PS, g, st.DISP_POS, l)
+                old_rotation = get4(PS, g, st.OLD_ROTATION, l)
+                velocity = get3(PS, g, st.VELOCITY, l)
+                real_velocity = get3(PS, g, st.REAL_VELOCITY, l)
+                a, c_, d, r, u = shift_history(old_pos, old_position, disp_pos, old_rotation, velocity, pivot, vec,
+                                               rot)
+                rv = q_rotate(rot, real_velocity)
+                put3(PS, g, st.OLD_POS, l, a if shift else old_pos)
+                put3(PS, g, st.OLD_POSITION, l, c_ if shift else old_position)
+                put3(PS, g, st.DISP_POS, l, d if shift else disp_pos)
+                put4(PS, g, st.OLD_ROTATION, l, r if shift else old_rotation)
+                put3(PS, g, st.VELOCITY, l, u if shift else velocity)
+                put3(PS, g, st.REAL_VELOCITY, l, rv if shift else real_velocity)
+    for l in range(w):
+        if get1(TS, b, st.ACTIVE, l) != 0.0 and get1(TS, b, st.RESET, l) != 0.0:
+            for g in range(g0, g0 + n):
+                snap_lane_to_base_pose(PS, g, l)
 
 
 @kernel
-def reset_or_shift_team(m, ps, ts, team):
-    """C.5: snap the particles to the base pose (Reset) or shift their history rigidly."""
-    start = m.team_particle_start[team]
-    end = start + m.team_particle_count[team]
-    if ts.reset[team] != 0:
-        snap_particles_to_base_pose(ps, start, end)
-    elif ts.inertia_shift[team] != 0:
-        pivot = load3(ts.old_component_pos, team)
-        vec = load3(ts.frame_shift_vector, team)
-        rot = load4(ts.frame_shift_rotation, team)
-        old_pos, old_position, disp_pos = ps.old_pos, ps.old_position, ps.disp_pos
-        old_rotation, velocity, real_velocity = ps.old_rotation, ps.velocity, ps.real_velocity
-        for p in range(start, end):
-            a, b, c, r, u, w = shift_particle(load3(old_pos, p), load3(old_position, p), load3(disp_pos, p),
-                                              load4(old_rotation, p), load3(velocity, p), load3(real_velocity, p),
-                                              pivot, vec, rot)
-            store3(old_pos, p, a)
-            store3(old_position, p, b)
-            store3(disp_pos, p, c)
-            store4(old_rotation, p, r)
-            store3(velocity, p, u)
-            store3(real_velocity, p, w)
+def lane_shifts(TS, b, l):
+    """Does lane l shift its particles' history this frame (active, no Reset, a shift)?"""
+    return (get1(TS, b, st.ACTIVE, l) != 0.0) & (get1(TS, b, st.RESET, l) == 0.0) & \
+        (get1(TS, b, st.INERTIA_SHIFT, l) != 0.0)
 
 
-@kernel
-def distance_culling_team(prm, ts, team, world_position, component_transform):
-    """H.1 distance culling: returns True when the team is beyond the culling length, and
-    updates the fade weight ``distance_weight`` (1 inside, 0 at the limit)."""
-    length = prm.culling_length[team]
-    ref = prm.culling_reference[team]
+@kernel(forceinline=False)
+def distance_culling_lane(TS, TI, P, b, l, world_position):
+    """H.1 distance culling of lane l's team: returns True when the team is beyond the culling
+    length, and updates the fade weight ``DISTANCE_WEIGHT`` (1 inside, 0 at the limit)."""
+    length = P[b, PRM_CULLING_LENGTH]
+    ref = TI[b, bk.TI_CULLING_REFERENCE + l]
     if length < 0.0 or ref < 0:
-        ts.distance_weight[team] = 1.0
+        put1(TS, b, st.DISTANCE_WEIGHT, l, 1.0)
         return False
-    d = v_length(v_sub(load3(world_position, component_transform), load3(world_position, ref)))
+    comp = TI[b, bk.TI_COMPONENT + l]
+    d = v_length((world_position[comp, 0] - world_position[ref, 0], world_position[comp, 1] - world_position[ref, 1],
+                  world_position[comp, 2] - world_position[ref, 2]))
     if d >= length:
-        ts.distance_weight[team] = 0.0
+        put1(TS, b, st.DISTANCE_WEIGHT, l, 0.0)
         return True
-    fade = saturate(prm.culling_fade_ratio[team]) * length
-    ts.distance_weight[team] = 1.0 - saturate(unlerp(length - fade, length, d))
+    fade = saturate(P[b, PRM_CULLING_FADE_RATIO]) * length
+    put1(TS, b, st.DISTANCE_WEIGHT, l, 1.0 - saturate(unlerp(length - fade, length, d)))
     return False
 
 
-@kernel
-def end_frame_team(ts, team, running):
+@kernel(forceinline=False)
+def end_frame_lane(TS, b, l, running):
     """A.7: remember this frame's component and center, clear the per-frame flags."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    ts_component_pos, ts_component_rot = ts.component_pos, ts.component_rot
-    ts_component_scale, ts_external_force = ts.component_scale, ts.external_force
-    ts_frame_world_pos, ts_frame_world_rot = ts.frame_world_pos, ts.frame_world_rot
-    ts_frame_world_scale, ts_old_component_pos = ts.frame_world_scale, ts.old_component_pos
-    ts_old_component_rot, ts_old_component_scale = ts.old_component_rot, ts.old_component_scale
-    ts_old_frame_world_pos, ts_old_frame_world_rot = ts.old_frame_world_pos, ts.old_frame_world_rot
-    ts_old_frame_world_scale = ts.old_frame_world_scale
-    for c in range(3):
-        ts_old_component_pos[team, c] = ts_component_pos[team, c]
-        ts_old_component_scale[team, c] = ts_component_scale[team, c]
-        if running:
-            ts_old_frame_world_pos[team, c] = ts_frame_world_pos[team, c]
-            ts_old_frame_world_scale[team, c] = ts_frame_world_scale[team, c]
-            ts_external_force[team, c] = 0.0
-    for c in range(4):
-        ts_old_component_rot[team, c] = ts_component_rot[team, c]
-        if running:
-            ts_old_frame_world_rot[team, c] = ts_frame_world_rot[team, c]
+    put3(TS, b, st.OLD_COMPONENT_POS, l, get3(TS, b, st.COMPONENT_POS, l))
+    put3(TS, b, st.OLD_COMPONENT_SCALE, l, get3(TS, b, st.COMPONENT_SCALE, l))
+    put4(TS, b, st.OLD_COMPONENT_ROT, l, get4(TS, b, st.COMPONENT_ROT, l))
     if running:
-        ts.external_force_mode[team] = 0
-    ts.reset[team] = 0
-    ts.time_reset[team] = 0
-    ts.keep_teleport[team] = 0
-    ts.inertia_shift[team] = 0
-    ts.running[team] = 0
+        put3(TS, b, st.OLD_FRAME_WORLD_POS, l, get3(TS, b, st.FRAME_WORLD_POS, l))
+        put3(TS, b, st.OLD_FRAME_WORLD_SCALE, l, get3(TS, b, st.FRAME_WORLD_SCALE, l))
+        put4(TS, b, st.OLD_FRAME_WORLD_ROT, l, get4(TS, b, st.FRAME_WORLD_ROT, l))
+        put3(TS, b, st.EXTERNAL_FORCE, l, ZERO3)
+        put1(TS, b, st.EXTERNAL_FORCE_MODE, l, 0.0)
+    put1(TS, b, st.RESET, l, 0.0)
+    put1(TS, b, st.TIME_RESET, l, 0.0)
+    put1(TS, b, st.KEEP_TELEPORT, l, 0.0)
+    put1(TS, b, st.INERTIA_SHIFT, l, 0.0)
+    put1(TS, b, st.RUNNING, l, 0.0)

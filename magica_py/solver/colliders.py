@@ -1,9 +1,12 @@
 """Collider poses per frame (docs/solver.md §G.2) and per step (§G.3), one slot per (team, collider).
 
-``ColliderSlots`` maps the scene's ``ColliderSet`` onto per-team slots; the kernels keep
-each slot's frame history (shifted with the team's inertia shift, reset with the team) and
-build the step's work data (old/new endpoints, scaled radii, swept bounds) read by
-``constraints/collision.py``.
+A block's collider slots (``blocks.BI_COLLIDER0`` + k) hold, lane by lane, the colliders of
+its teams in the order of their cloth's collider list; their shapes, capsule axes and flags
+are the block's (``collider_shape`` ... segments of its topology: part of the block key), the
+hierarchy node each lane's collider rides on is ``collider_transform[slot, lane]``. The
+kernels keep each slot's frame history (shifted with the team's inertia shift, reset with
+the team) and build the step's work data (old/new endpoints, scaled radii, swept bounds)
+read by ``constraints/collision.py``.
 """
 from __future__ import annotations
 
@@ -11,10 +14,11 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    q_slerp,
-    load3, load4, q_inverse, q_mul, q_normalize, q_rotate, shift_position, store3,
-    store4, v_add, v_lerp, v_scale, v_sub,
+    q_inverse, q_mul, q_normalize, q_rotate, q_slerp, shift_position, v_add, v_lerp, v_scale, v_sub,
 )
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
 
 SPHERE = 0
 CAPSULE = 1
@@ -26,30 +30,23 @@ def _sign(x):
     return -1.0 if x < 0.0 else 1.0
 
 
-@kernel
-def collider_frame_team(cs, ts, team, world_position, world_rotation, lossy_scale):
-    """G.2 for the slots of one team: this frame's pose and the history update."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    cs_first_frame, cs_frame_pos, cs_frame_rot = cs.first_frame, cs.frame_pos, cs.frame_rot
-    cs_frame_scale, cs_local_center, cs_now_pos = cs.frame_scale, cs.local_center, cs.now_pos
-    cs_now_rot, cs_old_frame_pos, cs_old_frame_rot = cs.now_rot, cs.old_frame_pos, cs.old_frame_rot
-    cs_old_pos, cs_old_rot, cs_scale_suspend = cs.old_pos, cs.old_rot, cs.scale_suspend
-    cs_transform, ts_collider_count = cs.transform, ts.collider_count
-    reset = ts.reset[team] != 0
-    shift = ts.inertia_shift[team] != 0
-    pivot = load3(ts.old_component_pos, team)
-    vec = load3(ts.frame_shift_vector, team)
-    srot = load4(ts.frame_shift_rotation, team)
-    c0 = ts.collider_start[team]
-    for k in range(c0, c0 + ts_collider_count[team]):
-        i = cs_transform[k]
-        pos = load3(world_position, i)
-        rot = load4(world_rotation, i)
-        s = load3(lossy_scale, i)
+@kernel(forceinline=False)
+def collider_frame_lane(CS, TS, BI, CT, b, l, world_position, world_rotation, lossy_scale):
+    """G.2 for the collider slots of lane l's team: this frame's pose and the history update."""
+    reset = get1(TS, b, st.RESET, l) != 0.0
+    shift = get1(TS, b, st.INERTIA_SHIFT, l) != 0.0
+    pivot = get3(TS, b, st.OLD_COMPONENT_POS, l)
+    vec = get3(TS, b, st.FRAME_SHIFT_VECTOR, l)
+    srot = get4(TS, b, st.FRAME_SHIFT_ROTATION, l)
+    c0 = BI[b, bk.BI_COLLIDER0]
+    for k in range(c0, c0 + BI[b, bk.BI_COLLIDERS]):
+        i = CT[k, l]
+        pos = (world_position[i, 0], world_position[i, 1], world_position[i, 2])
+        rot = (world_rotation[i, 0], world_rotation[i, 1], world_rotation[i, 2], world_rotation[i, 3])
+        sx = lossy_scale[i, 0]
+        sy = lossy_scale[i, 1]
+        sz = lossy_scale[i, 2]
         suspend = False
-        sx = s[0]
-        sy = s[1]
-        sz = s[2]
         if abs(sx) < 1e-6:
             sx = 1e-6
             suspend = True
@@ -59,29 +56,29 @@ def collider_frame_team(cs, ts, team, world_position, world_rotation, lossy_scal
         if abs(sz) < 1e-6:
             sz = 1e-6
             suspend = True
-        cs_scale_suspend[k] = 1 if suspend else 0
-        center = (cs_local_center[k, 0] * _sign(sx), cs_local_center[k, 1] * _sign(sy),
-                  cs_local_center[k, 2] * _sign(sz))
+        put1(CS, k, st.SCALE_SUSPEND, l, 1.0 if suspend else 0.0)
+        lc = get3(CS, k, st.LOCAL_CENTER, l)
+        center = (lc[0] * _sign(sx), lc[1] * _sign(sy), lc[2] * _sign(sz))
         rc = q_rotate(rot, center)
         fpos = (pos[0] + rc[0] * abs(sx), pos[1] + rc[1] * abs(sy), pos[2] + rc[2] * abs(sz))
-        store3(cs_frame_pos, k, fpos)
-        store4(cs_frame_rot, k, rot)
-        store3(cs_frame_scale, k, (sx, sy, sz))
-        if reset or cs_first_frame[k] != 0 or suspend:
-            store3(cs_old_frame_pos, k, fpos)
-            store3(cs_now_pos, k, fpos)
-            store3(cs_old_pos, k, fpos)
-            store4(cs_old_frame_rot, k, rot)
-            store4(cs_now_rot, k, rot)
-            store4(cs_old_rot, k, rot)
-            cs_first_frame[k] = 0
+        put3(CS, k, st.FRAME_POS, l, fpos)
+        put4(CS, k, st.FRAME_ROT, l, rot)
+        put3(CS, k, st.FRAME_SCALE, l, (sx, sy, sz))
+        if reset or get1(CS, k, st.FIRST_FRAME, l) != 0.0 or suspend:
+            put3(CS, k, st.OLD_FRAME_POS, l, fpos)
+            put3(CS, k, st.NOW_POS, l, fpos)
+            put3(CS, k, st.C_OLD_POS, l, fpos)
+            put4(CS, k, st.OLD_FRAME_ROT, l, rot)
+            put4(CS, k, st.NOW_ROT, l, rot)
+            put4(CS, k, st.C_OLD_ROT, l, rot)
+            put1(CS, k, st.FIRST_FRAME, l, 0.0)
         elif shift:
-            store3(cs_old_frame_pos, k, shift_position(load3(cs_old_frame_pos, k), pivot, vec, srot))
-            store3(cs_now_pos, k, shift_position(load3(cs_now_pos, k), pivot, vec, srot))
-            store3(cs_old_pos, k, shift_position(load3(cs_old_pos, k), pivot, vec, srot))
-            store4(cs_old_frame_rot, k, q_mul(srot, load4(cs_old_frame_rot, k)))
-            store4(cs_now_rot, k, q_mul(srot, load4(cs_now_rot, k)))
-            store4(cs_old_rot, k, q_mul(srot, load4(cs_old_rot, k)))
+            put3(CS, k, st.OLD_FRAME_POS, l, shift_position(get3(CS, k, st.OLD_FRAME_POS, l), pivot, vec, srot))
+            put3(CS, k, st.NOW_POS, l, shift_position(get3(CS, k, st.NOW_POS, l), pivot, vec, srot))
+            put3(CS, k, st.C_OLD_POS, l, shift_position(get3(CS, k, st.C_OLD_POS, l), pivot, vec, srot))
+            put4(CS, k, st.OLD_FRAME_ROT, l, q_mul(srot, get4(CS, k, st.OLD_FRAME_ROT, l)))
+            put4(CS, k, st.NOW_ROT, l, q_mul(srot, get4(CS, k, st.NOW_ROT, l)))
+            put4(CS, k, st.C_OLD_ROT, l, q_mul(srot, get4(CS, k, st.C_OLD_ROT, l)))
 
 
 @kernel
@@ -138,119 +135,98 @@ def sphere_bounds(old_pos, now_pos, r):
     return lo, hi
 
 
-@kernel
-def collider_step_team(cs, ts, team, frame_interpolation):
-    """G.3 at the start of a step: step pose, local-inertia shift of the old pose, work data
-    (per slot: ``collider_step_pose``, ``capsule_ends``, ``swept_bounds``)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    cs_aabb_max, cs_aabb_min, cs_aligned_on_center = cs.aabb_max, cs.aabb_min, cs.aligned_on_center
-    cs_direction, cs_end_new, cs_end_old, cs_frame_pos = cs.direction, cs.end_new, cs.end_old, cs.frame_pos
-    cs_frame_rot, cs_frame_scale, cs_inverse_old_rot = cs.frame_rot, cs.frame_scale, cs.inverse_old_rot
-    cs_now_pos, cs_now_rot, cs_old_frame_pos = cs.now_pos, cs.now_rot, cs.old_frame_pos
-    cs_old_frame_rot, cs_old_pos, cs_old_rot = cs.old_frame_rot, cs.old_pos, cs.old_rot
-    cs_plane_normal, cs_radius_end, cs_radius_start = cs.plane_normal, cs.radius_end, cs.radius_start
-    cs_reverse_direction, cs_shape, cs_size = cs.reverse_direction, cs.shape, cs.size
-    cs_start_new, cs_start_old, ts_collider_count = cs.start_new, cs.start_old, ts.collider_count
-    t = frame_interpolation
-    mv = ts.step_move_inertia_ratio[team]
-    rv = ts.step_rotation_inertia_ratio[team]
-    c0 = ts.collider_start[team]
-    for k in range(c0, c0 + ts_collider_count[team]):
-        now_pos, now_rot, old_pos, old_rot, inverse_old_rot = collider_step_pose(
-            load3(cs_old_frame_pos, k), load3(cs_frame_pos, k), load4(cs_old_frame_rot, k), load4(cs_frame_rot, k),
-            load3(cs_old_pos, k), load4(cs_old_rot, k), t, mv, rv)
-        store3(cs_now_pos, k, now_pos)
-        store4(cs_now_rot, k, now_rot)
-        store3(cs_old_pos, k, old_pos)
-        store4(cs_old_rot, k, old_rot)
-        store4(cs_inverse_old_rot, k, inverse_old_rot)
-        shape = cs_shape[k]
-        if shape == SPHERE:
-            r = cs_size[k, 0] * abs(cs_frame_scale[k, 0])
-            cs_radius_start[k] = r
-            cs_radius_end[k] = r
-            store3(cs_start_old, k, old_pos)
-            store3(cs_end_old, k, old_pos)
-            store3(cs_start_new, k, now_pos)
-            store3(cs_end_new, k, now_pos)
-            lo, hi = sphere_bounds(old_pos, now_pos, r)
-            store3(cs_aabb_min, k, lo)
-            store3(cs_aabb_max, k, hi)
-        elif shape == CAPSULE:
-            d = cs_direction[k]
-            size = (cs_size[k, 0], cs_size[k, 1], cs_size[k, 2])
-            reverse = cs_reverse_direction[k] != 0
-            aligned = cs_aligned_on_center[k] != 0
-            so, eo, rs, re = capsule_ends(old_pos, old_rot, d, reverse, aligned, size, cs_frame_scale[k, d])
-            sn, en, rs, re = capsule_ends(now_pos, now_rot, d, reverse, aligned, size, cs_frame_scale[k, d])
-            cs_radius_start[k] = rs
-            cs_radius_end[k] = re
-            store3(cs_start_old, k, so)
-            store3(cs_end_old, k, eo)
-            store3(cs_start_new, k, sn)
-            store3(cs_end_new, k, en)
-            lo, hi = swept_bounds(so, sn, eo, en, rs, re)
-            store3(cs_aabb_min, k, lo)
-            store3(cs_aabb_max, k, hi)
-        else:
-            sy = _sign(cs_frame_scale[k, 1])
-            store3(cs_plane_normal, k, q_rotate(now_rot, (0.0, sy, 0.0)))
-            store3(cs_start_new, k, now_pos)
-            store3(cs_start_old, k, old_pos)
+@kernel(forceinline=False)
+def collider_step_block(CS, TS, BI, topology, b):
+    """G.3 at the start of a step, every collider slot and running lane of block b: step pose,
+    local-inertia shift of the old pose, work data (``collider_step_pose``, ``capsule_ends``,
+    ``swept_bounds``)."""
+    c0 = BI[b, bk.BI_COLLIDER0]
+    w = bk.lane_width(BI, b)
+    shapes, directions = BI[b, bk.BI_COLLIDER_SHAPE], BI[b, bk.BI_COLLIDER_DIRECTION]
+    reverses, aligns = BI[b, bk.BI_COLLIDER_REVERSE], BI[b, bk.BI_COLLIDER_ALIGNED]
+    for c in range(BI[b, bk.BI_COLLIDERS]):
+        k = c0 + c
+        shape = topology[shapes + c]
+        d = topology[directions + c]
+        reverse = topology[reverses + c] != 0
+        aligned = topology[aligns + c] != 0
+        for l in range(w):
+            now_pos, now_rot, old_pos, old_rot, inverse_old_rot = collider_step_pose(
+                get3(CS, k, st.OLD_FRAME_POS, l), get3(CS, k, st.FRAME_POS, l), get4(CS, k, st.OLD_FRAME_ROT, l),
+                get4(CS, k, st.FRAME_ROT, l), get3(CS, k, st.C_OLD_POS, l), get4(CS, k, st.C_OLD_ROT, l),
+                get1(TS, b, st.FRAME_INTERPOLATION, l), get1(TS, b, st.STEP_MOVE_INERTIA_RATIO, l),
+                get1(TS, b, st.STEP_ROTATION_INERTIA_RATIO, l))
+            put3(CS, k, st.NOW_POS, l, now_pos)
+            put4(CS, k, st.NOW_ROT, l, now_rot)
+            put3(CS, k, st.C_OLD_POS, l, old_pos)
+            put4(CS, k, st.C_OLD_ROT, l, old_rot)
+            put4(CS, k, st.INVERSE_OLD_ROT, l, inverse_old_rot)
+            size = get3(CS, k, st.SIZE, l)
+            scale = get3(CS, k, st.FRAME_SCALE, l)
+            if shape == SPHERE:
+                r = size[0] * abs(scale[0])
+                put1(CS, k, st.RADIUS_START, l, r)
+                put1(CS, k, st.RADIUS_END, l, r)
+                put3(CS, k, st.START_OLD, l, old_pos)
+                put3(CS, k, st.END_OLD, l, old_pos)
+                put3(CS, k, st.START_NEW, l, now_pos)
+                put3(CS, k, st.END_NEW, l, now_pos)
+                lo, hi = sphere_bounds(old_pos, now_pos, r)
+                put3(CS, k, st.AABB_MIN, l, lo)
+                put3(CS, k, st.AABB_MAX, l, hi)
+            elif shape == CAPSULE:
+                s = scale[0] if d == 0 else (scale[1] if d == 1 else scale[2])
+                so, eo, rs, re = capsule_ends(old_pos, old_rot, d, reverse, aligned, size, s)
+                sn, en, rs, re = capsule_ends(now_pos, now_rot, d, reverse, aligned, size, s)
+                put1(CS, k, st.RADIUS_START, l, rs)
+                put1(CS, k, st.RADIUS_END, l, re)
+                put3(CS, k, st.START_OLD, l, so)
+                put3(CS, k, st.END_OLD, l, eo)
+                put3(CS, k, st.START_NEW, l, sn)
+                put3(CS, k, st.END_NEW, l, en)
+                lo, hi = swept_bounds(so, sn, eo, en, rs, re)
+                put3(CS, k, st.AABB_MIN, l, lo)
+                put3(CS, k, st.AABB_MAX, l, hi)
+            else:
+                put3(CS, k, st.PLANE_NORMAL, l, q_rotate(now_rot, (0.0, _sign(scale[1]), 0.0)))
+                put3(CS, k, st.START_NEW, l, now_pos)
+                put3(CS, k, st.START_OLD, l, old_pos)
 
 
-@kernel
-def collider_end_step_team(cs, ts, team):
-    """G.3 end of step: old = now."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    cs_now_pos, cs_now_rot, cs_old_pos, cs_old_rot = cs.now_pos, cs.now_rot, cs.old_pos, cs.old_rot
-    ts_collider_count = ts.collider_count
-    c0 = ts.collider_start[team]
-    for k in range(c0, c0 + ts_collider_count[team]):
-        for c in range(3):
-            cs_old_pos[k, c] = cs_now_pos[k, c]
-        for c in range(4):
-            cs_old_rot[k, c] = cs_now_rot[k, c]
+@kernel(forceinline=False)
+def collider_end_step_block(CS, BI, b):
+    """G.3 end of step: old = now, every slot and lane of block b."""
+    c0 = BI[b, bk.BI_COLLIDER0]
+    w = bk.lane_width(BI, b)
+    for k in range(c0, c0 + BI[b, bk.BI_COLLIDERS]):
+        for l in range(w):
+            put3(CS, k, st.C_OLD_POS, l, get3(CS, k, st.NOW_POS, l))
+            put4(CS, k, st.C_OLD_ROT, l, get4(CS, k, st.NOW_ROT, l))
 
 
-@kernel
-def collider_end_frame_team(cs, ts, team, running):
-    """End of frame: if the team ran, the frame pose becomes the old frame pose."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    cs_frame_pos, cs_frame_rot, cs_old_frame_pos = cs.frame_pos, cs.frame_rot, cs.old_frame_pos
-    cs_old_frame_rot, ts_collider_count = cs.old_frame_rot, ts.collider_count
-    if not running:
-        return
-    c0 = ts.collider_start[team]
-    for k in range(c0, c0 + ts_collider_count[team]):
-        for c in range(3):
-            cs_old_frame_pos[k, c] = cs_frame_pos[k, c]
-        for c in range(4):
-            cs_old_frame_rot[k, c] = cs_frame_rot[k, c]
+@kernel(forceinline=False)
+def collider_end_frame_lane(CS, BI, b, l):
+    """End of frame of a lane that ran steps: the frame pose becomes the old frame pose."""
+    c0 = BI[b, bk.BI_COLLIDER0]
+    for k in range(c0, c0 + BI[b, bk.BI_COLLIDERS]):
+        put3(CS, k, st.OLD_FRAME_POS, l, get3(CS, k, st.FRAME_POS, l))
+        put4(CS, k, st.OLD_FRAME_ROT, l, get4(CS, k, st.FRAME_ROT, l))
 
 
-def fill_slots(cs, team_slots: list[tuple[int, list[int]]], collider_set) -> None:
-    """Copy the static collider description into slots: ``team_slots`` is
-    ``[(team, [collider indices]), ...]`` in slot order."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    cs_aligned_on_center, cs_collider_index = cs.aligned_on_center, cs.collider_index
-    cs_direction, cs_first_frame, cs_local_center = cs.direction, cs.first_frame, cs.local_center
-    cs_reverse_direction, cs_shape, cs_size, cs_team = cs.reverse_direction, cs.shape, cs.size, cs.team
-    cs_transform = cs.transform
-    k = 0
-    for team, indices in team_slots:
-        for ci in indices:
-            cs_collider_index[k] = ci
-            cs_team[k] = team
-            cs_shape[k] = int(collider_set.shape[ci])
-            cs_transform[k] = int(collider_set.transform[ci])
-            cs_local_center[k] = np.asarray(collider_set.center[ci], dtype=np.float64)
-            radius = float(collider_set.radius[ci])
-            end = getattr(collider_set, "end_radius", None)
-            end_radius = float(end[ci]) if end is not None else radius
-            cs_size[k] = (radius, end_radius, float(collider_set.length[ci]))
-            cs_direction[k] = int(collider_set.direction[ci])
-            cs_reverse_direction[k] = 1 if collider_set.reverse_direction[ci] else 0
-            cs_aligned_on_center[k] = 1 if collider_set.aligned_on_center[ci] else 0
-            cs_first_frame[k] = 1
-            k += 1
+def collider_shapes(collider_set, indices) -> list[tuple[int, int, int, int]]:
+    """``(shape, direction, reverse, aligned)`` of each collider of a cloth (its block key)."""
+    return [(int(collider_set.shape[ci]), int(collider_set.direction[ci]),
+             1 if collider_set.reverse_direction[ci] else 0, 1 if collider_set.aligned_on_center[ci] else 0)
+            for ci in indices]
+
+
+def fill_slots(CS, slots: np.ndarray, lane: int, collider_set, indices) -> None:
+    """Write the static description (local center, radii, length) of a cloth's colliders
+    ``indices`` into ``slots`` of lane ``lane`` and mark them fresh (first frame)."""
+    for k, ci in zip(slots, indices):
+        st.COLLIDER.reset_lanes(CS, int(k), lane)
+        st.COLLIDER.write(CS, "local_center", [int(k)], lane, np.asarray(collider_set.center[ci], dtype=np.float64))
+        radius = float(collider_set.radius[ci])
+        end = getattr(collider_set, "end_radius", None)
+        end_radius = float(end[ci]) if end is not None else radius
+        st.COLLIDER.write(CS, "size", [int(k)], lane, [radius, end_radius, float(collider_set.length[ci])])

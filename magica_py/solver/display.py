@@ -9,7 +9,7 @@ With ``solver.time_based_smoothing`` on (quality mode) the display is built from
 step states, each carried in its *display frame* (the particle's fixed root at that step, or
 the team center for a particle without one) and shown in that frame's pose of this frame
 (docs/quality-mode.md, *Display*). ``L_k(p) = root_rot_k^-1 (x_k(p) - root_pos_k)`` is
-recorded at the end of step k (``record_display_state_team``), and
+recorded at the end of step k (``record_display_state_block``), and
 
     shown(p, s) = root_pos + root_rot * lerp(L_{k-1}(p), L_k(p), s)
 
@@ -18,17 +18,17 @@ latency. A rotation keeps lengths and a lerp of two vectors is no longer
 than the longer of them, so in the interpolated display an edge between two particles of the
 same root (or of roots moving rigidly together) is never longer than in one of the two
 states: it shows no stretch the state does not have, at any render rate, and it is a function
-of time only. ``display_team`` writes it; ``quality_display.display_constraints_team`` then moves it out of
+of time only. ``display_block`` writes it; ``quality_display.display_constraints_block`` then moves it out of
 the colliders at this frame's pose as far as the edge bounds allow.
 """
 from __future__ import annotations
 
-import numpy as np
-
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import (
-    clamp_length, load3, load4, q_inverse, q_rotate, store3, store4, v_add, v_length, v_lerp, v_scale, v_sub,
-)
+from magica_py.kernels.math3d import clamp_length, q_inverse, q_rotate, v_add, v_length, v_lerp, v_scale, v_sub
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
+from magica_py.solver.parameters import PRM_TIME_BASED_SMOOTHING
 
 MOVE = 0x02
 MAX_DISTANCE_RATIO = 1.3   # MaxDistanceRatioFutuerPrediction
@@ -55,104 +55,115 @@ def display_clamped(f, root_position, position):
 
 
 @kernel
-def display_frame_index(m, p):
-    """The particle whose pose is p's display frame: its root when that is fixed, else -1
-    (the team center)."""
-    r = m.root_index[p]
-    if r >= 0 and (m.attribute[r] & MOVE) == 0:
+def display_frame_of(topology, attribute, root_index, j):
+    """The particle whose pose is particle j's display frame: its root when that is fixed,
+    else -1 (the team center)."""
+    r = topology[root_index + j]
+    if r >= 0 and (topology[attribute + r] & MOVE) == 0:
         return r
     return -1
 
 
-@kernel
-def record_display_state_team(m, ps, ts, team):
+@kernel(forceinline=False)
+def record_display_state_block(PS, TS, BI, topology, b):
     """Quality display, at the end of a step (after D.10): each particle's new state
-    (``old_pos``) in its display frame at this step (the fixed root's step pose ``next_pos`` /
-    ``base_rot``, or the team center ``now_world_pos`` / ``now_world_rot``); the previous one
-    kept as ``display_prev_local``."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_team_particle_count, ps_base_rot = m.team_particle_count, ps.base_rot
-    ps_display_history, ps_display_local = ps.display_history, ps.display_local
-    ps_display_prev_local, ps_next_pos, ps_old_pos = ps.display_prev_local, ps.next_pos, ps.old_pos
-    center_pos = load3(ts.now_world_pos, team)
-    center_inv = q_inverse(load4(ts.now_world_rot, team))
-    start = m.team_particle_start[team]
-    for p in range(start, start + m_team_particle_count[team]):
-        r = display_frame_index(m, p)
-        if r >= 0:
-            local = q_rotate(q_inverse(load4(ps_base_rot, r)), v_sub(load3(ps_old_pos, p), load3(ps_next_pos, r)))
-        else:
-            local = q_rotate(center_inv, v_sub(load3(ps_old_pos, p), center_pos))
-        store3(ps_display_prev_local, p, load3(ps_display_local, p))
-        store3(ps_display_local, p, local)
-        ps_display_history[p] = min(ps_display_history[p] + 1, 2)
+    (``OLD_POS``) in its display frame at this step (the fixed root's step pose ``NEXT_POS`` /
+    ``BASE_ROT``, or the team center ``NOW_WORLD_POS`` / ``NOW_WORLD_ROT``); the previous one
+    kept as ``DISPLAY_PREV_LOCAL``."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute, root_index = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_ROOT_INDEX]
+    for j in range(BI[b, bk.BI_N]):
+        g = g0 + j
+        r = display_frame_of(topology, attribute, root_index, j)
+        gr = g0 + (r if r >= 0 else j)
+        for l in range(w):
+            x = get3(PS, g, st.OLD_POS, l)
+            if r >= 0:
+                local = q_rotate(q_inverse(get4(PS, gr, st.BASE_ROT, l)), v_sub(x, get3(PS, gr, st.NEXT_POS, l)))
+            else:
+                local = q_rotate(q_inverse(get4(TS, b, st.NOW_WORLD_ROT, l)), v_sub(x, get3(TS, b, st.NOW_WORLD_POS, l)))
+            put3(PS, g, st.DISPLAY_PREV_LOCAL, l, get3(PS, g, st.DISPLAY_LOCAL, l))
+            put3(PS, g, st.DISPLAY_LOCAL, l, local)
+            put1(PS, g, st.DISPLAY_HISTORY, l, min(get1(PS, g, st.DISPLAY_HISTORY, l) + 1.0, 2.0))
 
 
 @kernel
-def display_interpolated(m, ps, ts, team, p, alpha):
-    """Quality display of Move particle p: its state interpolated between the last two steps
-    at ``alpha`` (in [0, 1): one step of latency) in its display frame at this frame's pose;
-    its last state as is when no step ran since a reset."""
-    history = ps.display_history[p]
-    if history == 0:
-        return load3(ps.old_pos, p)
-    local = load3(ps.display_local, p)
-    if history >= 2:
-        local = v_lerp(load3(ps.display_prev_local, p), local, alpha)
-    r = display_frame_index(m, p)
-    if r >= 0:
-        return v_add(load3(ps.position, r), q_rotate(load4(ps.rotation, r), local))
-    return v_add(load3(ts.frame_world_pos, team), q_rotate(load4(ts.frame_world_rot, team), local))
+def display_interpolated(PS, TS, b, g, gr, l, rooted, alpha):
+    """Quality display of a Move particle (slot g, display frame slot gr when ``rooted``, else
+    the team center): its state interpolated between the last two steps at ``alpha`` (in
+    [0, 1): one step of latency) in its display frame at this frame's pose; its last state as
+    is when no step ran since a reset."""
+    history = get1(PS, g, st.DISPLAY_HISTORY, l)
+    if history == 0.0:
+        return get3(PS, g, st.OLD_POS, l)
+    local = get3(PS, g, st.DISPLAY_LOCAL, l)
+    if history >= 2.0:
+        local = v_lerp(get3(PS, g, st.DISPLAY_PREV_LOCAL, l), local, alpha)
+    if rooted:
+        return v_add(get3(PS, gr, st.POSITION, l), q_rotate(get4(PS, gr, st.ROTATION, l), local))
+    return v_add(get3(TS, b, st.FRAME_WORLD_POS, l), q_rotate(get4(TS, b, st.FRAME_WORLD_ROT, l), local))
 
 
-@kernel
-def display_team(m, ps, prm, ts, team, dt, time, old_time, now_update_time, running, quality):
-    """E.1 for one team (module docstring); quality mode's collider and edge pass follows in
-    ``quality_display.display_constraints_team``. ``quality``: the frame's quality stage switch (None:
-    no team of the scene uses quality mode, its interpolation is not compiled)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_team_particle_count, ps_disp_pos = m.attribute, m.team_particle_count, ps.disp_pos
-    blend = ts.blend_weight[team]
-    t = display_fraction(dt, time, old_time, now_update_time)
-    time_based = prm.time_based_smoothing[team] != 0
-    # quality mode: the last two states interpolated with one step of latency, at the time
-    # since the last step (in [0, dt) with exact timing): a function of time only (E.1's lerp
-    # from the last display is a per-frame filter whose strength depends on the frame rate),
-    # within the states' edge lengths (extrapolating along each particle's velocity is not)
-    alpha = min(max(time - now_update_time, 0.0), dt) / dt if dt > 0.0 else 0.0
+@kernel(forceinline=False)
+def display_block(PS, TS, P, BI, topology, b, dt, quality):
+    """E.1 for block b (module docstring); quality mode's collider and edge pass follows in
+    ``quality_display.display_constraints_block``. Each lane's clock is in ``TS``
+    (``DISPLAY_T``, ``DISPLAY_ALPHA``: written by the frame before the end stages).
+    ``quality``: the frame's quality stage switch (None: no team of the scene uses quality
+    mode, its interpolation is not compiled)."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    n = BI[b, bk.BI_N]
+    attribute, root_index = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_ROOT_INDEX]
+    time_based = P[b, PRM_TIME_BASED_SMOOTHING] != 0.0
     if quality is not None:
         if time_based:
             # the roots' poses are read below: compute every Move display first (a Move root
             # is not a display frame, so the order does not matter here)
-            start = m.team_particle_start[team]
-            for p in range(start, start + m_team_particle_count[team]):
-                if (m_attribute[p] & MOVE) != 0:
-                    store3(ps_disp_pos, p, display_interpolated(m, ps, ts, team, p, alpha))
-    # one pass in particle order (the root read below)
-    attribute, root_index = m_attribute, m.root_index
-    position, rotation, disp_pos = ps.position, ps.rotation, ps_disp_pos
-    old_pos, real_velocity = ps.old_pos, ps.real_velocity
-    old_position, old_rotation = ps.old_position, ps.old_rotation
-    base_pos_buffer, base_rot_buffer = ps.base_pos_buffer, ps.base_rot_buffer
-    first = np.uint64(m.team_particle_start[team])
-    for j in range(m_team_particle_count[team]):
-        p = first + np.uint64(j)
-        pos0 = load3(position, p)
-        rot0 = load4(rotation, p)
-        if (attribute[p] & MOVE) != 0:
-            if time_based:
-                f = load3(disp_pos, p)   # no E.1 clamp: the interpolation is bounded by the states
-            else:
-                f = display_extrapolated(load3(old_pos, p), load3(real_velocity, p), load3(disp_pos, p), dt, t)
-                r = root_index[p]
-                if r >= 0:
-                    f = display_clamped(f, load3(position, np.uint64(r)), pos0)
-            store3(disp_pos, p, f)
-            store3(position, p, v_lerp(pos0, f, blend))
+            for j in range(n):
+                if (topology[attribute + j] & MOVE) == 0:
+                    continue
+                g = g0 + j
+                r = display_frame_of(topology, attribute, root_index, j)
+                gr = g0 + (r if r >= 0 else j)
+                for l in range(w):
+                    put3(PS, g, st.DISP_POS, l, display_interpolated(PS, TS, b, g, gr, l, r >= 0,
+                                                                     get1(TS, b, st.DISPLAY_ALPHA, l)))
+    # one pass in particle order (a Move particle reads its root's position as written so far:
+    # a Move root's display, the quirk of §E.1), the root's position gathered next to it first
+    for j in range(n):
+        g = g0 + j
+        move = (topology[attribute + j] & MOVE) != 0
+        r = topology[root_index + j]
+        clamp = move and (not time_based) and r >= 0
+        if clamp:
+            gr = g0 + r
+            for l in range(w):
+                put3(PS, g, st.PARTNER_POS, l, get3(PS, gr, st.POSITION, l))
+        for l in range(w):   # the animated pose kept (E.2 reads it); stores selected, not branched
+            pos0 = get3(PS, g, st.POSITION, l)
+            rot0 = get4(PS, g, st.ROTATION, l)
+            running = get1(TS, b, st.RUNNING, l) != 0.0
+            old_position = get3(PS, g, st.OLD_POSITION, l)
+            old_rotation = get4(PS, g, st.OLD_ROTATION, l)
+            put3(PS, g, st.OLD_POSITION, l, pos0 if running else old_position)
+            put4(PS, g, st.OLD_ROTATION, l, rot0 if running else old_rotation)
+            put3(PS, g, st.BASE_POS_BUFFER, l, pos0)
+            put4(PS, g, st.BASE_ROT_BUFFER, l, rot0)
+        if not move:
+            for l in range(w):
+                put3(PS, g, st.DISP_POS, l, get3(PS, g, st.POSITION, l))
+        elif time_based:   # no E.1 clamp: the interpolation is bounded by the states
+            for l in range(w):
+                put3(PS, g, st.POSITION, l, v_lerp(get3(PS, g, st.POSITION, l), get3(PS, g, st.DISP_POS, l),
+                                                   get1(TS, b, st.BLEND_WEIGHT, l)))
         else:
-            store3(disp_pos, p, pos0)
-        if running:
-            store3(old_position, p, pos0)
-            store4(old_rotation, p, rot0)
-        store3(base_pos_buffer, p, pos0)
-        store4(base_rot_buffer, p, rot0)
+            for l in range(w):
+                pos0 = get3(PS, g, st.POSITION, l)
+                f = display_extrapolated(get3(PS, g, st.OLD_POS, l), get3(PS, g, st.REAL_VELOCITY, l),
+                                         get3(PS, g, st.DISP_POS, l), dt, get1(TS, b, st.DISPLAY_T, l))
+                clamped = display_clamped(f, get3(PS, g, st.PARTNER_POS, l), pos0)
+                f = clamped if clamp else f
+                put3(PS, g, st.DISP_POS, l, f)
+                put3(PS, g, st.POSITION, l, v_lerp(pos0, f, get1(TS, b, st.BLEND_WEIGHT, l)))

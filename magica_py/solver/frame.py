@@ -1,20 +1,28 @@
-"""The LATE_UPDATE frame of every team in one numba call (docs/solver.md §A.3, §D.0 order).
+"""The LATE_UPDATE frame of every block in one numba call (docs/solver.md §A.3, §D.0 order).
 
 One recipe for every scene: scale suspension and distance culling, the runtime's team time
-(§A.4); then per team its begin of frame (skinning, center, inertia, reset or shift, collider
-frame: §C, §G.2) and its steps (each: §A.6 time, §C.3 team update, §G.3 colliders,
-§D.1-§D.10); then per team its end of frame (guards, display §E.1, rotations §E.2/§E.3,
+(§A.4); then per block its begin of frame (skinning, center, inertia, reset or shift,
+collider frame: §C, §G.2) and its steps (each: §A.6 time, §C.3 team update, §G.3 colliders,
+§D.1-§D.10); then per block its end of frame (guards, display §E.1, rotations §E.2/§E.3,
 transform data and write-back §E.4, §A.7). Within a team everything runs in particle order
-(Gauss-Seidel, §D.0). Teams are independent until the write-back, so the serial kernel
-(``simulate_frame``) and the parallel one (``simulate_frame_parallel``, teams dealt to
-threads) call the same per-team functions and give the same bits.
+(Gauss-Seidel, §D.0), the block's teams side by side (``solver/lanes.py``). Blocks are
+independent until the write-back, so the serial kernel (``simulate_frame``) and the parallel
+one (``simulate_frame_parallel``, blocks dealt to threads) call the same per-block functions
+and give the same bits.
+
+**Lanes that do not run.** A block runs every stage for all its lanes. A lane whose team is
+not simulated this frame (disabled, culled, scale-suspended: ``ACTIVE`` 0) or that runs
+fewer steps than its neighbours (another time scale, a reset clock) keeps its state: its
+columns are copied aside before the block's frame (or step) and written back after it
+(``save_lane`` / ``restore_lane``), and the stages that write outside the tables (the
+write-back, the guards' events) skip it. A free lane (no team) is computed and ignored.
 
 **Only the stages a scene uses are compiled.** The optional stages are switched by plain
 arguments (``StageSwitches``: ``None`` or ``1``); numba removes an ``if switch is not None``
 branch whose argument is ``None`` before it types the callee, so a scene whose cloths use no
-angle constraint neither compiles nor calls ``angle_team``. Each combination is its own
-compiled (and disk-cached) signature. Within a compiled stage, the per-team parameters still
-decide at run time (a switch is on when any team may need the stage).
+angle constraint neither compiles nor calls ``angle_block``. Each combination is its own
+compiled (and disk-cached) signature. Within a compiled stage, the block's parameters still
+decide at run time (a switch is on when any block may need the stage).
 """
 from __future__ import annotations
 
@@ -25,41 +33,56 @@ import numpy as np
 from numba import prange
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import load3, load4, q_angle, v_length, v_sub
-from magica_py.runtime.team_time import TeamTimeState, team_time_begin_step_team, team_time_end_frame, \
-    team_time_frame_update
+from magica_py.kernels.math3d import q_angle, v_length, v_sub
+from magica_py.runtime.team_time import (
+    TeamTimeState, team_time_begin_step_team, team_time_end_frame, team_time_frame_update,
+)
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
 from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.center import (
-    center_and_inertia_team, distance_culling_team, end_frame_team, reset_or_shift_team, skin_team,
-    snap_particles_to_base_pose,
+    center_and_inertia_lane, distance_culling_lane, end_frame_lane, reset_or_shift_block, skin_block,
+    snap_lane_to_base_pose,
 )
 from magica_py.solver.colliders import (
-    collider_end_frame_team, collider_end_step_team, collider_frame_team, collider_step_team,
+    collider_end_frame_lane, collider_end_step_block, collider_frame_lane, collider_step_block,
 )
-from magica_py.solver.constraints.angle import angle_team
-from magica_py.solver.constraints.bending import apply_accumulated, bending_team
-from magica_py.solver.constraints.collision import edge_collision_team, point_collision_team
-from magica_py.solver.constraints.distance import distance_team
-from magica_py.solver.constraints.motion import motion_team
-from magica_py.solver.constraints.tether import tether_team
-from magica_py.solver.display import display_team, record_display_state_team
-from magica_py.solver.guards import check_team, reset_team_to_base
-from magica_py.solver.quality import drift_applies, drift_begin_team, drift_end_team, quality_end_of_step
-from magica_py.solver.quality_display import display_constraints_team
-from magica_py.solver.rotations import line_rotations_team, triangle_rotations_team
-from magica_py.solver.step import end_step_team, predict_team, step_basic_pose_team, team_step_update
-from magica_py.solver.writeback import transform_data_team, write_transforms_team
-from magica_py.wind.force import wind_team
+from magica_py.solver.constraints.angle import angle_block
+from magica_py.solver.constraints.bending import bending_block
+from magica_py.solver.constraints.collision import edge_collision_block, point_collision_block
+from magica_py.solver.constraints.distance import distance_block
+from magica_py.solver.constraints.motion import motion_block
+from magica_py.solver.constraints.tether import tether_block
+from magica_py.solver.display import display_block, display_fraction, record_display_state_block
+from magica_py.solver.guards import check_block, lane_guard_code, reset_lane_to_base
+from magica_py.solver.lanes import LANES, get1, get3, put1
+from magica_py.solver.parameters import (
+    PRM_COLLISION_LAST, PRM_COLLISION_MODE, PRM_INEXTENSIBILITY, PRM_QUALITY, PRM_TELEPORT_DISTANCE,
+    PRM_TELEPORT_ROTATION, PRM_TIME_BASED_SMOOTHING,
+)
+from magica_py.solver.quality import drift_applies, drift_begin_block, drift_end_block, quality_end_of_step_block
+from magica_py.solver.quality_display import display_constraints_block
+from magica_py.solver.rotations import line_rotations_block, triangle_rotations_block
+from magica_py.solver.step import end_step_block, predict_block, step_basic_pose_block, team_step_lane
+from magica_py.solver.writeback import transform_block, write_transforms_lane
+from magica_py.wind.force import wind_block
 
 TimeArrays = namedtuple("TimeArrays", TeamTimeState.FIELDS)
+# the solver's tables as the frame kernel takes them (``system.ClothSystem.tables``):
+# state (PS, TS, CS, TRS triangle and EDS edge scratch), per-lane model (PM, TM, LM link, TRM
+# triangle, BM bend, VM volume), parameters P (one row per block) and PP (its depth curves at
+# each particle: ``blocks.PARTICLE_PARAMETERS``), block ints BI and topology,
+# per-lane hierarchy nodes (PT particles, TI teams, CT collider slots), the live block ids
+Tables = namedtuple("Tables", [
+    "PS", "TS", "CS", "TRS", "EDS", "PM", "PP", "TM", "LM", "TRM", "BM", "VM", "P", "BI", "topology", "PT", "TI", "CT",
+    "blocks"])
 HierarchyArrays = namedtuple("HierarchyArrays", [
     "parent", "local_position", "local_rotation", "world_position", "world_rotation",
     "lossy_scale", "local_to_world",
     # the world pose at build (copies taken by ``hierarchy_arrays`` when the system is built),
-    # read once by quality mode's build-time reset (``build_reset_team``)
+    # read once by quality mode's build-time reset (``build_reset_lane``)
     "build_world_position", "build_world_rotation", "build_lossy_scale", "build_local_to_world",
-    "build_pose_pending",   # (1,) uint8: 1 until the first frame has run
-    "ramp_from_build"])     # (n,) uint8 per team id (< n): 1 while its last reset was the build
+    "build_pose_pending"])   # (1,) uint8: 1 until the first frame has run
 # frame inputs: Unity time of the frame and the global simulation settings
 FrameInputs = namedtuple("FrameInputs", [
     "delta_time", "unscaled_delta_time", "fixed_delta_time", "fixed_update_count",
@@ -71,17 +94,17 @@ FrameInputs = namedtuple("FrameInputs", [
 # 0.2 us) and the kernel rebuilds the namedtuple (``frame_inputs``); every value is a float64
 # or a small integer, so the round trip is exact.
 FRAME_INPUT_COUNT = len(FrameInputs._fields)
-# The optional stages (None: not compiled, not called; 1: compiled, run where a team asks):
+# The optional stages (None: not compiled, not called; 1: compiled, run where a block asks):
 # angle (D.5/D.6), bending (D.7 dihedral and volume), point and edge collision (D.8),
 # motion (D.9), quality (quality mode's build reset, end-of-step passes and display collision),
 # lines (E.2 line rotations), triangles (E.3 triangle rotations), wind (the wind's share of
-# D.1, ``wind.force.wind_team``: a scene with wind zones or a cloth with moving wind).
-# ``system.stage_switches`` derives them from the live teams.
+# D.1, ``wind.force.wind_block``: a scene with wind zones or a cloth with moving wind).
+# ``system.stage_switches`` derives them from the live blocks.
 StageSwitches = namedtuple("StageSwitches", [
     "angle", "bending", "point_collision", "edge_collision", "motion", "quality", "lines", "triangles", "wind"])
-# the per-thread work table of the parallel kernel: team_worker (teams,) int32, worker_load
+# the per-thread work table of the parallel kernel: block_worker (blocks,) int32, worker_load
 # (threads,) int64 particle-steps (written by ``assign_workers`` each frame)
-WorkerTable = namedtuple("WorkerTable", ["team_worker", "worker_load"])
+WorkerTable = namedtuple("WorkerTable", ["block_worker", "worker_load"])
 
 
 def frame_input_values() -> np.ndarray:
@@ -108,200 +131,354 @@ def hierarchy_arrays(h) -> HierarchyArrays:
     return HierarchyArrays(h.parent, h.local_position, h.local_rotation, h.world_position,
                            h.world_rotation, h.lossy_scale, h.local_to_world,
                            h.world_position.copy(), h.world_rotation.copy(), h.lossy_scale.copy(),
-                           h.local_to_world.copy(), np.ones(1, dtype=np.uint8),
-                           np.zeros(max(h.parent.shape[0], 1), dtype=np.uint8))
+                           h.local_to_world.copy(), np.ones(1, dtype=np.uint8))
 
 
-def worker_table(team_capacity: int, threads: int) -> WorkerTable:
-    return WorkerTable(np.full(max(team_capacity, 1), -1, dtype=np.int32), np.zeros(max(threads, 1), dtype=np.int64))
+def worker_table(block_capacity: int, threads: int) -> WorkerTable:
+    return WorkerTable(np.full(max(block_capacity, 1), -1, dtype=np.int32), np.zeros(max(threads, 1), dtype=np.int64))
+
+
+# rows of the tables a lane's save copies (module constants: the kernels read them as constants)
+PS_ROWS = st.PARTICLE.rows
+TS_ROWS = st.TEAM.rows
+CS_ROWS = st.COLLIDER.rows
+
+
+def lane_save_area(max_particles: int, max_colliders: int, threads: int) -> np.ndarray:
+    """Scratch of ``save_lane``: per thread, every lane of one block's particle, team and
+    collider items (``LANES`` lanes of ``max_particles`` particle slots and ``max_colliders``
+    collider slots)."""
+    width = LANES * (max_particles * PS_ROWS + TS_ROWS + max_colliders * CS_ROWS)
+    return np.zeros((max(threads, 1), max(width, 1)))
+
+
+# ----------------------------------------------------------------------------- lanes that do not run
+@kernel(forceinline=False)
+def save_lane(PS, TS, CS, BI, b, l, area):
+    """Copy lane l's columns of block b's particle, team and collider items into its part of
+    ``area`` (one thread's row; lane l's part starts at ``l`` times a lane's size)."""
+    n = BI[b, bk.BI_N]
+    g0 = BI[b, bk.BI_G0]
+    c0 = BI[b, bk.BI_COLLIDER0]
+    at = l * (n * PS_ROWS + TS_ROWS + BI[b, bk.BI_COLLIDERS] * CS_ROWS)
+    for g in range(g0, g0 + n):
+        for r in range(PS_ROWS):
+            area[at] = PS[g, r * LANES + l]
+            at += 1
+    for r in range(TS_ROWS):
+        area[at] = TS[b, r * LANES + l]
+        at += 1
+    for k in range(c0, c0 + BI[b, bk.BI_COLLIDERS]):
+        for r in range(CS_ROWS):
+            area[at] = CS[k, r * LANES + l]
+            at += 1
+
+
+@kernel(forceinline=False)
+def restore_lane(PS, TS, CS, BI, b, l, area):
+    """Write lane l's columns of block b back from ``area`` (``save_lane``)."""
+    n = BI[b, bk.BI_N]
+    g0 = BI[b, bk.BI_G0]
+    c0 = BI[b, bk.BI_COLLIDER0]
+    at = l * (n * PS_ROWS + TS_ROWS + BI[b, bk.BI_COLLIDERS] * CS_ROWS)
+    for g in range(g0, g0 + n):
+        for r in range(PS_ROWS):
+            PS[g, r * LANES + l] = area[at]
+            at += 1
+    for r in range(TS_ROWS):
+        TS[b, r * LANES + l] = area[at]
+        at += 1
+    for k in range(c0, c0 + BI[b, bk.BI_COLLIDERS]):
+        for r in range(CS_ROWS):
+            CS[k, r * LANES + l] = area[at]
+            at += 1
+
+
+# ----------------------------------------------------------------------------- team level
+@kernel(forceinline=False)
+def prepare_lanes(TS, TI, P, BI, blocks, tt, h):
+    """Scale suspension (A.4) and distance culling (H.1) of every lane, before the team time."""
+    for i in range(blocks.shape[0]):
+        b = blocks[i]
+        for l in range(bk.lane_width(BI, b)):
+            t = TI[b, bk.TI_TEAM + l]
+            if t < 0:
+                continue
+            if get1(TS, b, st.ENABLED, l) == 0.0:
+                tt.active[t] = False
+                put1(TS, b, st.ACTIVE, l, 0.0)
+                continue
+            tt.active[t] = True
+            comp = TI[b, bk.TI_COMPONENT + l]
+            sx, sy, sz = h.lossy_scale[comp, 0], h.lossy_scale[comp, 1], h.lossy_scale[comp, 2]
+            smin = min(abs(sx), min(abs(sy), abs(sz)))
+            negative = sx < 0.0 or sy < 0.0 or sz < 0.0
+            # a tiny scale suspends the team (A.4); so does a negative one: the negative-scale
+            # teleport of H.7 is not modelled (negative scale is rejected at build)
+            put1(TS, b, st.SCALE_SUSPENDED, l, 1.0 if (smin < 1e-6 or negative) else 0.0)
+            culled = distance_culling_lane(TS, TI, P, b, l, h.world_position)
+            if (1.0 if culled else 0.0) != get1(TS, b, st.CULLED, l):
+                put1(TS, b, st.RESET, l, 1.0)  # any visibility change forces a reset (H.1)
+            put1(TS, b, st.CULLED, l, 1.0 if culled else 0.0)
+            suspended = get1(TS, b, st.SCALE_SUSPENDED, l) != 0.0 or culled
+            tt.suspended[t] = suspended
+            put1(TS, b, st.ACTIVE, l, 0.0 if suspended else 1.0)
 
 
 @kernel
-def prepare_teams(m, ts, prm, tt, h):
-    """Scale suspension (A.4) and distance culling (H.1) before the team time runs."""
-    for i in range(m.live_teams.shape[0]):
-        t = m.live_teams[i]
-        if ts.enabled[t] == 0:
-            tt.active[t] = False
-            ts.active[t] = 0
-            continue
-        tt.active[t] = True
-        comp = m.team_component_transform[t]
-        smin = min(abs(h.lossy_scale[comp, 0]), min(abs(h.lossy_scale[comp, 1]), abs(h.lossy_scale[comp, 2])))
-        negative = h.lossy_scale[comp, 0] < 0.0 or h.lossy_scale[comp, 1] < 0.0 or h.lossy_scale[comp, 2] < 0.0
-        # a tiny scale suspends the team (A.4); so does a negative one: the negative-scale
-        # teleport of H.7 is not modelled (negative scale is rejected at build)
-        ts.scale_suspended[t] = 1 if (smin < 1e-6 or negative) else 0
-        culled = distance_culling_team(prm, ts, t, h.world_position, comp)
-        if (1 if culled else 0) != ts.culled[t]:
-            ts.reset[t] = 1  # any visibility change forces a reset (H.1)
-        ts.culled[t] = 1 if culled else 0
-        suspended = ts.scale_suspended[t] != 0 or culled
-        tt.suspended[t] = suspended
-        ts.active[t] = 0 if suspended else 1
+def first_frame_continues_build_pose(TS, TM, TI, P, b, l, h):
+    """True when lane l's component's first-frame pose is within the teleport thresholds of
+    its build pose (whatever the teleport mode): the animation then starts from the build pose
+    and the build can be the reset instant. A scene whose rest pose is not the animation's
+    pose at t = 0 (a jump at the first frame) keeps MagicaCloth2's first-frame reset."""
+    comp = TI[b, bk.TI_COMPONENT + l]
+    init_len = v_length(get3(TM, b, bk.INIT_SCALE, l))
+    scale = (h.lossy_scale[comp, 0], h.lossy_scale[comp, 1], h.lossy_scale[comp, 2])
+    ratio = v_length(scale) / init_len if init_len > 0.0 else 1.0
+    jump = v_length(v_sub((h.world_position[comp, 0], h.world_position[comp, 1], h.world_position[comp, 2]),
+                          (h.build_world_position[comp, 0], h.build_world_position[comp, 1],
+                           h.build_world_position[comp, 2])))
+    turn = math.degrees(q_angle(
+        (h.build_world_rotation[comp, 0], h.build_world_rotation[comp, 1], h.build_world_rotation[comp, 2],
+         h.build_world_rotation[comp, 3]),
+        (h.world_rotation[comp, 0], h.world_rotation[comp, 1], h.world_rotation[comp, 2], h.world_rotation[comp, 3])))
+    return jump < P[b, PRM_TELEPORT_DISTANCE] * ratio and turn < P[b, PRM_TELEPORT_ROTATION]
 
 
-@kernel
-def run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edge_collision, motion, quality, wind):
-    """One simulation step of team t (§D.0 order) at frame interpolation fi."""
-    dt = fi.dt
-    ratio = fi.frequency_ratio
-    frac = tt.frame_interpolation[t]
-    tether_attenuation, distance_attenuation, limit_attenuation, restoration_attenuation, motion_attenuation = \
-        step_attenuations(prm, t, ratio)
-    team_step_update(m, ts, prm, frac, t, dt)
-    collider_step_team(cs, ts, t, frac)
-    predict_team(m, ps, prm, ts, t, frac, dt, ratio, fi.power_z)
-    if wind is not None:
-        if ts.wind_zone_count[t] > 0 or prm.wind_moving_wind[t] > 0.01:  # wind's share of D.1's force sum
-            wind_team(m, ps, prm, ts, t, dt)
-    step_basic_pose_team(m, ps, prm, ts, t)
-    tether_team(m, ps, prm, t, tether_attenuation, ratio)
-    distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
-    drift = False
-    if angle is not None:
-        drift = quality is not None and drift_applies(prm, t)
-        if drift:   # quality mode: the angle pass's kept-out share, a drift the passes do not see
-            drift_begin_team(m, ps, t)
-        angle_team(m, ps, prm, ts, t, ratio, fi.power_w, limit_attenuation, restoration_attenuation)
-        if drift:
-            drift_end_team(m, ps, t)
-    if bending is not None:
-        if m.team_bend_count[t] > 0 or m.team_volume_count[t] > 0:
-            bending_team(m, ps, prm, ts, t, ratio, fi.power_y)
-            apply_accumulated(m, ps, t, True)
-    if ts.collider_count[t] > 0:
-        if point_collision is not None:
-            if prm.collision_mode[t] == 1:
-                point_collision_team(m, ps, prm, ts, cs, t)
-        if edge_collision is not None:
-            if prm.collision_mode[t] == 2:
-                edge_collision_team(m, ps, prm, ts, cs, t)
-    distance_team(m, ps, prm, ts, t, ratio, fi.power_y, distance_attenuation)
-    if motion is not None:
-        motion_team(m, ps, prm, t, motion_attenuation)
-    if quality is not None:
-        if prm.inextensibility[t] != 0 or prm.collision_last[t] != 0:  # quality mode (§D.0)
-            quality_end_of_step(m, ps, prm, ts, cs, t, ratio, fi.power_y, distance_attenuation, drift)
-    end_step_team(m, ps, prm, ts, t, dt, ratio)
-    if quality is not None:
-        if prm.time_based_smoothing[t] != 0:   # quality display: keep this step's state (display.py)
-            record_display_state_team(m, ps, ts, t)
-    collider_end_step_team(cs, ts, t)
-
-
-@kernel
-def build_reset_team(m, ps, prm, ts, h, t):
+@kernel(forceinline=False)
+def build_reset_lane(PS, PM, TS, TM, TI, P, BI, PT, topology, b, l, h):
     """Quality mode: the Reset of a team built with the system happens at the build (t = 0),
     not at its first frame (docs/quality-mode.md, *start-up*). The particles snap to the
     build-time pose with zero velocity, and the center, frame and component histories take
     the build-time component pose; the first frame then integrates from there like any other
     frame. MagicaCloth2 resets on the first frame (C.5, H.2), i.e. at t = 1/fps: each frame
     rate would start from a different state, which a lightly damped chain carries for ~1 s."""
-    skin_team(m, ps, h.build_local_to_world, t)
-    center_and_inertia_team(m, ps, prm, ts, t, h.build_world_position, h.build_world_rotation,
-                            h.build_lossy_scale, 0.0, 1.0, 0, False, 0.0, 0.0)
-    snap_particles_to_base_pose(ps, m.team_particle_start[t], m.team_particle_start[t] + m.team_particle_count[t])
+    skin_block(PS, PM, BI, PT, h.build_local_to_world, b, l, l + 1)
+    center_and_inertia_lane(PS, PM, TS, TM, TI, P, BI, topology, b, l, h.build_world_position,
+                            h.build_world_rotation, h.build_lossy_scale, 0.0, 1.0, 0, False, 0.0, 0.0)
+    g0 = BI[b, bk.BI_G0]
+    for g in range(g0, g0 + BI[b, bk.BI_N]):
+        snap_lane_to_base_pose(PS, g, l)
     for c in range(3):
-        ts.old_component_pos[t, c] = ts.component_pos[t, c]
-        ts.old_component_scale[t, c] = ts.component_scale[t, c]
+        TS[b, st.OLD_COMPONENT_POS + c * LANES + l] = TS[b, st.COMPONENT_POS + c * LANES + l]
+        TS[b, st.OLD_COMPONENT_SCALE + c * LANES + l] = TS[b, st.COMPONENT_SCALE + c * LANES + l]
     for c in range(4):
-        ts.old_component_rot[t, c] = ts.component_rot[t, c]
-    ts.reset[t] = 0  # the first frame is an ordinary frame (time_reset keeps the ramp at 0)
+        TS[b, st.OLD_COMPONENT_ROT + c * LANES + l] = TS[b, st.COMPONENT_ROT + c * LANES + l]
+    put1(TS, b, st.RESET, l, 0.0)  # the first frame is an ordinary frame (time_reset keeps the ramp at 0)
 
 
-@kernel
-def first_frame_continues_build_pose(m, prm, h, t):
-    """True when the component's first-frame pose is within the teleport thresholds of its
-    build pose (whatever the teleport mode): the animation then starts from the build pose
-    and the build can be the reset instant. A scene whose rest pose is not the animation's
-    pose at t = 0 (a jump at the first frame) keeps MagicaCloth2's first-frame reset."""
-    comp = m.team_component_transform[t]
-    init_len = v_length(load3(m.team_init_scale, t))
-    ratio = v_length(load3(h.lossy_scale, comp)) / init_len if init_len > 0.0 else 1.0
-    jump = v_length(v_sub(load3(h.world_position, comp), load3(h.build_world_position, comp)))
-    turn = math.degrees(q_angle(load4(h.build_world_rotation, comp), load4(h.world_rotation, comp)))
-    return jump < prm.teleport_distance[t] * ratio and turn < prm.teleport_rotation[t]
-
-
-@kernel
-def begin_frame_prelude_team(m, ps, prm, ts, tt, h, t, quality):
-    """The team-level start of team t's frame: running flag, quality mode's first-frame build
-    reset. Returns the team time since the last step (``center_and_inertia_team``)."""
-    ts.running[t] = 1 if tt.running[t] else 0
-    tracked = t < h.ramp_from_build.shape[0]
-    if ts.reset[t] != 0 and tracked:
-        h.ramp_from_build[t] = 0
-    if (quality is not None and prm.quality[t] != 0 and h.build_pose_pending[0] != 0 and ts.reset[t] != 0 and ts.time_reset[t] != 0
-            and first_frame_continues_build_pose(m, prm, h, t)):
-        build_reset_team(m, ps, prm, ts, h, t)
-        if tracked:
-            h.ramp_from_build[t] = 1
+@kernel(forceinline=False)
+def begin_frame_prelude_lane(PS, PM, TS, TM, TI, P, BI, PT, topology, tt, h, b, l, t, quality):
+    """The team-level start of lane l's frame (team t): running flag, quality mode's
+    first-frame build reset. Returns the team time since the last step
+    (``center_and_inertia_lane``)."""
+    put1(TS, b, st.RUNNING, l, 1.0 if tt.running[t] else 0.0)
+    if get1(TS, b, st.RESET, l) != 0.0:
+        put1(TS, b, st.RAMP_FROM_BUILD, l, 0.0)
+    if (quality is not None and P[b, PRM_QUALITY] != 0.0 and h.build_pose_pending[0] != 0
+            and get1(TS, b, st.RESET, l) != 0.0 and get1(TS, b, st.TIME_RESET, l) != 0.0
+            and first_frame_continues_build_pose(TS, TM, TI, P, b, l, h)):
+        build_reset_lane(PS, PM, TS, TM, TI, P, BI, PT, topology, b, l, h)
+        put1(TS, b, st.RAMP_FROM_BUILD, l, 1.0)
     # the stabilisation ramp in continuous time when it started at the build (t = 0, on the
     # step grid); after a first-frame reset the per-step ramp is kept (docs/quality-mode.md)
     since_last_step = 0.0
-    if tracked and h.ramp_from_build[t] != 0:
+    if get1(TS, b, st.RAMP_FROM_BUILD, l) != 0.0:
         since_last_step = tt.old_time[t] - tt.now_update_time[t]
     return since_last_step
 
 
 @kernel
-def begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t, quality):
-    """Per-frame stages of team t before the steps (C.1, C.2/C.4, C.5, G.2)."""
-    since_last_step = begin_frame_prelude_team(m, ps, prm, ts, tt, h, t, quality)
-    skin_team(m, ps, h.local_to_world, t)
-    center_and_inertia_team(m, ps, prm, ts, t, h.world_position, h.world_rotation, h.lossy_scale,
-                            tt.frame_delta_time[t], tt.now_time_scale[t], tt.skip_count[t],
-                            tt.running[t], fi.dt, since_last_step)
-    reset_or_shift_team(m, ps, ts, t)
-    collider_frame_team(cs, ts, t, h.world_position, h.world_rotation, h.lossy_scale)
+def lane_team(TI, b, l):
+    return TI[b, bk.TI_TEAM + l]
 
 
-@kernel
-def team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, t, angle, bending, point_collision, edge_collision, motion,
-                     quality, wind):
-    """Team t's frame up to the write-back: its begin of frame and its steps (each advancing
-    its own clock, §A.6; the clock of a suspended but enabled team advances too)."""
-    if ts.active[t] != 0:
-        begin_frame_team(m, ps, prm, ts, cs, tt, h, fi, t, quality)
-    for step in range(tt.update_count[t]):
-        _begin_step_team(tt, fi, step, t)
-        if ts.active[t] != 0 and tt.step_running[t]:
-            run_step(m, ps, prm, ts, cs, tt, t, fi, angle, bending, point_collision, edge_collision, motion, quality,
-                     wind)
-
-
-@kernel
-def team_frame_end(m, ps, prm, ts, cs, tt, h, fi, t, quality, lines, triangles):
-    """Per-frame stages of team t after the steps: guards, E.1-E.4, A.7."""
-    if ts.active[t] == 0:
-        return
-    code = check_team(m, ps, ts, t)
-    if code != 0:
-        reset_team_to_base(m, ps, ts, t)
-        ts.guard_code[t] = code
-        if t < h.ramp_from_build.shape[0]:
-            h.ramp_from_build[t] = 0
-    display_team(m, ps, prm, ts, t, fi.dt, tt.time[t], tt.old_time[t], tt.now_update_time[t],
-                 tt.running[t], quality)
+@kernel(forceinline=False, inline="always")
+def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones):
+    """One simulation step of block b (§D.0 order): every lane at its own frame
+    interpolation (``FRAME_INTERPOLATION``)."""
+    PS, TS, CS, PM, PP, TM, P, BI, topology = T.PS, T.TS, T.CS, T.PM, T.PP, T.TM, T.P, T.BI, T.topology
+    dt = fi.dt
+    ratio = fi.frequency_ratio
+    tether_attenuation, distance_attenuation, limit_attenuation, restoration_attenuation, motion_attenuation = \
+        step_attenuations(P, b, ratio)
+    for l in range(bk.lane_width(BI, b)):
+        team_step_lane(TS, TM, P, b, l, dt)
+    collider_step_block(CS, TS, BI, topology, b)
+    predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, ratio, fi.power_z)
+    if wind is not None:
+        wind_block(PS, PM, TS, T.TI, P, BI, topology, b, dt, wind_zones)
+    step_basic_pose_block(PS, PM, TS, TM, P, BI, topology, b)
+    tether_block(PS, P, BI, topology, b, tether_attenuation, ratio)
+    distance_block(PS, PM, PP, TS, TM, T.LM, P, BI, topology, b, ratio, fi.power_y, distance_attenuation)
+    drift = False
+    if angle is not None:
+        drift = quality is not None and drift_applies(P, b)
+        if drift:   # quality mode: the angle pass's kept-out share, a drift the passes do not see
+            drift_begin_block(PS, BI, b)
+        angle_block(PS, PP, TS, P, BI, topology, b, ratio, fi.power_w, limit_attenuation, restoration_attenuation)
+        if drift:
+            drift_end_block(PS, BI, topology, b)
+    if bending is not None:
+        if BI[b, bk.BI_BENDS] > 0 or BI[b, bk.BI_VOLUMES] > 0:
+            bending_block(PS, PM, TS, T.BM, T.VM, P, BI, topology, b, ratio, fi.power_y)
+    if BI[b, bk.BI_COLLIDERS] > 0:
+        if point_collision is not None:
+            if P[b, PRM_COLLISION_MODE] == 1.0:
+                point_collision_block(PS, PP, TS, CS, BI, topology, b)
+        if edge_collision is not None:
+            if P[b, PRM_COLLISION_MODE] == 2.0:
+                edge_collision_block(PS, PP, TS, CS, BI, topology, b)
+    distance_block(PS, PM, PP, TS, TM, T.LM, P, BI, topology, b, ratio, fi.power_y, distance_attenuation)
+    if motion is not None:
+        motion_block(PS, PP, TS, P, BI, topology, b, motion_attenuation)
     if quality is not None:
-        if prm.time_based_smoothing[t] != 0:
-            display_constraints_team(m, ps, prm, ts, cs, t, fi.dt)  # quality mode (§E.1)
+        if P[b, PRM_INEXTENSIBILITY] != 0.0 or P[b, PRM_COLLISION_LAST] != 0.0:  # quality mode (§D.0)
+            quality_end_of_step_block(PS, PM, PP, TS, TM, CS, T.LM, T.EDS, P, BI, topology, b, ratio, fi.power_y,
+                                      distance_attenuation, drift)
+    end_step_block(PS, PM, TS, P, BI, topology, b, dt, ratio)
+    if quality is not None:
+        if P[b, PRM_TIME_BASED_SMOOTHING] != 0.0:   # quality display: keep this step's state (display.py)
+            record_display_state_block(PS, TS, BI, topology, b)
+    collider_end_step_block(CS, BI, b)
+
+
+@kernel(forceinline=False)
+def frozen_lanes(TS, TI, b, w):
+    """Does block b have a team that is not simulated this frame (``ACTIVE`` 0)?"""
+    for l in range(w):
+        if lane_team(TI, b, l) >= 0 and get1(TS, b, st.ACTIVE, l) == 0.0:
+            return True
+    return False
+
+
+@kernel(forceinline=False)
+def save_frozen(PS, TS, CS, TI, BI, b, w, area):
+    for l in range(w):
+        if lane_team(TI, b, l) >= 0 and get1(TS, b, st.ACTIVE, l) == 0.0:
+            save_lane(PS, TS, CS, BI, b, l, area)
+
+
+@kernel(forceinline=False)
+def restore_frozen(PS, TS, CS, TI, BI, b, w, area):
+    for l in range(w):
+        if lane_team(TI, b, l) >= 0 and get1(TS, b, st.ACTIVE, l) == 0.0:
+            restore_lane(PS, TS, CS, BI, b, l, area)
+
+
+@kernel(forceinline=False, inline="always")
+def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, edge_collision, motion, quality,
+                      wind, wind_zones):
+    """Block b's frame up to the write-back: its lanes' begin of frame and the steps (each
+    lane advancing its own clock, §A.6; the clock of a suspended but enabled team advances
+    too). Lanes that do not run keep their state (module docstring)."""
+    PS, TS, CS, PM, TM, TI, P, BI, PT, topology = T.PS, T.TS, T.CS, T.PM, T.TM, T.TI, T.P, T.BI, T.PT, T.topology
+    w = bk.lane_width(BI, b)
+    frozen = frozen_lanes(TS, TI, b, w)
+    if frozen:
+        save_frozen(PS, TS, CS, TI, BI, b, w, area)
+    for l in range(w):
+        t = lane_team(TI, b, l)
+        if t >= 0 and get1(TS, b, st.ACTIVE, l) != 0.0:
+            since_last_step = begin_frame_prelude_lane(PS, PM, TS, TM, TI, P, BI, PT, topology, tt, h, b, l, t, quality)
+            put1(TS, b, st.DISPLAY_T, l, since_last_step)   # kept until the center is done
+    skin_block(PS, PM, BI, PT, h.local_to_world, b, 0, w)
+    for l in range(w):
+        t = lane_team(TI, b, l)
+        if t >= 0 and get1(TS, b, st.ACTIVE, l) != 0.0:
+            center_and_inertia_lane(PS, PM, TS, TM, TI, P, BI, topology, b, l, h.world_position, h.world_rotation,
+                                    h.lossy_scale, tt.frame_delta_time[t], tt.now_time_scale[t], tt.skip_count[t],
+                                    tt.running[t], fi.dt, get1(TS, b, st.DISPLAY_T, l))
+    reset_or_shift_block(PS, TS, BI, b)
+    for l in range(w):
+        t = lane_team(TI, b, l)
+        if t >= 0 and get1(TS, b, st.ACTIVE, l) != 0.0:
+            collider_frame_lane(CS, TS, BI, T.CT, b, l, h.world_position, h.world_rotation, h.lossy_scale)
+    if frozen:
+        restore_frozen(PS, TS, CS, TI, BI, b, w, area)
+    steps = 0
+    for l in range(w):
+        t = lane_team(TI, b, l)
+        if t >= 0:
+            steps = max(steps, tt.update_count[t])
+    for step in range(steps):
+        runs = 0
+        idle = 0
+        for l in range(w):
+            t = lane_team(TI, b, l)
+            if t < 0:
+                continue
+            team_time_begin_step_team(step, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
+                                      tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
+            put1(TS, b, st.FRAME_INTERPOLATION, l, tt.frame_interpolation[t])
+            if get1(TS, b, st.ACTIVE, l) != 0.0 and tt.step_running[t]:
+                runs += 1
+            else:
+                idle += 1
+        if runs == 0:
+            continue
+        if idle > 0:
+            for l in range(w):
+                t = lane_team(TI, b, l)
+                if t >= 0 and not (get1(TS, b, st.ACTIVE, l) != 0.0 and tt.step_running[t]):
+                    save_lane(PS, TS, CS, BI, b, l, area)
+        run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones)
+        if idle > 0:
+            for l in range(w):
+                t = lane_team(TI, b, l)
+                if t >= 0 and not (get1(TS, b, st.ACTIVE, l) != 0.0 and tt.step_running[t]):
+                    restore_lane(PS, TS, CS, BI, b, l, area)
+
+
+@kernel(forceinline=False, inline="always")
+def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles):
+    """Block b's stages after the steps: guards, E.1-E.4 and A.7 of every active lane (the
+    frame's team clocks read per lane); lanes that are not simulated keep their state."""
+    PS, TS, CS, PM, TI, P, BI, PT, topology = T.PS, T.TS, T.CS, T.PM, T.TI, T.P, T.BI, T.PT, T.topology
+    w = bk.lane_width(BI, b)
+    dt = fi.dt
+    frozen = frozen_lanes(TS, TI, b, w)
+    if frozen:
+        save_frozen(PS, TS, CS, TI, BI, b, w, area)
+    check_block(PS, TS, BI, b)
+    for l in range(w):
+        t = lane_team(TI, b, l)
+        if t < 0 or get1(TS, b, st.ACTIVE, l) == 0.0:
+            continue
+        code = lane_guard_code(TS, b, l)
+        if code != 0:
+            reset_lane_to_base(PS, TS, BI, b, l)
+            put1(TS, b, st.GUARD_CODE, l, float(code))
+            put1(TS, b, st.RAMP_FROM_BUILD, l, 0.0)
+        put1(TS, b, st.DISPLAY_T, l, display_fraction(dt, tt.time[t], tt.old_time[t], tt.now_update_time[t]))
+        alpha = min(max(tt.time[t] - tt.now_update_time[t], 0.0), dt) / dt if dt > 0.0 else 0.0
+        put1(TS, b, st.DISPLAY_ALPHA, l, alpha)
+    display_block(PS, TS, P, BI, topology, b, dt, quality)
+    if quality is not None:
+        if P[b, PRM_TIME_BASED_SMOOTHING] != 0.0:
+            display_constraints_block(PS, T.PP, TS, CS, P, BI, topology, b, dt)  # quality mode (§E.1)
     if lines is not None:
-        line_rotations_team(m, ps, prm, ts, t)
+        line_rotations_block(PS, PM, TS, P, BI, topology, b)
     if triangles is not None:
-        triangle_rotations_team(m, ps, t)
-    if transform_data_team(m, ps, t):
-        write_transforms_team(m, ps, t, h.parent, h.world_rotation, h.lossy_scale,
-                              h.local_position, h.local_rotation)
-    else:
-        reset_team_to_base(m, ps, ts, t)
-        ts.guard_code[t] = 1
-    end_frame_team(ts, t, tt.running[t])
-    collider_end_frame_team(cs, ts, t, tt.running[t])
+        triangle_rotations_block(PS, T.TRS, T.TRM, BI, topology, b)
+    transform_block(PS, PM, TS, BI, PT, topology, b, h.parent, h.world_rotation, h.lossy_scale)
+    for l in range(w):
+        t = lane_team(TI, b, l)
+        if t < 0 or get1(TS, b, st.ACTIVE, l) == 0.0:
+            continue
+        if get1(TS, b, st.TRANSFORM_OK, l) != 0.0:
+            write_transforms_lane(PS, BI, PT, topology, b, l, h.local_position, h.local_rotation)
+        else:
+            reset_lane_to_base(PS, TS, BI, b, l)
+            put1(TS, b, st.GUARD_CODE, l, 1.0)
+        end_frame_lane(TS, b, l, tt.running[t])
+        if tt.running[t]:
+            collider_end_frame_lane(CS, BI, b, l)
+    if frozen:
+        restore_frozen(PS, TS, CS, TI, BI, b, w, area)
 
 
-@kernel
+@kernel(forceinline=False)
 def _time_frame_update(tt, fi):
     team_time_frame_update(
         tt.active, tt.suspended, tt.update_mode, tt.team_time_scale, tt.time, tt.old_time,
@@ -311,7 +488,7 @@ def _time_frame_update(tt, fi):
         fi.fixed_update_count, fi.global_time_scale, fi.dt, fi.max_steps, fi.timing)
 
 
-@kernel
+@kernel(forceinline=False)
 def _frame_close(tt, h, fi):
     team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
                         tt.now_update_time, tt.old_update_time, tt.frame_update_time,
@@ -319,108 +496,177 @@ def _frame_close(tt, h, fi):
     h.build_pose_pending[0] = 0  # teams added or reset later reset at their first frame
 
 
-@kernel
-def frame_counts(m, ts, tt):
+@kernel(forceinline=False)
+def frame_counts(T, tt):
     """What the frame did, for the caller's metrics and events: (most steps of a team,
-    particle-steps, teams with a guard code). Integers: the same on every CPU."""
+    particle-steps, lanes with a guard code). Integers: the same on every CPU."""
     most_steps = np.int64(0)
     particle_steps = np.int64(0)
     guarded = 0
-    for t in range(tt.update_count.shape[0]):
-        c = np.int64(tt.update_count[t])
-        most_steps = max(most_steps, c)
-        particle_steps += c * np.int64(m.team_particle_count[t])
-        if ts.guard_code[t] != 0:
-            guarded += 1
+    for i in range(T.blocks.shape[0]):
+        b = T.blocks[i]
+        n = np.int64(T.BI[b, bk.BI_N])
+        for l in range(bk.lane_width(T.BI, b)):
+            t = T.TI[b, bk.TI_TEAM + l]
+            if t < 0:
+                continue
+            c = np.int64(tt.update_count[t])
+            most_steps = max(most_steps, c)
+            particle_steps += c * n
+            if get1(T.TS, b, st.GUARD_CODE, l) != 0.0:
+                guarded += 1
     return most_steps, particle_steps, guarded
 
 
 @kernel
-def _begin_step_team(tt, fi, step, t):
-    team_time_begin_step_team(step, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
-                              tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
-
-
-@kernel
-def simulate_frame(tables, frame_values, angle, bending, point_collision, edge_collision, motion, quality, lines,
-                   triangles, wind):
-    """The whole cloth frame, one team after another (see the module docstring): every team's
-    begin and steps, then every team's end (all reads of this frame's transforms come before
-    any write-back). ``tables``: ``tables.SolverTables``; ``frame_values``: the frame inputs
-    (``frame_input_values``). Returns ``frame_counts``."""
+def simulate_frame(T, tt, h, frame_values, area, wind_zones, angle, bending, point_collision, edge_collision,
+                   motion, quality, lines, triangles, wind):
+    """The whole cloth frame, one block after another (see the module docstring): every
+    block's begin and steps, then every block's end (all reads of this frame's transforms
+    come before any write-back). ``T``: ``Tables``; ``tt``: ``TimeArrays``; ``h``:
+    ``HierarchyArrays``; ``frame_values``: the frame inputs (``frame_input_values``);
+    ``area``: ``lane_save_area``. Returns ``frame_counts``."""
     fi = frame_inputs(frame_values)
-    m, ps, prm, ts, cs, tt, h = (tables.model, tables.particles, tables.parameters, tables.teams,
-                                 tables.colliders, tables.time, tables.hierarchy)
-    prepare_teams(m, ts, prm, tt, h)
+    prepare_lanes(T.TS, T.TI, T.P, T.BI, T.blocks, tt, h)
     _time_frame_update(tt, fi)
-    for i in range(m.live_teams.shape[0]):
-        team_frame_steps(m, ps, prm, ts, cs, tt, h, fi, m.live_teams[i], angle, bending, point_collision,
-                         edge_collision, motion, quality, wind)
-    for i in range(m.live_teams.shape[0]):
-        team_frame_end(m, ps, prm, ts, cs, tt, h, fi, m.live_teams[i], quality, lines, triangles)
+    for i in range(T.blocks.shape[0]):
+        block_frame_steps(T, tt, h, T.blocks[i], fi, area[0], angle, bending, point_collision, edge_collision,
+                          motion, quality, wind, wind_zones)
+    for i in range(T.blocks.shape[0]):
+        block_frame_end(T, tt, h, T.blocks[i], fi, area[0], quality, lines, triangles)
     _frame_close(tt, h, fi)
-    return frame_counts(m, ts, tt)
+    return frame_counts(T, tt)
 
 
 @kernel(parallel=True)
-def simulate_frame_parallel(tables, frame_values, wt, angle, bending, point_collision, edge_collision, motion,
-                            quality, lines, triangles, wind):
-    """``simulate_frame`` with the teams dealt to ``fi.threads`` threads (``scene.threads``,
-    ``system.choose_threads``). ``assign_workers`` deals the teams each frame (greedy,
-    largest first); each thread runs its teams' begin and steps in one parallel region and
-    their ends in a second: two thread launches per frame. Teams are independent and each
+def simulate_frame_parallel(T, tt, h, frame_values, area, wind_zones, wt, angle, bending, point_collision,
+                            edge_collision, motion, quality, lines, triangles, wind):
+    """``simulate_frame`` with the blocks dealt to ``fi.threads`` threads (``scene.threads``,
+    ``system.choose_threads``). ``assign_workers`` deals the blocks each frame (greedy, in
+    block order); each thread runs its blocks' begin and steps in one parallel region and
+    their ends in a second: two thread launches per frame. Blocks are independent and each
     runs in its own order, so the results are the serial kernel's bits."""
     fi = frame_inputs(frame_values)
-    m, ps, prm, ts, cs, tt, h = (tables.model, tables.particles, tables.parameters, tables.teams,
-                                 tables.colliders, tables.time, tables.hierarchy)
-    prepare_teams(m, ts, prm, tt, h)
+    prepare_lanes(T.TS, T.TI, T.P, T.BI, T.blocks, tt, h)
     _time_frame_update(tt, fi)
-    workers = max(1, min(fi.threads, wt.worker_load.shape[0]))
-    assign_workers(m, ts, tt, wt, workers)
+    workers = max(1, min(fi.threads, min(wt.worker_load.shape[0], area.shape[0])))
+    assign_workers(T, tt, wt, workers)
     # each region rebuilds the frame inputs from the array: a namedtuple made in the kernel
     # cannot enter a prange body (numba's parfor lowering looks its class up by name)
     for w in prange(workers):
         fw = frame_inputs(frame_values)
-        for i in range(m.live_teams.shape[0]):
-            t = m.live_teams[i]
-            if wt.team_worker[t] == w:
-                team_frame_steps(m, ps, prm, ts, cs, tt, h, fw, t, angle, bending, point_collision,
-                                 edge_collision, motion, quality, wind)
+        for i in range(T.blocks.shape[0]):
+            b = T.blocks[i]
+            if wt.block_worker[b] == w:
+                block_frame_steps(T, tt, h, b, fw, area[w], angle, bending, point_collision, edge_collision,
+                                  motion, quality, wind, wind_zones)
     for w in prange(workers):
         fw = frame_inputs(frame_values)
-        for i in range(m.live_teams.shape[0]):
-            t = m.live_teams[i]
-            if wt.team_worker[t] == w:
-                team_frame_end(m, ps, prm, ts, cs, tt, h, fw, t, quality, lines, triangles)
+        for i in range(T.blocks.shape[0]):
+            b = T.blocks[i]
+            if wt.block_worker[b] == w:
+                block_frame_end(T, tt, h, b, fw, area[w], quality, lines, triangles)
     _frame_close(tt, h, fi)
-    return frame_counts(m, ts, tt)
+    return frame_counts(T, tt)
 
 
-@kernel
-def _unit_cost(particles, steps):
-    """Work of a unit in particle-steps, the frame stages counted as about one step."""
-    return np.int64(particles) * np.int64(steps + 1)
+@kernel(forceinline=False)
+def frame_entry(PS, TS, CS, TRS, EDS, PM, PP, TM, LM, TRM, BM, VM, P, BI, topology, PT, TI, CT, blocks,
+                tt_active, tt_suspended, tt_update_mode, tt_team_time_scale, tt_time, tt_old_time,
+                tt_now_update_time, tt_old_update_time, tt_frame_update_time, tt_frame_old_time,
+                tt_update_count, tt_skip_count, tt_frame_delta_time, tt_now_time_scale, tt_frame_add,
+                tt_frame_interpolation, tt_running, tt_step_running, h_parent, h_local_position,
+                h_local_rotation, h_world_position, h_world_rotation, h_lossy_scale, h_local_to_world,
+                h_build_world_position, h_build_world_rotation, h_build_lossy_scale, h_build_local_to_world,
+                h_build_pose_pending, frame_values, area, wind_zones, angle, bending, point_collision,
+                edge_collision, motion, quality, lines, triangles, wind):
+    """``simulate_frame`` called with every array as its own argument (``frame_arguments``
+    lays them out): numba types an array argument in ~0.05 us and a namedtuple of arrays
+    in ~0.15 us per field, so the flat call saves ~4 us a frame (the single tail's frame is
+    ~35 us). The kernel rebuilds the namedtuples and runs the frame."""
+    T = Tables(PS, TS, CS, TRS, EDS, PM, PP, TM, LM, TRM, BM, VM, P, BI, topology, PT, TI, CT, blocks)
+    tt = TimeArrays(tt_active, tt_suspended, tt_update_mode, tt_team_time_scale, tt_time, tt_old_time,
+                    tt_now_update_time, tt_old_update_time, tt_frame_update_time, tt_frame_old_time,
+                    tt_update_count, tt_skip_count, tt_frame_delta_time, tt_now_time_scale, tt_frame_add,
+                    tt_frame_interpolation, tt_running, tt_step_running)
+    h = HierarchyArrays(h_parent, h_local_position, h_local_rotation, h_world_position, h_world_rotation,
+                        h_lossy_scale, h_local_to_world, h_build_world_position, h_build_world_rotation,
+                        h_build_lossy_scale, h_build_local_to_world, h_build_pose_pending)
+    return simulate_frame(T, tt, h, frame_values, area, wind_zones, angle, bending, point_collision, edge_collision,
+                          motion, quality, lines, triangles, wind)
 
 
-@kernel
-def _least_loaded(wt, workers):
-    best = 0
-    for w in range(1, workers):
-        if wt.worker_load[w] < wt.worker_load[best]:
-            best = w
-    return best
+@kernel(forceinline=False)
+def frame_entry_parallel(PS, TS, CS, TRS, EDS, PM, PP, TM, LM, TRM, BM, VM, P, BI, topology, PT, TI, CT,
+                         blocks, tt_active, tt_suspended, tt_update_mode, tt_team_time_scale, tt_time,
+                         tt_old_time, tt_now_update_time, tt_old_update_time, tt_frame_update_time,
+                         tt_frame_old_time, tt_update_count, tt_skip_count, tt_frame_delta_time,
+                         tt_now_time_scale, tt_frame_add, tt_frame_interpolation, tt_running,
+                         tt_step_running, h_parent, h_local_position, h_local_rotation, h_world_position,
+                         h_world_rotation, h_lossy_scale, h_local_to_world, h_build_world_position,
+                         h_build_world_rotation, h_build_lossy_scale, h_build_local_to_world,
+                         h_build_pose_pending, frame_values, area, wind_zones, wt_block_worker,
+                         wt_worker_load, angle, bending, point_collision, edge_collision, motion, quality,
+                         lines, triangles, wind):
+    """``simulate_frame_parallel`` called with every array as its own argument (``frame_arguments``
+    lays them out): numba types an array argument in ~0.05 us and a namedtuple of arrays
+    in ~0.15 us per field, so the flat call saves ~4 us a frame (the single tail's frame is
+    ~35 us). The kernel rebuilds the namedtuples and runs the frame."""
+    T = Tables(PS, TS, CS, TRS, EDS, PM, PP, TM, LM, TRM, BM, VM, P, BI, topology, PT, TI, CT, blocks)
+    tt = TimeArrays(tt_active, tt_suspended, tt_update_mode, tt_team_time_scale, tt_time, tt_old_time,
+                    tt_now_update_time, tt_old_update_time, tt_frame_update_time, tt_frame_old_time,
+                    tt_update_count, tt_skip_count, tt_frame_delta_time, tt_now_time_scale, tt_frame_add,
+                    tt_frame_interpolation, tt_running, tt_step_running)
+    h = HierarchyArrays(h_parent, h_local_position, h_local_rotation, h_world_position, h_world_rotation,
+                        h_lossy_scale, h_local_to_world, h_build_world_position, h_build_world_rotation,
+                        h_build_lossy_scale, h_build_local_to_world, h_build_pose_pending)
+    wt = WorkerTable(wt_block_worker, wt_worker_load)
+    return simulate_frame_parallel(T, tt, h, frame_values, area, wind_zones, wt, angle, bending, point_collision,
+                                   edge_collision, motion, quality, lines, triangles, wind)
 
 
-@kernel
-def assign_workers(m, ts, tt, wt, workers):
-    """``wt.team_worker`` for this frame: the live teams in order, each to the least loaded of
-    ``workers`` threads (ties to the lower thread). Suspended teams cost nothing but still go
-    to a thread (their clocks advance)."""
+def frame_arguments(T, tt, h) -> tuple:
+    """The arrays of ``Tables``, ``TimeArrays`` and ``HierarchyArrays`` in the order of
+    ``frame_entry``'s first parameters."""
+    return (*T, *tt, *h)
+
+
+# frame_entry's parameters follow the namedtuples' fields: a field added to one of them must be
+# added there too (checked here, at import)
+assert TimeArrays._fields == ("active", "suspended", "update_mode", "team_time_scale", "time", "old_time",
+                              "now_update_time", "old_update_time", "frame_update_time", "frame_old_time",
+                              "update_count", "skip_count", "frame_delta_time", "now_time_scale", "frame_add",
+                              "frame_interpolation", "running", "step_running"), TimeArrays._fields
+assert len(Tables._fields) == 19 and len(HierarchyArrays._fields) == 12
+
+
+@kernel(forceinline=False)
+def assign_workers(T, tt, wt, workers):
+    """``wt.block_worker`` for this frame: the live blocks cut into ``workers`` runs of
+    consecutive blocks of about equal load (a block's load: its particles times the lanes it
+    uses times the steps of its busiest lane, plus one for the frame stages). Consecutive
+    blocks on one thread keep each thread's writes (particle and team rows, team clocks, the
+    bones written back) in one region of memory, away from the other threads'."""
+    total = np.int64(0)
+    for i in range(T.blocks.shape[0]):
+        total += block_load(T, tt, T.blocks[i])
     for w in range(workers):
         wt.worker_load[w] = 0
-    for i in range(m.live_teams.shape[0]):
-        t = m.live_teams[i]
-        w = _least_loaded(wt, workers)
-        wt.team_worker[t] = w
-        if ts.active[t] != 0:
-            wt.worker_load[w] += _unit_cost(m.team_particle_count[t], tt.update_count[t])
+    done = np.int64(0)
+    for i in range(T.blocks.shape[0]):
+        b = T.blocks[i]
+        w = min(workers - 1, int((done * workers) // max(total, 1)))
+        load = block_load(T, tt, b)
+        wt.block_worker[b] = w
+        wt.worker_load[w] += load
+        done += load
+
+
+@kernel
+def block_load(T, tt, b):
+    steps = 0
+    for l in range(bk.lane_width(T.BI, b)):
+        t = T.TI[b, bk.TI_TEAM + l]
+        if t >= 0:
+            steps = max(steps, tt.update_count[t])
+    return np.int64(T.BI[b, bk.BI_N]) * np.int64(T.BI[b, bk.BI_LANES_USED]) * np.int64(steps + 1)

@@ -7,8 +7,10 @@ import math
 
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import load3, load4, store3, store4
-from magica_py.solver.center import snap_particles_to_base_pose
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.center import snap_lane_to_base_pose
+from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
 
 GUARD_OK = 0
 GUARD_NON_FINITE = 1
@@ -35,26 +37,32 @@ def particle_verdict(old_pos, real_velocity, velocity, disp_pos, limit_sq):
     return (not finite), s > limit_sq
 
 
-@kernel
-def check_team(m, ps, ts, team):
-    """Return the guard code of one team after its steps (0 when healthy).
+@kernel(forceinline=False)
+def check_block(PS, TS, BI, b):
+    """Every lane's guard verdicts after its steps, side by side: ``GUARD_NON_FINITE`` and
+    ``GUARD_TOO_FAST`` (1 when any particle of the lane is non-finite / faster than the bound;
+    read by ``guard_code``). One read-only pass, the verdicts OR-ed."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    for l in range(w):
+        put1(TS, b, st.GUARD_NON_FINITE_SEEN, l, 0.0)
+        put1(TS, b, st.GUARD_TOO_FAST_SEEN, l, 0.0)
+    for g in range(g0, g0 + BI[b, bk.BI_N]):
+        for l in range(w):
+            # quality mode: the bound follows the cloth's length unit too (1.0 in faithful mode)
+            limit_sq = speed_limit_sq(get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l))
+            bad, fast = particle_verdict(get3(PS, g, st.OLD_POS, l), get3(PS, g, st.REAL_VELOCITY, l),
+                                         get3(PS, g, st.VELOCITY, l), get3(PS, g, st.DISP_POS, l), limit_sq)
+            put1(TS, b, st.GUARD_NON_FINITE_SEEN, l, 1.0 if (bad | (get1(TS, b, st.GUARD_NON_FINITE_SEEN, l) != 0.0))
+                 else 0.0)
+            put1(TS, b, st.GUARD_TOO_FAST_SEEN, l, 1.0 if (fast | (get1(TS, b, st.GUARD_TOO_FAST_SEEN, l) != 0.0))
+                 else 0.0)
 
-    One read-only pass with the verdicts OR-ed (no early exit: the loop vectorises); any
-    non-finite value wins over a speed excess, as with the early return it replaces."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_team_particle_count = m.team_particle_count
-    # quality mode: the bound follows the cloth's length unit too (1.0 in faithful mode)
-    limit_sq = speed_limit_sq(ts.scale_ratio[team] * ts.length_unit[team])
-    old_pos, real_velocity, velocity, disp_pos = ps.old_pos, ps.real_velocity, ps.velocity, ps.disp_pos
-    start = m.team_particle_start[team]
-    non_finite = False
-    too_fast = False
-    for p in range(start, start + m_team_particle_count[team]):
-        bad, fast = particle_verdict(load3(old_pos, p), load3(real_velocity, p), load3(velocity, p),
-                                     load3(disp_pos, p), limit_sq)
-        non_finite = non_finite | bad
-        too_fast = too_fast | fast
-    return guard_code(non_finite, too_fast)
+
+@kernel
+def lane_guard_code(TS, b, l):
+    """The guard code of lane l after ``check_block`` (0 when healthy; non-finite wins)."""
+    return guard_code(get1(TS, b, st.GUARD_NON_FINITE_SEEN, l) != 0.0, get1(TS, b, st.GUARD_TOO_FAST_SEEN, l) != 0.0)
 
 
 @kernel
@@ -65,16 +73,12 @@ def guard_code(non_finite, too_fast):
 
 
 @kernel
-def reset_team_to_base(m, ps, ts, team):
-    """Snap a team's particles to this frame's animated pose with zero velocity (docs/solver.md §C.5 Reset)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    ps_position, ps_rotation, ps_step_basic_pos = ps.position, ps.rotation, ps.step_basic_pos
-    ps_step_basic_rot = ps.step_basic_rot
-    start = m.team_particle_start[team]
-    end = start + m.team_particle_count[team]
-    snap_particles_to_base_pose(ps, start, end)
-    for p in range(start, end):
-        store3(ps_step_basic_pos, p, load3(ps_position, p))
-        store4(ps_step_basic_rot, p, load4(ps_rotation, p))
-    ts.velocity_weight[team] = 0.0
-    ts.blend_weight[team] = 0.0
+def reset_lane_to_base(PS, TS, BI, b, l):
+    """Snap lane l's particles to this frame's animated pose with zero velocity (docs/solver.md §C.5 Reset)."""
+    g0 = BI[b, bk.BI_G0]
+    for g in range(g0, g0 + BI[b, bk.BI_N]):
+        snap_lane_to_base_pose(PS, g, l)
+        put3(PS, g, st.STEP_BASIC_POS, l, get3(PS, g, st.POSITION, l))
+        put4(PS, g, st.STEP_BASIC_ROT, l, get4(PS, g, st.ROTATION, l))
+    put1(TS, b, st.VELOCITY_WEIGHT, l, 0.0)
+    put1(TS, b, st.BLEND_WEIGHT, l, 0.0)

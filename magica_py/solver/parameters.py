@@ -20,6 +20,7 @@ import math
 import numpy as np
 
 from magica_py.jit import kernel
+from magica_py.solver import blocks as bk
 from magica_py.params import default_parameters
 from magica_py.solver.fields import F64, I32, U8, allocate, make_soa
 from magica_py.kernels import portable
@@ -240,38 +241,135 @@ def allocate_parameters(team_count: int):
     return allocate(TeamParameters, {"team": team_count})
 
 
+# ----------------------------------------------------------------------------- packed rows
+# The kernels read a block's parameters from one float64 row of ``P`` (B, PARAMETER_COUNT):
+# every field of TEAM_PARAMETER_FIELDS at its column (integers exactly as float64, a (3,)
+# direction in 3 columns, a curve in 16). The teams of a block share their row (it is part
+# of the block key), except the transform-valued fields, which are per lane
+# (``blocks.TI_ANCHOR``, ``blocks.TI_CULLING_REFERENCE``) and left out of the key.
+PARAMETER_COLUMNS: dict[str, tuple[int, int]] = {}
+_at = 0
+for _name, _per, _shape, _dtype, _doc in TEAM_PARAMETER_FIELDS:
+    _size = int(np.prod(_shape)) if _shape else 1
+    PARAMETER_COLUMNS[_name] = (_at, _size)
+    _at += _size
+PARAMETER_COUNT = _at
+del _at, _name, _per, _shape, _dtype, _doc, _size
+PER_LANE_PARAMETERS = ("anchor_transform", "culling_reference")
+
+
+def _column(name: str) -> int:
+    return PARAMETER_COLUMNS[name][0]
+
+
+PRM_GRAVITY = _column("gravity")
+PRM_GRAVITY_DIRECTION = _column("gravity_direction")
+PRM_GRAVITY_FALLOFF = _column("gravity_falloff")
+PRM_STABILIZATION_TIME = _column("stabilization_time")
+PRM_BLEND_WEIGHT = _column("blend_weight")
+PRM_ANIMATION_POSE_RATIO = _column("animation_pose_ratio")
+PRM_ROTATIONAL_INTERPOLATION = _column("rotational_interpolation")
+PRM_ROOT_ROTATION = _column("root_rotation")
+PRM_NORMAL_AXIS = _column("normal_axis")
+PRM_ANCHOR_INERTIA = _column("anchor_inertia")
+PRM_WORLD_INERTIA = _column("world_inertia")
+PRM_MOVEMENT_SMOOTHING = _column("movement_smoothing")
+PRM_MOVEMENT_SPEED_LIMIT = _column("movement_speed_limit")
+PRM_ROTATION_SPEED_LIMIT = _column("rotation_speed_limit")
+PRM_LOCAL_INERTIA = _column("local_inertia")
+PRM_LOCAL_MOVEMENT_SPEED_LIMIT = _column("local_movement_speed_limit")
+PRM_LOCAL_ROTATION_SPEED_LIMIT = _column("local_rotation_speed_limit")
+PRM_DEPTH_INERTIA = _column("depth_inertia")
+PRM_CENTRIFUGAL_ACCELERATION = _column("centrifugal_acceleration")
+PRM_PARTICLE_SPEED_LIMIT = _column("particle_speed_limit")
+PRM_TELEPORT_MODE = _column("teleport_mode")
+PRM_TELEPORT_DISTANCE = _column("teleport_distance")
+PRM_TELEPORT_ROTATION = _column("teleport_rotation")
+PRM_TETHER_COMPRESSION = _column("tether_compression")
+PRM_BENDING_STIFFNESS = _column("bending_stiffness")
+PRM_USE_RESTORATION = _column("use_restoration")
+PRM_RESTORATION_ATTENUATION = _column("restoration_attenuation")
+PRM_RESTORATION_GRAVITY_FALLOFF = _column("restoration_gravity_falloff")
+PRM_USE_ANGLE_LIMIT = _column("use_angle_limit")
+PRM_LIMIT_STIFFNESS = _column("limit_stiffness")
+PRM_USE_MAX_DISTANCE = _column("use_max_distance")
+PRM_USE_BACKSTOP = _column("use_backstop")
+PRM_BACKSTOP_RADIUS = _column("backstop_radius")
+PRM_MOTION_STIFFNESS = _column("motion_stiffness")
+PRM_COLLISION_MODE = _column("collision_mode")
+PRM_FRICTION = _column("friction")
+PRM_CULLING_LENGTH = _column("culling_length")
+PRM_CULLING_FADE_RATIO = _column("culling_fade_ratio")
+PRM_RATE_MODE = _column("rate_mode")
+PRM_WIND_INFLUENCE = _column("wind_influence")
+PRM_WIND_FREQUENCY = _column("wind_frequency")
+PRM_WIND_TURBULENCE = _column("wind_turbulence")
+PRM_WIND_BLEND = _column("wind_blend")
+PRM_WIND_SYNCHRONIZATION = _column("wind_synchronization")
+PRM_WIND_DEPTH_WEIGHT = _column("wind_depth_weight")
+PRM_WIND_MOVING_WIND = _column("wind_moving_wind")
+PRM_QUALITY = _column("quality")
+PRM_TIME_BASED_SMOOTHING = _column("time_based_smoothing")
+PRM_INEXTENSIBILITY = _column("inextensibility")
+PRM_TETHER_LIMIT = _column("tether_limit")
+PRM_DISTANCE_ITERATIONS = _column("distance_iterations")
+PRM_FTL_DAMPING = _column("ftl_damping")
+PRM_RESTORATION_DRIFT = _column("restoration_drift")
+PRM_DISTANCE_FULL_VELOCITY = _column("distance_full_velocity")
+PRM_COLLISION_LAST = _column("collision_last")
+PRM_DAMPING_CURVE = _column("damping_curve")
+PRM_RADIUS_CURVE = _column("radius_curve")
+PRM_DISTANCE_STIFFNESS_CURVE = _column("distance_stiffness_curve")
+PRM_RESTORATION_STIFFNESS_CURVE = _column("restoration_stiffness_curve")
+PRM_LIMIT_ANGLE_CURVE = _column("limit_angle_curve")
+PRM_MAX_DISTANCE_CURVE = _column("max_distance_curve")
+PRM_BACKSTOP_DISTANCE_CURVE = _column("backstop_distance_curve")
+
+
+def packed_row(table, team: int) -> np.ndarray:
+    """Team ``team``'s row of ``table`` (a ``TeamParameters``) as the kernels' float64 row;
+    the per-lane fields are left at 0 (they travel in ``blocks.team_ints``)."""
+    row = np.zeros(PARAMETER_COUNT)
+    for name, (at, size) in PARAMETER_COLUMNS.items():
+        if name in PER_LANE_PARAMETERS:
+            continue
+        row[at:at + size] = np.asarray(getattr(table, name)[team], dtype=np.float64).reshape(size)
+    return row
+
+
 # ----------------------------------------------------------------------------- kernels
 SQRT3 = math.sqrt(3.0)   # |(1, 1, 1)|: the length of a unit lossy scale
 
 
 @kernel
-def length_unit(m, prm, team):
+def length_unit(quality, init_scale):
     """The cloth's own length unit (m): 1.0 in faithful mode (MagicaCloth2's lengths are world
     metres at the build scale); in quality mode the component's build scale, |lossy scale| /
     sqrt(3) (exactly 1.0 at scale 1), so that every length-like parameter (particle radius,
     speed limits, friction threshold, gravity, motion distances, teleport distance) follows
     the cloth's scale: a rig built at 0.01 behaves as the rig at 1 seen at 0.01
-    (docs/parameters.md, *Scale*)."""
-    if prm.quality[team] == 0:
+    (docs/parameters.md, *Scale*). ``quality``: the block's ``PRM_QUALITY``; ``init_scale``: the
+    lane's build scale (``blocks.INIT_SCALE``)."""
+    if quality == 0.0:
         return 1.0
-    return math.sqrt(m.team_init_scale[team, 0] * m.team_init_scale[team, 0]
-                     + m.team_init_scale[team, 1] * m.team_init_scale[team, 1]
-                     + m.team_init_scale[team, 2] * m.team_init_scale[team, 2]) / SQRT3
+    return math.sqrt(init_scale[0] * init_scale[0] + init_scale[1] * init_scale[1]
+                     + init_scale[2] * init_scale[2]) / SQRT3
 
 
 @kernel
-def curve_at(tables, row, depth):
-    """``EvaluateCurve`` of §0.3 on row ``row`` of a (T, 16) table (no clamp)."""
+def curve_at(P, b, col, depth):
+    """``EvaluateCurve`` of §0.3 on the 16-sample curve at column ``col`` of block b's row of
+    ``P`` (no clamp)."""
     sd = 0.0 if depth < 0.0 else (1.0 if depth > 1.0 else depth)
     i = int(sd * 15.0)
     u = (depth - i / 15.0) * 15.0
     j = i + 1 if i + 1 < 15 else 15
-    return tables[row, i] + (tables[row, j] - tables[row, i]) * u
+    return P[b, col + i] + (P[b, col + j] - P[b, col + i]) * u
 
 
 @kernel
-def curve_at_clamp01(tables, row, depth):
-    v = curve_at(tables, row, depth)
+def curve_at_clamp01(P, b, col, depth):
+    v = curve_at(P, b, col, depth)
     if v < 0.0:
         return 0.0
     if v > 1.0:
@@ -327,3 +425,31 @@ def constraint_stiffness(k, frequency_ratio, power, rate_mode, quality):
     if rate_mode != 0 and quality == 0:
         return k
     return step_rate(k, frequency_ratio, power, rate_mode)
+
+
+@kernel(forceinline=False)
+def particle_parameters_block(PP, PM, P, BI, b):
+    """Block b's depth curves at every particle's depth, every lane (``blocks.PARTICLE_PARAMETERS``):
+    the values ``curve_at`` gives, computed when the block's row or a lane changes."""
+    g0 = BI[b, bk.BI_G0]
+    for g in range(g0, g0 + BI[b, bk.BI_N]):
+        for l in range(bk.lane_width(BI, b)):
+            depth = PM[g, bk.DEPTH + l]
+            PP[g, bk.CURVE_DAMPING + l] = curve_at(P, b, PRM_DAMPING_CURVE, depth)
+            PP[g, bk.CURVE_RADIUS + l] = curve_at(P, b, PRM_RADIUS_CURVE, depth)
+            PP[g, bk.CURVE_DISTANCE_STIFFNESS + l] = curve_at(P, b, PRM_DISTANCE_STIFFNESS_CURVE, depth)
+            PP[g, bk.CURVE_RESTORATION_STIFFNESS + l] = curve_at(P, b, PRM_RESTORATION_STIFFNESS_CURVE, depth)
+            PP[g, bk.CURVE_LIMIT_ANGLE + l] = curve_at(P, b, PRM_LIMIT_ANGLE_CURVE, depth)
+            # D.9 reads its curves at the depth squared
+            PP[g, bk.CURVE_MAX_DISTANCE + l] = curve_at(P, b, PRM_MAX_DISTANCE_CURVE, depth * depth)
+            PP[g, bk.CURVE_BACKSTOP_DISTANCE + l] = curve_at(P, b, PRM_BACKSTOP_DISTANCE_CURVE, depth * depth)
+
+
+@kernel
+def clamp01(v):
+    """``curve_at_clamp01``'s clamp of a curve value."""
+    if v < 0.0:
+        return 0.0
+    if v > 1.0:
+        return 1.0
+    return v

@@ -4,7 +4,7 @@ MagicaCloth2's constraints are soft (docs/solver.md Appendix 4): edges stretch b
 fast particles end a step inside colliders. Quality mode adds, after the second distance pass
 and the motion constraint (D.9), before the end of the step (D.10):
 
-1. an inextensibility pass chosen by ``prm.inextensibility[team]``:
+1. an inextensibility pass chosen by the ``inextensibility`` parameter (``P[b, PRM_INEXTENSIBILITY]``):
 
    * ``tether`` — a tight long-range attachment (Kim et al. 2012): each moving particle's
      distance to its root is clamped to its step-basic rest distance x (1 + tether_limit);
@@ -16,7 +16,7 @@ and the motion constraint (D.9), before the end of the step (D.10):
    * ``iterations`` — ``distance_iterations`` more D.4 passes (the brute-force candidate);
    * ``ftl_edges`` — on a mesh cloth (proxy edges besides the parent links: a skirt's
      horizontal links and triangle diagonals) first the edge projection
-     (``edge_projection_team``: every stretched edge at once, a linearised solve by
+     (``edge_projection_lane``: every stretched edge at once, a linearised solve by
      conjugate gradients), then ``distance_iterations`` Gauss-Seidel passes of a unilateral
      PBD projection over every proxy edge (depth-weighted masses as D.4, fixed ends
      immovable), then the tether and FTL;
@@ -30,30 +30,42 @@ and the motion constraint (D.9), before the end of the step (D.10):
    collider in turn (two rounds), so that no particle ends the step inside one; a particle
    that started the step inside a collider is carried out with it without the starting depth
    becoming velocity (``collision_last_push``). A colliding line cloth under an FTL mode then
-   runs follow-the-leader again with the colliders (``ftl_collision_team``): a pushed particle
+   runs follow-the-leader again with the colliders (``ftl_collision_lane``): a pushed particle
    keeps its place and its edges pull the rest of the chain. A colliding mesh cloth under ``ftl_edges``
    then runs ``SHAPE_ROUNDS - 1`` more rounds of (edge projection in which the particles
    collision last pushed slide along their push's plane, edge passes, collision last), so
    that the push's stretch is spread over the mesh instead of left on the pushed edges.
 
-The quality display (``display.py``) ends with ``quality_display.display_constraints_team``:
+The quality display (``display.py``) ends with ``quality_display.display_constraints_block``:
 collider push at this frame's pose within edge bounds taken from the step states.
 
 Every pass is unilateral (only stretch is removed) and uses the step-basic pose (D.2) as the
 rest reference, like the tether of D.3. Faithful mode never calls this module.
+
+Lane form (``solver/lanes.py``): the passes whose work follows the topology (the tight tether,
+FTL, the edge passes, the drift's put-back, D.4's passes) run every lane of a block side by
+side (``*_block``, ``edge_pass_lanes``), a partner particle's rows gathered next to the particle
+being solved; the conjugate-gradient projection, collision last and FTL with the colliders,
+whose work depends on each lane's state (active edges, early exits, pushes), run lane by lane
+(``*_lane``).
 """
 from __future__ import annotations
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    inverse_mass_friction_depth, load3, load4, q_rotate, store3, v_add, v_dot, v_length, v_length_sq, v_lerp,
-    v_normalize, v_scale, v_sub,
+    inverse_mass_friction_depth, q_rotate, v_add, v_dot, v_length, v_length_sq, v_lerp, v_normalize, v_scale, v_sub,
 )
 from magica_py.solver.constraints.collision import (
     INVALID_OR_NO_COLLISION, PLANE, SPHERE, particle_radius, plane_push, segment_parameter, solve_point_collider,
 )
-from magica_py.solver.constraints.distance import distance_team
-from magica_py.solver.parameters import length_unit
+from magica_py.solver.constraints.distance import distance_block
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import get1, get3, get4, put1, put3
+from magica_py.solver.parameters import (
+    PRM_COLLISION_LAST, PRM_COLLISION_MODE, PRM_DISTANCE_FULL_VELOCITY, PRM_DISTANCE_ITERATIONS, PRM_FTL_DAMPING,
+    PRM_INEXTENSIBILITY, PRM_QUALITY, PRM_RESTORATION_ATTENUATION, PRM_RESTORATION_DRIFT, PRM_TETHER_LIMIT,
+)
 from magica_py.kernels import portable
 
 MOVE = 0x02
@@ -72,6 +84,7 @@ PROJECTION_SLACK = 1e-2       # edges down to this share shorter than their rest
 PROJECTION_TOLERANCE = 1e-2   # the conjugate gradients stop when the residual's norm fell by this factor
 FTL_COLLISION_ITERATIONS = 4  # alternations of (parent ball, collider push) of the line cloth's FTL after collision last
 SHAPE_ROUNDS = 2           # rounds of (edge projection, passes, collision last) of a colliding mesh cloth
+ZERO3 = (0.0, 0.0, 0.0)
 
 
 @kernel
@@ -85,156 +98,202 @@ def clamp_to_sphere(x, center, radius):
     return target, v_sub(target, x)
 
 
-@kernel
-def tight_tether_team(m, ps, prm, team):
-    """Root distance of every moving particle <= step-basic rest x (1 + tether_limit).
+@kernel(forceinline=False)
+def tight_tether_block(PS, P, BI, topology, b):
+    """Root distance of every moving particle <= step-basic rest x (1 + tether_limit), every
+    lane of block b side by side (the root's rows gathered next to the particle's first).
     The correction becomes velocity in full (plain PBD)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_root_index, m_team_particle_count = m.attribute, m.root_index, m.team_particle_count
-    ps_next_pos, ps_step_basic_pos = ps.next_pos, ps.step_basic_pos
-    limit = 1.0 + prm.tether_limit[team]
-    start = m.team_particle_start[team]
-    for p in range(start, start + m_team_particle_count[team]):
-        if (m_attribute[p] & MOVE) == 0:
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute, root_index = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_ROOT_INDEX]
+    limit = 1.0 + P[b, PRM_TETHER_LIMIT]
+    for j in range(BI[b, bk.BI_N]):
+        if (topology[attribute + j] & MOVE) == 0:
             continue
-        r = m_root_index[p]
+        r = topology[root_index + j]
         if r < 0:
             continue
-        rest = v_length(v_sub(load3(ps_step_basic_pos, p), load3(ps_step_basic_pos, r)))
-        x, _move = clamp_to_sphere(load3(ps_next_pos, p), load3(ps_next_pos, r), rest * limit)
-        store3(ps_next_pos, p, x)
+        g = g0 + j
+        gr = g0 + r
+        for l in range(w):   # the root's values next to the particle's
+            put3(PS, g, st.PARTNER_POS, l, get3(PS, gr, st.NEXT_POS, l))
+            put3(PS, g, st.PARTNER_BASE, l, get3(PS, gr, st.STEP_BASIC_POS, l))
+        for l in range(w):
+            rest = v_length(v_sub(get3(PS, g, st.STEP_BASIC_POS, l), get3(PS, g, st.PARTNER_BASE, l)))
+            x, _move = clamp_to_sphere(get3(PS, g, st.NEXT_POS, l), get3(PS, g, st.PARTNER_POS, l), rest * limit)
+            put3(PS, g, st.NEXT_POS, l, x)
 
 
-@kernel
-def ftl_pass(m, ps, team, damping):
-    """Follow-the-leader along each baseline (parents before children): every edge is at
-    most its step-basic rest length. DFTL: the parent's velocity gets ``-damping`` x the
-    child's correction (velocity_pos += damping x correction; the team's ``ftl_damping``, 0
-    for the drift's second pass)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
-    m_baseline_start, m_parent, m_team_baseline_count = m.baseline_start, m.parent, m.team_baseline_count
-    ps_next_pos, ps_step_basic_pos, ps_velocity_pos = ps.next_pos, ps.step_basic_pos, ps.velocity_pos
-    b0 = m.team_baseline_start[team]
-    for b in range(b0, b0 + m_team_baseline_count[team]):
-        e0 = m_baseline_start[b]
-        for e in range(e0 + 1, e0 + m_baseline_count[b]):
-            v = m_baseline_data[e]
-            if (m_attribute[v] & MOVE) == 0:
+@kernel(forceinline=False)
+def ftl_pass_block(PS, BI, topology, b, damping):
+    """Follow-the-leader along each baseline (parents before children), every lane of block b
+    side by side: every edge is at most its step-basic rest length. DFTL: the parent's
+    velocity gets ``-damping`` x the child's correction (velocity_pos += damping x correction;
+    the block's ``ftl_damping``, 0 for the drift's second pass). The parent's rows are gathered
+    next to the child's, the child's move kept in ``ACCUM3`` for the parent's share."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute, parent = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_PARENT]
+    bl_start, bl_count, bl_data = BI[b, bk.BI_BASELINE_START], BI[b, bk.BI_BASELINE_COUNT], BI[b, bk.BI_BASELINE_DATA]
+    for line in range(BI[b, bk.BI_BASELINES]):
+        e0 = topology[bl_start + line]
+        for e in range(e0 + 1, e0 + topology[bl_count + line]):
+            v = topology[bl_data + e]
+            if (topology[attribute + v] & MOVE) == 0:
                 continue
-            p = m_parent[v]
+            p = topology[parent + v]
             if p < 0:
                 continue
-            rest = v_length(v_sub(load3(ps_step_basic_pos, v), load3(ps_step_basic_pos, p)))
-            x, move = clamp_to_sphere(load3(ps_next_pos, v), load3(ps_next_pos, p), rest)
-            store3(ps_next_pos, v, x)
-            if damping > 0.0 and (m_attribute[p] & MOVE) != 0:
-                store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(move, damping)))
+            gv = g0 + v
+            gp = g0 + p
+            for l in range(w):   # the parent's values next to the child's
+                put3(PS, gv, st.PARTNER_POS, l, get3(PS, gp, st.NEXT_POS, l))
+                put3(PS, gv, st.PARTNER_BASE, l, get3(PS, gp, st.STEP_BASIC_POS, l))
+            for l in range(w):
+                rest = v_length(v_sub(get3(PS, gv, st.STEP_BASIC_POS, l), get3(PS, gv, st.PARTNER_BASE, l)))
+                x, move = clamp_to_sphere(get3(PS, gv, st.NEXT_POS, l), get3(PS, gv, st.PARTNER_POS, l), rest)
+                put3(PS, gv, st.NEXT_POS, l, x)
+                put3(PS, gv, st.ACCUM3, l, move)
+            if damping > 0.0 and (topology[attribute + p] & MOVE) != 0:
+                for l in range(w):
+                    put3(PS, gp, st.VELOCITY_POS, l, v_add(get3(PS, gp, st.VELOCITY_POS, l),
+                                                           v_scale(get3(PS, gv, st.ACCUM3, l), damping)))
 
 
-@kernel
-def ftl_collision_team(m, ps, prm, ts, cs, team):
-    """Follow-the-leader with the colliders, after collision last, for a line cloth: along
-    each baseline, parents first, a child is moved into the ball of its step-basic rest length
-    around its (final) parent and out of the team's colliders at this step's pose
-    (``step_collider_push``), alternately, ``FTL_COLLISION_ITERATIONS`` times at most, the
-    collider push last: alternating projections towards a point of both sets (for a parent
-    outside a convex collider, or inside it by less than the rest length like a root fixed
-    inside one, the set is not empty). A pushed particle keeps its place and its edges pull
-    the free end, the rest of the chain towards the tip, instead of being left stretched.
-    The start-of-step carry was collision last's (it already ran); the moves become
-    velocity, with the parent's DFTL correction as in ``ftl_pass`` for the ball's share."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
-    m_baseline_start, m_parent, m_team_baseline_count = m.baseline_start, m.parent, m.team_baseline_count
-    ps_next_pos, ps_step_basic_pos, ps_velocity_pos = ps.next_pos, ps.step_basic_pos, ps.velocity_pos
-    cs_scale_suspend, m_depth, prm_radius_curve = cs.scale_suspend, m.depth, prm.radius_curve
-    damping = prm.ftl_damping[team]
-    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
-    c0 = ts.collider_start[team]
-    c1 = c0 + ts.collider_count[team]
-    b0 = m.team_baseline_start[team]
-    for b in range(b0, b0 + m_team_baseline_count[team]):
-        e0 = m_baseline_start[b]
-        for e in range(e0 + 1, e0 + m_baseline_count[b]):
-            v = m_baseline_data[e]
-            attr = m_attribute[v]
+@kernel(forceinline=False)
+def ftl_collision_lane(PS, PP, TS, CS, P, BI, topology, b, l):
+    """Follow-the-leader with the colliders, after collision last, for a line cloth (lane l of
+    block b): along each baseline, parents first, a child is moved into the ball of its
+    step-basic rest length around its (final) parent and out of the team's colliders at this
+    step's pose (``step_collider_push``), alternately, ``FTL_COLLISION_ITERATIONS`` times at
+    most, the collider push last: alternating projections towards a point of both sets (for a
+    parent outside a convex collider, or inside it by less than the rest length like a root
+    fixed inside one, the set is not empty). A pushed particle keeps its place and its edges
+    pull the free end, the rest of the chain towards the tip, instead of being left stretched.
+    The start-of-step carry was collision last's (it already ran); the moves become velocity,
+    with the parent's DFTL correction as in ``ftl_pass_block`` for the ball's share."""
+    g0 = BI[b, bk.BI_G0]
+    attribute, parent = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_PARENT]
+    bl_start, bl_count, bl_data = BI[b, bk.BI_BASELINE_START], BI[b, bk.BI_BASELINE_COUNT], BI[b, bk.BI_BASELINE_DATA]
+    c0 = BI[b, bk.BI_COLLIDER0]
+    colliders = BI[b, bk.BI_COLLIDERS]
+    shapes = BI[b, bk.BI_COLLIDER_SHAPE]
+    damping = P[b, PRM_FTL_DAMPING]
+    scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
+    for line in range(BI[b, bk.BI_BASELINES]):
+        e0 = topology[bl_start + line]
+        for e in range(e0 + 1, e0 + topology[bl_count + line]):
+            v = topology[bl_data + e]
+            attr = topology[attribute + v]
             if (attr & MOVE) == 0:
                 continue
-            p = m_parent[v]
+            p = topology[parent + v]
             if p < 0:
                 continue
+            gv = g0 + v
+            gp = g0 + p
             hits = (attr & INVALID_OR_NO_COLLISION) == 0
-            r = particle_radius(prm_radius_curve, team, m_depth[v], scale)
-            rest = v_length(v_sub(load3(ps_step_basic_pos, v), load3(ps_step_basic_pos, p)))
-            parent = load3(ps_next_pos, p)
+            r = particle_radius(get1(PP, gv, bk.CURVE_RADIUS, l), scale)
+            rest = v_length(v_sub(get3(PS, gv, st.STEP_BASIC_POS, l), get3(PS, gp, st.STEP_BASIC_POS, l)))
+            parent_pos = get3(PS, gp, st.NEXT_POS, l)
             if hits:
                 # no point of the ball is outside a collider the parent is deeper in than the
                 # rest length (a fixed root passing through it): collision wins
                 feasible = True
-                for k in range(c0, c1):
-                    if cs_scale_suspend[k] == 0 and \
-                            v_length(v_sub(step_collider_push(cs, k, parent, r), parent)) >= rest:
+                for c in range(colliders):
+                    k = c0 + c
+                    if get1(CS, k, st.SCALE_SUSPEND, l) == 0.0 and v_length(
+                            v_sub(step_collider_push(CS, k, l, topology[shapes + c], parent_pos, r),
+                                  parent_pos)) >= rest:
                         feasible = False
                 if not feasible:
                     continue
-            x = load3(ps_next_pos, v)
-            pulled = (0.0, 0.0, 0.0)
+            x = get3(PS, gv, st.NEXT_POS, l)
+            pulled = ZERO3
             for _ in range(FTL_COLLISION_ITERATIONS):
-                x, move = clamp_to_sphere(x, parent, rest)
+                x, move = clamp_to_sphere(x, parent_pos, rest)
                 pulled = v_add(pulled, move)
                 if not hits or (move[0] == 0.0 and move[1] == 0.0 and move[2] == 0.0):
                     break
                 x0 = x
-                for k in range(c0, c1):
-                    if cs_scale_suspend[k] == 0:
-                        x = step_collider_push(cs, k, x, r)
+                for c in range(colliders):
+                    k = c0 + c
+                    if get1(CS, k, st.SCALE_SUSPEND, l) == 0.0:
+                        x = step_collider_push(CS, k, l, topology[shapes + c], x, r)
                 if x[0] == x0[0] and x[1] == x0[1] and x[2] == x0[2]:
                     break
-            store3(ps_next_pos, v, x)
-            if damping > 0.0 and (m_attribute[p] & MOVE) != 0:
-                store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(pulled, damping)))
+            put3(PS, gv, st.NEXT_POS, l, x)
+            if damping > 0.0 and (topology[attribute + p] & MOVE) != 0:
+                put3(PS, gp, st.VELOCITY_POS, l, v_add(get3(PS, gp, st.VELOCITY_POS, l), v_scale(pulled, damping)))
 
 
 @kernel
-def edge_pass_team(m, ps, team):
-    """One Gauss-Seidel pass of unilateral edge projection over the team's proxy edges:
-    an edge longer than its step-basic rest length is shortened, both ends moving in
-    proportion to their inverse masses (D.4's depth masses; fixed ends do not move).
-    Corrections become velocity in full."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_depth, m_edges, m_team_edge_count = m.attribute, m.depth, m.edges, m.team_edge_count
-    ps_friction, ps_next_pos, ps_step_basic_pos = ps.friction, ps.next_pos, ps.step_basic_pos
-    e0 = m.team_edge_start[team]
-    for e in range(e0, e0 + m_team_edge_count[team]):
-        a = m_edges[e, 0]
-        b = m_edges[e, 1]
-        wa = inverse_mass_friction_depth(ps_friction[a], m_depth[a]) if (m_attribute[a] & MOVE) != 0 else 0.0
-        wb = inverse_mass_friction_depth(ps_friction[b], m_depth[b]) if (m_attribute[b] & MOVE) != 0 else 0.0
-        if wa + wb <= 0.0:
+def projection_masses(PS, PM, BI, topology, b, l0, l1):
+    """Every particle's inverse mass of the edge passes and the edge projection, lanes
+    ``l0 .. l1 - 1`` of block b, in ``PROJECTION_INVERSE_MASS``: D.4's depth mass
+    (``inverse_mass_friction_depth``), 0 when fixed."""
+    g0 = BI[b, bk.BI_G0]
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    for j in range(BI[b, bk.BI_N]):
+        g = g0 + j
+        if (topology[attribute + j] & MOVE) == 0:
+            for l in range(l0, l1):
+                put1(PS, g, st.PROJECTION_INVERSE_MASS, l, 0.0)
             continue
-        rest = v_length(v_sub(load3(ps_step_basic_pos, a), load3(ps_step_basic_pos, b)))
-        pa = load3(ps_next_pos, a)
-        pb = load3(ps_next_pos, b)
-        d = v_sub(pb, pa)
-        length = v_length(d)
-        if length <= rest or length < 1e-12:
-            continue
-        c = v_scale(d, (length - rest) / (length * (wa + wb)))
-        store3(ps_next_pos, a, v_add(pa, v_scale(c, wa)))
-        store3(ps_next_pos, b, v_sub(pb, v_scale(c, wb)))
+        for l in range(l0, l1):
+            put1(PS, g, st.PROJECTION_INVERSE_MASS, l,
+                 inverse_mass_friction_depth(get1(PS, g, st.FRICTION, l), get1(PM, g, bk.DEPTH, l)))
+
+
+@kernel(forceinline=False)
+def edge_pass_lanes(PS, PM, BI, topology, b, l0, l1):
+    """One Gauss-Seidel pass of unilateral edge projection over block b's proxy edges, lanes
+    ``l0 .. l1 - 1`` side by side: an edge longer than its step-basic rest length is
+    shortened, both ends moving in proportion to their inverse masses (D.4's depth masses,
+    ``projection_masses``; fixed ends do not move). Corrections become velocity in full.
+    Per edge, the second end's rows are gathered next to the first's (``PARTNER_*``), both
+    solved there (the second's result in ``ACCUM3``), then the second's copied back; an edge
+    left as it is writes its ends' positions back unchanged."""
+    projection_masses(PS, PM, BI, topology, b, l0, l1)
+    g0 = BI[b, bk.BI_G0]
+    attribute, pairs = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_EDGE_PAIRS]
+    for e in range(BI[b, bk.BI_EDGES]):
+        ia = topology[pairs + 2 * e]
+        ib = topology[pairs + 2 * e + 1]
+        if (topology[attribute + ia] & MOVE) == 0 and (topology[attribute + ib] & MOVE) == 0:
+            continue   # both ends fixed: w_a + w_b = 0
+        ga = g0 + ia
+        gb = g0 + ib
+        for l in range(l0, l1):   # the second end's values next to the first's
+            put3(PS, ga, st.PARTNER_POS, l, get3(PS, gb, st.NEXT_POS, l))
+            put3(PS, ga, st.PARTNER_BASE, l, get3(PS, gb, st.STEP_BASIC_POS, l))
+            put1(PS, ga, st.PARTNER_W, l, get1(PS, gb, st.PROJECTION_INVERSE_MASS, l))
+        for l in range(l0, l1):
+            wa = get1(PS, ga, st.PROJECTION_INVERSE_MASS, l)
+            wb = get1(PS, ga, st.PARTNER_W, l)
+            rest = v_length(v_sub(get3(PS, ga, st.STEP_BASIC_POS, l), get3(PS, ga, st.PARTNER_BASE, l)))
+            pa = get3(PS, ga, st.NEXT_POS, l)
+            pb = get3(PS, ga, st.PARTNER_POS, l)
+            d = v_sub(pb, pa)
+            length = v_length(d)
+            keep = wa + wb <= 0.0 or length <= rest or length < 1e-12
+            c = v_scale(d, (length - rest) / (length * (wa + wb)))   # discarded when kept
+            put3(PS, ga, st.NEXT_POS, l, pa if keep else v_add(pa, v_scale(c, wa)))
+            put3(PS, ga, st.ACCUM3, l, pb if keep else v_sub(pb, v_scale(c, wb)))
+        for l in range(l0, l1):
+            put3(PS, gb, st.NEXT_POS, l, get3(PS, ga, st.ACCUM3, l))
 
 
 @kernel
-def has_cross_links(m, team):
-    """Does the team have a proxy edge that is not a parent link (a mesh cloth's horizontal
-    links and triangle diagonals)? Line cloths are held exactly by FTL and skip the projection."""
-    m_edges, m_parent = m.edges, m.parent
-    e0 = m.team_edge_start[team]
-    for e in range(e0, e0 + m.team_edge_count[team]):
-        a = m_edges[e, 0]
-        b = m_edges[e, 1]
-        if m_parent[a] != b and m_parent[b] != a:
+def has_cross_links(BI, topology, b):
+    """Does block b's topology have a proxy edge that is not a parent link (a mesh cloth's
+    horizontal links and triangle diagonals)? Line cloths are held exactly by FTL and skip the
+    projection. The same for every lane (topology only)."""
+    parent, pairs = BI[b, bk.BI_PARENT], BI[b, bk.BI_EDGE_PAIRS]
+    for e in range(BI[b, bk.BI_EDGES]):
+        ia = topology[pairs + 2 * e]
+        ib = topology[pairs + 2 * e + 1]
+        if topology[parent + ia] != ib and topology[parent + ib] != ia:
             return True
     return False
 
@@ -245,21 +304,21 @@ def tangential(v, c):
     return v_sub(v, v_scale(c, v_dot(v, c)))
 
 
-@kernel
-def edge_projection_team(m, ps, team, iterations, contacts):
-    """Fast projection (Goldenthal et al. 2007) of the team's stretched proxy edges, all at
-    once, when one of them is stretched by more than ``PROJECTION_THRESHOLD``: one linearised
-    solve of ``(J W S J^T + K) lambda = C`` over the edges at least ``1 - PROJECTION_SLACK``
-    times their step-basic rest length (C = max(length - rest, 0): the stretched ones are
-    shortened, the others kept from stretching while their neighbours move; J the edges'
-    unit directions, W D.4's depth inverse masses with fixed ends 0, K diagonal,
-    ``(PROJECTION_COMPLIANCE + s / (1 - s)) (w_a + w_b)`` with s the edge's compression as a
-    share of the slack: a shorter edge holds less, and nothing as it leaves the solve, so the
-    result is continuous in the positions),
+@kernel(forceinline=False)
+def edge_projection_lane(PS, PM, EDS, BI, topology, b, l, iterations, contacts):
+    """Fast projection (Goldenthal et al. 2007) of the stretched proxy edges of lane l of
+    block b, all at once, when one of them is stretched by more than ``PROJECTION_THRESHOLD``:
+    one linearised solve of ``(J W S J^T + K) lambda = C`` over the edges at least
+    ``1 - PROJECTION_SLACK`` times their step-basic rest length (C = max(length - rest, 0): the
+    stretched ones are shortened, the others kept from stretching while their neighbours
+    move; J the edges' unit directions, W D.4's depth inverse masses with fixed ends 0, K
+    diagonal, ``(PROJECTION_COMPLIANCE + s / (1 - s)) (w_a + w_b)`` with s the edge's
+    compression as a share of the slack: a shorter edge holds less, and nothing as it leaves
+    the solve, so the result is continuous in the positions),
     by ``iterations`` Jacobi-preconditioned conjugate-gradient iterations, then
     ``x -= W S J^T lambda`` with lambda >= 0 (an edge only pulls). The correction becomes
     velocity in full. ``contacts``: S removes, for a particle that collision last pushed
-    out of a collider this step, the component along that push (``projection_contact``): it
+    out of a collider this step, the component along that push (``PROJECTION_CONTACT``): it
     slides along the collider's supporting plane and its neighbours give way (a filtered
     solve, Baraff and Witkin 1998); otherwise S = I.
 
@@ -269,166 +328,178 @@ def edge_projection_team(m, ps, team, iterations, contacts):
     of the ring's edges: 13 % of it per pass on a 12-strand ring). The solve couples every
     edge and removes that mode with the others (conjugate gradients converge in about
     sqrt(condition) iterations, and exactly in as many as the system has distinct
-    eigenvalues). Returns whether it ran."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_depth, m_edges = m.attribute, m.depth, m.edges
-    ps_friction, ps_next_pos, ps_step_basic_pos = ps.friction, ps.next_pos, ps.step_basic_pos
-    ps_w, ps_gather, ps_contact = ps.projection_inverse_mass, ps.projection_gather, ps.projection_contact
-    ps_normal, ps_lambda, ps_residual = ps.edge_normal, ps.edge_lambda, ps.edge_residual
-    ps_direction, ps_product, ps_diagonal = ps.edge_direction, ps.edge_product, ps.edge_diagonal
-    ps_active, ps_compliance = ps.edge_active, ps.edge_compliance
-    start = m.team_particle_start[team]
-    end = start + m.team_particle_count[team]
-    for p in range(start, end):
-        ps_w[p] = inverse_mass_friction_depth(ps_friction[p], m_depth[p]) if (m_attribute[p] & MOVE) != 0 else 0.0
-    e0 = m.team_edge_start[team]
-    count = 0   # the edges in the solve, listed in ps_active[e0:e0 + count]
+    eigenvalues). Returns whether it ran.
+
+    Lane by lane (the active set and the iterations depend on the lane's state): per-particle
+    values in ``PS`` (``PROJECTION_*``), per-edge ones in ``EDS`` (item = edge slot), the edges
+    in the solve listed in ``EDGE_ACTIVE`` from the block's first edge slot."""
+    projection_masses(PS, PM, BI, topology, b, l, l + 1)
+    g0 = BI[b, bk.BI_G0]
+    n = BI[b, bk.BI_N]
+    pairs = BI[b, bk.BI_EDGE_PAIRS]
+    s0 = BI[b, bk.BI_EDGE0]
+    count = 0   # the edges in the solve, listed in EDGE_ACTIVE of slots s0 .. s0 + count - 1
     stretched = False
     rz = 0.0
-    for e in range(e0, e0 + m.team_edge_count[team]):
-        a = m_edges[e, 0]
-        b = m_edges[e, 1]
-        wa = ps_w[a]
-        wb = ps_w[b]
+    for e in range(BI[b, bk.BI_EDGES]):
+        ga = g0 + topology[pairs + 2 * e]
+        gb = g0 + topology[pairs + 2 * e + 1]
+        s = s0 + e
+        wa = get1(PS, ga, st.PROJECTION_INVERSE_MASS, l)
+        wb = get1(PS, gb, st.PROJECTION_INVERSE_MASS, l)
         if wa + wb <= 0.0:
             continue
-        rest = v_length(v_sub(load3(ps_step_basic_pos, a), load3(ps_step_basic_pos, b)))
-        d = v_sub(load3(ps_next_pos, b), load3(ps_next_pos, a))
+        rest = v_length(v_sub(get3(PS, ga, st.STEP_BASIC_POS, l), get3(PS, gb, st.STEP_BASIC_POS, l)))
+        d = v_sub(get3(PS, gb, st.NEXT_POS, l), get3(PS, ga, st.NEXT_POS, l))
         length = v_length(d)
         slack = (rest - length) / (rest * PROJECTION_SLACK) if rest > 0.0 else 0.0
         if slack >= 1.0 or length < 1e-12:
             continue
-        n = v_scale(d, 1.0 / length)
+        normal = v_scale(d, 1.0 / length)
         c = max(length - rest, 0.0)
         stretched = stretched or length > rest * (1.0 + PROJECTION_THRESHOLD)
         # a shorter edge is kept from stretching less the shorter it is, and not at all at
         # 1 - PROJECTION_SLACK of its rest: its compliance grows from 0 to infinity on the way
         compliance = (PROJECTION_COMPLIANCE + (slack / (1.0 - slack) if slack > 0.0 else 0.0)) * (wa + wb)
-        ps_compliance[e] = compliance
+        put1(EDS, s, st.EDGE_COMPLIANCE, l, compliance)
         diagonal = compliance
         if contacts:
-            diagonal += wa * v_length_sq(tangential(n, load3(ps_contact, a))) \
-                + wb * v_length_sq(tangential(n, load3(ps_contact, b)))
+            diagonal += wa * v_length_sq(tangential(normal, get3(PS, ga, st.PROJECTION_CONTACT, l))) \
+                + wb * v_length_sq(tangential(normal, get3(PS, gb, st.PROJECTION_CONTACT, l)))
         else:
             diagonal += wa + wb
-        ps_active[e0 + count] = e
+        put1(EDS, s0 + count, st.EDGE_ACTIVE, l, float(e))
         count += 1
-        store3(ps_normal, e, n)
-        ps_diagonal[e] = diagonal
-        ps_lambda[e] = 0.0
-        ps_residual[e] = c
-        ps_direction[e] = c / diagonal
+        put3(EDS, s, st.EDGE_NORMAL, l, normal)
+        put1(EDS, s, st.EDGE_DIAGONAL, l, diagonal)
+        put1(EDS, s, st.EDGE_LAMBDA, l, 0.0)
+        put1(EDS, s, st.EDGE_RESIDUAL, l, c)
+        put1(EDS, s, st.EDGE_DIRECTION, l, c / diagonal)
         rz += c * c / diagonal
     if not stretched:
         return False
     stop = rz * PROJECTION_TOLERANCE * PROJECTION_TOLERANCE
     beta = 0.0
     for iteration in range(iterations):
-        for p in range(start, end):
-            store3(ps_gather, p, (0.0, 0.0, 0.0))
-        for i in range(e0, e0 + count):   # the search direction (after the first), and W S J^T of it
-            e = ps_active[i]
+        for j in range(n):
+            put3(PS, g0 + j, st.PROJECTION_GATHER, l, ZERO3)
+        for i in range(count):   # the search direction (after the first), and W S J^T of it
+            e = int(get1(EDS, s0 + i, st.EDGE_ACTIVE, l))
+            s = s0 + e
             if iteration > 0:
-                ps_direction[e] = ps_residual[e] / ps_diagonal[e] + beta * ps_direction[e]
-            de = ps_direction[e]
-            a = m_edges[e, 0]
-            b = m_edges[e, 1]
-            n = load3(ps_normal, e)
-            store3(ps_gather, a, v_sub(load3(ps_gather, a), v_scale(n, ps_w[a] * de)))
-            store3(ps_gather, b, v_add(load3(ps_gather, b), v_scale(n, ps_w[b] * de)))
+                put1(EDS, s, st.EDGE_DIRECTION, l,
+                     get1(EDS, s, st.EDGE_RESIDUAL, l) / get1(EDS, s, st.EDGE_DIAGONAL, l)
+                     + beta * get1(EDS, s, st.EDGE_DIRECTION, l))
+            de = get1(EDS, s, st.EDGE_DIRECTION, l)
+            ga = g0 + topology[pairs + 2 * e]
+            gb = g0 + topology[pairs + 2 * e + 1]
+            normal = get3(EDS, s, st.EDGE_NORMAL, l)
+            wa = get1(PS, ga, st.PROJECTION_INVERSE_MASS, l)
+            wb = get1(PS, gb, st.PROJECTION_INVERSE_MASS, l)
+            sum_a = get3(PS, ga, st.PROJECTION_GATHER, l)
+            put3(PS, ga, st.PROJECTION_GATHER, l, v_sub(sum_a, v_scale(normal, wa * de)))
+            sum_b = get3(PS, gb, st.PROJECTION_GATHER, l)
+            put3(PS, gb, st.PROJECTION_GATHER, l, v_add(sum_b, v_scale(normal, wb * de)))
         if contacts:
-            for p in range(start, end):
-                store3(ps_gather, p, tangential(load3(ps_gather, p), load3(ps_contact, p)))
+            for j in range(n):
+                g = g0 + j
+                put3(PS, g, st.PROJECTION_GATHER, l, tangential(get3(PS, g, st.PROJECTION_GATHER, l),
+                                                                get3(PS, g, st.PROJECTION_CONTACT, l)))
         dad = 0.0
-        for i in range(e0, e0 + count):
-            e = ps_active[i]
-            de = ps_direction[e]
-            a = m_edges[e, 0]
-            b = m_edges[e, 1]
-            ad = v_dot(load3(ps_normal, e), v_sub(load3(ps_gather, b), load3(ps_gather, a))) \
-                + ps_compliance[e] * de
-            ps_product[e] = ad
+        for i in range(count):
+            e = int(get1(EDS, s0 + i, st.EDGE_ACTIVE, l))
+            s = s0 + e
+            de = get1(EDS, s, st.EDGE_DIRECTION, l)
+            ga = g0 + topology[pairs + 2 * e]
+            gb = g0 + topology[pairs + 2 * e + 1]
+            ad = v_dot(get3(EDS, s, st.EDGE_NORMAL, l),
+                       v_sub(get3(PS, gb, st.PROJECTION_GATHER, l), get3(PS, ga, st.PROJECTION_GATHER, l))) \
+                + get1(EDS, s, st.EDGE_COMPLIANCE, l) * de
+            put1(EDS, s, st.EDGE_PRODUCT, l, ad)
             dad += de * ad
         if dad <= 0.0:
             break
         alpha = rz / dad
         rz_next = 0.0
-        for i in range(e0, e0 + count):
-            e = ps_active[i]
-            ps_lambda[e] += alpha * ps_direction[e]
-            r = ps_residual[e] - alpha * ps_product[e]
-            ps_residual[e] = r
-            rz_next += r * r / ps_diagonal[e]
+        for i in range(count):
+            s = s0 + int(get1(EDS, s0 + i, st.EDGE_ACTIVE, l))
+            lam = get1(EDS, s, st.EDGE_LAMBDA, l) + alpha * get1(EDS, s, st.EDGE_DIRECTION, l)
+            put1(EDS, s, st.EDGE_LAMBDA, l, lam)
+            r = get1(EDS, s, st.EDGE_RESIDUAL, l) - alpha * get1(EDS, s, st.EDGE_PRODUCT, l)
+            put1(EDS, s, st.EDGE_RESIDUAL, l, r)
+            rz_next += r * r / get1(EDS, s, st.EDGE_DIAGONAL, l)
         if rz_next <= stop:
             break
         beta = rz_next / rz
         rz = rz_next
-    for i in range(e0, e0 + count):
-        e = ps_active[i]
-        lam = ps_lambda[e]
+    for i in range(count):
+        e = int(get1(EDS, s0 + i, st.EDGE_ACTIVE, l))
+        s = s0 + e
+        lam = get1(EDS, s, st.EDGE_LAMBDA, l)
         if lam <= 0.0:
             continue
-        a = m_edges[e, 0]
-        b = m_edges[e, 1]
-        n = load3(ps_normal, e)
-        da = v_scale(n, ps_w[a] * lam)
-        db = v_scale(n, ps_w[b] * lam)
+        ga = g0 + topology[pairs + 2 * e]
+        gb = g0 + topology[pairs + 2 * e + 1]
+        normal = get3(EDS, s, st.EDGE_NORMAL, l)
+        da = v_scale(normal, get1(PS, ga, st.PROJECTION_INVERSE_MASS, l) * lam)
+        db = v_scale(normal, get1(PS, gb, st.PROJECTION_INVERSE_MASS, l) * lam)
         if contacts:
-            da = tangential(da, load3(ps_contact, a))
-            db = tangential(db, load3(ps_contact, b))
-        store3(ps_next_pos, a, v_add(load3(ps_next_pos, a), da))
-        store3(ps_next_pos, b, v_sub(load3(ps_next_pos, b), db))
+            da = tangential(da, get3(PS, ga, st.PROJECTION_CONTACT, l))
+            db = tangential(db, get3(PS, gb, st.PROJECTION_CONTACT, l))
+        put3(PS, ga, st.NEXT_POS, l, v_add(get3(PS, ga, st.NEXT_POS, l), da))
+        put3(PS, gb, st.NEXT_POS, l, v_sub(get3(PS, gb, st.NEXT_POS, l), db))
     return True
 
 
-@kernel
-def collision_last_team(m, ps, prm, ts, cs, team, carry):
-    """Project every colliding moving particle out of each collider (``collision_last_push``),
-    ``COLLISION_LAST_ROUNDS`` rounds over the colliders so that a push out of one collider
-    into another is undone. Friction and normals are left to D.8. ``carry``: a particle that
-    started the step inside is carried out without its starting depth becoming velocity
-    (the first call of a step; a later call only undoes the inextensibility passes in
-    between, whose corrections became velocity, so its push does too). The direction of
-    each push is kept in ``projection_contact`` for the next edge projection. Returns the
-    number of particles it moved."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    cs_scale_suspend, m_attribute, m_depth = cs.scale_suspend, m.attribute, m.depth
-    m_team_particle_count, prm_radius_curve, ps_next_pos = m.team_particle_count, prm.radius_curve, ps.next_pos
-    ps_old_pos, ps_velocity_pos, ps_contact = ps.old_pos, ps.velocity_pos, ps.projection_contact
-    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
-    c0 = ts.collider_start[team]
-    c1 = c0 + ts.collider_count[team]
-    start = m.team_particle_start[team]
+@kernel(forceinline=False)
+def collision_last_lane(PS, PP, TS, CS, BI, topology, b, l, carry):
+    """Project every colliding moving particle of lane l of block b out of each collider
+    (``collision_last_push``), ``COLLISION_LAST_ROUNDS`` rounds over the colliders so that a
+    push out of one collider into another is undone. Friction and normals are left to D.8.
+    ``carry``: a particle that started the step inside is carried out without its starting
+    depth becoming velocity (the first call of a step; a later call only undoes the
+    inextensibility passes in between, whose corrections became velocity, so its push does
+    too). The direction of each push is kept in ``PROJECTION_CONTACT`` for the next edge
+    projection. Returns the number of particles it moved."""
+    g0 = BI[b, bk.BI_G0]
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    c0 = BI[b, bk.BI_COLLIDER0]
+    colliders = BI[b, bk.BI_COLLIDERS]
+    shapes = BI[b, bk.BI_COLLIDER_SHAPE]
+    scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
     pushed = 0
-    for p in range(start, start + m_team_particle_count[team]):
-        attr = m_attribute[p]
+    for j in range(BI[b, bk.BI_N]):
+        attr = topology[attribute + j]
         if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
             continue
-        r = particle_radius(prm_radius_curve, team, m_depth[p], scale)
-        x = load3(ps_next_pos, p)
-        start_x = load3(ps_old_pos, p)
-        velocity_pos = load3(ps_velocity_pos, p)
+        g = g0 + j
+        r = particle_radius(get1(PP, g, bk.CURVE_RADIUS, l), scale)
+        x = get3(PS, g, st.NEXT_POS, l)
+        start_x = get3(PS, g, st.OLD_POS, l)
+        velocity_pos = get3(PS, g, st.VELOCITY_POS, l)
         x0 = x
         for _ in range(COLLISION_LAST_ROUNDS):
-            for k in range(c0, c1):
-                if cs_scale_suspend[k] == 0:
-                    x, velocity_pos = collision_last_push(cs, k, x, start_x, velocity_pos, r,
+            for c in range(colliders):
+                k = c0 + c
+                if get1(CS, k, st.SCALE_SUSPEND, l) == 0.0:
+                    x, velocity_pos = collision_last_push(CS, k, l, topology[shapes + c], x, start_x, velocity_pos, r,
                                                           INSIDE_TOLERANCE * scale, carry)
         push = v_sub(x, x0)
         if v_dot(push, push) > 0.0:
-            store3(ps_contact, p, v_normalize(push))
+            put3(PS, g, st.PROJECTION_CONTACT, l, v_normalize(push))
             pushed += 1
-        store3(ps_next_pos, p, x)
-        store3(ps_velocity_pos, p, velocity_pos)
+        put3(PS, g, st.NEXT_POS, l, x)
+        put3(PS, g, st.VELOCITY_POS, l, velocity_pos)
     return pushed
 
 
 @kernel
-def collision_last_push(cs, k, x, start_x, velocity_pos, r, tolerance, carry):
+def collision_last_push(CS, k, l, shape, x, start_x, velocity_pos, r, tolerance, carry):
     """One particle (end-of-step position x, radius r, start-of-step position ``start_x``)
-    against collider slot k moving from its previous-step to its current pose within the step:
-    (x, velocity_pos) after the push. ``tolerance`` (m): the depth below which it counts as
-    having started outside (a particle projected by the last step lies on the surface).
+    against collider slot k of lane l (of shape ``shape``) moving from its previous-step to its
+    current pose within the step: (x, velocity_pos) after the push. ``tolerance`` (m): the
+    depth below which it counts as having started outside (a particle projected by the last
+    step lies on the surface).
 
     A particle that started the step outside is pushed by D.8's moving plane (normal from the
     previous pose, surface at the current one): it ends on the supporting plane of the surface
@@ -442,31 +513,32 @@ def collision_last_push(cs, k, x, start_x, velocity_pos, r, tolerance, carry):
     removes the depth it started with does not become velocity (``velocity_pos`` moves with
     it): it leaves with the collider's motion along that side and its own, not thrown out by
     the depth it was found at."""
-    shape = cs.shape[k]
-    depth = start_depth(cs, k, start_x, r)
+    depth = start_depth(CS, k, l, shape, start_x, r)
     if depth <= tolerance or shape == PLANE:
         bmin = (x[0] - 2.0 * r, x[1] - 2.0 * r, x[2] - 2.0 * r)
         bmax = (x[0] + 2.0 * r, x[1] + 2.0 * r, x[2] + 2.0 * r)
-        d, n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
+        d, n, x2 = solve_point_collider(CS, k, l, shape, x, r, bmin, bmax)
         if d >= 0.0:
             return x, velocity_pos
     else:
+        radius_start = get1(CS, k, st.RADIUS_START, l)
         if shape == SPHERE:
             t = 0.0
-            n = v_normalize(v_sub(start_x, load3(cs.start_old, k)))
-            surface = v_add(load3(cs.start_new, k), v_scale(n, cs.radius_start[k] + r))
+            n = v_normalize(v_sub(start_x, get3(CS, k, st.START_OLD, l)))
+            surface = v_add(get3(CS, k, st.START_NEW, l), v_scale(n, radius_start + r))
         else:
-            so = load3(cs.start_old, k)
-            eo = load3(cs.end_old, k)
+            so = get3(CS, k, st.START_OLD, l)
+            eo = get3(CS, k, st.END_OLD, l)
             t = segment_parameter(start_x, so, eo)
-            u = q_rotate(load4(cs.inverse_old_rot, k), v_sub(start_x, v_lerp(so, eo, t)))
-            n = v_normalize(q_rotate(load4(cs.now_rot, k), u))
-            radius = cs.radius_start[k] + (cs.radius_end[k] - cs.radius_start[k]) * t
-            surface = v_add(v_lerp(load3(cs.start_new, k), load3(cs.end_new, k), t), v_scale(n, radius + r))
+            u = q_rotate(get4(CS, k, st.INVERSE_OLD_ROT, l), v_sub(start_x, v_lerp(so, eo, t)))
+            n = v_normalize(q_rotate(get4(CS, k, st.NOW_ROT, l), u))
+            radius = radius_start + (get1(CS, k, st.RADIUS_END, l) - radius_start) * t
+            surface = v_add(v_lerp(get3(CS, k, st.START_NEW, l), get3(CS, k, st.END_NEW, l), t),
+                            v_scale(n, radius + r))
         if v_length_sq(n) < 0.5:   # started on the axis: no side, the nearest surface
             bmin = (x[0] - 2.0 * r, x[1] - 2.0 * r, x[2] - 2.0 * r)
             bmax = (x[0] + 2.0 * r, x[1] + 2.0 * r, x[2] + 2.0 * r)
-            d, n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
+            d, n, x2 = solve_point_collider(CS, k, l, shape, x, r, bmin, bmax)
         else:
             d, x2 = plane_push(surface, n, x)
         if d >= 0.0:
@@ -490,75 +562,76 @@ def push_out_of_ball(x, c, reach):
 
 
 @kernel
-def step_collider_push(cs, k, x, r):
-    """``x`` (a sphere of radius r) moved onto the surface of collider slot k at its pose of
-    this step (``start_new`` / ``end_new``, ``plane_normal``) when it lies inside it, along the
-    shortest way out (the nearest point of a sphere or capsule surface, or the plane's normal);
-    unchanged otherwise or on the capsule's axis. Unlike D.8's moving plane (normal from the
-    previous pose) the set it projects onto does not depend on the collider's motion: the
-    alternation of ``ftl_collision_team`` projects onto two fixed sets."""
-    shape = cs.shape[k]
-    a = load3(cs.start_new, k)
+def step_collider_push(CS, k, l, shape, x, r):
+    """``x`` (a sphere of radius r) moved onto the surface of collider slot k of lane l (of shape
+    ``shape``) at its pose of this step (``START_NEW`` / ``END_NEW``, ``PLANE_NORMAL``) when it
+    lies inside it, along the shortest way out (the nearest point of a sphere or capsule
+    surface, or the plane's normal); unchanged otherwise or on the capsule's axis. Unlike D.8's
+    moving plane (normal from the previous pose) the set it projects onto does not depend on
+    the collider's motion: the alternation of ``ftl_collision_lane`` projects onto two fixed
+    sets."""
+    a = get3(CS, k, st.START_NEW, l)
     if shape == PLANE:
-        n = load3(cs.plane_normal, k)
+        n = get3(CS, k, st.PLANE_NORMAL, l)
         d = v_dot(v_sub(x, a), n) - r
         return v_sub(x, v_scale(n, d)) if d < 0.0 else x
     if shape == SPHERE:
         t = 0.0
         c = a
     else:
-        b = load3(cs.end_new, k)
-        t = segment_parameter(x, a, b)
-        c = v_lerp(a, b, t)
-    reach = cs.radius_start[k] + (cs.radius_end[k] - cs.radius_start[k]) * t + r
+        e = get3(CS, k, st.END_NEW, l)
+        t = segment_parameter(x, a, e)
+        c = v_lerp(a, e, t)
+    radius_start = get1(CS, k, st.RADIUS_START, l)
+    reach = radius_start + (get1(CS, k, st.RADIUS_END, l) - radius_start) * t + r
     return push_out_of_ball(x, c, reach)
 
 
 @kernel
-def start_depth(cs, k, x, r):
-    """How deep the particle sphere (x, r) lay inside collider slot k at its previous-step
-    pose (m; <= 0 outside)."""
-    shape = cs.shape[k]
-    so = load3(cs.start_old, k)
+def start_depth(CS, k, l, shape, x, r):
+    """How deep the particle sphere (x, r) lay inside collider slot k of lane l (of shape
+    ``shape``) at its previous-step pose (m; <= 0 outside)."""
+    so = get3(CS, k, st.START_OLD, l)
+    radius_start = get1(CS, k, st.RADIUS_START, l)
     if shape == PLANE:
-        return r - v_dot(v_sub(x, so), load3(cs.plane_normal, k))
+        return r - v_dot(v_sub(x, so), get3(CS, k, st.PLANE_NORMAL, l))
     if shape == SPHERE:
-        return cs.radius_start[k] + r - v_length(v_sub(x, so))
-    eo = load3(cs.end_old, k)
+        return radius_start + r - v_length(v_sub(x, so))
+    eo = get3(CS, k, st.END_OLD, l)
     t = segment_parameter(x, so, eo)
-    radius = cs.radius_start[k] + (cs.radius_end[k] - cs.radius_start[k]) * t
+    radius = radius_start + (get1(CS, k, st.RADIUS_END, l) - radius_start) * t
     return radius + r - v_length(v_sub(x, v_lerp(so, eo, t)))
 
 
 @kernel
-def inside_old_pose(cs, k, x, r):
-    """Is x (with radius r) deeper than ``INSIDE_TOLERANCE`` inside collider slot k at its
-    previous-step pose? (A particle projected by the last step lies on the surface.)"""
-    return start_depth(cs, k, x, r) > INSIDE_TOLERANCE
+def inside_old_pose(CS, k, l, shape, x, r):
+    """Is x (with radius r) deeper than ``INSIDE_TOLERANCE`` inside collider slot k of lane l
+    at its previous-step pose? (A particle projected by the last step lies on the surface.)"""
+    return start_depth(CS, k, l, shape, x, r) > INSIDE_TOLERANCE
 
 
 @kernel
-def quality_distance_attenuation(prm, team, faithful_attenuation):
+def quality_distance_attenuation(P, b, faithful_attenuation):
     """D.4's velocity attenuation: 0 (full PBD velocity) when distance_full_velocity is on."""
-    if prm.distance_full_velocity[team] != 0:
+    if P[b, PRM_DISTANCE_FULL_VELOCITY] != 0.0:
         return 0.0
     return faithful_attenuation
 
 
 @kernel
-def quality_hard_attenuation(prm, team, frequency_ratio, attenuation, converted):
+def quality_hard_attenuation(P, b, frequency_ratio, attenuation, converted):
     """Velocity attenuation of a hard limit (tether D.3, angle limit D.5, motion D.9) at the
     step size. When a limit removes a step's penetration, ``1 - attn`` of the normal velocity
     survives into the next step: a per-step retention, so quality mode converts it as one,
     ``attn^(90/f)``, as the frequency-consistent mode does too (``converted``; converting attn
     as a rate let the surviving share tend to 1 - and the limit to a hard bounce - as f grows)."""
-    if prm.quality[team] == 0:
+    if P[b, PRM_QUALITY] == 0.0:
         return converted
     return portable.pow(attenuation, frequency_ratio)
 
 
 @kernel
-def quality_restoration_attenuation(prm, team, frequency_ratio, converted):
+def quality_restoration_attenuation(P, b, frequency_ratio, converted):
     """D.6's velocity attenuation at the step size. Quality mode scales the share of the
     restoration correction that becomes velocity, ``1 - attn``, linearly with the step
     (``(1 - attn) 90/f``): the correction itself is about proportional to the step, so the
@@ -566,37 +639,61 @@ def quality_restoration_attenuation(prm, team, frequency_ratio, converted):
     frequency-consistent mode does too (``converted``; converted as a rate, that share tends to
     1 as f grows, and the restoration then acts as a force growing with f: 29 % of the tail's
     length between 90 and 1440 Hz)."""
-    if prm.quality[team] == 0:
+    if P[b, PRM_QUALITY] == 0.0:
         return converted
-    share = (1.0 - prm.restoration_attenuation[team]) * frequency_ratio
+    share = (1.0 - P[b, PRM_RESTORATION_ATTENUATION]) * frequency_ratio
     return 1.0 - (1.0 if share > 1.0 else (0.0 if share < 0.0 else share))
 
 
 @kernel
-def inextensibility_passes(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh,
-                           damping):
-    """The inextensibility pass ``mode`` (module docstring); ``mesh``: the team has cross
-    links (``has_cross_links``) and ``ftl_edges`` starts with the edge projection; ``damping``:
-    FTL's DFTL factor."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    prm_distance_iterations = prm.distance_iterations
+def inextensibility_passes(PS, PM, PP, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y,
+                           distance_attenuation, mode, mesh, damping):
+    """The inextensibility pass ``mode`` (module docstring) over every lane of block b;
+    ``mesh``: the block has cross links (``has_cross_links``) and ``ftl_edges`` starts with
+    the edge projection (lane by lane); ``damping``: FTL's DFTL factor."""
+    w = bk.lane_width(BI, b)
+    iterations = int(P[b, PRM_DISTANCE_ITERATIONS])
     if mode == INEXT_FTL_EDGES:
         if mesh:
-            edge_projection_team(m, ps, team, PROJECTION_ITERATIONS, False)
-        for _ in range(prm_distance_iterations[team]):
-            edge_pass_team(m, ps, team)
+            for l in range(w):
+                edge_projection_lane(PS, PM, EDS, BI, topology, b, l, PROJECTION_ITERATIONS, False)
+        for _ in range(iterations):
+            edge_pass_lanes(PS, PM, BI, topology, b, 0, w)
     if mode == INEXT_TETHER or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES:
-        tight_tether_team(m, ps, prm, team)
+        tight_tether_block(PS, P, BI, topology, b)
     if mode == INEXT_FTL or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES:
-        ftl_pass(m, ps, team, damping)
+        ftl_pass_block(PS, BI, topology, b, damping)
     elif mode == INEXT_ITERATIONS:
-        for _ in range(prm_distance_iterations[team]):
-            distance_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation)
+        for _ in range(iterations):
+            distance_block(PS, PM, PP, TS, TM, LM, P, BI, topology, b, frequency_ratio, power_y, distance_attenuation)
 
 
-@kernel
-def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, distance_attenuation, drift):
-    """The quality passes of one team after D.9 (see the module docstring): the
+@kernel(forceinline=False)
+def collision_last_rounds_lane(PS, PM, PP, TS, CS, EDS, P, BI, topology, b, l, mode, mesh):
+    """Collision last of lane l of block b and what follows it (``quality_end_of_step_block``):
+    the follow-the-leader with the colliders of a line cloth under an FTL mode, or the further
+    rounds of a mesh cloth under ``ftl_edges``."""
+    if mesh:
+        g0 = BI[b, bk.BI_G0]
+        for j in range(BI[b, bk.BI_N]):
+            put3(PS, g0 + j, st.PROJECTION_CONTACT, l, ZERO3)
+    pushed = collision_last_lane(PS, PP, TS, CS, BI, topology, b, l, True)
+    if not mesh and pushed > 0 and (mode == INEXT_FTL or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES):
+        ftl_collision_lane(PS, PP, TS, CS, P, BI, topology, b, l)
+    if mesh:
+        iterations = int(P[b, PRM_DISTANCE_ITERATIONS])
+        for _ in range(SHAPE_ROUNDS - 1):
+            if pushed == 0 or not edge_projection_lane(PS, PM, EDS, BI, topology, b, l, PROJECTION_ITERATIONS, True):
+                break
+            for _ in range(iterations):
+                edge_pass_lanes(PS, PM, BI, topology, b, l, l + 1)
+            pushed = collision_last_lane(PS, PP, TS, CS, BI, topology, b, l, False)
+
+
+@kernel(forceinline=False)
+def quality_end_of_step_block(PS, PM, PP, TS, TM, CS, LM, EDS, P, BI, topology, b, frequency_ratio, power_y,
+                              distance_attenuation, drift):
+    """The quality passes of block b after D.9 (see the module docstring): the
     inextensibility pass, then collision last. A mesh cloth under ``ftl_edges`` that collides
     then runs ``SHAPE_ROUNDS - 1`` more rounds of (edge projection with the particles that
     collision last pushed sliding along their push's plane, edge passes, collision last),
@@ -606,102 +703,104 @@ def quality_end_of_step(m, ps, prm, ts, cs, team, frequency_ratio, power_y, dist
     just shortened; the filtered projection shortens them again by moving the pushed
     particles' neighbours and the pushed particles along the collider, not back into it.
     Every round ends with collision last, so no particle ends the step inside a collider.
+    The passes over the topology run every lane side by side; collision last and what follows
+    it run lane by lane (``collision_last_rounds_lane``: each lane's pushes decide its work).
 
-    ``drift``: ``quality_drift`` holds this step's restoration drift, taken out of the
-    positions since the angle pass (``drift_begin_team`` / ``drift_end_team`` around it): put
-    back after the inextensibility pass (``drift_in_team``)."""
-    mode = prm.inextensibility[team]
-    mesh = mode == INEXT_FTL_EDGES and has_cross_links(m, team)
-    collide = prm.collision_last[team] != 0 and ts.collider_count[team] > 0 and prm.collision_mode[team] != 0
-    inextensibility_passes(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh,
-                           prm.ftl_damping[team])
+    ``drift``: ``QUALITY_DRIFT`` holds this step's restoration drift, taken out of the
+    positions since the angle pass (``drift_begin_block`` / ``drift_end_block`` around it): put
+    back after the inextensibility pass (``drift_in_block``)."""
+    mode = int(P[b, PRM_INEXTENSIBILITY])
+    mesh = mode == INEXT_FTL_EDGES and has_cross_links(BI, topology, b)
+    collide = P[b, PRM_COLLISION_LAST] != 0.0 and BI[b, bk.BI_COLLIDERS] > 0 and P[b, PRM_COLLISION_MODE] != 0.0
+    inextensibility_passes(PS, PM, PP, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y,
+                           distance_attenuation, mode, mesh, P[b, PRM_FTL_DAMPING])
     if drift:
-        drift_in_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh)
+        drift_in_block(PS, PM, PP, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y, distance_attenuation,
+                       mode, mesh)
     if not collide:
         return
-    if mesh:
-        ps_contact = ps.projection_contact
-        for p in range(m.team_particle_start[team], m.team_particle_start[team] + m.team_particle_count[team]):
-            store3(ps_contact, p, (0.0, 0.0, 0.0))
-    pushed = collision_last_team(m, ps, prm, ts, cs, team, True)
-    if not mesh and pushed > 0 and (mode == INEXT_FTL or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES):
-        ftl_collision_team(m, ps, prm, ts, cs, team)
-    if mesh:
-        for _ in range(SHAPE_ROUNDS - 1):
-            if pushed == 0 or not edge_projection_team(m, ps, team, PROJECTION_ITERATIONS, True):
-                break
-            for _ in range(prm.distance_iterations[team]):
-                edge_pass_team(m, ps, team)
-            pushed = collision_last_team(m, ps, prm, ts, cs, team, False)
+    for l in range(bk.lane_width(BI, b)):
+        collision_last_rounds_lane(PS, PM, PP, TS, CS, EDS, P, BI, topology, b, l, mode, mesh)
 
 
 @kernel
-def drift_applies(prm, team):
-    """Does the team take its restoration drift out of the passes (``restoration_drift`` on an
+def drift_applies(P, b):
+    """Does block b take its restoration drift out of the passes (``restoration_drift`` on an
     inextensibility pass that projects: tether, FTL, ``ftl_edges``)?"""
-    mode = prm.inextensibility[team]
-    return prm.restoration_drift[team] != 0 and mode != INEXT_NONE and mode != INEXT_ITERATIONS
+    mode = int(P[b, PRM_INEXTENSIBILITY])
+    return P[b, PRM_RESTORATION_DRIFT] != 0.0 and mode != INEXT_NONE and mode != INEXT_ITERATIONS
 
 
-@kernel
-def drift_begin_team(m, ps, team):
-    """Before the angle pass (D.5/D.6) of a quality team with ``restoration_drift``: keep
-    velocity_pos in ``quality_drift``."""
-    ps_velocity_pos, ps_drift = ps.velocity_pos, ps.quality_drift
-    start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        store3(ps_drift, p, load3(ps_velocity_pos, p))
+@kernel(forceinline=False)
+def drift_begin_block(PS, BI, b):
+    """Before the angle pass (D.5/D.6) of a quality block with ``restoration_drift``: keep
+    velocity_pos in ``QUALITY_DRIFT``."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    for g in range(g0, g0 + BI[b, bk.BI_N]):
+        for l in range(w):
+            put3(PS, g, st.QUALITY_DRIFT, l, get3(PS, g, st.VELOCITY_POS, l))
 
 
-@kernel
-def drift_end_team(m, ps, team):
-    """After the angle pass: ``quality_drift`` = what the pass moved velocity_pos by, i.e. the
+@kernel(forceinline=False)
+def drift_end_block(PS, BI, topology, b):
+    """After the angle pass: ``QUALITY_DRIFT`` = what the pass moved velocity_pos by, i.e. the
     share of its correction it kept out of the velocity (quality mode: ``1 - (1 - attn) 90/f``
     of the restoration's, the drift; and the angle limit's retention). The drift is then taken
     out of next_pos and velocity_pos of the moving particles (the velocity, their difference,
     does not change) until the inextensibility pass has run: the constraints after the angle
     pass (bending, collision, D.4's second pass, motion) and the inextensibility passes see the
     step's motion without it, so they turn into velocity only the stretch that motion made."""
-    m_attribute, ps_next_pos, ps_velocity_pos, ps_drift = m.attribute, ps.next_pos, ps.velocity_pos, ps.quality_drift
-    start = m.team_particle_start[team]
-    for p in range(start, start + m.team_particle_count[team]):
-        vp = load3(ps_velocity_pos, p)
-        o = v_sub(vp, load3(ps_drift, p))
-        store3(ps_drift, p, o)
-        if (m_attribute[p] & MOVE) == 0:
-            continue
-        store3(ps_next_pos, p, v_sub(load3(ps_next_pos, p), o))
-        store3(ps_velocity_pos, p, v_sub(vp, o))
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    for j in range(BI[b, bk.BI_N]):
+        g = g0 + j
+        move = (topology[attribute + j] & MOVE) != 0
+        for l in range(w):
+            vp = get3(PS, g, st.VELOCITY_POS, l)
+            o = v_sub(vp, get3(PS, g, st.QUALITY_DRIFT, l))
+            put3(PS, g, st.QUALITY_DRIFT, l, o)
+            if move:
+                put3(PS, g, st.NEXT_POS, l, v_sub(get3(PS, g, st.NEXT_POS, l), o))
+                put3(PS, g, st.VELOCITY_POS, l, v_sub(vp, o))
 
 
-@kernel
-def drift_in_team(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, mode, mesh):
+@kernel(forceinline=False)
+def drift_in_block(PS, PM, PP, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y, distance_attenuation,
+                   mode, mesh):
     """The drift put back into next_pos and velocity_pos after the inextensibility pass, then
     the pass again (no DFTL reaction; a line cloth's tether and FTL only, a mesh cloth's without
     the edge projection) over the drifted positions with velocity_pos moved with every
     correction: the constraints bend the drift (its share along a taut edge is
     removed) and none of it becomes velocity. Without this, the passes removed the drift's
     stretch as velocity at every step, a share per step that per second grew with f
-    (docs/quality-mode.md, *Convergence*)."""
-    m_attribute, ps_next_pos, ps_velocity_pos, ps_drift = m.attribute, ps.next_pos, ps.velocity_pos, ps.quality_drift
-    start = m.team_particle_start[team]
-    end = start + m.team_particle_count[team]
-    for p in range(start, end):
-        if (m_attribute[p] & MOVE) == 0:
+    (docs/quality-mode.md, *Convergence*). Every lane of block b side by side; the drifted
+    position is kept in ``QUALITY_DRIFT`` during the pass."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    n = BI[b, bk.BI_N]
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    for j in range(n):
+        if (topology[attribute + j] & MOVE) == 0:
             continue
-        o = load3(ps_drift, p)
-        x = v_add(load3(ps_next_pos, p), o)
-        store3(ps_next_pos, p, x)
-        store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), o))
-        store3(ps_drift, p, x)
+        g = g0 + j
+        for l in range(w):
+            o = get3(PS, g, st.QUALITY_DRIFT, l)
+            x = v_add(get3(PS, g, st.NEXT_POS, l), o)
+            put3(PS, g, st.NEXT_POS, l, x)
+            put3(PS, g, st.VELOCITY_POS, l, v_add(get3(PS, g, st.VELOCITY_POS, l), o))
+            put3(PS, g, st.QUALITY_DRIFT, l, x)
     # a line cloth's edges are its parent links, which follow-the-leader alone brings within
     # their rest lengths: its edge passes are left out here (the tether and FTL remain)
     drift_mode = INEXT_FTL_TETHER if (mode == INEXT_FTL_EDGES and not mesh) else mode
-    inextensibility_passes(m, ps, prm, ts, team, frequency_ratio, power_y, distance_attenuation, drift_mode, False,
-                           0.0)
-    for p in range(start, end):
-        if (m_attribute[p] & MOVE) == 0:
+    inextensibility_passes(PS, PM, PP, TS, TM, LM, EDS, P, BI, topology, b, frequency_ratio, power_y,
+                           distance_attenuation, drift_mode, False, 0.0)
+    for j in range(n):
+        if (topology[attribute + j] & MOVE) == 0:
             continue
-        x = load3(ps_next_pos, p)
-        store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_sub(x, load3(ps_drift, p))))
-        store3(ps_drift, p, (0.0, 0.0, 0.0))
+        g = g0 + j
+        for l in range(w):
+            moved = v_sub(get3(PS, g, st.NEXT_POS, l), get3(PS, g, st.QUALITY_DRIFT, l))
+            put3(PS, g, st.VELOCITY_POS, l, v_add(get3(PS, g, st.VELOCITY_POS, l), moved))
+            put3(PS, g, st.QUALITY_DRIFT, l, ZERO3)

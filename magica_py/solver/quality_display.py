@@ -1,21 +1,23 @@
 """Quality mode's display (``docs/quality-mode.md``, *Display*): after E.1 (``display.py``) the
 interpolated display is moved towards a target that is out of the colliders at this frame's
 pose, never showing an edge longer than the step states it interpolates allow
-(``display_constraints_team``). The step passes are in ``quality.py``.
+(``display_constraints_block``, lane by lane: the fraction each lane's display moves by
+depends on its state). The step passes are in ``quality.py``.
 """
 from __future__ import annotations
 
 import math
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import (
-    load3, load4, q_rotate, store3, v_add, v_dot, v_length, v_length_sq, v_lerp, v_scale, v_sub,
-)
+from magica_py.kernels.math3d import q_rotate, v_add, v_dot, v_length, v_length_sq, v_lerp, v_scale, v_sub
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
 from magica_py.solver.colliders import capsule_ends
 from magica_py.solver.constraints.collision import (
     INVALID_OR_NO_COLLISION, PLANE, SPHERE, particle_radius, segment_parameter,
 )
-from magica_py.solver.parameters import length_unit
+from magica_py.solver.lanes import get1, get3, get4, put3
+from magica_py.solver.parameters import PRM_COLLISION_LAST, PRM_COLLISION_MODE
 from magica_py.solver.quality import MOVE, clamp_to_sphere, push_out_of_ball
 
 DISPLAY_PASSES = 2        # collider push + edge clamp passes of the quality display
@@ -24,27 +26,34 @@ DISPLAY_MOVE_PASSES = 3    # bounded moves of the quality display towards its ta
 
 
 @kernel
-def frame_collider_push(cs, k, x, r):
-    """``x`` (a sphere of radius r) moved onto the surface of collider slot k at this frame's
-    pose (G.2: ``frame_pos`` / ``frame_rot`` / ``frame_scale``) when it lies inside it, along
-    the shortest way out; unchanged otherwise (or when its centre is on the capsule's axis)."""
-    shape = cs.shape[k]
-    pos = load3(cs.frame_pos, k)
-    rot = load4(cs.frame_rot, k)
+def frame_capsule(CS, k, l, direction, reverse, aligned, pos, rot):
+    """(start, end, start radius, end radius) of capsule slot k of lane l at this frame's pose
+    (``capsule_ends`` with the slot's size and frame scale; ``direction``, ``reverse``,
+    ``aligned`` from the block's topology)."""
+    scale = get3(CS, k, st.FRAME_SCALE, l)
+    s = scale[0] if direction == 0 else (scale[1] if direction == 1 else scale[2])
+    return capsule_ends(pos, rot, direction, reverse != 0, aligned != 0, get3(CS, k, st.SIZE, l), s)
+
+
+@kernel
+def frame_collider_push(CS, k, l, shape, direction, reverse, aligned, x, r):
+    """``x`` (a sphere of radius r) moved onto the surface of collider slot k of lane l at this
+    frame's pose (G.2: ``FRAME_POS`` / ``FRAME_ROT`` / ``FRAME_SCALE``) when it lies inside it,
+    along the shortest way out; unchanged otherwise (or when its centre is on the capsule's
+    axis). ``shape``, ``direction``, ``reverse``, ``aligned``: the slot's (block topology)."""
+    pos = get3(CS, k, st.FRAME_POS, l)
+    rot = get4(CS, k, st.FRAME_ROT, l)
     if shape == PLANE:
-        n = q_rotate(rot, (0.0, -1.0 if cs.frame_scale[k, 1] < 0.0 else 1.0, 0.0))
+        n = q_rotate(rot, (0.0, -1.0 if get3(CS, k, st.FRAME_SCALE, l)[1] < 0.0 else 1.0, 0.0))
         d = v_dot(v_sub(x, pos), n) - r
         return v_sub(x, v_scale(n, d)) if d < 0.0 else x
     if shape == SPHERE:
         a = pos
         b = pos
-        ra = cs.size[k, 0] * abs(cs.frame_scale[k, 0])
+        ra = get3(CS, k, st.SIZE, l)[0] * abs(get3(CS, k, st.FRAME_SCALE, l)[0])
         rb = ra
     else:
-        d = cs.direction[k]
-        size = (cs.size[k, 0], cs.size[k, 1], cs.size[k, 2])
-        a, b, ra, rb = capsule_ends(pos, rot, d, cs.reverse_direction[k] != 0, cs.aligned_on_center[k] != 0,
-                                    size, cs.frame_scale[k, d])
+        a, b, ra, rb = frame_capsule(CS, k, l, direction, reverse, aligned, pos, rot)
     t = segment_parameter(x, a, b)
     c = v_lerp(a, b, t)
     reach = ra + (rb - ra) * t + r
@@ -52,7 +61,7 @@ def frame_collider_push(cs, k, x, r):
 
 
 @kernel
-def frame_collider_push_bounded(cs, k, x, r, parent, bound):
+def frame_collider_push_bounded(CS, k, l, shape, direction, reverse, aligned, x, r, parent, bound):
     """``frame_collider_push`` of x, kept within ``bound`` of ``parent`` when it can be: a
     pushed point farther than ``bound`` from ``parent`` is moved to the nearest point of the
     circle where the pushed-to surface (the sphere, or a capsule's sphere at the pushed
@@ -60,20 +69,17 @@ def frame_collider_push_bounded(cs, k, x, r, parent, bound):
     sphere, where alternating the push with the parent clamp only converges slowly. Where that
     circle does not exist (the parent deeper than ``bound``, or a plane) the pushed point is
     returned and the caller's clamp wins."""
-    y = frame_collider_push(cs, k, x, r)
-    if cs.shape[k] == PLANE or (y[0] == x[0] and y[1] == x[1] and y[2] == x[2]):
+    y = frame_collider_push(CS, k, l, shape, direction, reverse, aligned, x, r)
+    if shape == PLANE or (y[0] == x[0] and y[1] == x[1] and y[2] == x[2]):
         return y
     if v_length_sq(v_sub(y, parent)) <= bound * bound:
         return y
-    pos = load3(cs.frame_pos, k)
-    if cs.shape[k] == SPHERE:
+    pos = get3(CS, k, st.FRAME_POS, l)
+    if shape == SPHERE:
         c = pos
-        reach = cs.size[k, 0] * abs(cs.frame_scale[k, 0]) + r
+        reach = get3(CS, k, st.SIZE, l)[0] * abs(get3(CS, k, st.FRAME_SCALE, l)[0]) + r
     else:
-        d = cs.direction[k]
-        size = (cs.size[k, 0], cs.size[k, 1], cs.size[k, 2])
-        a, b, ra, rb = capsule_ends(pos, load4(cs.frame_rot, k), d, cs.reverse_direction[k] != 0,
-                                    cs.aligned_on_center[k] != 0, size, cs.frame_scale[k, d])
+        a, b, ra, rb = frame_capsule(CS, k, l, direction, reverse, aligned, pos, get4(CS, k, st.FRAME_ROT, l))
         t = segment_parameter(x, a, b)
         c = v_lerp(a, b, t)
         reach = ra + (rb - ra) * t + r
@@ -95,16 +101,16 @@ def frame_collider_push_bounded(cs, k, x, r, parent, bound):
 
 
 @kernel
-def display_edge_bound(ps, a, b, dt):
-    """The longest the displayed edge (a, b) may be: the larger of its step-basic rest length
-    and its length in the two step states the display interpolates, the last one
-    (``old_pos``) and the one before (``old_pos - real_velocity dt``, D.10's definition of the
-    real velocity; the C.5 shift moves and turns both together)."""
-    old_a = load3(ps.old_pos, a)
-    old_b = load3(ps.old_pos, b)
-    before = v_sub(v_sub(old_a, v_scale(load3(ps.real_velocity, a), dt)),
-                   v_sub(old_b, v_scale(load3(ps.real_velocity, b), dt)))
-    rest = v_length(v_sub(load3(ps.step_basic_pos, a), load3(ps.step_basic_pos, b)))
+def display_edge_bound(PS, ga, gb, l, dt):
+    """The longest the displayed edge (particle slots ga, gb; lane l) may be: the larger of its
+    step-basic rest length and its length in the two step states the display interpolates, the
+    last one (``OLD_POS``) and the one before (``OLD_POS - REAL_VELOCITY dt``, D.10's definition
+    of the real velocity; the C.5 shift moves and turns both together)."""
+    old_a = get3(PS, ga, st.OLD_POS, l)
+    old_b = get3(PS, gb, st.OLD_POS, l)
+    before = v_sub(v_sub(old_a, v_scale(get3(PS, ga, st.REAL_VELOCITY, l), dt)),
+                   v_sub(old_b, v_scale(get3(PS, gb, st.REAL_VELOCITY, l), dt)))
+    rest = v_length(v_sub(get3(PS, ga, st.STEP_BASIC_POS, l), get3(PS, gb, st.STEP_BASIC_POS, l)))
     return max(rest, max(v_length(v_sub(old_a, old_b)), v_length(before)))
 
 
@@ -125,20 +131,21 @@ def safe_fraction(e0, de, bound):
     return min(max((-half_b + math.sqrt(disc)) / a, 0.0), 1.0)
 
 
-@kernel
-def display_constraints_team(m, ps, prm, ts, cs, team, dt):
-    """Quality display after E.1 (``display.display_team``): the interpolated display in
-    ``ps.position`` (every edge within its bound, ``display_edge_bound``) moved towards a
-    target that is out of the colliders at this frame's pose, never past the bounds.
+@kernel(forceinline=False)
+def display_constraints_lane(PS, PP, TS, CS, P, BI, topology, b, l, dt):
+    """Quality display of lane l of block b after E.1 (``display.display_block``): the
+    interpolated display in ``POSITION`` (every edge within its bound,
+    ``display_edge_bound``) moved towards a target that is out of the colliders at this
+    frame's pose, never past the bounds.
 
-    1. The target, in ``ps.position``: along every baseline, parents first, each Move
+    1. The target, in ``POSITION``: along every baseline, parents first, each Move
        particle is pushed out of the team's colliders at this frame's pose, onto the
        nearest point that is also within its parent link's bound when there is one
        (``frame_collider_push_bounded``; only when the cloth collides: ``collision_mode`` not
        none and ``collision_last`` on), and kept within that bound (follow-the-leader),
        ``DISPLAY_PASSES`` times; then ``DISPLAY_EDGE_PASSES`` Gauss-Seidel passes shorten the
        other edges (a skirt's rings) longer than their bound, both ends moving.
-    2. The display, in ``ps.disp_pos``: starting from the interpolated display, the whole
+    2. The display, in ``DISP_POS``: starting from the interpolated display, the whole
        team moves towards its target by one common fraction, the largest that keeps every
        link (D.4's partners, every proxy edge) within its bound (each link moves linearly in
        the fraction and its length is convex, ``safe_fraction``): a target within every
@@ -147,108 +154,122 @@ def display_constraints_team(m, ps, prm, ts, cs, team, dt):
        bound with its neighbours' current display, ``DISPLAY_MOVE_PASSES`` times. Every move
        keeps the display within the bounds, so none is ever shown longer than the state
        allows; where a push would need more stretch than the state has, the particle is
-       shown partly inside the collider. Then copied to ``ps.position``."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    cs_scale_suspend, m_attribute, m_baseline_count = cs.scale_suspend, m.attribute, m.baseline_count
-    m_baseline_data, m_baseline_start, m_depth = m.baseline_data, m.baseline_start, m.depth
-    m_distance_count, m_distance_start = m.distance_count, m.distance_start
-    m_distance_target, m_edges, m_parent = m.distance_target, m.edges, m.parent
-    m_team_baseline_count, prm_radius_curve, ps_disp_pos = m.team_baseline_count, prm.radius_curve, ps.disp_pos
-    ps_position = ps.position
-    blend = ts.blend_weight[team]
-    start = m.team_particle_start[team]
-    end = start + m.team_particle_count[team]
-    for p in range(start, end):   # the interpolated display, blended (E.1)
-        store3(ps_disp_pos, p, load3(ps_position, p))
-    if blend <= 0.0:
+       shown partly inside the collider. Then copied to ``POSITION``."""
+    g0 = BI[b, bk.BI_G0]
+    n = BI[b, bk.BI_N]
+    attribute, parent = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_PARENT]
+    bl_start, bl_count, bl_data = BI[b, bk.BI_BASELINE_START], BI[b, bk.BI_BASELINE_COUNT], BI[b, bk.BI_BASELINE_DATA]
+    link_start, link_count, link_target = (BI[b, bk.BI_DISTANCE_START], BI[b, bk.BI_DISTANCE_COUNT],
+                                           BI[b, bk.BI_DISTANCE_TARGET])
+    pairs = BI[b, bk.BI_EDGE_PAIRS]
+    c0 = BI[b, bk.BI_COLLIDER0]
+    colliders = BI[b, bk.BI_COLLIDERS]
+    shapes, directions = BI[b, bk.BI_COLLIDER_SHAPE], BI[b, bk.BI_COLLIDER_DIRECTION]
+    reverses, aligns = BI[b, bk.BI_COLLIDER_REVERSE], BI[b, bk.BI_COLLIDER_ALIGNED]
+    for j in range(n):   # the interpolated display, blended (E.1)
+        put3(PS, g0 + j, st.DISP_POS, l, get3(PS, g0 + j, st.POSITION, l))
+    if get1(TS, b, st.BLEND_WEIGHT, l) <= 0.0:
         return
-    collide = prm.collision_mode[team] != 0 and prm.collision_last[team] != 0 and ts.collider_count[team] > 0
-    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
-    c0 = ts.collider_start[team]
-    c1 = c0 + ts.collider_count[team]
-    b0 = m.team_baseline_start[team]
-    for bl in range(b0, b0 + m_team_baseline_count[team]):
-        e0 = m_baseline_start[bl]
-        for e in range(e0 + 1, e0 + m_baseline_count[bl]):
-            v = m_baseline_data[e]
-            p = m_parent[v]
-            attr = m_attribute[v]
+    collide = P[b, PRM_COLLISION_MODE] != 0.0 and P[b, PRM_COLLISION_LAST] != 0.0 and colliders > 0
+    scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
+    for line in range(BI[b, bk.BI_BASELINES]):
+        e0 = topology[bl_start + line]
+        for e in range(e0 + 1, e0 + topology[bl_count + line]):
+            v = topology[bl_data + e]
+            p = topology[parent + v]
+            attr = topology[attribute + v]
             if (attr & MOVE) == 0 or p < 0:
                 continue
-            bound = display_edge_bound(ps, v, p, dt)
-            parent_pos = load3(ps_position, p)
-            x0 = load3(ps_position, v)
-            x = x0
+            gv = g0 + v
+            gp = g0 + p
+            bound = display_edge_bound(PS, gv, gp, l, dt)
+            parent_pos = get3(PS, gp, st.POSITION, l)
+            x = get3(PS, gv, st.POSITION, l)
             hits = collide and (attr & INVALID_OR_NO_COLLISION) == 0
-            r = particle_radius(prm_radius_curve, team, m_depth[v], scale)
+            r = particle_radius(get1(PP, gv, bk.CURVE_RADIUS, l), scale)
             for _ in range(DISPLAY_PASSES):
                 if hits:
-                    for k in range(c0, c1):
-                        if cs_scale_suspend[k] == 0:
-                            x = frame_collider_push_bounded(cs, k, x, r, parent_pos, bound)
+                    for c in range(colliders):
+                        k = c0 + c
+                        if get1(CS, k, st.SCALE_SUSPEND, l) == 0.0:
+                            x = frame_collider_push_bounded(CS, k, l, topology[shapes + c], topology[directions + c],
+                                                            topology[reverses + c], topology[aligns + c], x, r,
+                                                            parent_pos, bound)
                 x, _move = clamp_to_sphere(x, parent_pos, bound)
-            store3(ps_position, v, x)
-    f0 = m.team_edge_start[team]
-    f1 = f0 + m.team_edge_count[team]
+            put3(PS, gv, st.POSITION, l, x)
     for _ in range(DISPLAY_EDGE_PASSES):
-        for f in range(f0, f1):
-            a = m_edges[f, 0]
-            b = m_edges[f, 1]
-            wa = 1.0 if (m_attribute[a] & MOVE) != 0 else 0.0
-            wb = 1.0 if (m_attribute[b] & MOVE) != 0 else 0.0
+        for f in range(BI[b, bk.BI_EDGES]):
+            ia = topology[pairs + 2 * f]
+            ib = topology[pairs + 2 * f + 1]
+            wa = 1.0 if (topology[attribute + ia] & MOVE) != 0 else 0.0
+            wb = 1.0 if (topology[attribute + ib] & MOVE) != 0 else 0.0
             if wa + wb <= 0.0:
                 continue
-            pa = load3(ps_position, a)
-            pb = load3(ps_position, b)
+            ga = g0 + ia
+            gb = g0 + ib
+            pa = get3(PS, ga, st.POSITION, l)
+            pb = get3(PS, gb, st.POSITION, l)
             d = v_sub(pb, pa)
             length = v_length(d)
-            bound = display_edge_bound(ps, a, b, dt)
+            bound = display_edge_bound(PS, ga, gb, l, dt)
             if length <= bound or length < 1e-12:
                 continue
             c = v_scale(d, (length - bound) / (length * (wa + wb)))
-            store3(ps_position, a, v_add(pa, v_scale(c, wa)))
-            store3(ps_position, b, v_sub(pb, v_scale(c, wb)))
+            put3(PS, ga, st.POSITION, l, v_add(pa, v_scale(c, wa)))
+            put3(PS, gb, st.POSITION, l, v_sub(pb, v_scale(c, wb)))
     # the whole team towards its target by one fraction: each edge moves linearly in it (an edge
     # is seen from its moving ends, as in the passes below; one whose ends keep still keeps its length)
     common = 1.0
     moved = False
-    for v in range(start, end):
-        shown = load3(ps_disp_pos, v)
-        target = load3(ps_position, v)
+    for v in range(n):
+        gv = g0 + v
+        shown = get3(PS, gv, st.DISP_POS, l)
+        target = get3(PS, gv, st.POSITION, l)
         move_v = v_sub(target, shown)
-        if (m_attribute[v] & MOVE) == 0 or v_dot(move_v, move_v) == 0.0:
+        if (topology[attribute + v] & MOVE) == 0 or v_dot(move_v, move_v) == 0.0:
             continue
         moved = True
-        for link in range(m_distance_start[v], m_distance_start[v] + m_distance_count[v]):
-            u = m_distance_target[link]
-            e0 = v_sub(shown, load3(ps_disp_pos, u))
-            e1 = v_sub(target, load3(ps_position, u))
+        k0 = topology[link_start + v]
+        for link in range(k0, k0 + topology[link_count + v]):
+            gu = g0 + topology[link_target + link]
+            e0 = v_sub(shown, get3(PS, gu, st.DISP_POS, l))
+            e1 = v_sub(target, get3(PS, gu, st.POSITION, l))
             if v_dot(e1, e1) > v_dot(e0, e0):   # otherwise the edge never gets longer than now
-                common = min(common, safe_fraction(e0, v_sub(e1, e0), display_edge_bound(ps, v, u, dt)))
+                common = min(common, safe_fraction(e0, v_sub(e1, e0), display_edge_bound(PS, gv, gu, l, dt)))
     if not moved:
-        return   # the target is the interpolated display (already in ps.position)
+        return   # the target is the interpolated display (already in POSITION)
     if common > 0.0:
-        for v in range(start, end):
-            if (m_attribute[v] & MOVE) != 0:
-                shown = load3(ps_disp_pos, v)
-                store3(ps_disp_pos, v, v_add(shown, v_scale(v_sub(load3(ps_position, v), shown), common)))
+        for v in range(n):
+            if (topology[attribute + v] & MOVE) != 0:
+                gv = g0 + v
+                shown = get3(PS, gv, st.DISP_POS, l)
+                put3(PS, gv, st.DISP_POS, l, v_add(shown, v_scale(v_sub(get3(PS, gv, st.POSITION, l), shown), common)))
     if common >= 1.0:
         passes = 0   # every particle reached its target
     else:
         passes = DISPLAY_MOVE_PASSES
     for _ in range(passes):
-        for v in range(start, end):
-            if (m_attribute[v] & MOVE) == 0:
+        for v in range(n):
+            if (topology[attribute + v] & MOVE) == 0:
                 continue
-            shown = load3(ps_disp_pos, v)
-            move = v_sub(load3(ps_position, v), shown)
+            gv = g0 + v
+            shown = get3(PS, gv, st.DISP_POS, l)
+            move = v_sub(get3(PS, gv, st.POSITION, l), shown)
             if v_dot(move, move) == 0.0:
                 continue
             fraction = 1.0
-            for link in range(m_distance_start[v], m_distance_start[v] + m_distance_count[v]):
-                u = m_distance_target[link]
-                fraction = min(fraction, safe_fraction(v_sub(shown, load3(ps_disp_pos, u)), move,
-                                                       display_edge_bound(ps, v, u, dt)))
-            store3(ps_disp_pos, v, v_add(shown, v_scale(move, fraction)))
-    for p in range(start, end):
-        store3(ps_position, p, load3(ps_disp_pos, p))
+            k0 = topology[link_start + v]
+            for link in range(k0, k0 + topology[link_count + v]):
+                gu = g0 + topology[link_target + link]
+                fraction = min(fraction, safe_fraction(v_sub(shown, get3(PS, gu, st.DISP_POS, l)), move,
+                                                       display_edge_bound(PS, gv, gu, l, dt)))
+            put3(PS, gv, st.DISP_POS, l, v_add(shown, v_scale(move, fraction)))
+    for j in range(n):
+        put3(PS, g0 + j, st.POSITION, l, get3(PS, g0 + j, st.DISP_POS, l))
+
+
+@kernel(forceinline=False)
+def display_constraints_block(PS, PP, TS, CS, P, BI, topology, b, dt):
+    """The quality display (``display_constraints_lane``) of every lane of block b."""
+    for l in range(bk.lane_width(BI, b)):
+        display_constraints_lane(PS, PP, TS, CS, P, BI, topology, b, l, dt)

@@ -10,14 +10,16 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    from_to_rotation, from_to_rotation_unit, load3, load4, q_inverse, q_mul, store3,
-    q_rotate, q_slerp, store4, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp, v_normalize, v_scale,
-    v_sub,
+    from_to_rotation_select, from_to_rotation_unit, orthogonal_axis_select, q_axis_angle, q_inverse, q_mul,
+    q_rotate, q_slerp, q_slerp_select, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp, v_normalize_select,
+    v_scale, v_sub,
 )
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import LANES, get1, get3, get4, put3, put4
+from magica_py.solver.parameters import PRM_ANIMATION_POSE_RATIO, PRM_ROOT_ROTATION, PRM_ROTATIONAL_INTERPOLATION
 
 FIXED = 0x01
 MOVE = 0x02
@@ -79,6 +81,24 @@ def rot_from_normal_tangent_select(normal, tangent):
 
 
 @kernel
+def swing_select(a, b):
+    """``full_swing(a, b)`` (unit a, b) without a branch, the same bits on every path: its
+    degenerate cases call ``from_to_rotation_unit``, whose general (acos, sincos) branch the
+    very tests that lead there exclude; the half-angle form, the flip and the identity are
+    selected. Used by E.2 and the angle limit (D.5)."""
+    c = v_dot(a, b)
+    c = 1.0 if c > 1.0 else c
+    c = -1.0 if c < -1.0 else c
+    x = v_cross(a, b)
+    w = 1.0 + c
+    inv = 1.0 / math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + w * w)
+    half_angle = (x[0] * inv, x[1] * inv, x[2] * inv, w * inv)
+    opposite = abs(1.0 + c) < 1e-6
+    flip = q_axis_angle(orthogonal_axis_select(a), math.pi * 1.0)
+    return flip if opposite else (IDENTITY if abs(1.0 - c) < 1e-6 else half_angle)
+
+
+@kernel
 def full_swing(a, b):
     """``fromto_v(a, b, 1)`` for unit a, b without trigonometry: the half-angle quaternion
     ``normalize(a x b, 1 + a.b)`` is the same rotation; the reference's degenerate cases
@@ -109,92 +129,113 @@ def line_child_pose(ibq, bp, rest_position, rest_rotation, base_pos_c, base_rot_
     return lp, lq
 
 
-@kernel(inline="always")
+@kernel
 def line_child_rotation(q, lq, tv, cur, zero):
     """E.2: rotation of a moving child: its rest rotation carried by x's rotation q, swung so
-    the rest edge ``tv`` matches the simulated edge ``cur`` (not for a zero-distance child)."""
+    the rest edge ``tv`` matches the simulated edge ``cur`` (not for a zero-distance child).
+    Branch-free (``swing_select``: full_swing's bits)."""
     qc = q_mul(q, lq)
     if not zero:
-        qc = q_mul(full_swing(v_normalize(tv), v_normalize(cur)), qc)
+        qc = q_mul(swing_select(v_normalize_select(tv), v_normalize_select(cur)), qc)
     return qc
 
 
-@kernel(inline="always")
+@kernel
 def line_turn(q, ctv, cv, t):
     """E.2: x's rotation q turned by fraction t from its children's rest directions ``ctv``
-    towards their simulated ones ``cv`` (left as is when either sum is (near) zero)."""
-    if (v_length(ctv) >= 1e-8) & (v_length(cv) >= 1e-8):
-        q = q_mul(from_to_rotation(ctv, cv, t), q)
-    return q
-
-
-@kernel(inline="always")
-def line_blend(bq, q, bw):
-    """E.2: the bone rotation blended from the animated one by ``blend_weight`` bw."""
-    return q if bw == 1.0 else q_slerp(bq, q, bw)
+    towards their simulated ones ``cv`` (left as is when either sum is (near) zero).
+    Branch-free."""
+    turned = q_mul(from_to_rotation_select(ctv, cv, t), q)
+    return turned if ((v_length(ctv) >= 1e-8) & (v_length(cv) >= 1e-8)) else q
 
 
 @kernel
-def line_rotations_team(m, ps, prm, ts, team):
-    """E.2 over the IncludeLine baselines of one team."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_baseline_count, m_baseline_data, m_baseline_flags = m.baseline_count, m.baseline_data, m.baseline_flags
-    m_baseline_start, m_team_baseline_count = m.baseline_start, m.team_baseline_count
-    if m.team_has_lines[team] == 0:
+def line_blend(bq, q, bw):
+    """E.2: the bone rotation blended from the animated one by ``blend_weight`` bw. Branch-free."""
+    blended = q_slerp_select(bq, q, bw)
+    return q if bw == 1.0 else blended
+
+
+@kernel(forceinline=False)
+def line_rotations_block(PS, PM, TS, P, BI, topology, b):
+    """E.2 over the IncludeLine baselines of block b, every lane side by side. For each bone
+    x with children, in baseline order: its pose is copied next to each child (``PARENT_*``),
+    each child's rotation and its rest and simulated edges are solved across the lanes
+    (``CHILD_REST_EDGE`` / ``CHILD_EDGE``), the edges are summed at x in child order, and x
+    turns and blends. Each loop touches one or two items, so the lane loops vectorise."""
+    if BI[b, bk.BI_HAS_LINES] == 0:
         return
-    ri = prm.rotational_interpolation[team]
-    rr = prm.root_rotation[team]
-    a = prm.animation_pose_ratio[team]
+    ri = P[b, PRM_ROTATIONAL_INTERPOLATION]
+    rr = P[b, PRM_ROOT_ROTATION]
+    a = P[b, PRM_ANIMATION_POSE_RATIO]
     a_zero = a == 0.0
-    bw = ts.blend_weight[team]
-    # arrays as locals, flat rows, unsigned indices (through the tables the array pointers
-    # are reloaded after every store); the walk and the maths are unchanged
-    attribute, child_start, child_count, child_data = m.attribute, m.child_start, m.child_count, m.child_data
-    rest_position, rest_rotation = m.baseline_local_position, m.baseline_local_rotation
-    position, rotation = ps.position, ps.rotation
-    base_pos_buffer, base_rot_buffer = ps.base_pos_buffer, ps.base_rot_buffer
-    b0 = m.team_baseline_start[team]
-    for b in range(b0, b0 + m_team_baseline_count[team]):
-        if (m_baseline_flags[b] & INCLUDE_LINE) == 0:
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    child_start, child_count, child_data = BI[b, bk.BI_CHILD_START], BI[b, bk.BI_CHILD_COUNT], BI[b, bk.BI_CHILD_DATA]
+    bl_flags, bl_start, bl_count, bl_data = (BI[b, bk.BI_BASELINE_FLAGS], BI[b, bk.BI_BASELINE_START],
+                                             BI[b, bk.BI_BASELINE_COUNT], BI[b, bk.BI_BASELINE_DATA])
+    z = (0.0, 0.0, 0.0)
+    blend = False   # a lane whose blend weight is not 1 (line_blend is the identity at 1: its slerp left out)
+    for l in range(w):
+        blend = blend | (get1(TS, b, st.BLEND_WEIGHT, l) != 1.0)
+    for line in range(BI[b, bk.BI_BASELINES]):
+        if (topology[bl_flags + line] & INCLUDE_LINE) == 0:
             continue
-        e0 = m_baseline_start[b]
-        for e in range(e0, e0 + m_baseline_count[b]):
-            x = np.uint64(m_baseline_data[e])
-            attr = attribute[x]
-            pos = load3(position, x)
-            q = load4(rotation, x)
-            bp = load3(base_pos_buffer, x)
-            bq = load4(base_rot_buffer, x)
-            cn = child_count[x]
+        e0 = topology[bl_start + line]
+        for e in range(e0, e0 + topology[bl_count + line]):
+            x = topology[bl_data + e]
+            gx = g0 + x
+            attr = topology[attribute + x]
+            cn = topology[child_count + x]
+            c0 = topology[child_start + x]
             if cn > 0 and (attr & (FIXED | MOVE)) != 0:
-                ibq = q_inverse(bq)
-                ctv = (0.0, 0.0, 0.0)
-                cv = (0.0, 0.0, 0.0)
-                c0 = child_start[x]
                 for k in range(c0, c0 + cn):
-                    c = np.uint64(child_data[k])
-                    if a_zero:
-                        lp, lq = line_child_pose(ibq, bp, load3(rest_position, c), load4(rest_rotation, c),
-                                                 load3(base_pos_buffer, c), load4(base_rot_buffer, c), a, True)
-                    else:
-                        lp, lq = line_child_pose(ibq, bp, load3(rest_position, c), load4(rest_rotation, c),
-                                                 load3(base_pos_buffer, c), load4(base_rot_buffer, c), a, False)
-                    zero = (attribute[c] & ZERO_DISTANCE) != 0
-                    tv = (0.0, 0.0, 0.0) if zero else q_rotate(q, lp)
-                    ctv = v_add(ctv, tv)
-                    if (attribute[c] & MOVE) != 0:
-                        cur = v_sub(load3(position, c), pos)
-                        cv = v_add(cv, cur)
-                        qc = line_child_rotation(q, lq, tv, cur, zero)
-                        store4(rotation, c, qc)
-                    else:
-                        cv = v_add(cv, tv)
+                    gc = g0 + topology[child_data + k]
+                    for l in range(w):   # x's pose next to the child
+                        put4(PS, gc, st.PARENT_ROTATION, l, get4(PS, gx, st.ROTATION, l))
+                        put4(PS, gc, st.PARENT_BASE_ROT, l, get4(PS, gx, st.BASE_ROT_BUFFER, l))
+                        put3(PS, gc, st.PARENT_BASE_POS, l, get3(PS, gx, st.BASE_POS_BUFFER, l))
+                        put3(PS, gc, st.PARENT_POSITION, l, get3(PS, gx, st.POSITION, l))
+                for k in range(c0, c0 + cn):
+                    c = topology[child_data + k]
+                    gc = g0 + c
+                    zero = (topology[attribute + c] & ZERO_DISTANCE) != 0
+                    move = (topology[attribute + c] & MOVE) != 0
+                    for l in range(w):
+                        q = get4(PS, gc, st.PARENT_ROTATION, l)
+                        lp, lq = line_child_pose(q_inverse(get4(PS, gc, st.PARENT_BASE_ROT, l)),
+                                                 get3(PS, gc, st.PARENT_BASE_POS, l),
+                                                 get3(PM, gc, bk.BASELINE_LOCAL_POSITION, l),
+                                                 get4(PM, gc, bk.BASELINE_LOCAL_ROTATION, l),
+                                                 get3(PS, gc, st.BASE_POS_BUFFER, l),
+                                                 get4(PS, gc, st.BASE_ROT_BUFFER, l), a, a_zero)
+                        tv = z if zero else q_rotate(q, lp)
+                        cur = v_sub(get3(PS, gc, st.POSITION, l), get3(PS, gc, st.PARENT_POSITION, l))
+                        put3(PS, gc, st.CHILD_REST_EDGE, l, tv)
+                        put3(PS, gc, st.CHILD_EDGE, l, cur if move else tv)
+                        if move:
+                            put4(PS, gc, st.ROTATION, l, line_child_rotation(q, lq, tv, cur, zero))
+                for l in range(w):
+                    put3(PS, gx, st.CHILD_REST_SUM, l, z)
+                    put3(PS, gx, st.CHILD_EDGE_SUM, l, z)
+                for k in range(c0, c0 + cn):   # the sums in child order
+                    gc = g0 + topology[child_data + k]
+                    for l in range(w):
+                        put3(PS, gx, st.CHILD_REST_SUM, l,
+                             v_add(get3(PS, gx, st.CHILD_REST_SUM, l), get3(PS, gc, st.CHILD_REST_EDGE, l)))
+                        put3(PS, gx, st.CHILD_EDGE_SUM, l,
+                             v_add(get3(PS, gx, st.CHILD_EDGE_SUM, l), get3(PS, gc, st.CHILD_EDGE, l)))
                 t = ri if (attr & MOVE) != 0 else rr
-                q = line_turn(q, ctv, cv, t)
-            store4(rotation, x, line_blend(bq, q, bw))
-
-
-TRIANGLES_PER_VERTEX = 6   # E.3's vectorised pass sums up to this many triangles per vertex
+                for l in range(w):
+                    q = line_turn(get4(PS, gx, st.ROTATION, l), get3(PS, gx, st.CHILD_REST_SUM, l),
+                                  get3(PS, gx, st.CHILD_EDGE_SUM, l), t)
+                    put4(PS, gx, st.ROTATION, l, q)
+            if blend:
+                for l in range(w):
+                    put4(PS, gx, st.ROTATION, l, line_blend(get4(PS, gx, st.BASE_ROT_BUFFER, l),
+                                                            get4(PS, gx, st.ROTATION, l),
+                                                            get1(TS, b, st.BLEND_WEIGHT, l)))
 
 
 @kernel
@@ -238,85 +279,56 @@ def vertex_frame_rotation(ns, ts_):
     return valid, look_rotation_select(binormal, nn)
 
 
-@kernel
-def triangle_rotations_team(m, ps, team):
-    """E.3: rotation of triangle vertices from their triangles' display normals and uv tangents.
+@kernel(forceinline=False)
+def triangle_rotations_block(PS, TRS, TRM, BI, topology, b):
+    """E.3 over block b: rotation of triangle vertices from their triangles' display normals
+    and uv tangents.
 
-    Each triangle's frame is computed once (into ``ps.triangle_normal/tangent``) and then
-    summed per vertex: a vertex of a strip mesh touches up to 6 triangles, so computing the
-    frame per (vertex, triangle) pair did the same work ~3 times. Positions do not change in
-    E.3, so the frames and sums are bit-identical either way.
-
-    The per-vertex sums run over ``TRIANGLES_PER_VERTEX`` slots, the unused ones selected away
-    (same additions in the same order); a vertex with more triangles is left to a scalar pass."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_vertex_triangle_count = m.vertex_triangle_count
-    t0 = m.team_triangle_start[team]
-    tn_count = m.team_triangle_count[team]
+    Each triangle's frame is computed once (into ``TRIANGLE_NORMAL/TANGENT``) and then summed
+    per vertex: a vertex of a strip mesh touches up to 6 triangles, so computing the frame
+    per (vertex, triangle) pair did the same work ~3 times. Positions do not change in E.3,
+    so the frames and sums are the same bits either way."""
+    tn_count = BI[b, bk.BI_TRIANGLES]
     if tn_count == 0:
         return
-    triangles, triangle_uv = m.triangles, m.triangle_uv
-    position = ps.position
-    triangle_normal, triangle_tangent = ps.triangle_normal, ps.triangle_tangent
-    for tri in range(t0, t0 + tn_count):
-        tn, tt = triangle_frame_from(
-            load3(position, triangles[tri, 0]), load3(position, triangles[tri, 1]), load3(position, triangles[tri, 2]),
-            (triangle_uv[tri, 0, 0], triangle_uv[tri, 0, 1]),
-            (triangle_uv[tri, 1, 0], triangle_uv[tri, 1, 1]),
-            (triangle_uv[tri, 2, 0], triangle_uv[tri, 2, 1]))
-        store3(triangle_normal, tri, tn)
-        store3(triangle_tangent, tri, tt)
-    start = m.team_particle_start[team]
-    count = m.team_particle_count[team]
-    vt_start, vt_count, vt_data, vt_flip = (m.vertex_triangle_start, m_vertex_triangle_count,
-                                            m.vertex_triangle_data, m.vertex_triangle_flip)
-    rotation = ps.rotation
-    crowded = 0
-    first = np.uint64(start)
-    for j in range(count):
-        p = first + np.uint64(j)
-        n = vt_count[p]
-        k0 = vt_start[p]
-        ns = (0.0, 0.0, 0.0)
-        ts_ = (0.0, 0.0, 0.0)
-        for k in range(TRIANGLES_PER_VERTEX):
-            used = k < n
-            # an unused slot reads entry 0 (always valid) and is selected away
-            e = np.uint64(k0 + k) if used else np.uint64(0)
-            tri = vt_data[e]
-            flip = vt_flip[e]
-            ns_k = add_flipped(ns, load3(triangle_normal, tri), (flip & 1) != 0)
-            ts_k = add_flipped(ts_, load3(triangle_tangent, tri), (flip & 2) != 0)
-            ns = (ns_k[0] if used else ns[0], ns_k[1] if used else ns[1], ns_k[2] if used else ns[2])
-            ts_ = (ts_k[0] if used else ts_[0], ts_k[1] if used else ts_[1], ts_k[2] if used else ts_[2])
-        valid, q = vertex_frame_rotation(ns, ts_)
-        few = n <= TRIANGLES_PER_VERTEX
-        crowded += 0 if few else 1
-        if valid & few:
-            store4(rotation, p, q)
-    if crowded > 0:
-        for p in range(start, start + count):
-            if m_vertex_triangle_count[p] > TRIANGLES_PER_VERTEX:
-                crowded_vertex_rotation(m, ps, p)
-
-
-@kernel
-def crowded_vertex_rotation(m, ps, p):
-    """E.3 for a vertex with more than ``TRIANGLES_PER_VERTEX`` triangles (scalar)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_vertex_triangle_count, m_vertex_triangle_data = m.vertex_triangle_count, m.vertex_triangle_data
-    m_vertex_triangle_flip, ps_triangle_normal = m.vertex_triangle_flip, ps.triangle_normal
-    ps_triangle_tangent = ps.triangle_tangent
-    ns = (0.0, 0.0, 0.0)
-    ts_ = (0.0, 0.0, 0.0)
-    k0 = m.vertex_triangle_start[p]
-    for k in range(k0, k0 + m_vertex_triangle_count[p]):
-        tri = m_vertex_triangle_data[k]
-        flip = m_vertex_triangle_flip[k]
-        ns = add_flipped(ns, load3(ps_triangle_normal, tri), (flip & 1) != 0)
-        ts_ = add_flipped(ts_, load3(ps_triangle_tangent, tri), (flip & 2) != 0)
-    valid, q = vertex_frame_rotation(ns, ts_)
-    if valid:
-        store4(ps.rotation, p, q)
-
-
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    t0 = BI[b, bk.BI_TRIANGLE0]
+    corners = BI[b, bk.BI_TRIANGLE_CORNERS]
+    for tri in range(tn_count):
+        ga = g0 + topology[corners + 3 * tri]
+        gb = g0 + topology[corners + 3 * tri + 1]
+        gc = g0 + topology[corners + 3 * tri + 2]
+        it = t0 + tri
+        for l in range(w):
+            tn, tt = triangle_frame_from(
+                get3(PS, ga, st.POSITION, l), get3(PS, gb, st.POSITION, l), get3(PS, gc, st.POSITION, l),
+                (TRM[it, bk.TRIANGLE_UV + l], TRM[it, bk.TRIANGLE_UV + LANES + l]),
+                (TRM[it, bk.TRIANGLE_UV + 2 * LANES + l], TRM[it, bk.TRIANGLE_UV + 3 * LANES + l]),
+                (TRM[it, bk.TRIANGLE_UV + 4 * LANES + l], TRM[it, bk.TRIANGLE_UV + 5 * LANES + l]))
+            put3(TRS, it, st.TRIANGLE_NORMAL, l, tn)
+            put3(TRS, it, st.TRIANGLE_TANGENT, l, tt)
+    vt_start, vt_count = BI[b, bk.BI_VERTEX_TRIANGLE_START], BI[b, bk.BI_VERTEX_TRIANGLE_COUNT]
+    vt_data, vt_flip = BI[b, bk.BI_VERTEX_TRIANGLE_DATA], BI[b, bk.BI_VERTEX_TRIANGLE_FLIP]
+    z = (0.0, 0.0, 0.0)
+    for j in range(BI[b, bk.BI_N]):
+        n = topology[vt_count + j]
+        if n == 0:
+            continue
+        g = g0 + j
+        k0 = topology[vt_start + j]
+        for l in range(w):
+            put3(PS, g, st.CHILD_REST_SUM, l, z)
+            put3(PS, g, st.CHILD_EDGE_SUM, l, z)
+        for k in range(k0, k0 + n):
+            it = t0 + topology[vt_data + k]
+            flip = topology[vt_flip + k]
+            for l in range(w):
+                put3(PS, g, st.CHILD_REST_SUM, l, add_flipped(get3(PS, g, st.CHILD_REST_SUM, l),
+                                                              get3(TRS, it, st.TRIANGLE_NORMAL, l), (flip & 1) != 0))
+                put3(PS, g, st.CHILD_EDGE_SUM, l, add_flipped(get3(PS, g, st.CHILD_EDGE_SUM, l),
+                                                              get3(TRS, it, st.TRIANGLE_TANGENT, l), (flip & 2) != 0))
+        for l in range(w):
+            valid, q = vertex_frame_rotation(get3(PS, g, st.CHILD_REST_SUM, l), get3(PS, g, st.CHILD_EDGE_SUM, l))
+            if valid:
+                put4(PS, g, st.ROTATION, l, q)

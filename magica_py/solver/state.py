@@ -1,249 +1,244 @@
-"""Simulation state: preallocated structure-of-arrays for every team at once (docs/solver.md §D.0, §C, §G).
+"""Simulation state: the packed lane tables of every block (docs/solver.md §D.0, §C, §G).
 
-Three tables, all float64 / int32 / uint8, world space, metres and seconds:
+Every table is a ``lanes.RowTable`` (float64, ``(items, rows * LANES)``; ``solver/lanes.py``);
+world space, metres and seconds. The field constants below are the first columns of the
+fields, used by the kernels with ``lanes.get3`` / ``put3``.
 
-* ``ParticleState`` (one row per particle of every team; a team owns the contiguous rows
-  ``team_particle_start[t] : + team_particle_count[t]`` of the solver model; plus a
-  per-triangle scratch for E.3 sized like the model's triangle pool);
-* ``TeamState`` (one row per team: center, inertia, flags, weights);
-* ``ColliderState`` (one row per collider *slot*: colliders are per team, §G.3, so a
-  collider shared by two cloths is simulated as two slots).
+* ``PARTICLE`` (``PS``): one item per particle slot ``g = block particle base + j`` (j the
+  particle's index in its team), lane = the team's lane in its block;
+* ``TRIANGLE_STATE`` / ``EDGE_STATE``: per-triangle and per-edge scratch of E.3 and of quality
+  mode's edge projection (one item per triangle / edge slot of the block);
+* ``TEAM`` (``TS``): one item per block, a lane per team: center, inertia, flags, weights;
+* ``COLLIDER`` (``CS``): one item per collider slot of the block (colliders are per team,
+  §G.3: a collider shared by two cloths is simulated as two slots).
 
 A step never allocates: every buffer a kernel needs is a field here.
 """
 from __future__ import annotations
 
-from magica_py.solver.fields import F64, I32, U8, allocate, grow, make_soa, reset_rows
+from magica_py.solver.lanes import INTEGER, QUATERNION, RowTable
 
-V3 = (3,)
-Q4 = (4,)
-WIND_SLOTS = (4,)   # one area (or global) zone and up to three additive zones (§C, TeamWindData)
+PARTICLE = RowTable("particle state", "particle slot")
+_p = PARTICLE.add
+# animated pose (C.1 writes position/rotation each frame; E.1 overwrites position with the display)
+POSITION = _p("position", 3, "m; base pose skinned this frame (C.1), then display position (E.1)")
+ROTATION = _p("rotation", 4, "xyzw; base rotation (C.1), then simulated rotation (E.2/E.3)", QUATERNION)
+BASE_POS_BUFFER = _p("base_pos_buffer", 3, "m; animated pose of this frame kept for E.2 (E.1)")
+BASE_ROT_BUFFER = _p("base_rot_buffer", 4, "xyzw; animated rotation of this frame kept for E.2 (E.1)", QUATERNION)
+# simulation state (D.0)
+NEXT_POS = _p("next_pos", 3, "m; prediction being corrected within a step")
+OLD_POS = _p("old_pos", 3, "m; final position of the previous step (D.10)")
+VELOCITY_POS = _p("velocity_pos", 3, "m; reference position for the end-of-step velocity")
+VELOCITY = _p("velocity", 3, "m/s; velocity carried to the next step (D.10)")
+REAL_VELOCITY = _p("real_velocity", 3, "m/s; (next - old)/dt of the last step (D.10)")
+BASE_POS = _p("base_pos", 3, "m; animated pose interpolated at this step (D.1)")
+BASE_ROT = _p("base_rot", 4, "xyzw; animated rotation interpolated at this step (D.1)", QUATERNION)
+OLD_POSITION = _p("old_position", 3, "m; animated pose of the last frame that ran steps (E.1)")
+OLD_ROTATION = _p("old_rotation", 4, "xyzw; same, rotation (E.1)", QUATERNION)
+DISP_POS = _p("disp_pos", 3, "m; display position (E.1)")
+FRICTION = _p("friction", 1, "[0,1]; collision friction, decays x0.6 per step (D.8, D.10)")
+STATIC_FRICTION = _p("static_friction", 1, "[0,1]; static friction ramp (D.10)")
+COLLISION_NORMAL = _p("collision_normal", 3, "unit or 0; contact normal of the last step (D.8)")
+STEP_BASIC_POS = _p("step_basic_pos", 3, "m; rest reference of this step (D.2)")
+STEP_BASIC_ROT = _p("step_basic_rot", 4, "xyzw; rest reference rotation of this step (D.2)", QUATERNION)
+INVERSE_MASS = _p("inverse_mass", 1, "D.4's inverse mass of this pass: 1/(1 + 3 friction + 5 (1 - depth)^2), 1/50 "
+                  "when fixed (each distance pass writes it first)")
+K_VERTICAL = _p("k_vertical", 1, "D.4's stiffness of vertical links at the particle's depth, this pass")
+K_HORIZONTAL = _p("k_horizontal", 1, "D.4's stiffness of horizontal and shear links, this pass")
+# scratch of the stages' gathers: a partner particle's values copied next to the particle
+# being solved (lanes.py: the solving loop then touches one item per table)
+PARTNER_POS = _p("partner_pos", 3, "m; scratch: a partner's position (gathered within a stage)")
+PARTNER_BASE = _p("partner_base", 3, "m; scratch: a partner's rest reference (gathered within a stage)")
+PARTNER_W = _p("partner_w", 1, "scratch: a partner's inverse mass (gathered within a stage)")
+ACCUM3 = _p("accum3", 3, "m; scratch: a correction summed over a particle's links within a stage")
+ACCUM_N = _p("accum_n", 1, "scratch: the number of links summed in accum3")
+CONTACT_NORMAL_SUM = _p("contact_normal_sum", 3, "scratch of D.8 point mode: normals of the colliders penetrated")
+CONTACT_NEAR_SUM = _p("contact_near_sum", 3, "scratch of D.8 point mode: normals of the colliders within range")
+BONE_MATRIX = _p("bone_matrix", 12, "scratch of C.1: the first three rows of the bone's local-to-world matrix, "
+                 "row major (gathered from the hierarchy)")
+PARENT_ROTATION = _p("parent_rotation", 4, "scratch of E.2: the parent bone's rotation (gathered)", QUATERNION)
+PARENT_BASE_ROT = _p("parent_base_rot", 4, "scratch of E.2: the parent bone's animated rotation (gathered)", QUATERNION)
+PARENT_BASE_POS = _p("parent_base_pos", 3, "m; scratch of E.2: the parent bone's animated position (gathered)")
+PARENT_POSITION = _p("parent_position", 3, "m; scratch of E.2: the parent bone's display position (gathered)")
+CHILD_REST_EDGE = _p("child_rest_edge", 3, "m; scratch of E.2: this child's rest edge from its parent (tv)")
+CHILD_EDGE = _p("child_edge", 3, "m; scratch of E.2: this child's simulated edge (its rest edge when fixed)")
+LOCAL_OUT_POSITION = _p("local_out_position", 3, "m; scratch of E.4: the local position the bone is written with")
+LOCAL_OUT_ROTATION = _p("local_out_rotation", 4, "xyzw; scratch of E.4: the local rotation the bone is written with",
+                        QUATERNION)
+PARENT_HAS_NODE = _p("parent_has_node", 1, "scratch of E.4: 1 when a fixed bone has a parent node")
+CHILD_REST_SUM = _p("child_rest_sum", 3, "scratch of E.2: the children's rest edges summed (ctv)")
+CHILD_EDGE_SUM = _p("child_edge_sum", 3, "scratch of E.2: the children's simulated edges summed (cv)")
+CONTACT_MIN_DIST = _p("contact_min_dist", 1, "m; scratch of D.8 point mode: closest distance within range")
+# display of quality mode (display.py): the last two step states in their display frame
+# (the particle's fixed root, or the team center), written at the end of each step (D.10)
+DISPLAY_LOCAL = _p("display_local", 3, "m; state of the last step in its display frame (D.10)")
+DISPLAY_PREV_LOCAL = _p("display_prev_local", 3, "m; state of the step before it, same frame (D.10)")
+DISPLAY_HISTORY = _p("display_history", 1, "0-2: step states recorded since the last reset (C.5 sets 0)", INTEGER)
+# angle constraint buffers (D.5/D.6), zeroed after the routine
+ANGLE_LENGTH = _p("angle_length", 1, "m; segment length when the angle routine starts")
+ANGLE_LOCAL_POS = _p("angle_local_pos", 3, "unit; rest edge direction in the parent's frame")
+ANGLE_LOCAL_ROT = _p("angle_local_rot", 4, "xyzw; rest rotation relative to the parent", QUATERNION)
+ANGLE_REST_VECTOR = _p("angle_rest_vector", 3, "m; rest edge vector in world space (restoration)")
+ANGLE_INVERSE_MASS = _p("angle_inverse_mass", 1, "1/(1 + 3 friction) of this angle pass (per step)")
+ANGLE_REST_LENGTH = _p("angle_rest_length", 1, "m; |angle_rest_vector| (restoration, per step)")
+ANGLE_REST_DIRECTION = _p("angle_rest_direction", 3, "unit; angle_rest_vector / its length (restoration, per step)")
+ANGLE_ROTATION = _p("angle_rotation", 4, "xyzw; working rotation of the limit pass", QUATERNION)
+ANGLE_LIMIT = _p("angle_limit", 1, "rad; limit angle at the particle's depth (per step)")
+ANGLE_LIMIT_COS = _p("angle_limit_cos", 1, "cos of angle_limit: the no-violation test without acos")
+ANGLE_RESTORATION_K = _p("angle_restoration_k", 1, "restoration stiffness of this step (curve, rate, gravity factor)")
+# fixed-point accumulators of bending and edge collision (§0.2; 1 unit = 1e-6 m)
+ACCUM_VECTOR = _p("accum_vector", 3, "1e-6 m integer units summed as float64 (exact below 2^53)")
+ACCUM_COUNT = _p("accum_count", 1, "number of contributions", INTEGER)
+BEND_INVERSE_MASS = _p("bend_inverse_mass", 1, "inverse mass of this bending pass (D.7, per step)")
+ACCUM_FRICTION = _p("accum_friction", 1, "edge collision recorded friction (fixed-point max)")
+ACCUM_NORMAL = _p("accum_normal", 3, "edge collision normal sum")
+# transform data (E.4)
+TRANSFORM_POSITION = _p("transform_position", 3, "m; world position written to the bone (E.4)")
+TRANSFORM_ROTATION = _p("transform_rotation", 4, "xyzw; world rotation written to the bone (E.4)", QUATERNION)
+# quality mode's edge projection (quality.edge_projection_block, per step)
+PROJECTION_INVERSE_MASS = _p("projection_inverse_mass", 1, "inverse mass of the edge projection (0: fixed)")
+PROJECTION_GATHER = _p("projection_gather", 3, "W J^T p of the projection's conjugate gradients")
+PROJECTION_CONTACT = _p("projection_contact", 3, "unit or 0; direction collision last pushed it this step")
+QUALITY_DRIFT = _p("quality_drift", 3, "m; the angle pass's share of this step's correction kept out of the "
+                   "velocity (restoration drift)")
+del _p
 
-PARTICLE_FIELDS = [
-    # animated pose (C.1 writes position/rotation each frame; E.1 overwrites position with the display)
-    ("position", "particle", V3, F64, "m; base pose skinned this frame (C.1), then display position (E.1)"),
-    ("rotation", "particle", Q4, F64, "xyzw; base rotation (C.1), then simulated rotation (E.2/E.3)"),
-    ("base_pos_buffer", "particle", V3, F64, "m; animated pose of this frame kept for E.2 (E.1)"),
-    ("base_rot_buffer", "particle", Q4, F64, "xyzw; animated rotation of this frame kept for E.2 (E.1)"),
-    # simulation state (D.0)
-    ("next_pos", "particle", V3, F64, "m; prediction being corrected within a step"),
-    ("old_pos", "particle", V3, F64, "m; final position of the previous step (D.10)"),
-    ("velocity_pos", "particle", V3, F64, "m; reference position for the end-of-step velocity"),
-    ("velocity", "particle", V3, F64, "m/s; velocity carried to the next step (D.10)"),
-    ("real_velocity", "particle", V3, F64, "m/s; (next - old)/dt of the last step (D.10)"),
-    ("base_pos", "particle", V3, F64, "m; animated pose interpolated at this step (D.1)"),
-    ("base_rot", "particle", Q4, F64, "xyzw; animated rotation interpolated at this step (D.1)"),
-    ("old_position", "particle", V3, F64, "m; animated pose of the last frame that ran steps (E.1)"),
-    ("old_rotation", "particle", Q4, F64, "xyzw; same, rotation (E.1)"),
-    ("disp_pos", "particle", V3, F64, "m; display position (E.1)"),
-    # quality display (display.py): the last two step states in their display frame (the
-    # particle's fixed root, or the team center), written at the end of each step (D.10)
-    ("display_local", "particle", V3, F64, "m; state of the last step in its display frame (D.10)"),
-    ("display_prev_local", "particle", V3, F64, "m; state of the step before it, same frame (D.10)"),
-    ("display_history", "particle", (), U8, "0-2: step states recorded since the last reset (C.5 sets 0)"),
-    ("friction", "particle", (), F64, "[0,1]; collision friction, decays x0.6 per step (D.8, D.10)"),
-    ("static_friction", "particle", (), F64, "[0,1]; static friction ramp (D.10)"),
-    ("collision_normal", "particle", V3, F64, "unit or 0; contact normal of the last step (D.8)"),
-    ("step_basic_pos", "particle", V3, F64, "m; rest reference of this step (D.2)"),
-    ("step_basic_rot", "particle", Q4, F64, "xyzw; rest reference rotation of this step (D.2)"),
-    # angle constraint buffers (D.5/D.6), zeroed after the routine
-    ("angle_length", "particle", (), F64, "m; segment length when the angle routine starts"),
-    ("angle_local_pos", "particle", V3, F64, "unit; rest edge direction in the parent's frame"),
-    ("angle_local_rot", "particle", Q4, F64, "xyzw; rest rotation relative to the parent"),
-    ("angle_rest_vector", "particle", V3, F64, "m; rest edge vector in world space (restoration)"),
-    ("angle_inverse_mass", "particle", (), F64, "1/(1 + 3 friction) of this angle pass (per step)"),
-    ("angle_rest_length", "particle", (), F64, "m; |angle_rest_vector| (restoration, per step)"),
-    ("angle_rest_direction", "particle", V3, F64, "unit; angle_rest_vector / its length (restoration, per step)"),
-    ("angle_rotation", "particle", Q4, F64, "xyzw; working rotation of the limit pass"),
-    ("angle_limit", "particle", (), F64, "rad; limit angle at the particle's depth (per step)"),
-    ("angle_limit_cos", "particle", (), F64, "cos of angle_limit: the no-violation test without acos"),
-    ("angle_restoration_k", "particle", (), F64, "restoration stiffness of this step (curve, rate, gravity factor)"),
-    # fixed-point accumulators of bending and edge collision (§0.2; 1 unit = 1e-6 m)
-    ("accum_vector", "particle", V3, F64, "1e-6 m integer units summed as float64 (exact below 2^53)"),
-    ("accum_count", "particle", (), I32, "number of contributions"),
-    ("bend_inverse_mass", "particle", (), F64, "inverse mass of this bending pass (D.7, per step)"),
-    ("accum_friction", "particle", (), F64, "edge collision recorded friction (fixed-point max)"),
-    ("accum_normal", "particle", V3, F64, "edge collision normal sum"),
-    # transform data (E.4)
-    ("transform_position", "particle", V3, F64, "m; world position written to the bone (E.4)"),
-    ("transform_rotation", "particle", Q4, F64, "xyzw; world rotation written to the bone (E.4)"),
-    # per-triangle scratch of E.3 (one row per triangle of the model's triangle pool)
-    ("triangle_normal", "triangle", V3, F64, "unit or 0; display normal of each triangle (E.3, per frame)"),
-    ("triangle_tangent", "triangle", V3, F64, "unit; display uv tangent of each triangle (E.3, per frame)"),
-    # scratch of quality mode's edge projection (quality.edge_projection_team, per step): one
-    # row per particle / per edge of the model's pools
-    ("projection_inverse_mass", "particle", (), F64, "inverse mass of the edge projection (0: fixed)"),
-    ("projection_gather", "particle", V3, F64, "W J^T p of the projection's conjugate gradients"),
-    ("projection_contact", "particle", V3, F64, "unit or 0; direction collision last pushed it this step"),
-    ("quality_drift", "particle", V3, F64, "m; the angle pass's share of this step's correction kept out of the velocity (restoration drift)"),
-    ("edge_normal", "edge", V3, F64, "unit direction a -> b of a stretched edge, 0 otherwise"),
-    ("edge_lambda", "edge", (), F64, "m; the edge projection's multiplier"),
-    ("edge_residual", "edge", (), F64, "m; conjugate-gradient residual"),
-    ("edge_direction", "edge", (), F64, "m; conjugate-gradient search direction"),
-    ("edge_product", "edge", (), F64, "m; (J W J^T + compliance) times the search direction"),
-    ("edge_diagonal", "edge", (), F64, "the edge's diagonal entry of J W J^T + compliance"),
-    ("edge_compliance", "edge", (), F64, "the edge's compliance times (w_a + w_b)"),
-    ("edge_active", "edge", (), I32, "the stretched edges of a team, listed from its first edge row"),
-]
-ParticleState = make_soa("ParticleState", PARTICLE_FIELDS)
+TRIANGLE_STATE = RowTable("triangle state", "triangle slot")
+TRIANGLE_NORMAL = TRIANGLE_STATE.add("triangle_normal", 3, "unit or 0; display normal of each triangle (E.3, per frame)")
+TRIANGLE_TANGENT = TRIANGLE_STATE.add("triangle_tangent", 3, "unit; display uv tangent of each triangle (E.3, per frame)")
 
-TEAM_FIELDS = [
-    # flags (A.7 clears reset, keep_teleport, inertia_shift, running at the end of a frame)
-    ("reset", "team", (), U8, "1: snap particles to the base pose this frame (C.5)"),
-    ("time_reset", "team", (), U8, "1: time counters were reset (build, ResetCloth)"),
-    ("keep_teleport", "team", (), U8, "1: carry the shape rigidly with the component this frame"),
-    ("inertia_shift", "team", (), U8, "1: a frame shift is applied this frame (C.4/C.5)"),
-    ("running", "team", (), U8, "1: the team runs at least one step this frame"),
-    ("active", "team", (), U8, "1: simulated this frame (enabled, not culled, not scale-suspended)"),
-    ("enabled", "team", (), U8, "1: component enabled (slot in use)"),
-    ("culled", "team", (), U8, "1: distance culled"),
-    ("scale_suspended", "team", (), U8, "1: component scale below 1e-6 (A.4)"),
-    ("guard_code", "team", (), I32, "0 ok, 1 non-finite, 2 speed bound exceeded (guards.py)"),
-    ("collider_start", "team", (), I32, "first collider slot of the team"),
-    ("collider_count", "team", (), I32, "collider slots of the team"),
-    # component pose (C.2)
-    ("component_pos", "team", V3, F64, "m; component world position read this frame"),
-    ("component_rot", "team", Q4, F64, "xyzw"),
-    ("component_scale", "team", V3, F64, "lossy scale"),
-    ("old_component_pos", "team", V3, F64, "m; last frame's component position (shift pivot)"),
-    ("old_component_rot", "team", Q4, F64, "xyzw"),
-    ("old_component_scale", "team", V3, F64, ""),
-    ("component_scale_ratio", "team", (), F64, "|scale|/|init scale|"),
-    # center (C.2, C.3)
-    ("frame_world_pos", "team", V3, F64, "m; center of this frame"),
-    ("frame_world_rot", "team", Q4, F64, "xyzw"),
-    ("frame_world_scale", "team", V3, F64, ""),
-    ("old_frame_world_pos", "team", V3, F64, "m; center of the last frame that ran steps"),
-    ("old_frame_world_rot", "team", Q4, F64, ""),
-    ("old_frame_world_scale", "team", V3, F64, ""),
-    ("now_world_pos", "team", V3, F64, "m; center interpolated at this step"),
-    ("now_world_rot", "team", Q4, F64, ""),
-    ("old_world_pos", "team", V3, F64, "m; center at the previous step"),
-    ("old_world_rot", "team", Q4, F64, ""),
-    ("step_vector", "team", V3, F64, "m; center motion of this step"),
-    ("step_rotation", "team", Q4, F64, "center rotation of this step"),
-    ("inertia_vector", "team", V3, F64, "m; part of step_vector removed rigidly (C.3)"),
-    ("inertia_rotation", "team", Q4, F64, ""),
-    ("step_move_inertia_ratio", "team", (), F64, "C.3 m"),
-    ("step_rotation_inertia_ratio", "team", (), F64, "C.3 r"),
-    ("angular_velocity", "team", (), F64, "rad/s of the center this step"),
-    ("rotation_axis", "team", V3, F64, "unit axis of the center rotation this step, or 0"),
-    ("scale_ratio", "team", (), F64, "max(|scale|/|init scale|, 1e-6) at this step"),
-    ("length_unit", "team", (), F64, "m; the cloth's length unit (parameters.length_unit; C.2 writes it; 1 faithful)"),
-    ("gravity_dot", "team", (), F64, "C.3"),
-    ("gravity_ratio", "team", (), F64, "C.3"),
-    ("velocity_weight", "team", (), F64, "stabilisation ramp after a reset [0,1]"),
-    ("blend_weight", "team", (), F64, "[0,1] display blend (C.3, H.3)"),
-    ("distance_weight", "team", (), F64, "[0,1] distance-culling fade (H.1)"),
-    ("smoothing_velocity", "team", V3, F64, "m/s; smoothed component velocity (C.4)"),
-    ("frame_shift_vector", "team", V3, F64, "m; rigid shift of this frame (C.4)"),
-    ("frame_shift_rotation", "team", Q4, F64, ""),
-    ("frame_moving_speed", "team", (), F64, "m/s (C.4 wind bookkeeping)"),
-    ("frame_moving_direction", "team", V3, F64, "unit or 0; direction of frame_moving_speed (C.4)"),
-    # anchor (C.4.1)
-    ("anchor_pos", "team", V3, F64, "m; anchor pose of this frame"),
-    ("anchor_rot", "team", Q4, F64, ""),
-    ("old_anchor_rot", "team", Q4, F64, ""),
-    ("anchor_component_local_pos", "team", V3, F64, "component position in anchor space"),
-    ("anchor_valid", "team", (), U8, "1: anchor pose stored"),
-    # external force (D.1), applied on every step of the next frame that runs
-    ("external_force", "team", V3, F64, "m/s^2 impact force direction * speed"),
-    ("external_force_mode", "team", (), I32, "0 none, 1 add, 2 add w/o depth, 3 change, 4 change w/o depth"),
-    # wind (§C team selection, §D.1; magica_py/wind): the zones a team feels this frame, written
-    # once per frame by wind.selection.select_team_wind, phases advanced per step by wind_team
-    ("wind_zone_count", "team", (), I32, "zones felt this frame (<= WIND_SLOTS: one area zone + 3 additive)"),
-    ("wind_zone_id", "team", WIND_SLOTS, I32, "scene wind zone index of each slot, -1 unused"),
-    ("wind_zone_time", "team", WIND_SLOTS, F64, "phase time of each slot (starts at -10000, +freq*dt per step)"),
-    ("wind_zone_main", "team", WIND_SLOTS, F64, "m/s; main speed (radial: attenuated at the team center)"),
-    ("wind_zone_direction", "team", WIND_SLOTS + V3, F64, "unit world direction of each slot"),
-    ("wind_zone_turbulence", "team", WIND_SLOTS, F64, "the zone's turbulence [0,1]"),
-    ("moving_wind_main", "team", (), F64, "m/s; wind from the team's own movement at this step (0: none)"),
-    ("moving_wind_time", "team", (), F64, "phase time of the moving wind"),
-    ("wind_felt", "team", V3, F64, "m/s^2; mean wind acceleration over the Move particles at the last step"),
-]
-TeamState = make_soa("TeamState", TEAM_FIELDS)
+EDGE_STATE = RowTable("edge state", "edge slot")
+_e = EDGE_STATE.add
+EDGE_NORMAL = _e("edge_normal", 3, "unit direction a -> b of a stretched edge, 0 otherwise")
+EDGE_LAMBDA = _e("edge_lambda", 1, "m; the edge projection's multiplier")
+EDGE_RESIDUAL = _e("edge_residual", 1, "m; conjugate-gradient residual")
+EDGE_DIRECTION = _e("edge_direction", 1, "m; conjugate-gradient search direction")
+EDGE_PRODUCT = _e("edge_product", 1, "m; (J W J^T + compliance) times the search direction")
+EDGE_DIAGONAL = _e("edge_diagonal", 1, "the edge's diagonal entry of J W J^T + compliance")
+EDGE_COMPLIANCE = _e("edge_compliance", 1, "the edge's compliance times (w_a + w_b)")
+EDGE_ACTIVE = _e("edge_active", 1, "the stretched edges of a team, listed from its first edge slot", INTEGER)
+del _e
 
-COLLIDER_FIELDS = [
-    ("collider_index", "slot", (), I32, "index into the scene ColliderSet"),
-    ("team", "slot", (), I32, "team owning this slot"),
-    ("shape", "slot", (), I32, "0 sphere, 1 capsule, 2 plane"),
-    ("transform", "slot", (), I32, "hierarchy node carrying the collider"),
-    ("local_center", "slot", V3, F64, "m; local offset (G.1)"),
-    ("size", "slot", V3, F64, "m; (start radius, end radius, length) as G.1"),
-    ("direction", "slot", (), I32, "capsule axis 0 X, 1 Y, 2 Z"),
-    ("reverse_direction", "slot", (), U8, ""),
-    ("aligned_on_center", "slot", (), U8, ""),
-    ("first_frame", "slot", (), U8, "1 until the first frame pose is stored"),
-    ("scale_suspend", "slot", (), U8, "1: scale below 1e-6 this frame: skipped (G.2)"),
-    ("frame_pos", "slot", V3, F64, "m; pose read this frame (G.2)"),
-    ("frame_rot", "slot", Q4, F64, ""),
-    ("frame_scale", "slot", V3, F64, ""),
-    ("old_frame_pos", "slot", V3, F64, "m; pose of the last frame that ran steps"),
-    ("old_frame_rot", "slot", Q4, F64, ""),
-    ("now_pos", "slot", V3, F64, "m; pose at this step (G.3)"),
-    ("now_rot", "slot", Q4, F64, ""),
-    ("old_pos", "slot", V3, F64, "m; pose at the previous step (after the local inertia shift)"),
-    ("old_rot", "slot", Q4, F64, ""),
-    # work data of this step (G.3)
-    ("start_old", "slot", V3, F64, "m; sphere centre / capsule start, previous step"),
-    ("end_old", "slot", V3, F64, "m; capsule end, previous step"),
-    ("start_new", "slot", V3, F64, "m; sphere centre / capsule start / plane point, this step"),
-    ("end_new", "slot", V3, F64, "m; capsule end, this step"),
-    ("radius_start", "slot", (), F64, "m; scaled radius (sphere, capsule start)"),
-    ("radius_end", "slot", (), F64, "m; scaled capsule end radius"),
-    ("plane_normal", "slot", V3, F64, "unit; plane normal this step"),
-    ("inverse_old_rot", "slot", Q4, F64, "qinv(old rotation)"),
-    ("aabb_min", "slot", V3, F64, "m; swept bounds"),
-    ("aabb_max", "slot", V3, F64, "m"),
-]
-ColliderState = make_soa("ColliderState", COLLIDER_FIELDS)
+WIND_SLOTS = 4   # one area (or global) zone and up to three additive zones (§C, TeamWindData)
 
+TEAM = RowTable("team state", "block")
+_t = TEAM.add
+# flags (A.7 clears reset, keep_teleport, inertia_shift, running at the end of a frame)
+RESET = _t("reset", 1, "1: snap particles to the base pose this frame (C.5)", INTEGER, fill=1)
+TIME_RESET = _t("time_reset", 1, "1: time counters were reset (build, ResetCloth)", INTEGER, fill=1)
+KEEP_TELEPORT = _t("keep_teleport", 1, "1: carry the shape rigidly with the component this frame", INTEGER)
+INERTIA_SHIFT = _t("inertia_shift", 1, "1: a frame shift is applied this frame (C.4/C.5)", INTEGER)
+RUNNING = _t("running", 1, "1: the team runs at least one step this frame", INTEGER)
+ACTIVE = _t("active", 1, "1: simulated this frame (enabled, not culled, not scale-suspended)", INTEGER)
+ENABLED = _t("enabled", 1, "1: component enabled (lane in use)", INTEGER)
+CULLED = _t("culled", 1, "1: distance culled", INTEGER)
+SCALE_SUSPENDED = _t("scale_suspended", 1, "1: component scale below 1e-6 (A.4)", INTEGER)
+GUARD_CODE = _t("guard_code", 1, "0 ok, 1 non-finite, 2 speed bound exceeded (guards.py)", INTEGER)
+GUARD_NON_FINITE_SEEN = _t("guard_non_finite_seen", 1, "1: a particle of the team is non-finite (E.5 check, this frame)",
+                           INTEGER)
+GUARD_TOO_FAST_SEEN = _t("guard_too_fast_seen", 1, "1: a particle of the team is above the speed bound (E.5 check)",
+                         INTEGER)
+TRANSFORM_OK = _t("transform_ok", 1, "1: every value of the team's transform data is finite (E.4, this frame)", INTEGER)
+STEP_RUNS = _t("step_runs", 1, "1: the team runs the block's current step (A.6, begin of each step)", INTEGER)
+FRAME_INTERPOLATION = _t("frame_interpolation", 1, "[0,1]: the team's frame interpolation at this step (A.6)")
+DISPLAY_T = _t("display_t", 1, "[0,1]: E.1's frame interpolation of the display (the frame, before the end stages)")
+DISPLAY_ALPHA = _t("display_alpha", 1, "[0,1): quality display's time since the last step / dt (the frame)")
+RAMP_FROM_BUILD = _t("ramp_from_build", 1, "1 while the team's last reset was the build reset (quality)", INTEGER)
+# component pose (C.2)
+COMPONENT_POS = _t("component_pos", 3, "m; component world position read this frame")
+COMPONENT_ROT = _t("component_rot", 4, "xyzw", QUATERNION)
+COMPONENT_SCALE = _t("component_scale", 3, "lossy scale", fill=1.0)
+OLD_COMPONENT_POS = _t("old_component_pos", 3, "m; last frame's component position (shift pivot)")
+OLD_COMPONENT_ROT = _t("old_component_rot", 4, "xyzw", QUATERNION)
+OLD_COMPONENT_SCALE = _t("old_component_scale", 3, "", fill=1.0)
+COMPONENT_SCALE_RATIO = _t("component_scale_ratio", 1, "|scale|/|init scale|", fill=1.0)
+# center (C.2, C.3)
+FRAME_WORLD_POS = _t("frame_world_pos", 3, "m; center of this frame")
+FRAME_WORLD_ROT = _t("frame_world_rot", 4, "xyzw", QUATERNION)
+FRAME_WORLD_SCALE = _t("frame_world_scale", 3, "", fill=1.0)
+OLD_FRAME_WORLD_POS = _t("old_frame_world_pos", 3, "m; center of the last frame that ran steps")
+OLD_FRAME_WORLD_ROT = _t("old_frame_world_rot", 4, "", QUATERNION)
+OLD_FRAME_WORLD_SCALE = _t("old_frame_world_scale", 3, "", fill=1.0)
+NOW_WORLD_POS = _t("now_world_pos", 3, "m; center interpolated at this step")
+NOW_WORLD_ROT = _t("now_world_rot", 4, "", QUATERNION)
+OLD_WORLD_POS = _t("old_world_pos", 3, "m; center at the previous step")
+OLD_WORLD_ROT = _t("old_world_rot", 4, "", QUATERNION)
+STEP_VECTOR = _t("step_vector", 3, "m; center motion of this step")
+STEP_ROTATION = _t("step_rotation", 4, "center rotation of this step", QUATERNION)
+INERTIA_VECTOR = _t("inertia_vector", 3, "m; part of step_vector removed rigidly (C.3)")
+INERTIA_ROTATION = _t("inertia_rotation", 4, "", QUATERNION)
+STEP_MOVE_INERTIA_RATIO = _t("step_move_inertia_ratio", 1, "C.3 m")
+STEP_ROTATION_INERTIA_RATIO = _t("step_rotation_inertia_ratio", 1, "C.3 r")
+ANGULAR_VELOCITY = _t("angular_velocity", 1, "rad/s of the center this step")
+ROTATION_AXIS = _t("rotation_axis", 3, "unit axis of the center rotation this step, or 0")
+SCALE_RATIO = _t("scale_ratio", 1, "max(|scale|/|init scale|, 1e-6) at this step", fill=1.0)
+LENGTH_UNIT = _t("length_unit", 1, "m; the cloth's length unit (parameters.length_unit; C.2 writes it; 1 faithful)",
+                 fill=1.0)
+GRAVITY_DOT = _t("gravity_dot", 1, "C.3", fill=1.0)
+GRAVITY_RATIO = _t("gravity_ratio", 1, "C.3", fill=1.0)
+VELOCITY_WEIGHT = _t("velocity_weight", 1, "stabilisation ramp after a reset [0,1]")
+BLEND_WEIGHT = _t("blend_weight", 1, "[0,1] display blend (C.3, H.3)")
+DISTANCE_WEIGHT = _t("distance_weight", 1, "[0,1] distance-culling fade (H.1)", fill=1.0)
+SMOOTHING_VELOCITY = _t("smoothing_velocity", 3, "m/s; smoothed component velocity (C.4)")
+FRAME_SHIFT_VECTOR = _t("frame_shift_vector", 3, "m; rigid shift of this frame (C.4)")
+FRAME_SHIFT_ROTATION = _t("frame_shift_rotation", 4, "", QUATERNION)
+FRAME_MOVING_SPEED = _t("frame_moving_speed", 1, "m/s (C.4 wind bookkeeping)")
+FRAME_MOVING_DIRECTION = _t("frame_moving_direction", 3, "unit or 0; direction of frame_moving_speed (C.4)")
+# anchor (C.4.1)
+ANCHOR_POS = _t("anchor_pos", 3, "m; anchor pose of this frame")
+ANCHOR_ROT = _t("anchor_rot", 4, "", QUATERNION)
+OLD_ANCHOR_ROT = _t("old_anchor_rot", 4, "", QUATERNION)
+ANCHOR_COMPONENT_LOCAL_POS = _t("anchor_component_local_pos", 3, "component position in anchor space")
+ANCHOR_VALID = _t("anchor_valid", 1, "1: anchor pose stored", INTEGER)
+# external force (D.1), applied on every step of the next frame that runs
+EXTERNAL_FORCE = _t("external_force", 3, "m/s^2 impact force direction * speed")
+EXTERNAL_FORCE_MODE = _t("external_force_mode", 1, "0 none, 1 add, 2 add w/o depth, 3 change, 4 change w/o depth",
+                         INTEGER)
+# wind (§C team selection, §D.1; magica_py/wind): the zones a team feels this frame, written
+# once per frame by wind.selection, phases advanced per step by the wind stage
+WIND_ZONE_COUNT = _t("wind_zone_count", 1, "zones felt this frame (<= WIND_SLOTS: one area zone + 3 additive)",
+                     INTEGER)
+WIND_ZONE_ID = _t("wind_zone_id", WIND_SLOTS, "scene wind zone index of each slot, -1 unused", INTEGER, fill=-1)
+WIND_ZONE_TIME = _t("wind_zone_time", WIND_SLOTS, "phase time of each slot (starts at -10000, +freq*dt per step)")
+WIND_ZONE_MAIN = _t("wind_zone_main", WIND_SLOTS, "m/s; main speed (radial: attenuated at the team center)")
+WIND_ZONE_DIRECTION = _t("wind_zone_direction", 3 * WIND_SLOTS, "unit world direction of each slot (x, y, z "
+                         "rows of slot 0, then slot 1, ...)")
+WIND_ZONE_TURBULENCE = _t("wind_zone_turbulence", WIND_SLOTS, "the zone's turbulence [0,1]")
+MOVING_WIND_MAIN = _t("moving_wind_main", 1, "m/s; wind from the team's own movement at this step (0: none)")
+MOVING_WIND_TIME = _t("moving_wind_time", 1, "phase time of the moving wind")
+WIND_FELT = _t("wind_felt", 3, "m/s^2; mean wind acceleration over the Move particles at the last step")
+# wind (wind.force.wind_block): the lane's part of a step, kept for its particle loop
+WIND_RUNS = _t("wind_runs", 1, "1: the lane's particles take wind at this step (wind_lane)", INTEGER)
+WIND_ZONE_FRAME = _t("wind_zone_frame", 4 * WIND_SLOTS, "direction_angles (cos x, sin x, cos y, sin y) of each "
+                     "slot's direction at this step (4 rows per slot)")
+MOVING_WIND_FRAME = _t("moving_wind_frame", 4, "direction_angles of the moving wind's direction at this step")
+WIND_LINE = _t("wind_line", 3, "m/s; wind at the root line of the particle being pushed (scratch)")
+del _t
 
-# initial values besides zero / identity (a team starts with Reset and TimeReset)
-TEAM_FILL = {"reset": 1, "time_reset": 1, "scale_ratio": 1.0, "length_unit": 1.0, "gravity_ratio": 1.0,
-             "gravity_dot": 1.0, "distance_weight": 1.0, "component_scale_ratio": 1.0,
-             "component_scale": 1.0, "old_component_scale": 1.0,
-             "frame_world_scale": 1.0, "old_frame_world_scale": 1.0, "wind_zone_id": -1}
-COLLIDER_FILL = {"first_frame": 1, "frame_scale": 1.0}
-
-
-def allocate_state(particle_count: int, team_count: int, slot_count: int, triangle_count: int = 0,
-                   edge_count: int = 0):
-    """Fresh state tables sized for the given counts (every team starts with Reset)."""
-    particles = allocate(ParticleState, {"particle": particle_count, "triangle": triangle_count,
-                                         "edge": edge_count})
-    teams = allocate(TeamState, {"team": team_count}, fill=TEAM_FILL)
-    colliders = allocate(ColliderState, {"slot": slot_count}, fill=COLLIDER_FILL)
-    return particles, teams, colliders
-
-
-def grow_state(particles, teams, colliders, particle_count: int, team_count: int, slot_count: int,
-               triangle_count: int = 0, edge_count: int = 0):
-    """The state tables enlarged to the given counts: existing rows copied bit for bit, new
-    rows fresh (used when a cloth is added at runtime and a pool has no free chunk)."""
-    if (particles.position.shape[0] < particle_count or particles.triangle_normal.shape[0] < triangle_count
-            or particles.edge_lambda.shape[0] < edge_count):
-        particles = grow(ParticleState, particles, {
-            "particle": max(particle_count, particles.position.shape[0]),
-            "triangle": max(triangle_count, particles.triangle_normal.shape[0]),
-            "edge": max(edge_count, particles.edge_lambda.shape[0])})
-    if teams.reset.shape[0] < team_count:
-        teams = grow(TeamState, teams, {"team": team_count}, fill=TEAM_FILL)
-    if colliders.shape.shape[0] < slot_count:
-        colliders = grow(ColliderState, colliders, {"slot": slot_count}, fill=COLLIDER_FILL)
-    return particles, teams, colliders
-
-
-def free_particle_rows(particles, start: int, count: int) -> None:
-    reset_rows(ParticleState, particles, "particle", start, start + count)
-
-
-def free_team_row(teams, team: int) -> None:
-    """A removed team's row: fresh values, disabled."""
-    reset_rows(TeamState, teams, "team", team, team + 1, fill=TEAM_FILL)
-    teams.enabled[team] = 0
-    teams.active[team] = 0
-
-
-def free_collider_rows(colliders, start: int, count: int) -> None:
-    reset_rows(ColliderState, colliders, "slot", start, start + count, fill=COLLIDER_FILL)
+COLLIDER = RowTable("collider state", "collider slot")
+_c = COLLIDER.add
+LOCAL_CENTER = _c("local_center", 3, "m; local offset (G.1)")
+SIZE = _c("size", 3, "m; (start radius, end radius, length) as G.1")
+FIRST_FRAME = _c("first_frame", 1, "1 until the first frame pose is stored", INTEGER, fill=1)
+SCALE_SUSPEND = _c("scale_suspend", 1, "1: scale below 1e-6 this frame: skipped (G.2)", INTEGER)
+FRAME_POS = _c("frame_pos", 3, "m; pose read this frame (G.2)")
+FRAME_ROT = _c("frame_rot", 4, "", QUATERNION)
+FRAME_SCALE = _c("frame_scale", 3, "", fill=1.0)
+OLD_FRAME_POS = _c("old_frame_pos", 3, "m; pose of the last frame that ran steps")
+OLD_FRAME_ROT = _c("old_frame_rot", 4, "", QUATERNION)
+NOW_POS = _c("now_pos", 3, "m; pose at this step (G.3)")
+NOW_ROT = _c("now_rot", 4, "", QUATERNION)
+C_OLD_POS = _c("old_pos", 3, "m; pose at the previous step (after the local inertia shift)")
+C_OLD_ROT = _c("old_rot", 4, "", QUATERNION)
+# work data of this step (G.3)
+START_OLD = _c("start_old", 3, "m; sphere centre / capsule start, previous step")
+END_OLD = _c("end_old", 3, "m; capsule end, previous step")
+START_NEW = _c("start_new", 3, "m; sphere centre / capsule start / plane point, this step")
+END_NEW = _c("end_new", 3, "m; capsule end, this step")
+RADIUS_START = _c("radius_start", 1, "m; scaled radius (sphere, capsule start)")
+RADIUS_END = _c("radius_end", 1, "m; scaled capsule end radius")
+PLANE_NORMAL = _c("plane_normal", 3, "unit; plane normal this step")
+INVERSE_OLD_ROT = _c("inverse_old_rot", 4, "qinv(old rotation)", QUATERNION)
+AABB_MIN = _c("aabb_min", 3, "m; swept bounds")
+AABB_MAX = _c("aabb_max", 3, "m")
+del _c

@@ -1,9 +1,10 @@
 """One simulation step's team update and particle stages (docs/solver.md §A.6/§C.3, §D.1, §D.2, §D.10).
 
-``team_step_update`` runs after the runtime's ``team_time_begin_step`` (A.6: now_update_time,
+``team_step_lane`` runs after the runtime's ``team_time_begin_step`` (A.6: now_update_time,
 frame_interpolation) and interpolates the center, derives local inertia, gravity falloff and
-the stabilisation weights (C.3). ``predict_team`` is D.1, ``step_basic_pose_team`` D.2 and
-``end_step_team`` D.10. The per-particle maths are separate functions (``predict_move``,
+the stabilisation weights (C.3) of one lane's team. ``predict_block`` is D.1,
+``step_basic_pose_block`` D.2 and ``end_step_block`` D.10, over one block (particles, then
+lanes innermost: solver/lanes.py). The per-particle maths are separate functions (``predict_move``,
 ``basic_pose_child``, ``end_step_velocity``, ...), branch-free where a select is as cheap as a
 branch, so that the particle loops can vectorise.
 """
@@ -15,11 +16,19 @@ import math
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     lerp, q_angle, q_from_to, q_to_angle_axis,
-    clamp_length, depth_mass, load3, load4, project_on_plane, q_mul,
-    q_normalize, q_rotate, q_slerp, saturate, store3, store4, v_add, v_cross,
+    clamp_length, depth_mass, project_on_plane, q_mul,
+    q_normalize, q_normalize_select, q_rotate, q_slerp, q_slerp_select, saturate, v_add, v_cross,
     v_dot, v_length, v_length_sq, v_lerp, v_mul, v_normalize, v_scale, v_sub,
 )
-from magica_py.solver.parameters import curve_at_clamp01, length_unit, step_keep, step_rate, step_share
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
+from magica_py.solver.parameters import (
+    PRM_BLEND_WEIGHT, PRM_CENTRIFUGAL_ACCELERATION, PRM_DEPTH_INERTIA, PRM_FRICTION, PRM_GRAVITY,
+    PRM_GRAVITY_DIRECTION, PRM_GRAVITY_FALLOFF, PRM_LOCAL_INERTIA, PRM_LOCAL_MOVEMENT_SPEED_LIMIT,
+    PRM_LOCAL_ROTATION_SPEED_LIMIT, PRM_ANIMATION_POSE_RATIO, PRM_PARTICLE_SPEED_LIMIT, PRM_RATE_MODE,
+    PRM_STABILIZATION_TIME, clamp01, step_keep, step_rate, step_share,
+)
 
 MOVE = 0x02
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -81,38 +90,42 @@ def team_step_values(old_pos, old_rot, old_frame_pos, frame_pos, old_frame_rot, 
             scale_ratio, gravity_dot, gravity_ratio, velocity_weight, blend_weight)
 
 
-@kernel
-def team_step_update(m, ts, prm, frame_interpolation, team, dt):
-    """C.3 for one team at the start of a step (the maths: ``team_step_values``)."""
-    old_pos = load3(ts.now_world_pos, team)
-    old_rot = load4(ts.now_world_rot, team)
-    store3(ts.old_world_pos, team, old_pos)
-    store4(ts.old_world_rot, team, old_rot)
+@kernel(forceinline=False)
+def team_step_lane(TS, TM, P, b, l, dt):
+    """C.3 for lane l's team at the start of a step (the maths: ``team_step_values``), at its
+    frame interpolation of this step (``FRAME_INTERPOLATION``, written by the step's A.6)."""
+    old_pos = get3(TS, b, st.NOW_WORLD_POS, l)
+    old_rot = get4(TS, b, st.NOW_WORLD_ROT, l)
+    put3(TS, b, st.OLD_WORLD_POS, l, old_pos)
+    put4(TS, b, st.OLD_WORLD_ROT, l, old_rot)
+    unit = get1(TS, b, st.LENGTH_UNIT, l)
     (now_pos, now_rot, step_vector, step_rotation, mv, rv, inertia_vector, inertia_rotation, w, axis,
      scale_ratio, gravity_dot, gravity_ratio, velocity_weight, blend_weight) = team_step_values(
-        old_pos, old_rot, load3(ts.old_frame_world_pos, team), load3(ts.frame_world_pos, team),
-        load4(ts.old_frame_world_rot, team), load4(ts.frame_world_rot, team),
-        load3(ts.old_frame_world_scale, team), load3(ts.frame_world_scale, team), frame_interpolation, dt,
-        prm.local_inertia[team], prm.local_movement_speed_limit[team] * length_unit(m, prm, team),
-        prm.local_rotation_speed_limit[team],
-        v_length(load3(m.team_init_scale, team)), load3(prm.gravity_direction, team),
-        load3(m.team_init_local_gravity, team), prm.gravity[team], prm.gravity_falloff[team],
-        prm.stabilization_time[team], ts.velocity_weight[team], prm.blend_weight[team], ts.distance_weight[team])
-    store3(ts.now_world_pos, team, now_pos)
-    store4(ts.now_world_rot, team, now_rot)
-    store3(ts.step_vector, team, step_vector)
-    store4(ts.step_rotation, team, step_rotation)
-    ts.step_move_inertia_ratio[team] = mv
-    ts.step_rotation_inertia_ratio[team] = rv
-    store3(ts.inertia_vector, team, inertia_vector)
-    store4(ts.inertia_rotation, team, inertia_rotation)
-    ts.angular_velocity[team] = w
-    store3(ts.rotation_axis, team, axis)
-    ts.scale_ratio[team] = scale_ratio
-    ts.gravity_dot[team] = gravity_dot
-    ts.gravity_ratio[team] = gravity_ratio
-    ts.velocity_weight[team] = velocity_weight
-    ts.blend_weight[team] = blend_weight
+        old_pos, old_rot, get3(TS, b, st.OLD_FRAME_WORLD_POS, l), get3(TS, b, st.FRAME_WORLD_POS, l),
+        get4(TS, b, st.OLD_FRAME_WORLD_ROT, l), get4(TS, b, st.FRAME_WORLD_ROT, l),
+        get3(TS, b, st.OLD_FRAME_WORLD_SCALE, l), get3(TS, b, st.FRAME_WORLD_SCALE, l),
+        get1(TS, b, st.FRAME_INTERPOLATION, l), dt,
+        P[b, PRM_LOCAL_INERTIA], P[b, PRM_LOCAL_MOVEMENT_SPEED_LIMIT] * unit, P[b, PRM_LOCAL_ROTATION_SPEED_LIMIT],
+        v_length(get3(TM, b, bk.INIT_SCALE, l)),
+        (P[b, PRM_GRAVITY_DIRECTION], P[b, PRM_GRAVITY_DIRECTION + 1], P[b, PRM_GRAVITY_DIRECTION + 2]),
+        get3(TM, b, bk.INIT_LOCAL_GRAVITY, l), P[b, PRM_GRAVITY], P[b, PRM_GRAVITY_FALLOFF],
+        P[b, PRM_STABILIZATION_TIME], get1(TS, b, st.VELOCITY_WEIGHT, l), P[b, PRM_BLEND_WEIGHT],
+        get1(TS, b, st.DISTANCE_WEIGHT, l))
+    put3(TS, b, st.NOW_WORLD_POS, l, now_pos)
+    put4(TS, b, st.NOW_WORLD_ROT, l, now_rot)
+    put3(TS, b, st.STEP_VECTOR, l, step_vector)
+    put4(TS, b, st.STEP_ROTATION, l, step_rotation)
+    put1(TS, b, st.STEP_MOVE_INERTIA_RATIO, l, mv)
+    put1(TS, b, st.STEP_ROTATION_INERTIA_RATIO, l, rv)
+    put3(TS, b, st.INERTIA_VECTOR, l, inertia_vector)
+    put4(TS, b, st.INERTIA_ROTATION, l, inertia_rotation)
+    put1(TS, b, st.ANGULAR_VELOCITY, l, w)
+    put3(TS, b, st.ROTATION_AXIS, l, axis)
+    put1(TS, b, st.SCALE_RATIO, l, scale_ratio)
+    put1(TS, b, st.GRAVITY_DOT, l, gravity_dot)
+    put1(TS, b, st.GRAVITY_RATIO, l, gravity_ratio)
+    put1(TS, b, st.VELOCITY_WEIGHT, l, velocity_weight)
+    put1(TS, b, st.BLEND_WEIGHT, l, blend_weight)
 
 
 @kernel
@@ -164,64 +177,76 @@ def predict_move_shifted(old_pos, velocity, depth, old_world_pos, iv, iq, veloci
 
 
 @kernel
-def damping_keep_at(prm, team, depth, frequency_ratio, power_z):
-    """D.1's velocity factor at a depth: saturate(1 - step rate of the damping curve)."""
-    damp = curve_at_clamp01(prm.damping_curve, team, depth)
-    return saturate(1.0 - step_rate(damp, frequency_ratio, power_z, prm.rate_mode[team]))
+def damping_keep(damping, frequency_ratio, power_z, rate_mode):
+    """D.1's velocity factor of a particle whose damping curve value is ``damping``:
+    saturate(1 - step rate of the clamped damping)."""
+    return saturate(1.0 - step_rate(clamp01(damping), frequency_ratio, power_z, rate_mode))
 
 
-@kernel
-def predict_team(m, ps, prm, ts, team, frame_interpolation, dt, frequency_ratio, power_z):
-    """D.1: animated pose at this step, inertia shift, damping, forces, prediction."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_depth, m_team_particle_count = m.attribute, m.depth, m.team_particle_count
-    ps_base_pos, ps_base_rot, ps_next_pos, ps_old_pos = ps.base_pos, ps.base_rot, ps.next_pos, ps.old_pos
-    ps_old_position, ps_old_rotation, ps_position = ps.old_position, ps.old_rotation, ps.position
-    ps_rotation, ps_step_basic_pos, ps_step_basic_rot = ps.rotation, ps.step_basic_pos, ps.step_basic_rot
-    ps_velocity, ps_velocity_pos = ps.velocity, ps.velocity_pos
-    t = frame_interpolation
-    old_world_pos = load3(ts.old_world_pos, team)
-    inertia_vector = load3(ts.inertia_vector, team)
-    inertia_rotation = load4(ts.inertia_rotation, team)
-    step_vector = load3(ts.step_vector, team)
-    step_rotation = load4(ts.step_rotation, team)
-    depth_inertia = prm.depth_inertia[team]
-    velocity_weight = ts.velocity_weight[team]
-    gravity = v_scale(load3(prm.gravity_direction, team), prm.gravity[team] * ts.gravity_ratio[team])
-    force_mode = ts.external_force_mode[team]
-    impact = load3(ts.external_force, team)
-    scale = ts.scale_ratio[team] * length_unit(m, prm, team)   # forces follow the cloth's scale
-    start = m.team_particle_start[team]
-    for p in range(start, start + m_team_particle_count[team]):
-        if t == 1.0:  # the last step of a frame: predict_base_pose's select, without the slerp
-            base_pos = v_lerp(load3(ps_old_position, p), load3(ps_position, p), t)
-            base_rot = load4(ps_rotation, p)
+@kernel(forceinline=False)
+def predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, frequency_ratio, power_z):
+    """D.1 over block b: animated pose at this step, inertia shift, damping, forces,
+    prediction (each lane at its own frame interpolation). The lane loops take the
+    branch-free forms (``*_select``: the same bits); where every lane is at the frame's last
+    step (t = 1) the animated rotation needs no slerp, and without depth inertia the step's
+    inertia needs no mix: those loops leave that work out."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    depth_inertia = P[b, PRM_DEPTH_INERTIA]
+    g_dir = (P[b, PRM_GRAVITY_DIRECTION], P[b, PRM_GRAVITY_DIRECTION + 1], P[b, PRM_GRAVITY_DIRECTION + 2])
+    g_mag = P[b, PRM_GRAVITY]
+    rate_mode = int(P[b, PRM_RATE_MODE])
+    last = True   # every lane at t = 1
+    for l in range(w):
+        last = last & (get1(TS, b, st.FRAME_INTERPOLATION, l) == 1.0)
+    for j in range(BI[b, bk.BI_N]):
+        g = g0 + j
+        move = (topology[attribute + j] & MOVE) != 0
+        if last:
+            for l in range(w):
+                base_pos = v_lerp(get3(PS, g, st.OLD_POSITION, l), get3(PS, g, st.POSITION, l), 1.0)
+                put3(PS, g, st.BASE_POS, l, base_pos)
+                put3(PS, g, st.STEP_BASIC_POS, l, base_pos)
+                put4(PS, g, st.BASE_ROT, l, get4(PS, g, st.ROTATION, l))
+                put4(PS, g, st.STEP_BASIC_ROT, l, get4(PS, g, st.ROTATION, l))
         else:
-            base_pos, base_rot = predict_base_pose(load3(ps_old_position, p), load3(ps_position, p),
-                                                   load4(ps_old_rotation, p), load4(ps_rotation, p), t)
-        store3(ps_base_pos, p, base_pos)
-        store4(ps_base_rot, p, base_rot)
-        store3(ps_step_basic_pos, p, base_pos)
-        store4(ps_step_basic_rot, p, base_rot)
-        if (m_attribute[p] & MOVE) == 0:
-            store3(ps_next_pos, p, base_pos)
-            store3(ps_velocity_pos, p, base_pos)
+            for l in range(w):
+                t = get1(TS, b, st.FRAME_INTERPOLATION, l)
+                rotation = get4(PS, g, st.ROTATION, l)
+                base_pos = v_lerp(get3(PS, g, st.OLD_POSITION, l), get3(PS, g, st.POSITION, l), t)
+                slerped = q_normalize_select(q_slerp_select(get4(PS, g, st.OLD_ROTATION, l), rotation, t))
+                base_rot = rotation if t == 1.0 else slerped   # predict_base_pose's paths
+                put3(PS, g, st.BASE_POS, l, base_pos)
+                put4(PS, g, st.BASE_ROT, l, base_rot)
+                put3(PS, g, st.STEP_BASIC_POS, l, base_pos)
+                put4(PS, g, st.STEP_BASIC_ROT, l, base_rot)
+        if not move:
+            for l in range(w):
+                base_pos = get3(PS, g, st.BASE_POS, l)
+                put3(PS, g, st.NEXT_POS, l, base_pos)
+                put3(PS, g, st.VELOCITY_POS, l, base_pos)
             continue
-        depth = m_depth[p]
-        damping_keep = damping_keep_at(prm, team, depth, frequency_ratio, power_z)
-        if depth_inertia * (1.0 - depth * depth) == 0.0:  # no depth-inertia mix: predict_move's select
+        for l in range(w):
+            depth = get1(PM, g, bk.DEPTH, l)
+            gravity = v_scale(g_dir, g_mag * get1(TS, b, st.GRAVITY_RATIO, l))
+            scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)   # forces follow the scale
+            iv = get3(TS, b, st.INERTIA_VECTOR, l)
+            iq = get4(TS, b, st.INERTIA_ROTATION, l)
+            if depth_inertia != 0.0:   # predict_move's depth-inertia mix, where k != 0
+                k = depth_inertia * (1.0 - depth * depth)
+                mixed_v = v_lerp(iv, get3(TS, b, st.STEP_VECTOR, l), k)
+                mixed_q = q_slerp_select(iq, get4(TS, b, st.STEP_ROTATION, l), k)
+                iv = mixed_v if k != 0.0 else iv
+                iq = mixed_q if k != 0.0 else iq
             velocity, velocity_pos, next_pos = predict_move_shifted(
-                load3(ps_old_pos, p), load3(ps_velocity, p), depth, old_world_pos, inertia_vector,
-                inertia_rotation, velocity_weight, damping_keep, gravity, force_mode, impact, scale, dt)
-        else:
-            velocity, velocity_pos, next_pos = predict_move(
-                load3(ps_old_pos, p), load3(ps_velocity, p), depth, old_world_pos, inertia_vector,
-                inertia_rotation, step_vector, step_rotation, depth_inertia, velocity_weight,
-                damping_keep, gravity, force_mode, impact, scale, dt)
-        store3(ps_velocity, p, velocity)
-        store3(ps_velocity_pos, p, velocity_pos)
-        store3(ps_next_pos, p, next_pos)
-
+                get3(PS, g, st.OLD_POS, l), get3(PS, g, st.VELOCITY, l), depth, get3(TS, b, st.OLD_WORLD_POS, l),
+                iv, iq, get1(TS, b, st.VELOCITY_WEIGHT, l),
+                damping_keep(get1(PP, g, bk.CURVE_DAMPING, l), frequency_ratio, power_z, rate_mode), gravity,
+                int(get1(TS, b, st.EXTERNAL_FORCE_MODE, l)), get3(TS, b, st.EXTERNAL_FORCE, l), scale, dt)
+            put3(PS, g, st.VELOCITY, l, velocity)
+            put3(PS, g, st.VELOCITY_POS, l, velocity_pos)
+            put3(PS, g, st.NEXT_POS, l, next_pos)
 
 
 @kernel
@@ -237,37 +262,39 @@ def basic_pose_blend(pos, rot, base_pos, base_rot, ratio):
     return v_lerp(pos, base_pos, ratio), q_slerp(rot, base_rot, ratio)
 
 
-@kernel
-def step_basic_pose_team(m, ps, prm, ts, team):
-    """D.2: rebuild the rest shape along each baseline and blend it to the animated pose."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_baseline_count, m_baseline_data = m.baseline_count, m.baseline_data
-    m_baseline_local_position, m_baseline_local_rotation = m.baseline_local_position, m.baseline_local_rotation
-    m_baseline_start, m_parent, m_team_baseline_count = m.baseline_start, m.parent, m.team_baseline_count
-    ps_base_pos, ps_base_rot, ps_step_basic_pos = ps.base_pos, ps.base_rot, ps.step_basic_pos
-    ps_step_basic_rot = ps.step_basic_rot
-    a = prm.animation_pose_ratio[team]
+@kernel(forceinline=False)
+def step_basic_pose_block(PS, PM, TS, TM, P, BI, topology, b):
+    """D.2 over block b: rebuild the rest shape along each baseline and blend it to the
+    animated pose."""
+    a = P[b, PRM_ANIMATION_POSE_RATIO]
     if a > 0.99:
         return
-    s = v_scale(load3(m.team_init_scale, team), ts.scale_ratio[team])
-    b0 = m.team_baseline_start[team]
-    for b in range(b0, b0 + m_team_baseline_count[team]):
-        e0 = m_baseline_start[b]
-        e1 = e0 + m_baseline_count[b]
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    parent = BI[b, bk.BI_PARENT]
+    bl_start, bl_count, bl_data = BI[b, bk.BI_BASELINE_START], BI[b, bk.BI_BASELINE_COUNT], BI[b, bk.BI_BASELINE_DATA]
+    for line in range(BI[b, bk.BI_BASELINES]):
+        e0 = topology[bl_start + line]
+        e1 = e0 + topology[bl_count + line]
         for e in range(e0 + 1, e1):
-            v = m_baseline_data[e]
-            p = m_parent[v]
-            pos, rot = basic_pose_child(load3(ps_step_basic_pos, p), load4(ps_step_basic_rot, p),
-                                        load3(m_baseline_local_position, v), load4(m_baseline_local_rotation, v), s)
-            store3(ps_step_basic_pos, v, pos)
-            store4(ps_step_basic_rot, v, rot)
+            v = topology[bl_data + e]
+            gv = g0 + v
+            gp = g0 + topology[parent + v]
+            for l in range(w):
+                s = v_scale(get3(TM, b, bk.INIT_SCALE, l), get1(TS, b, st.SCALE_RATIO, l))
+                pos, rot = basic_pose_child(get3(PS, gp, st.STEP_BASIC_POS, l), get4(PS, gp, st.STEP_BASIC_ROT, l),
+                                            get3(PM, gv, bk.BASELINE_LOCAL_POSITION, l),
+                                            get4(PM, gv, bk.BASELINE_LOCAL_ROTATION, l), s)
+                put3(PS, gv, st.STEP_BASIC_POS, l, pos)
+                put4(PS, gv, st.STEP_BASIC_ROT, l, rot)
         if a > 1e-8:
             for e in range(e0, e1):
-                v = m_baseline_data[e]
-                pos, rot = basic_pose_blend(load3(ps_step_basic_pos, v), load4(ps_step_basic_rot, v),
-                                            load3(ps_base_pos, v), load4(ps_base_rot, v), a)
-                store3(ps_step_basic_pos, v, pos)
-                store4(ps_step_basic_rot, v, rot)
+                gv = g0 + topology[bl_data + e]
+                for l in range(w):
+                    pos, rot = basic_pose_blend(get3(PS, gv, st.STEP_BASIC_POS, l), get4(PS, gv, st.STEP_BASIC_ROT, l),
+                                                get3(PS, gv, st.BASE_POS, l), get4(PS, gv, st.BASE_ROT, l), a)
+                    put3(PS, gv, st.STEP_BASIC_POS, l, pos)
+                    put4(PS, gv, st.STEP_BASIC_ROT, l, rot)
 
 
 @kernel
@@ -339,25 +366,17 @@ def centrifugal_velocity(vel, next_pos, direction, moving, depth, angular_veloci
     return flung if (angular_velocity > 1e-8 and centrifugal > 1e-8 and moving and radius > 1e-8) else vel
 
 
-@kernel
-def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
-    """D.10: velocity from positions, static and dynamic friction, speed limit, centrifugal term."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_depth, m_team_particle_count = m.attribute, m.depth, m.team_particle_count
-    ps_collision_normal, ps_friction, ps_next_pos = ps.collision_normal, ps.friction, ps.next_pos
-    ps_old_pos, ps_real_velocity, ps_static_friction = ps.old_pos, ps.real_velocity, ps.static_friction
-    ps_velocity, ps_velocity_pos = ps.velocity, ps.velocity_pos
-    mode = prm.rate_mode[team]
-    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
-    static_threshold = prm.friction[team] * scale
-    dynamic = prm.friction[team]
-    speed_limit = prm.particle_speed_limit[team]
-    angular_velocity = ts.angular_velocity[team]
-    centrifugal = prm.centrifugal_acceleration[team]
-    spinning = angular_velocity > 1e-8 and centrifugal > 1e-8
-    axis = load3(ts.rotation_axis, team)
-    center = load3(ts.now_world_pos, team)
-    velocity_weight = ts.velocity_weight[team]
+@kernel(forceinline=False)
+def end_step_block(PS, PM, TS, P, BI, topology, b, dt, frequency_ratio):
+    """D.10 over block b: velocity from positions, static and dynamic friction, speed limit,
+    centrifugal term."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    mode = int(P[b, PRM_RATE_MODE])
+    dynamic = P[b, PRM_FRICTION]
+    speed_limit = P[b, PRM_PARTICLE_SPEED_LIMIT]
+    centrifugal_parameter = P[b, PRM_CENTRIFUGAL_ACCELERATION]
     # frequency-consistent and quality modes convert the per-step amounts of D.10 by the step:
     # the centrifugal velocity increment and the static-friction loss scale with 90/f, the
     # dynamic-friction brake's kept share becomes a retention keep^(90/f) (per step, the brake
@@ -365,41 +384,49 @@ def end_step_team(m, ps, prm, ts, team, dt, frequency_ratio):
     # docs/quality-mode.md *Convergence*); MagicaCloth2 mode and 90 Hz keep the bits
     consistent = mode != 0 and frequency_ratio != 1.0
     loss_scale = frequency_ratio if consistent else 1.0
-    if consistent:
-        centrifugal = step_share(centrifugal, frequency_ratio, mode)
+    centrifugal = step_share(centrifugal_parameter, frequency_ratio, mode) if consistent else centrifugal_parameter
     friction_keep = step_keep(FRICTION_DAMPING_RATE, frequency_ratio, mode)
     gain = step_rate(STATIC_FRICTION_GAIN, frequency_ratio, 1.0, mode)
-    start = m.team_particle_start[team]
-    for p in range(start, start + m_team_particle_count[team]):
-        next_pos = load3(ps_next_pos, p)
-        old_pos = load3(ps_old_pos, p)
-        if (m_attribute[p] & MOVE) != 0:
-            cn = load3(ps_collision_normal, p)
-            f = ps_friction[p]
+    for j in range(BI[b, bk.BI_N]):
+        g = g0 + j
+        if (topology[attribute + j] & MOVE) == 0:
+            for l in range(w):
+                next_pos = get3(PS, g, st.NEXT_POS, l)
+                put3(PS, g, st.REAL_VELOCITY, l, v_scale(v_sub(next_pos, get3(PS, g, st.OLD_POS, l)), 1.0 / dt))
+                put3(PS, g, st.OLD_POS, l, next_pos)
+            continue
+        for l in range(w):
+            scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
+            static_threshold = dynamic * scale
+            angular_velocity = get1(TS, b, st.ANGULAR_VELOCITY, l)
+            next_pos = get3(PS, g, st.NEXT_POS, l)
+            old_pos = get3(PS, g, st.OLD_POS, l)
+            cn = get3(PS, g, st.COLLISION_NORMAL, l)
+            f = get1(PS, g, st.FRICTION, l)
             contact = v_length_sq(cn) > 1e-8 and f > 1e-8
-            velocity_pos = load3(ps_velocity_pos, p)
+            velocity_pos = get3(PS, g, st.VELOCITY_POS, l)
+            static_friction = get1(PS, g, st.STATIC_FRICTION, l)
             if contact and static_threshold > 0.0:
                 next_pos, velocity_pos, sf = static_friction_step(next_pos, old_pos, velocity_pos, cn,
-                                                                  ps_static_friction[p], dt, static_threshold, gain,
+                                                                  static_friction, dt, static_threshold, gain,
                                                                   loss_scale)
-                store3(ps_next_pos, p, next_pos)
             else:
-                sf = saturate(ps_static_friction[p] - STATIC_FRICTION_LOSS * loss_scale)
-            ps_static_friction[p] = sf
+                sf = saturate(static_friction - STATIC_FRICTION_LOSS * loss_scale)
+            put1(PS, g, st.STATIC_FRICTION, l, sf)
             vel, direction, moving = end_step_velocity(next_pos, velocity_pos, dt)
             if moving and contact and dynamic > 0.0:
                 if consistent:
                     vel = dynamic_friction_keep(vel, direction, cn, f, dynamic, frequency_ratio)
                 else:
                     vel = dynamic_friction_brake(vel, direction, cn, f, dynamic)
-            ps_friction[p] = f * friction_keep
+            put1(PS, g, st.FRICTION, l, f * friction_keep)
             if speed_limit >= 0.0:
                 vel = clamp_length(vel, speed_limit * scale)
-            if spinning:
-                vel = centrifugal_velocity(vel, next_pos, direction, moving, m_depth[p], angular_velocity,
-                                           centrifugal, axis, center)
-            store3(ps_velocity, p, v_scale(vel, velocity_weight))
-        store3(ps_real_velocity, p, v_scale(v_sub(next_pos, old_pos), 1.0 / dt))
-        store3(ps_old_pos, p, next_pos)
-
-
+            if angular_velocity > 1e-8 and centrifugal > 1e-8:
+                vel = centrifugal_velocity(vel, next_pos, direction, moving, get1(PM, g, bk.DEPTH, l),
+                                           angular_velocity, centrifugal, get3(TS, b, st.ROTATION_AXIS, l),
+                                           get3(TS, b, st.NOW_WORLD_POS, l))
+            put3(PS, g, st.VELOCITY, l, v_scale(vel, get1(TS, b, st.VELOCITY_WEIGHT, l)))
+            put3(PS, g, st.REAL_VELOCITY, l, v_scale(v_sub(next_pos, old_pos), 1.0 / dt))
+            put3(PS, g, st.OLD_POS, l, next_pos)
+            put3(PS, g, st.NEXT_POS, l, next_pos)

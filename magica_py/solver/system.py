@@ -1,8 +1,10 @@
 """``ClothSystem``: the LATE_UPDATE system that simulates every BoneCloth of a scene.
 
-Python orchestrates, numba computes: a frame is one ``simulate_frame`` call over all teams
+Python orchestrates, numba computes: a frame is one ``simulate_frame`` call over all blocks
 (``solver/frame.py``) plus the hierarchy propagation, whatever the number of teams or
-particles. Teams are the scene's cloths in order (``teams`` / ``team_names``).
+particles. Teams are the scene's cloths in order (``teams`` / ``team_names``); the layout
+groups teams of identical structure and parameters into blocks, one team per lane
+(``solver/blocks.py``, ``solver/lanes.py``).
 
 Runtime control (all take effect at the next frame, none resets the simulation unless said):
 
@@ -15,10 +17,12 @@ Runtime control (all take effect at the next frame, none resets the simulation u
   ``add_force(cloth, direction, speed, mode)``;
 * ``wind.set_zone(name, enabled=None, main=None)`` (``wind``: the scene's ``wind.zones.WindField``,
   None without wind zones) — also the ``("wind", {zone, enabled, main})`` event raised by animation;
-* ``add_cloth(spec) -> team id`` / ``remove_cloth(team)`` — teams at runtime:
-  chunks of the global SoA are allocated from freed space first and freed on removal
-  (``layout.SolverLayout``); other teams' rows never move or change; the frame kernel visits
-  ``model.live_teams`` only; a removed cloth's bones are no longer restored nor written.
+* ``add_cloth(spec) -> team id`` / ``remove_cloth(team)`` — teams at runtime: a new team
+  takes a free lane of a matching block or a new block whose chunks come from freed space
+  first (``blocks.BlockLayout``); other teams' rows never move or change; a removed cloth's
+  lane is freed and its bones are no longer restored nor written. A ``set_parameter`` that
+  makes a team differ from its block's other lanes moves it to a block of its own kind, its
+  state copied bit for bit.
 
 Guards: a team reset by ``solver/guards.py`` raises ``("cloth_reset", {"cloth", "team",
 "reason"})`` in ``ctx.events``. Metrics: ``cloth.steps`` (particle-steps this frame),
@@ -32,40 +36,44 @@ import time as _time
 import numba
 import numpy as np
 
+from magica_py.kernels import portable
 from magica_py.params import default_parameters
 from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, update_mode_code
-from magica_py.solver.colliders import fill_slots
-from magica_py.solver.fields import F64
+from magica_py.solver import state as st
+from magica_py.solver.blocks import (
+    BI_COLLIDERS, BI_N, LANES, PARTICLE_PARAMETERS, TI_ANCHOR, TI_CULLING_REFERENCE, BlockLayout,
+)
+from magica_py.solver.colliders import collider_shapes, fill_slots
 from magica_py.solver.frame import (
-    StageSwitches, frame_input_values, hierarchy_arrays, simulate_frame, simulate_frame_parallel, time_arrays, worker_table,
+    StageSwitches, Tables, frame_arguments, frame_entry, frame_entry_parallel, frame_input_values, hierarchy_arrays,
+    lane_save_area, time_arrays, worker_table,
 )
-from magica_py.solver.tables import kernel_tables
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
-from magica_py.solver.fields import grow
-from magica_py.solver.layout import ChunkAllocator, SolverLayout
-from magica_py.solver.parameters import allocate_parameters, write_row
-from magica_py.solver.state import (
-    allocate_state, free_collider_rows, free_particle_rows, free_team_row, grow_state,
+from magica_py.solver.parameters import (
+    PARAMETER_COUNT, allocate_parameters, packed_row, particle_parameters_block, write_row,
 )
-from magica_py.kernels import portable
+from magica_py.solver.fields import grow
+from magica_py.solver.views import TableView, team_model
 
 FORCE_MODES = {"velocity_add": 1, "velocity_add_without_depth": 2, "velocity_change": 3,
                "velocity_change_without_depth": 4}
 # the system's own copies in the frame kernel's hierarchy table (``frame.hierarchy_arrays``)
 _BUILD_POSE_FIELDS = ("build_world_position", "build_world_rotation", "build_lossy_scale",
-                      "build_local_to_world", "build_pose_pending", "ramp_from_build")
+                      "build_local_to_world", "build_pose_pending")
 GUARD_REASONS = {GUARD_NON_FINITE: "non-finite particle state", GUARD_SPEED: "particle speed above the guard bound"}
+# the state tables, per pool of items (``blocks.BlockLayout`` capacities)
+_STATE_TABLES = (("PS", st.PARTICLE, "particle"), ("CS", st.COLLIDER, "collider"),
+                 ("TRS", st.TRIANGLE_STATE, "triangle"), ("EDS", st.EDGE_STATE, "edge"))
 
 
 # "auto" runs the frame on numba's threads from this many teams and particles: below it the
-# two thread launches per frame cost more than they save (single tail: 40 -> 49 us per frame
-# on 2 threads; crowd, 200 teams: 10.8 -> 6.7 ms; docs/BENCHMARKS.md)
+# two thread launches per frame cost more than they save (docs/BENCHMARKS.md)
 AUTO_PARALLEL_TEAMS = 8
 AUTO_PARALLEL_PARTICLES = 2000
 
 
 def choose_threads(parallel, setting, teams: int, particles: int) -> int:
-    """Threads the frame kernel deals its teams to: ``parallel`` True / False forces numba's
+    """Threads the frame kernel deals its blocks to: ``parallel`` True / False forces numba's
     thread count / 1; otherwise the scene's ``threads`` setting: a count (at most numba's
     threads, ``NUMBA_NUM_THREADS``) or ``"auto"``: numba's threads when the scene has at
     least ``AUTO_PARALLEL_TEAMS`` teams and ``AUTO_PARALLEL_PARTICLES`` particles, else 1."""
@@ -83,12 +91,16 @@ class ClothSystem:
 
     ``models`` may be given (prebuilt ``build.ClothModel`` in the same order); otherwise each
     spec is built with ``build.build_cloth`` from the hierarchy's current (rest) pose.
-    Threads: ``parallel=True`` spreads teams over numba's threads, ``False`` keeps one;
+    Threads: ``parallel=True`` spreads blocks over numba's threads, ``False`` keeps one;
     ``None`` (the default) follows the scene's ``threads`` setting (``settings.threads``:
     ``"auto"`` or a count; ``choose_threads``): the same results bit for bit either way. Only the stages
     the live teams use are compiled and called (``stage_switches``). After the write-back the
     hierarchy is propagated over the subtrees of the cloth bones only (a plan rebuilt when teams
     change); with ``parallel=True`` over the numba threads too (``hierarchy.threads``).
+
+    Reading the state: ``positions(cloth)``, and the team-ordered views ``model``,
+    ``particles``, ``teams``, ``collider_state`` (``solver/views.py``); ``write_particles``
+    and ``write_team`` change it.
     """
 
     name = "cloth"
@@ -99,58 +111,132 @@ class ClothSystem:
         from magica_py.wind.zones import WindField
 
         self.wind = WindField(wind) if len(wind) else None   # the scene's wind zones (magica_py/wind)
-
         self.hierarchy = hierarchy
         self.specs = list(cloth_specs)
         self.colliders = colliders
         self.time_settings = SimulationTimeSettings.from_scene_settings(settings or {})
-        scene_update_mode = getattr(settings, "update_mode", None) if settings is not None else None
+        self._scene_update_mode = getattr(settings, "update_mode", None) if settings is not None else None
         if models is None:
             models = [build_cloth(hierarchy, spec) for spec in self.specs]
         self.models = list(models)
         self._check_positive_scale(hierarchy)
         self.team_names = [str(getattr(s, "name", f"cloth{i}")) for i, s in enumerate(self.specs)]
-        self._scene_update_mode = scene_update_mode
-        # chunked global model: one chunk per team and pool (layout.SolverLayout); collider
-        # slots are chunked the same way
-        self.layout = SolverLayout()
-        for model in self.models:
-            self.layout.add(model)
-        self.model = self.layout.model()
         team_count = len(self.models)
-        self._slots = ChunkAllocator()
-        slots = [(t, self._collider_indices(spec)) for t, spec in enumerate(self.specs)]
-        starts = [self._slots.allocate(len(indices)) for _t, indices in slots]
-        self.particles, self.teams, self.collider_state = allocate_state(
-            self.layout.capacity("particle"), team_count, self._slots.capacity, self.layout.capacity("triangle"),
-            self.layout.capacity("edge"))
-        for (t, indices), start in zip(slots, starts):
-            self.teams.collider_start[t] = start
-            self.teams.collider_count[t] = len(indices)
-        if self._slots.capacity:
-            fill_slots(self.collider_state, slots, colliders)
-        self.parameters = allocate_parameters(team_count)
         self.team_parameters = [getattr(s, "parameters", None) or {} for s in self.specs]
         self.collision_modes = [getattr(s, "collision_mode", None) for s in self.specs]
+        self.parameters = allocate_parameters(team_count)   # per team id: the source of the block rows
         for t in range(team_count):
             self._write_parameters(t)
+        self.layout = BlockLayout()
+        self.PS = st.PARTICLE.allocate(0)
+        self.CS = st.COLLIDER.allocate(0)
+        self.TRS = st.TRIANGLE_STATE.allocate(0)
+        self.EDS = st.EDGE_STATE.allocate(0)
+        self.TS = st.TEAM.allocate(0)
+        self.P = np.zeros((0, PARAMETER_COUNT))
+        self.PP = PARTICLE_PARAMETERS.allocate(0)
         self.time_state = TeamTimeState.allocate(team_count)
-        for t in range(team_count):
+        for t, (spec, model) in enumerate(zip(self.specs, self.models)):
+            self._place(t, spec, model)
             self._activate(t)
         self._time = time_arrays(self.time_state)
         self._hierarchy = hierarchy_arrays(hierarchy)
         self.frame_count = 0
         self._player = None
-        self._tables = None
         self.threads = choose_threads(parallel, getattr(settings, "threads", "auto") if settings is not None else "auto",
-                                      team_count, int(self.model.team_particle_count.sum()))
+                                      team_count, sum(int(m.particle_count) for m in self.models))
         self.parallel = self.threads > 1
-        self._workers = worker_table(self.layout.team_count, self.threads)
         self._frame_values = frame_input_values()
-        self.stages = self.stage_switches()
         if self.parallel:  # the hierarchy propagation spreads over the same threads
             hierarchy.threads = max(hierarchy.threads, self.threads)
-        self._written_plan = hierarchy.plan(self.restored_bones())
+        self._tables_changed(register=False)
+
+    # ------------------------------------------------------------------ placement
+    def _key_extra(self, team: int) -> bytes:
+        """What a team's block lanes must share besides the topology: its parameter row."""
+        return packed_row(self.parameters, team).tobytes()
+
+    def _place(self, team: int, spec, model, state=None) -> None:
+        """Put team ``team`` into a lane (``BlockLayout.add``) and write its per-lane data;
+        ``state``: columns saved by ``_lane_state`` (a move), else fresh state."""
+        indices = self._collider_indices(spec)
+        shapes = collider_shapes(self.colliders, indices) if indices else []
+        nodes = [int(self.colliders.transform[ci]) for ci in indices]
+        row = packed_row(self.parameters, team)
+        got = self.layout.add(model, row.tobytes(), shapes, nodes, team=team)
+        assert got == team
+        self._fit_state()
+        b, lane = self.layout.place(team)
+        items = self.layout.slots(team)
+        if state is None:
+            for name, table, pool in _STATE_TABLES:
+                table.reset_lanes(getattr(self, name), items[pool], lane)
+            st.TEAM.reset_lanes(self.TS, b, lane)
+            st.TEAM.write(self.TS, "enabled", [b], lane, [1.0])
+            if indices:
+                fill_slots(self.CS, items["collider"], lane, self.colliders, indices)
+        else:
+            self._write_lane_state(team, state)
+        self._write_block_parameters(team, row)
+
+    def _write_block_parameters(self, team: int, row=None) -> None:
+        """Team ``team``'s parameters into its block: the block's row of ``P`` (shared by its
+        lanes; ``row``: the team's ``packed_row`` when known), the lane's transform-valued
+        parameters, the depth curves ``PP`` of the block."""
+        b, lane = self.layout.place(team)
+        self.P[b] = packed_row(self.parameters, team) if row is None else row
+        self.layout.team_ints[b, TI_ANCHOR + lane] = int(self.parameters.anchor_transform[team])
+        self.layout.team_ints[b, TI_CULLING_REFERENCE + lane] = int(self.parameters.culling_reference[team])
+        particle_parameters_block(self.PP, self.layout.particle_model, self.P, self.layout.block_ints, b)
+
+    def _fit_state(self) -> None:
+        """The state tables at the layout's capacities (old rows kept, new rows fresh)."""
+        def fit(array, table, rows):
+            if array.shape[0] >= rows:
+                return array
+            new = table.allocate(max(rows, 2 * array.shape[0]))
+            new[:array.shape[0]] = array
+            return new
+
+        for name, table, pool in _STATE_TABLES:
+            setattr(self, name, fit(getattr(self, name), table, self.layout.capacity(pool)))
+        self.PP = fit(self.PP, PARTICLE_PARAMETERS, self.layout.capacity("particle"))
+        self.TS = fit(self.TS, st.TEAM, self.layout.block_count)
+        if self.P.shape[0] < self.layout.block_count:
+            grown = np.zeros((max(self.layout.block_count, 2 * self.P.shape[0]), PARAMETER_COUNT))
+            grown[:self.P.shape[0]] = self.P
+            self.P = grown
+
+    def _lane_state(self, team: int) -> dict:
+        """Copies of a team's columns of every state table (``_write_lane_state`` puts them back)."""
+        b, lane = self.layout.place(team)
+        items = self.layout.slots(team)
+        out = {"TS": self.TS[b, lane::LANES].copy()}
+        for name, _table, pool in _STATE_TABLES:
+            out[name] = getattr(self, name)[items[pool], lane::LANES].copy()
+        return out
+
+    def _write_lane_state(self, team: int, state: dict) -> None:
+        b, lane = self.layout.place(team)
+        items = self.layout.slots(team)
+        self.TS[b, lane::LANES] = state["TS"]
+        for name, _table, pool in _STATE_TABLES:
+            getattr(self, name)[items[pool], lane::LANES] = state[name]
+
+    def _move_if_needed(self, team: int) -> None:
+        """After a parameter change: a team whose row no longer matches its block's moves to a
+        block of its new kind, its state and model columns copied bit for bit."""
+        b, _lane = self.layout.place(team)
+        if self.layout.blocks[b].key == self.layout.key_of(self.models[team], self._key_extra(team),
+                                                           self._collider_shapes_of(team)):
+            return
+        state = self._lane_state(team)
+        self.layout.remove(team)
+        self._place(team, self.specs[team], self.models[team], state)
+
+    def _collider_shapes_of(self, team: int):
+        indices = self._collider_indices(self.specs[team])
+        return collider_shapes(self.colliders, indices) if indices else []
 
     # ------------------------------------------------------------------ registration
     def attach(self, player, scene=None) -> "ClothSystem":
@@ -164,7 +250,7 @@ class ClothSystem:
         return self
 
     def restored_bones(self) -> np.ndarray:
-        """Bones of the cloths in use (freed chunks have attribute 0: left out)."""
+        """Bones of the cloths in use (Fixed or Move; invalid bones are left alone)."""
         m = self.model
         return np.unique(m.transform_index[(m.attribute & 0x03) != 0]).astype(np.int32)
 
@@ -173,10 +259,10 @@ class ClothSystem:
         """Add a cloth at runtime; returns its team id (ids are not reused).
 
         The model is built (unless given) after putting the cloth's bones back to their rest
-        local pose. Its chunks come from
-        the freed space first, the pools grow otherwise: other teams' rows never move and their
-        state is not touched. The new team starts with Reset, like a team built with the scene,
-        and its bones join the restored set."""
+        local pose. It takes a free lane of a block of its kind, or a new block whose chunks
+        come from the freed space first: other teams' rows never move and their state is not
+        touched. The new team starts with Reset, like a team built with the scene, and its
+        bones join the restored set."""
         from magica_py.build import build_cloth
 
         if model is None:
@@ -188,50 +274,28 @@ class ClothSystem:
             h.propagate()
             model = build_cloth(h, spec)
         self._check_positive_scale(self.hierarchy, [(spec, model)])
-        team = self.layout.add(model)
-        indices = self._collider_indices(spec)
-        slot_start = self._slots.allocate(len(indices))
-        self.particles, self.teams, self.collider_state = grow_state(
-            self.particles, self.teams, self.collider_state, self.layout.capacity("particle"),
-            self.layout.team_count, self._slots.capacity, self.layout.capacity("triangle"),
-            self.layout.capacity("edge"))
-        p0, pn = self.layout.chunks[team]["particle"]
-        free_particle_rows(self.particles, p0, pn)   # a reused chunk starts fresh too
-        free_team_row(self.teams, team)
-        self.teams.collider_start[team] = slot_start
-        self.teams.collider_count[team] = len(indices)
-        if indices:
-            free_collider_rows(self.collider_state, slot_start, len(indices))
-            fill_slots(_rows(self.collider_state, slot_start, len(indices)), [(team, indices)], self.colliders)
+        team = len(self.models)
         self.specs.append(spec)
         self.models.append(model)
         self.team_names.append(str(getattr(spec, "name", f"cloth{team}")))
         self.team_parameters.append(getattr(spec, "parameters", None) or {})
         self.collision_modes.append(getattr(spec, "collision_mode", None))
-        if self.parameters.gravity.shape[0] < self.layout.team_count:
-            self.parameters = grow(type(self.parameters), self.parameters, {"team": self.layout.team_count})
+        if self.parameters.gravity.shape[0] < team + 1:
+            self.parameters = grow(type(self.parameters), self.parameters, {"team": max(team + 1, 2 * team)})
         self._write_parameters(team)
-        if self.time_state.capacity < self.layout.team_count:
-            self.time_state.resize(self.layout.team_count)
+        if self.time_state.capacity < team + 1:
+            self.time_state.resize(max(team + 1, 2 * self.time_state.capacity))
+        self._place(team, spec, model)
         self._activate(team)
         self._tables_changed()
         return team
 
     def remove_cloth(self, team: int) -> None:
-        """Remove a cloth at runtime: its chunks are freed (rows reset), the frame kernel no
-        longer visits it, its bones are neither restored nor written any more (they keep the
-        last written pose). Other teams are not touched."""
+        """Remove a cloth at runtime: its lane is freed (the block's chunks with its last lane),
+        its bones are neither restored nor written any more (they keep the last written pose).
+        Other teams are not touched."""
         self._check_live(team)
-        p0, pn = self.layout.chunks[team]["particle"]
         self.layout.remove(team)
-        free_particle_rows(self.particles, p0, pn)
-        s0, sn = int(self.teams.collider_start[team]), int(self.teams.collider_count[team])
-        if sn:
-            free_collider_rows(self.collider_state, s0, sn)
-            self.collider_state.team[s0:s0 + sn] = -1
-        self._slots.release(s0, sn)
-        free_team_row(self.teams, team)
-        self.teams.collider_count[team] = 0
         self.time_state.deactivate(team)
         self.models[team] = None
         self._tables_changed()
@@ -248,53 +312,120 @@ class ClothSystem:
 
     def stage_switches(self) -> StageSwitches:
         """Which optional stages the live teams may run (``frame.StageSwitches``: 1 compiled and
-        called where a team asks, None neither): from the teams' models, parameters and
+        called where a block asks, None neither): from the teams' models, parameters and
         colliders. Recomputed after any change of teams or parameters; a stage that becomes
         needed at run time compiles then (once per machine: the kernels are cached)."""
-        m, prm, live = self.model, self.parameters, np.asarray(self.live_teams, dtype=np.int64)
+        prm = self.parameters
+        live = np.asarray(self.live_teams, dtype=np.int64)
 
         def any_of(values) -> int | None:
             return 1 if live.size and bool(np.any(np.asarray(values)[live])) else None
 
-        colliding = self.teams.collider_count[live] > 0 if live.size else np.zeros(0, bool)
+        m = self.model
+        colliding = m.team_collider_count[live] > 0 if live.size else np.zeros(0, bool)
         mode = prm.collision_mode[live] if live.size else np.zeros(0, np.int32)
+        bends = np.array([len(getattr(mm, "bend_vertices", ())) + len(getattr(mm, "volume_vertices", ()))
+                          if mm is not None else 0 for mm in self.models])
+        lines = np.array([len(getattr(mm, "lines", ())) if mm is not None else 0 for mm in self.models])
         return StageSwitches(
             angle=any_of((prm.use_angle_limit != 0) | (prm.use_restoration != 0)),
-            bending=any_of((m.team_bend_count > 0) | (m.team_volume_count > 0)),
+            bending=any_of(bends > 0),
             point_collision=1 if bool(np.any(colliding & (mode == 1))) else None,
             edge_collision=1 if bool(np.any(colliding & (mode == 2))) else None,
             motion=any_of((prm.use_max_distance != 0) | (prm.use_backstop != 0)),
             quality=any_of((prm.quality != 0) | (prm.inextensibility != 0) | (prm.collision_last != 0)
                            | (prm.time_based_smoothing != 0)),
-            lines=any_of(m.team_has_lines != 0),
+            lines=any_of(lines > 0),
             triangles=any_of(m.team_triangle_count > 0),
             wind=1 if self.wind is not None else any_of(prm.wind_moving_wind > 0.01))
 
-    def _tables_changed(self) -> None:
-        """After add/remove: new model, new kernel tables (same types: the compiled entry point
-        stays valid), restored bones re-registered with the player."""
-        self.model = self.layout.model()
+    def _tables_changed(self, register: bool = True) -> None:
+        """After a change of teams: the team-ordered views, the kernels' tables, the work
+        tables, the stage switches, the propagation plan and the restored bones."""
+        collider_counts = [len(self._collider_indices(s)) if m is not None else 0
+                           for s, m in zip(self.specs, self.models)]
+        self.model = team_model(self.models, collider_counts)
+        self._views()
+        lay = self.layout
+        blocks = np.asarray([b for b, blk in enumerate(lay.blocks) if blk is not None], dtype=np.int32)
+        self.tables = Tables(self.PS, self.TS, self.CS, self.TRS, self.EDS, lay.particle_model, self.PP, lay.team_model,
+                             lay.link_model, lay.triangle_model, lay.bend_model, lay.volume_model, self.P,
+                             lay.block_ints, lay.topology, lay.particle_transform, lay.team_ints,
+                             lay.collider_transform, blocks)
         self._time = time_arrays(self.time_state)
-        self._tables = None
-        if self._workers.team_worker.shape[0] < self.layout.team_count:
-            self._workers = worker_table(self.layout.team_count, self.threads)
+        most_n = int(lay.block_ints[blocks, BI_N].max()) if blocks.size else 1
+        most_c = int(lay.block_ints[blocks, BI_COLLIDERS].max()) if blocks.size else 0
+        self._save_area = lane_save_area(most_n, most_c, self.threads)
+        self._workers = worker_table(max(lay.block_count, 1), self.threads)
         self.stages = self.stage_switches()
         self._written_plan = self.hierarchy.plan(self.restored_bones())
-        if self._player is not None:
+        if register and self._player is not None:
             self._player.unregister_restored_bones(self)
             self._player.register_restored_bones(self.restored_bones(), owner=self)
+
+    def _views(self) -> None:
+        """The team-ordered views of the state (``solver/views.py``)."""
+        lay = self.layout
+        live = self.live_teams
+        g_items, g_lanes, c_items, c_lanes = [], [], [], []
+        for t in live:
+            b, lane = lay.place(t)
+            slots = lay.slots(t)
+            g_items.append(slots["particle"])
+            g_lanes.append(np.full(len(slots["particle"]), lane))
+            c_items.append(slots["collider"])
+            c_lanes.append(np.full(len(slots["collider"]), lane))
+        cat = (lambda parts: np.concatenate(parts) if parts else np.zeros(0, np.int64))
+        team_b = np.array([lay.team_block[t] if lay.team_block[t] >= 0 else 0 for t in range(len(self.models))])
+        team_l = np.array([lay.team_lane[t] if lay.team_lane[t] >= 0 else 0 for t in range(len(self.models))])
+        valid = np.array([lay.team_block[t] >= 0 for t in range(len(self.models))], dtype=bool)
+        self.particles = TableView(st.PARTICLE, cat(g_items), cat(g_lanes), lambda: self.PS,
+                                   {"display_history": np.uint8, "accum_count": np.int32})
+        self.teams = TableView(st.TEAM, team_b, team_l, lambda: self.TS,
+                               {"reset": np.uint8, "time_reset": np.uint8, "keep_teleport": np.uint8,
+                                "inertia_shift": np.uint8, "running": np.uint8, "active": np.uint8,
+                                "enabled": np.uint8, "culled": np.uint8, "scale_suspended": np.uint8,
+                                "guard_code": np.int32, "external_force_mode": np.int32,
+                                "wind_zone_count": np.int32, "wind_zone_id": np.int32}, valid)
+        self.collider_state = TableView(st.COLLIDER, cat(c_items), cat(c_lanes), lambda: self.CS,
+                                        {"first_frame": np.uint8, "scale_suspend": np.uint8})
 
     def _activate(self, t: int) -> None:
         mode = self._parameter(t, "update_mode", default_parameters()["update_mode"])
         if str(mode) in ("normal", "animator_linkage") and self._scene_update_mode:
             mode = self._scene_update_mode
         self.time_state.activate(t, update_mode=update_mode_code(mode))
-        self.teams.enabled[t] = 1
+        self.write_team(t, "enabled", 1.0)
 
     def _collider_indices(self, spec) -> list[int]:
         if self.colliders is None:
             return []
         return [int(i) for i in (getattr(spec, "colliders", ()) or ())]
+
+    # ------------------------------------------------------------------ state access
+    def team_slots(self, team: int) -> tuple[int, int, np.ndarray]:
+        """(block, lane, particle slots) of a live team."""
+        b, lane = self.layout.place(team)
+        return b, lane, self.layout.slots(team)["particle"]
+
+    def read_particles(self, team: int, field: str) -> np.ndarray:
+        """One field of a team's particles, (n,) or (n, k), particle order (a copy)."""
+        _b, lane, g = self.team_slots(team)
+        return st.PARTICLE.view(self.PS, field, g, lane)
+
+    def write_particles(self, team: int, field: str, values) -> None:
+        """Write one field of a team's particles ((n,) or (n, k) values, particle order)."""
+        _b, lane, g = self.team_slots(team)
+        st.PARTICLE.write(self.PS, field, g, lane, values)
+
+    def read_team(self, team: int, field: str):
+        b, lane = self.layout.place(team)
+        v = st.TEAM.view(self.TS, field, [b], lane)
+        return v[0]
+
+    def write_team(self, team: int, field: str, value) -> None:
+        b, lane = self.layout.place(team)
+        st.TEAM.write(self.TS, field, [b], lane, np.asarray(value, dtype=np.float64).reshape(1, -1))
 
     # ------------------------------------------------------------------ frame
     def run(self, ctx) -> None:
@@ -355,12 +486,13 @@ class ClothSystem:
         t2 = clock()
         self.frame_count += 1
         if guarded:
-            codes = self.teams.guard_code
-            for team in np.nonzero(codes)[0]:
-                if events is not None:
-                    events.append(("cloth_reset", {"cloth": self.team_names[team], "team": int(team),
-                                                   "reason": GUARD_REASONS.get(int(codes[team]), "guard")}))
-            codes[:] = 0
+            for team in self.live_teams:
+                code = int(self.read_team(team, "guard_code"))
+                if code:
+                    if events is not None:
+                        events.append(("cloth_reset", {"cloth": self.team_names[team], "team": int(team),
+                                                       "reason": GUARD_REASONS.get(code, "guard")}))
+                    self.write_team(team, "guard_code", 0.0)
         if metrics is not None:
             metrics["cloth.steps"] = float(particle_steps)
             metrics["cloth.simulation_steps"] = float(most_steps)
@@ -383,7 +515,8 @@ class ClothSystem:
 
     def set_parameter(self, cloth, key: str, value) -> None:
         """Change one parameter (dotted key) of a cloth from the next frame on, without reset."""
-        for t in self.teams_of(cloth):
+        teams = self.teams_of(cloth)
+        for t in teams:
             params = self.team_parameters[t]
             if hasattr(params, "with_changes"):
                 params = params.with_changes({key: value}, where=f"set_parameter[{self.team_names[t]}]")
@@ -394,23 +527,33 @@ class ClothSystem:
             if key == "collider_collision.mode":
                 self.collision_modes[t] = str(value)
             self._write_parameters(t)
+        moved = False
+        for t in teams:
+            b, lane = self.layout.place(t)
+            before = self.layout.blocks[b].key
+            self._move_if_needed(t)
+            b, lane = self.layout.place(t)
+            moved = moved or self.layout.blocks[b].key != before
+            self._write_block_parameters(t)
+        if moved:
+            self._tables_changed()
         self.stages = self.stage_switches()  # a changed parameter may need another stage
 
     def reset_cloth(self, cloth, keep_pose: bool = False) -> None:
         for t in self.teams_of(cloth):
             if keep_pose:
-                self.teams.keep_teleport[t] = 1
+                self.write_team(t, "keep_teleport", 1.0)
             else:
-                self.teams.reset[t] = 1
-                self.teams.time_reset[t] = 1
+                self.write_team(t, "reset", 1.0)
+                self.write_team(t, "time_reset", 1.0)
                 self.time_state.reset([t])
 
     def set_enabled(self, cloth, enabled: bool) -> None:
         for t in self.teams_of(cloth):
-            was = self.teams.enabled[t] != 0
-            self.teams.enabled[t] = 1 if enabled else 0
+            was = self.read_team(t, "enabled") != 0.0
+            self.write_team(t, "enabled", 1.0 if enabled else 0.0)
             if enabled and not was:
-                self.teams.reset[t] = 1
+                self.write_team(t, "reset", 1.0)
 
     def set_time_scale(self, cloth, value: float) -> None:
         for t in self.teams_of(cloth):
@@ -418,25 +561,27 @@ class ClothSystem:
 
     def add_force(self, cloth, direction, speed: float, mode: str = "velocity_add") -> None:
         """MagicaCloth.AddForce: an acceleration on every step of the next frame that runs."""
-        d = np.asarray(direction, dtype=F64)
+        d = np.asarray(direction, dtype=np.float64)
         n = portable.norm(d)
         if mode not in FORCE_MODES:
             raise ValueError(f"add_force mode {mode!r}: expected one of {sorted(FORCE_MODES)}")
         for t in self.teams_of(cloth):
-            self.teams.external_force[t] = d / n * float(speed) if n > 1e-8 else 0.0
-            self.teams.external_force_mode[t] = FORCE_MODES[mode]
+            self.write_team(t, "external_force", d / n * float(speed) if n > 1e-8 else np.zeros(3))
+            self.write_team(t, "external_force_mode", float(FORCE_MODES[mode]))
 
     # ------------------------------------------------------------------ state capture
     def capture_state(self) -> dict:
-        """Copies of everything the next frame reads (``runtime/snapshot.py``): the particle,
-        team, collider, parameter and team-clock tables, the build pose and first-frame flags,
-        and the runtime parameter overrides."""
+        """Copies of everything the next frame reads (``runtime/snapshot.py``), team by team
+        (so that a snapshot restores into a system whose blocks are grouped otherwise: the
+        bench's candidates with other parameters): each live team's columns of the state
+        tables, the parameter table, the team clocks, the build pose, the runtime overrides."""
         from magica_py.runtime.snapshot import table_state
 
         h = self._hierarchy
         return {
             "layout": self._layout_signature(),
-            "tables": {name: table_state(table) for name, table in self._state_tables().items()},
+            "lanes": {t: self._lane_state(t) for t in self.live_teams},
+            "tables": {"parameters": table_state(self.parameters), "time": table_state(self._time)},
             "build_pose": {name: getattr(h, name).copy() for name in _BUILD_POSE_FIELDS},
             "frame_count": self.frame_count,
             "team_parameters": list(self.team_parameters),
@@ -452,62 +597,57 @@ class ClothSystem:
             raise SnapshotError(f"cloth {self.name!r}: the snapshot was taken with teams "
                                 f"{state['layout'][0]}, this system has {self._layout_signature()[0]} "
                                 "(cloths added or removed since: a snapshot restores state, not structure)")
-        tables = self._state_tables()
-        for name, saved in state["tables"].items():
-            restore_arrays(f"{self.name}.{name}", table_arrays(tables[name]), saved)
+        restore_arrays(f"{self.name}.time", table_arrays(self._time), state["tables"]["time"])
+        restore_arrays(f"{self.name}.parameters", table_arrays(self.parameters), state["tables"]["parameters"])
         restore_arrays(f"{self.name}.build_pose", {n: getattr(self._hierarchy, n) for n in _BUILD_POSE_FIELDS},
                        state["build_pose"])
         self.frame_count = state["frame_count"]
         self.team_parameters = list(state["team_parameters"])
         self.collision_modes = list(state["collision_modes"])
+        moved = False
+        for t in self.live_teams:
+            b, _lane = self.layout.place(t)
+            before = self.layout.blocks[b].key
+            self._move_if_needed(t)
+            b, lane = self.layout.place(t)
+            moved = moved or self.layout.blocks[b].key != before
+            self._write_block_parameters(t)
+        for t, lane_state in state["lanes"].items():
+            self._write_lane_state(t, lane_state)
         if self.wind is not None and state.get("wind") is not None:
             self.wind.restore_state(state["wind"])
+        if moved:
+            self._tables_changed()
         self.stages = self.stage_switches()
 
-    def _state_tables(self) -> dict:
-        return {"particles": self.particles, "teams": self.teams, "colliders": self.collider_state,
-                "parameters": self.parameters, "time": self._time}
-
     def _layout_signature(self) -> tuple:
-        return (tuple(int(t) for t in self.live_teams), self.layout.capacity("particle"),
-                self._slots.capacity, tuple(self.team_names))
+        return (tuple(int(t) for t in self.live_teams),
+                tuple(int(m.particle_count) for m in self.models if m is not None), tuple(self.team_names))
 
     # ------------------------------------------------------------------ queries
-    def team_particles(self, team: int) -> slice:
-        start = int(self.model.team_particle_start[team])
-        return slice(start, start + int(self.model.team_particle_count[team]))
-
     def positions(self, cloth) -> np.ndarray:
         """Display positions (world, m) of one cloth's particles (a copy)."""
-        return self.particles.position[self.team_particles(self.teams_of(cloth)[0])].copy()
+        return self.read_particles(self.teams_of(cloth)[0], "position")
 
     # ------------------------------------------------------------------ internals
-    def kernel_tables(self) -> tuple:
-        """The seven tables (model, particles, parameters, teams, colliders, team time,
-        hierarchy) as the stage kernels take them (``solver/tables.py``; built on first use and
-        after any change of teams)."""
-        return self._kernel_tables()[1]
-
-    def _kernel_tables(self) -> tuple:
-        if self._tables is None:
-            self._tables = kernel_tables(self.model, self.particles, self.parameters, self.teams,
-                                         self.collider_state, self._time, self._hierarchy)
-        return self._tables
-
     def select_wind(self) -> None:
         """The wind zones' poses and the zones each team feels from this frame's transforms
         (``wind.zones.WindField.update``; nothing without wind zones). ``step_frame`` calls it
         before the frame kernel."""
         if self.wind is not None:
-            self.wind.update(self._kernel_tables()[0])
+            self.wind.update(self.tables, self._hierarchy)
+
+    def _wind_zones(self):
+        return self.wind.kernel_table() if self.wind is not None else None
 
     def _call_frame(self, fi) -> tuple:
         """One numba call per frame: the serial or the parallel kernel, with the stage switches;
         returns the frame's counts (``frame.frame_counts``)."""
-        tables = self._kernel_tables()[0]
+        zones = self._wind_zones()
+        arrays = frame_arguments(self.tables, self._time, self._hierarchy)
         if self.parallel:
-            return simulate_frame_parallel(tables, fi, self._workers, *self.stages)
-        return simulate_frame(tables, fi, *self.stages)
+            return frame_entry_parallel(*arrays, fi, self._save_area, zones, *self._workers, *self.stages)
+        return frame_entry(*arrays, fi, self._save_area, zones, *self.stages)
 
     def _parameter(self, team, key, default):
         params = self.team_parameters[team]
@@ -534,8 +674,19 @@ class ClothSystem:
             return int(self.hierarchy.index(name))
         write_row(self.parameters, team, self.team_parameters[team], self.collision_modes[team], resolve)
 
-
-def _rows(table, start: int, count: int):
-    """The same namedtuple table restricted to rows ``start:start+count`` (views: writes land
-    in ``table``)."""
-    return type(table)(*(a[start:start + count] for a in table))
+    # queries for tests and sinks
+    def collider_slots(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What each collider slot of ``collider_state`` is (team order, ``model.team_collider_start``
+        / ``team_collider_count`` ranges): ``(team, collider_index, shape)``, (S,) int32 each: the
+        slot's team, its collider's index in the scene's ``ColliderSet`` (slot k of a team is
+        its cloth's k-th collider, §G.3), and that collider's shape (0 sphere, 1 capsule, 2 plane)."""
+        team, index = [], []
+        for t in self.live_teams:
+            indices = self._collider_indices(self.specs[t])
+            team += [t] * len(indices)
+            index += indices
+        team = np.asarray(team, dtype=np.int32)
+        index = np.asarray(index, dtype=np.int32)
+        shape = (np.asarray(self.colliders.shape, dtype=np.int32)[index] if index.size
+                 else np.zeros(0, dtype=np.int32))
+        return team, index, shape

@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import load3, load4, store3, store4, q_inverse, q_mul, q_normalize, q_rotate, v_sub
+from magica_py.kernels.math3d import q_inverse, q_mul, q_normalize, q_rotate, v_sub
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
 from magica_py.solver.rotations import q_normalize_or_identity
 
 FIXED = 0x01
@@ -36,27 +37,6 @@ def bone_rotation(rotation, v2t):
     return q_normalize_or_identity(q_mul(rotation, v2t))
 
 
-@kernel
-def transform_data_team(m, ps, team):
-    """World transform data of every bone of one team; returns False if any value is non-finite.
-
-    Vectorised over the team's bones (flat rows, selects, the verdict AND-ed)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_team_particle_count = m.team_particle_count
-    position, rotation, v2t = ps.position, ps.rotation, m.vertex_to_transform_rotation
-    transform_position, transform_rotation = ps.transform_position, ps.transform_rotation
-    ok = True
-    first = np.uint64(m.team_particle_start[team])
-    for j in range(m_team_particle_count[team]):
-        p = first + np.uint64(j)
-        pos = load3(position, p)
-        rot = bone_rotation(load4(rotation, p), load4(v2t, p))
-        store3(transform_position, p, pos)
-        store4(transform_rotation, p, rot)
-        ok = ok & finite3(pos) & finite4(rot)
-    return ok
-
-
 @kernel(inline="always")
 def moving_bone_local(parent_rotation, parent_position, rotation, position, parent_scale):
     """E.4: local (position, rotation) of a moving bone under its parent particle's bone pose,
@@ -76,43 +56,80 @@ def fixed_bone_local(rotation, parent_world_rotation, has_parent):
     return q_normalize(rotation)
 
 
-@kernel
-def write_transforms_team(m, ps, team, parent_node, world_rotation, lossy_scale,
-                          local_position, local_rotation):
-    """Write one team's bones into the hierarchy's local pose arrays.
-
-    Scalar: the writes are scatters (through transform_index) of 3- and 4-value rows, which
-    LLVM's vectoriser cannot check for overlap, so the branches stay."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_team_particle_count = m.team_particle_count
-    # arrays as locals and flat rows: through the tables their pointers would be reloaded
-    # after every store (the stores may alias the tables as far as LLVM knows)
-    attribute, node_of, parent_of = m.attribute, m.transform_index, m.parent
-    transform_position, transform_rotation = ps.transform_position, ps.transform_rotation
-    world_rot, scale = world_rotation, lossy_scale
-    out_position, out_rotation = local_position, local_rotation
-    first = np.uint64(m.team_particle_start[team])
-    for j in range(m_team_particle_count[team]):
-        p = first + np.uint64(j)
-        attr = attribute[p]
-        node = np.uint64(node_of[p])
+@kernel(forceinline=False)
+def transform_block(PS, PM, TS, BI, PT, topology, b, parent_node, world_rotation, lossy_scale):
+    """E.4's world transform data of every bone of block b, every lane side by side, and the
+    local pose each bone will be written with (``LOCAL_OUT_*``): a moving bone's relative to
+    its parent particle's transform, a fixed bone's rotation under its parent node's current
+    world rotation (the hierarchy's values it needs gathered next to it first). Each lane's
+    ``TRANSFORM_OK`` is 1 when every value of its transform data is finite."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute, parent = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_PARENT]
+    for l in range(w):
+        put1(TS, b, st.TRANSFORM_OK, l, 1.0)
+    for j in range(BI[b, bk.BI_N]):
+        g = g0 + j
+        for l in range(w):
+            pos = get3(PS, g, st.POSITION, l)
+            rot = bone_rotation(get4(PS, g, st.ROTATION, l), get4(PM, g, bk.VERTEX_TO_TRANSFORM_ROTATION, l))
+            put3(PS, g, st.TRANSFORM_POSITION, l, pos)
+            put4(PS, g, st.TRANSFORM_ROTATION, l, rot)
+            ok = get1(TS, b, st.TRANSFORM_OK, l) != 0.0
+            put1(TS, b, st.TRANSFORM_OK, l, 1.0 if (ok & finite3(pos) & finite4(rot)) else 0.0)
+    for j in range(BI[b, bk.BI_N]):
+        attr = topology[attribute + j]
+        g = g0 + j
         if (attr & MOVE) != 0:
-            pp = parent_of[p]
+            pp = topology[parent + j]
             if pp < 0:
                 continue
-            ppu = np.uint64(pp)
-            pnode = np.uint64(node_of[ppu])
-            lp, lq = moving_bone_local(load4(transform_rotation, ppu),
-                                       load3(transform_position, ppu),
-                                       load4(transform_rotation, p),
-                                       load3(transform_position, p), load3(scale, pnode))
-            store3(out_position, node, lp)
-            store4(out_rotation, node, lq)
+            gp = g0 + pp
+            for l in range(w):   # the parent's transform and its node's scale next to the bone
+                node = PT[gp, l]
+                put3(PS, g, st.PARTNER_POS, l, get3(PS, gp, st.TRANSFORM_POSITION, l))
+                put4(PS, g, st.PARENT_ROTATION, l, get4(PS, gp, st.TRANSFORM_ROTATION, l))
+                put3(PS, g, st.PARTNER_BASE, l, (lossy_scale[node, 0], lossy_scale[node, 1], lossy_scale[node, 2]))
+            for l in range(w):
+                lp, lq = moving_bone_local(get4(PS, g, st.PARENT_ROTATION, l), get3(PS, g, st.PARTNER_POS, l),
+                                           get4(PS, g, st.TRANSFORM_ROTATION, l), get3(PS, g, st.TRANSFORM_POSITION, l),
+                                           get3(PS, g, st.PARTNER_BASE, l))
+                put3(PS, g, st.LOCAL_OUT_POSITION, l, lp)
+                put4(PS, g, st.LOCAL_OUT_ROTATION, l, lq)
         elif (attr & FIXED) != 0:
-            parent = parent_node[node]
-            rot = load4(transform_rotation, p)
-            if parent >= 0:
-                store4(out_rotation, node,
-               fixed_bone_local(rot, load4(world_rot, np.uint64(parent)), True))
-            else:
-                store4(out_rotation, node, fixed_bone_local(rot, rot, False))
+            for l in range(w):   # the parent node's world rotation next to the bone (identity: no parent)
+                up = parent_node[PT[g, l]]
+                q = (world_rotation[up, 0], world_rotation[up, 1], world_rotation[up, 2], world_rotation[up, 3]) \
+                    if up >= 0 else (0.0, 0.0, 0.0, 1.0)
+                put4(PS, g, st.PARENT_ROTATION, l, q)
+                PS[g, st.PARENT_HAS_NODE + l] = 1.0 if up >= 0 else 0.0
+            for l in range(w):
+                rot = get4(PS, g, st.TRANSFORM_ROTATION, l)
+                under = fixed_bone_local(rot, get4(PS, g, st.PARENT_ROTATION, l), True)
+                alone = fixed_bone_local(rot, rot, False)
+                put4(PS, g, st.LOCAL_OUT_ROTATION, l, under if PS[g, st.PARENT_HAS_NODE + l] != 0.0 else alone)
+
+
+@kernel(forceinline=False)
+def write_transforms_lane(PS, BI, PT, topology, b, l, local_position, local_rotation):
+    """Write lane l's bones (``transform_block``'s local poses) into the hierarchy's local pose
+    arrays: a scatter through the bones' hierarchy nodes; invalid bones and a moving bone
+    without a parent particle are left alone."""
+    g0 = BI[b, bk.BI_G0]
+    attribute, parent = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_PARENT]
+    for j in range(BI[b, bk.BI_N]):
+        attr = topology[attribute + j]
+        g = g0 + j
+        node = PT[g, l]
+        if (attr & MOVE) != 0:
+            if topology[parent + j] < 0:
+                continue
+            lp = get3(PS, g, st.LOCAL_OUT_POSITION, l)
+            local_position[node, 0] = lp[0]
+            local_position[node, 1] = lp[1]
+            local_position[node, 2] = lp[2]
+        elif (attr & FIXED) == 0:
+            continue
+        lq = get4(PS, g, st.LOCAL_OUT_ROTATION, l)
+        for c in range(4):
+            local_rotation[node, c] = lq[c]

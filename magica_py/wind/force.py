@@ -1,15 +1,15 @@
-"""The wind force of one step (docs/solver.md §D.1 "Wind", §C.3 wind time): ``wind_team``.
+"""The wind force of one step (docs/solver.md §D.1 "Wind", §C.3 wind time): ``wind_block``.
 
 MagicaCloth2 adds the wind to the force sum of D.1 (``F = gravity + external + wind``,
 ``F *= scaleRatio``, ``velocity += F dt``, ``nextPos += velocity dt``). Every term of that sum
-enters linearly, so ``wind_team`` runs right after ``step.predict_team`` and adds the wind's
+enters linearly, so ``wind_block`` runs right after ``step.predict_block`` and adds the wind's
 share to the Move particles' velocity and prediction: ``velocity += W s dt`` and
 ``next_pos += W s dt^2`` (W the particle's wind, s the step's scale ratio). It is a separate
 stage so that a scene without wind never compiles it; a team that feels no zone and no
-moving wind returns before touching a particle (a wind of zero changes no bit of a run).
+moving wind touches no particle (a wind of zero changes no bit of a run).
 
-Per step, first the team part (MagicaCloth2's ``UpdateWind`` in ``SimulationStepTeamUpdate``):
-each selected zone's phase time advances by ``min((0.2 + 0.5 main/7.5) frequency, 1.5) dt``
+Per step, first the team part of every lane (``wind_lane``; MagicaCloth2's ``UpdateWind`` in
+``SimulationStepTeamUpdate``): each selected zone's phase time advances by ``min((0.2 + 0.5 main/7.5) frequency, 1.5) dt``
 and the moving wind takes ``frameMovingSpeed x moving_wind / scaleRatio`` against the
 frame's movement direction. Then per Move particle (``WindBatchJob`` / ``WindForceBlend``,
 facts from MagicaCloth2's ``SimulationManagerBatch.cs``):
@@ -26,9 +26,9 @@ facts from MagicaCloth2's ``SimulationManagerBatch.cs``):
 * the sum (zones, then the moving wind with zone turbulence 1) is scaled by
   ``influence (1 - friction) lerp(1, depth^2, depth_weight)``.
 
-MagicaCloth2's team id starts at 1 for the first cloth; here team t is MagicaCloth2's
-``t + 1``. The wind is an acceleration of ``main`` m/s^2 per m/s of wind (no drag law:
-MagicaCloth2 adds the speed to the force sum like gravity).
+MagicaCloth2's team id starts at 1 for the first cloth; here team t (the lane's team id,
+``TI[b, TI_TEAM + l]``) is MagicaCloth2's ``t + 1``. The wind is an acceleration of ``main``
+m/s^2 per m/s of wind (no drag law: MagicaCloth2 adds the speed to the force sum like gravity).
 """
 from __future__ import annotations
 
@@ -36,7 +36,14 @@ import math
 
 from magica_py.jit import kernel
 from magica_py.kernels import portable
-from magica_py.kernels.math3d import lerp, load3, saturate, store3, unlerp
+from magica_py.kernels.math3d import lerp, saturate, unlerp, v_add, v_scale
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import LANES, get1, get3, get4, put1, put3, put4
+from magica_py.solver.parameters import (
+    PRM_WIND_BLEND, PRM_WIND_DEPTH_WEIGHT, PRM_WIND_FREQUENCY, PRM_WIND_INFLUENCE, PRM_WIND_MOVING_WIND,
+    PRM_WIND_SYNCHRONIZATION, PRM_WIND_TURBULENCE,
+)
 from magica_py.wind.noise import cnoise
 
 MOVE = 0x02
@@ -104,104 +111,123 @@ def zone_wind(main, time, frame, zone_turbulence, turbulence, blend, wind_pos):
     return d[0] * speed, d[1] * speed, d[2] * speed
 
 
-@kernel
-def wind_team(m, ps, prm, ts, team, dt):
-    """§D.1 wind of team ``team`` at this step, after ``predict_team`` (module docstring)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_depth, m_root_index = m.attribute, m.depth, m.root_index
-    m_team_particle_count, ps_friction, ps_next_pos = m.team_particle_count, ps.friction, ps.next_pos
-    ps_velocity, ts_moving_wind_time, ts_wind_zone_main = ps.velocity, ts.moving_wind_time, ts.wind_zone_main
-    ts_wind_zone_time, ts_wind_zone_turbulence = ts.wind_zone_time, ts.wind_zone_turbulence
-    influence = prm.wind_influence[team]
-    ts.wind_felt[team, 0] = 0.0
-    ts.wind_felt[team, 1] = 0.0
-    ts.wind_felt[team, 2] = 0.0
-    if influence <= 1e-8:   # WindParams.IsValid
-        return
-    frequency = prm.wind_frequency[team]
-    count = ts.wind_zone_count[team]
+@kernel(forceinline=False)
+def wind_lane(TS, P, b, l, dt):
+    """The team part of lane l's wind at this step: zone phases, moving wind, the directions'
+    frames (``WIND_ZONE_FRAME``, ``MOVING_WIND_FRAME``). Returns whether the lane's Move
+    particles take wind at this step; a lane that feels no zone and no moving wind is not
+    touched, and ``WIND_FELT`` restarts at 0 otherwise (it sums the particles' wind)."""
+    count = int(get1(TS, b, st.WIND_ZONE_COUNT, l))
+    moving_wind = P[b, PRM_WIND_MOVING_WIND]
+    if count == 0 and moving_wind <= 0.01:
+        return False
+    put3(TS, b, st.WIND_FELT, l, (0.0, 0.0, 0.0))
+    if P[b, PRM_WIND_INFLUENCE] <= 1e-8:   # WindParams.IsValid
+        return False
+    frequency = P[b, PRM_WIND_FREQUENCY]
     for s in range(count):
-        ts_wind_zone_time[team, s] = advance_wind_time(ts_wind_zone_time[team, s], ts_wind_zone_main[team, s],
-                                                       frequency, dt)
+        time = advance_wind_time(get1(TS, b, st.WIND_ZONE_TIME + s * LANES, l),
+                                 get1(TS, b, st.WIND_ZONE_MAIN + s * LANES, l), frequency, dt)
+        put1(TS, b, st.WIND_ZONE_TIME + s * LANES, l, time)
     moving_main = 0.0
-    moving_frame = (1.0, 0.0, 1.0, 0.0)
-    if prm.wind_moving_wind[team] > 0.01:
-        moving_main = ts.frame_moving_speed[team] * prm.wind_moving_wind[team] / ts.scale_ratio[team]
-        ts_moving_wind_time[team] = advance_wind_time(ts_moving_wind_time[team], moving_main, frequency, dt)
-        d = load3(ts.frame_moving_direction, team)
-        moving_frame = direction_angles((-d[0], -d[1], -d[2]))
-    ts.moving_wind_main[team] = moving_main
+    if moving_wind > 0.01:
+        moving_main = get1(TS, b, st.FRAME_MOVING_SPEED, l) * moving_wind / get1(TS, b, st.SCALE_RATIO, l)
+        put1(TS, b, st.MOVING_WIND_TIME, l,
+             advance_wind_time(get1(TS, b, st.MOVING_WIND_TIME, l), moving_main, frequency, dt))
+        d = get3(TS, b, st.FRAME_MOVING_DIRECTION, l)
+        put4(TS, b, st.MOVING_WIND_FRAME, l, direction_angles((-d[0], -d[1], -d[2])))
+    put1(TS, b, st.MOVING_WIND_MAIN, l, moving_main)
     if count == 0 and moving_main < WIND_MIN_MAIN:
-        return
-    f0 = (1.0, 0.0, 1.0, 0.0)
-    f1 = f0
-    f2 = f0
-    f3 = f0
-    if count > 0:
-        f0 = direction_angles(load3(ts.wind_zone_direction[team], 0))
-    if count > 1:
-        f1 = direction_angles(load3(ts.wind_zone_direction[team], 1))
-    if count > 2:
-        f2 = direction_angles(load3(ts.wind_zone_direction[team], 2))
-    if count > 3:
-        f3 = direction_angles(load3(ts.wind_zone_direction[team], 3))
-    turbulence = prm.wind_turbulence[team]
-    blend = prm.wind_blend[team]
-    root_phase = ROOT_PHASE * (1.0 - prm.wind_synchronization[team]) * 100.0
-    team_phase = (team + 2) * TEAM_PHASE      # MagicaCloth2 team id t + 1
-    depth_weight = prm.wind_depth_weight[team]
-    scale = ts.scale_ratio[team]
-    start = m.team_particle_start[team]
-    sx = 0.0
-    sy = 0.0
-    sz = 0.0
-    moved = 0
-    # the wind depends on the particle only through its root line (windPos): particles of one
-    # line are mostly consecutive, so the line's wind is computed once and reused
-    last_root = -2
+        return False
+    for s in range(count):
+        put4(TS, b, st.WIND_ZONE_FRAME + 4 * s * LANES, l,
+             direction_angles(get3(TS, b, st.WIND_ZONE_DIRECTION + 3 * s * LANES, l)))
+    return True
+
+
+@kernel(forceinline=False)
+def line_wind_lane(TS, b, l, wind_pos, turbulence, blend):
+    """Lane l's wind at a root line of phase ``wind_pos``: its zones, then its moving wind."""
     wx = 0.0
     wy = 0.0
     wz = 0.0
-    for p in range(start, start + m_team_particle_count[team]):
-        if (m_attribute[p] & MOVE) == 0:
+    for s in range(int(get1(TS, b, st.WIND_ZONE_COUNT, l))):
+        cx, cy, cz = zone_wind(get1(TS, b, st.WIND_ZONE_MAIN + s * LANES, l),
+                               get1(TS, b, st.WIND_ZONE_TIME + s * LANES, l),
+                               get4(TS, b, st.WIND_ZONE_FRAME + 4 * s * LANES, l),
+                               get1(TS, b, st.WIND_ZONE_TURBULENCE + s * LANES, l), turbulence, blend, wind_pos)
+        wx += cx
+        wy += cy
+        wz += cz
+    moving_main = get1(TS, b, st.MOVING_WIND_MAIN, l)
+    if moving_main >= WIND_MIN_MAIN:
+        cx, cy, cz = zone_wind(moving_main, get1(TS, b, st.MOVING_WIND_TIME, l), get4(TS, b, st.MOVING_WIND_FRAME, l),
+                               1.0, turbulence, blend, wind_pos)
+        wx += cx
+        wy += cy
+        wz += cz
+    return wx, wy, wz
+
+
+@kernel(forceinline=False)
+def wind_block(PS, PM, TS, TI, P, BI, topology, b, dt, wind_zones):
+    """§D.1 wind of every lane of block b at this step, after ``predict_block`` (module
+    docstring). The zones a lane feels are in its ``WIND_ZONE_*`` rows (selected each frame
+    by ``selection.select_wind``); ``wind_zones``, the zone table, is not read here.
+
+    The wind depends on a particle only through its root line (windPos): particles of one
+    line are mostly consecutive, so each line's wind is computed once per lane (``WIND_LINE``)
+    and reused; then the particle loop runs the lanes side by side, a lane without wind
+    keeping its values (a select, not an addition of zero: -0.0 stays -0.0)."""
+    w = bk.lane_width(BI, b)
+    runs = False
+    for l in range(w):
+        lane_runs = wind_lane(TS, P, b, l, dt)
+        put1(TS, b, st.WIND_RUNS, l, 1.0 if lane_runs else 0.0)
+        runs = runs or lane_runs
+    if not runs:
+        return
+    g0 = BI[b, bk.BI_G0]
+    attribute, root_index = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_ROOT_INDEX]
+    influence = P[b, PRM_WIND_INFLUENCE]
+    turbulence = P[b, PRM_WIND_TURBULENCE]
+    blend = P[b, PRM_WIND_BLEND]
+    root_phase = ROOT_PHASE * (1.0 - P[b, PRM_WIND_SYNCHRONIZATION]) * 100.0
+    depth_weight = P[b, PRM_WIND_DEPTH_WEIGHT]
+    moved = 0
+    last_root = -2
+    for j in range(BI[b, bk.BI_N]):
+        if (topology[attribute + j] & MOVE) == 0:
             continue
-        root = m_root_index[p]
+        g = g0 + j
+        root = topology[root_index + j]
         if root != last_root:
             last_root = root
-            wind_pos = team_phase + (root - start if root >= 0 else -1) * root_phase
-            wx = 0.0
-            wy = 0.0
-            wz = 0.0
-            for s in range(count):
-                frame = f0 if s == 0 else (f1 if s == 1 else (f2 if s == 2 else f3))
-                cx, cy, cz = zone_wind(ts_wind_zone_main[team, s], ts_wind_zone_time[team, s], frame,
-                                       ts_wind_zone_turbulence[team, s], turbulence, blend, wind_pos)
-                wx += cx
-                wy += cy
-                wz += cz
-            if moving_main >= WIND_MIN_MAIN:
-                cx, cy, cz = zone_wind(moving_main, ts_moving_wind_time[team], moving_frame, 1.0, turbulence, blend,
-                                       wind_pos)
-                wx += cx
-                wy += cy
-                wz += cz
-        depth = m_depth[p]
-        k = influence * (1.0 - ps_friction[p]) * lerp(1.0, depth * depth, depth_weight)
-        ax = wx * k * scale
-        ay = wy * k * scale
-        az = wz * k * scale
-        sx += wx * k
-        sy += wy * k
-        sz += wz * k
+            line = root if root >= 0 else -1
+            for l in range(w):
+                if get1(TS, b, st.WIND_RUNS, l) != 0.0:
+                    team_phase = (TI[b, bk.TI_TEAM + l] + 2) * TEAM_PHASE      # MagicaCloth2 team id t + 1
+                    wind_pos = team_phase + line * root_phase
+                    put3(TS, b, st.WIND_LINE, l, line_wind_lane(TS, b, l, wind_pos, turbulence, blend))
+        for l in range(w):
+            lane_runs = get1(TS, b, st.WIND_RUNS, l) != 0.0
+            wx, wy, wz = get3(TS, b, st.WIND_LINE, l)
+            depth = get1(PM, g, bk.DEPTH, l)
+            k = influence * (1.0 - get1(PS, g, st.FRICTION, l)) * lerp(1.0, depth * depth, depth_weight)
+            scale = get1(TS, b, st.SCALE_RATIO, l)
+            felt = get3(TS, b, st.WIND_FELT, l)
+            summed = (felt[0] + wx * k, felt[1] + wy * k, felt[2] + wz * k)
+            dv = (wx * k * scale * dt, wy * k * scale * dt, wz * k * scale * dt)
+            velocity = get3(PS, g, st.VELOCITY, l)
+            next_pos = get3(PS, g, st.NEXT_POS, l)
+            pushed_velocity = v_add(velocity, dv)
+            pushed_next_pos = v_add(next_pos, v_scale(dv, dt))
+            put3(TS, b, st.WIND_FELT, l, summed if lane_runs else felt)
+            put3(PS, g, st.VELOCITY, l, pushed_velocity if lane_runs else velocity)
+            put3(PS, g, st.NEXT_POS, l, pushed_next_pos if lane_runs else next_pos)
         moved += 1
-        dvx = ax * dt
-        dvy = ay * dt
-        dvz = az * dt
-        ps_velocity[p, 0] += dvx
-        ps_velocity[p, 1] += dvy
-        ps_velocity[p, 2] += dvz
-        ps_next_pos[p, 0] += dvx * dt
-        ps_next_pos[p, 1] += dvy * dt
-        ps_next_pos[p, 2] += dvz * dt
     if moved > 0:
-        store3(ts.wind_felt, team, (sx / moved, sy / moved, sz / moved))
+        for l in range(w):
+            if get1(TS, b, st.WIND_RUNS, l) != 0.0:
+                s = get3(TS, b, st.WIND_FELT, l)
+                put3(TS, b, st.WIND_FELT, l, (s[0] / moved, s[1] / moved, s[2] / moved))

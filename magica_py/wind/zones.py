@@ -9,73 +9,110 @@ radial zones an attenuation curve over distance / radius. Each frame, before the
 kernel, ``WindField.update`` computes every zone's world pose, direction and volume
 (``zone_world_poses``) and selects the zones every team feels (``selection.select_wind``).
 
-``WindZoneTable`` (one row per zone; written by ``WindField`` from the specs and events,
-``world_*`` and ``volume`` by ``zone_world_poses`` each frame):
+The zone table is one float64 array ``(zones, ZONE_WIDTH)``, a row per zone, each field at
+its columns (``Z_*`` constants; codes and flags exactly as float64): the kernels take that one
+array (cheap to pass). ``WindZoneTable`` is the same data for Python, a namedtuple of column
+views of the array (``zone_views``), so that writing ``table.main[i]`` writes the array.
+Written by ``WindField`` from the specs and events, ``world_*`` and ``volume`` by
+``zone_world_poses`` each frame:
 """
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import config, types
-from numba.experimental import structref
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import load3, load4, q_mul, q_rotate, store3, store4, v_add, v_mul
+from magica_py.kernels.math3d import q_mul, q_rotate, v_add, v_mul
 from magica_py.params.curves import Curve
-from magica_py.solver.fields import F64, I32, U8, allocate, make_soa
 
 GLOBAL, SPHERE, BOX, RADIAL = 0, 1, 2, 10      # MagicaWindZone.Mode values
 MODE_CODES = {"global": GLOBAL, "sphere": SPHERE, "box": BOX, "radial": RADIAL}
 FLOAT_MAX = 3.4028234663852886e38              # C#'s float.MaxValue: the global zone's volume
 EASE_IN_OUT = Curve.hermite(1.0, (1.0, 0.0), (0.0, 0.0))   # AnimationCurve.EaseInOut(0, 1, 1, 0)
 
+# (name, columns, doc)
 WIND_ZONE_FIELDS = [
-    ("mode", "zone", (), I32, "0 global, 1 sphere, 2 box, 10 radial"),
-    ("enabled", "zone", (), U8, "1: blowing (events switch it)"),
-    ("addition", "zone", (), U8, "1: additive zone"),
-    ("main", "zone", (), F64, "m/s; main speed (events change it)"),
-    ("turbulence", "zone", (), F64, "[0,1]"),
-    ("size", "zone", (3,), F64, "m; box edge lengths, or (radius, radius, radius)"),
-    ("transform", "zone", (), I32, "hierarchy node the zone follows, or -1"),
-    ("local_position", "zone", (3,), F64, "m; world position, or offset in the bone's space"),
-    ("local_rotation", "zone", (4,), F64, "xyzw; world rotation, or relative to the bone"),
-    ("local_direction", "zone", (3,), F64, "unit; wind direction in the zone's space"),
-    ("attenuation", "zone", (16,), F64, "radial: strength table over distance / radius (§0.3 samples)"),
-    ("world_position", "zone", (3,), F64, "m; this frame (zone_world_poses)"),
-    ("world_rotation", "zone", (4,), F64, "xyzw; this frame"),
-    ("world_scale", "zone", (3,), F64, "the bone's lossy scale, or 1"),
-    ("world_direction", "zone", (3,), F64, "unit; this frame (directional modes)"),
-    ("volume", "zone", (), F64, "m^3; FLOAT_MAX for a global zone (the largest: any area zone wins)"),
+    ("mode", 1, "0 global, 1 sphere, 2 box, 10 radial"),
+    ("enabled", 1, "1: blowing (events switch it)"),
+    ("addition", 1, "1: additive zone"),
+    ("main", 1, "m/s; main speed (events change it)"),
+    ("turbulence", 1, "[0,1]"),
+    ("size", 3, "m; box edge lengths, or (radius, radius, radius)"),
+    ("transform", 1, "hierarchy node the zone follows, or -1"),
+    ("local_position", 3, "m; world position, or offset in the bone's space"),
+    ("local_rotation", 4, "xyzw; world rotation, or relative to the bone"),
+    ("local_direction", 3, "unit; wind direction in the zone's space"),
+    ("attenuation", 16, "radial: strength table over distance / radius (§0.3 samples)"),
+    ("world_position", 3, "m; this frame (zone_world_poses)"),
+    ("world_rotation", 4, "xyzw; this frame"),
+    ("world_scale", 3, "the bone's lossy scale, or 1"),
+    ("world_direction", 3, "unit; this frame (directional modes)"),
+    ("volume", 1, "m^3; FLOAT_MAX for a global zone (the largest: any area zone wins)"),
 ]
-WindZoneTable = make_soa("WindZoneTable", WIND_ZONE_FIELDS)
-__doc__ += WindZoneTable.__doc__
+ZONE_COLUMNS: dict[str, tuple[int, int]] = {}
+_at = 0
+for _name, _size, _doc in WIND_ZONE_FIELDS:
+    ZONE_COLUMNS[_name] = (_at, _size)
+    __doc__ += f"\n* ``{_name}`` (columns {_at}-{_at + _size - 1}): {_doc}"
+    _at += _size
+ZONE_WIDTH = _at
+del _at, _name, _size, _doc
+
+Z_MODE = ZONE_COLUMNS["mode"][0]
+Z_ENABLED = ZONE_COLUMNS["enabled"][0]
+Z_ADDITION = ZONE_COLUMNS["addition"][0]
+Z_MAIN = ZONE_COLUMNS["main"][0]
+Z_TURBULENCE = ZONE_COLUMNS["turbulence"][0]
+Z_SIZE = ZONE_COLUMNS["size"][0]
+Z_TRANSFORM = ZONE_COLUMNS["transform"][0]
+Z_LOCAL_POSITION = ZONE_COLUMNS["local_position"][0]
+Z_LOCAL_ROTATION = ZONE_COLUMNS["local_rotation"][0]
+Z_LOCAL_DIRECTION = ZONE_COLUMNS["local_direction"][0]
+Z_ATTENUATION = ZONE_COLUMNS["attenuation"][0]
+Z_WORLD_POSITION = ZONE_COLUMNS["world_position"][0]
+Z_WORLD_ROTATION = ZONE_COLUMNS["world_rotation"][0]
+Z_WORLD_SCALE = ZONE_COLUMNS["world_scale"][0]
+Z_WORLD_DIRECTION = ZONE_COLUMNS["world_direction"][0]
+Z_VOLUME = ZONE_COLUMNS["volume"][0]
+
+WindZoneTable = namedtuple("WindZoneTable", [name for name, _size, _doc in WIND_ZONE_FIELDS])
 
 
-# the zone table as the kernels take it: a StructRef sharing the arrays (one pointer to type
-# per call instead of 16 arrays; the same pattern as ``solver/tables.py``)
-@structref.register
-class WindZoneTableType(types.StructRef):
-    def preprocess_fields(self, fields):
-        return tuple((name, types.unliteral(typ)) for name, typ in fields)
-
-
-class WindZones(structref.StructRefProxy):
-    """``WindZoneTable`` for the kernels."""
-
-
-structref.define_proxy(WindZones, WindZoneTableType, list(WindZoneTable._fields))
+def zone_views(zones: np.ndarray) -> WindZoneTable:
+    """The fields of the packed zone table as column views, (Z,) or (Z, k) (they share its memory)."""
+    views = {}
+    for name, (first, size) in ZONE_COLUMNS.items():
+        views[name] = zones[:, first] if size == 1 else zones[:, first:first + size]
+    return WindZoneTable(**views)
 
 
 @kernel
-def new_wind_zones(*fields):
-    return WindZones(*fields)
+def row3(a, i, col):
+    """Columns col .. col+2 of row i."""
+    return a[i, col], a[i, col + 1], a[i, col + 2]
 
 
-def zone_kernel_table(table: WindZoneTable):
-    """The zone table as the kernels take it (the namedtuple itself with the JIT off)."""
-    return table if config.DISABLE_JIT else new_wind_zones(*table)
+@kernel
+def row4(a, i, col):
+    return a[i, col], a[i, col + 1], a[i, col + 2], a[i, col + 3]
+
+
+@kernel
+def put_row3(a, i, col, v):
+    a[i, col] = v[0]
+    a[i, col + 1] = v[1]
+    a[i, col + 2] = v[2]
+
+
+@kernel
+def put_row4(a, i, col, q):
+    a[i, col] = q[0]
+    a[i, col + 1] = q[1]
+    a[i, col + 2] = q[2]
+    a[i, col + 3] = q[3]
 
 
 @dataclass(frozen=True)
@@ -110,9 +147,10 @@ class WindZoneSpec:
             document_path=format_path(z["path"]))
 
 
-def zone_table(specs) -> WindZoneTable:
-    """The zone table of ``specs`` (world fields filled by the first ``zone_world_poses``)."""
-    z = allocate(WindZoneTable, {"zone": len(specs)})
+def zone_table(specs) -> np.ndarray:
+    """The packed zone table of ``specs`` (world fields filled by the first ``zone_world_poses``)."""
+    zones = np.zeros((len(specs), ZONE_WIDTH))
+    z = zone_views(zones)
     for i, spec in enumerate(specs):
         z.mode[i] = MODE_CODES[spec.mode]
         z.enabled[i] = 1 if spec.enabled else 0
@@ -125,48 +163,51 @@ def zone_table(specs) -> WindZoneTable:
         z.local_rotation[i] = spec.rotation
         z.local_direction[i] = spec.direction
         z.attenuation[i] = spec.attenuation.samples
-    return z
+    return zones
 
 
 @kernel
-def zone_world_poses(z, world_position, world_rotation, lossy_scale):
-    """Every zone's world pose, direction and volume this frame (``WindManager.AlwaysWindUpdate``)."""
-    for i in range(z.mode.shape[0]):
-        pos = load3(z.local_position, i)
-        rot = load4(z.local_rotation, i)
+def zone_world_poses(Z, world_position, world_rotation, lossy_scale):
+    """Every zone's world pose, direction and volume this frame (``WindManager.AlwaysWindUpdate``);
+    ``Z``: the packed zone table."""
+    for i in range(Z.shape[0]):
+        pos = row3(Z, i, Z_LOCAL_POSITION)
+        rot = row4(Z, i, Z_LOCAL_ROTATION)
         scale = (1.0, 1.0, 1.0)
-        bone = z.transform[i]
+        bone = int(Z[i, Z_TRANSFORM])
         if bone >= 0:
-            bone_rot = load4(world_rotation, bone)
-            scale = load3(lossy_scale, bone)
-            pos = v_add(load3(world_position, bone), q_rotate(bone_rot, v_mul(pos, scale)))
+            bone_rot = row4(world_rotation, bone, 0)
+            scale = row3(lossy_scale, bone, 0)
+            pos = v_add(row3(world_position, bone, 0), q_rotate(bone_rot, v_mul(pos, scale)))
             rot = q_mul(bone_rot, rot)
-        store3(z.world_position, i, pos)
-        store4(z.world_rotation, i, rot)
-        store3(z.world_scale, i, scale)
-        store3(z.world_direction, i, q_rotate(rot, load3(z.local_direction, i)))
-        mode = z.mode[i]
-        if mode == 2:
-            z.volume[i] = z.size[i, 0] * scale[0] * z.size[i, 1] * scale[1] * z.size[i, 2] * scale[2]
-        elif mode == 1 or mode == 10:
-            r = z.size[i, 0] * scale[0]
-            z.volume[i] = (4.0 / 3.0) * r * r * r * math.pi
+        put_row3(Z, i, Z_WORLD_POSITION, pos)
+        put_row4(Z, i, Z_WORLD_ROTATION, rot)
+        put_row3(Z, i, Z_WORLD_SCALE, scale)
+        put_row3(Z, i, Z_WORLD_DIRECTION, q_rotate(rot, row3(Z, i, Z_LOCAL_DIRECTION)))
+        mode = Z[i, Z_MODE]
+        if mode == BOX:
+            Z[i, Z_VOLUME] = (Z[i, Z_SIZE] * scale[0] * Z[i, Z_SIZE + 1] * scale[1] * Z[i, Z_SIZE + 2]
+                              * scale[2])
+        elif mode == SPHERE or mode == RADIAL:
+            r = Z[i, Z_SIZE] * scale[0]
+            Z[i, Z_VOLUME] = (4.0 / 3.0) * r * r * r * math.pi
         else:
-            z.volume[i] = FLOAT_MAX
+            Z[i, Z_VOLUME] = FLOAT_MAX
 
 
 class WindField:
     """The scene's wind zones at run time: events, world poses, the per-frame team selection.
 
-    ``update(system)`` runs once per frame before the cloth kernel (``ClothSystem.step_frame``);
-    ``apply_event({zone, enabled, main})`` is the ``wind`` scene event; ``set_zone(name, ...)``
-    the same from Python."""
+    ``update(tables, hierarchy)`` runs once per frame before the cloth kernel
+    (``ClothSystem.select_wind``); ``apply_event({zone, enabled, main})`` is the ``wind`` scene
+    event; ``set_zone(name, ...)`` the same from Python. ``zones`` is the packed table (what
+    ``kernel_table`` hands to the frame kernel), ``table`` its column views."""
 
     def __init__(self, specs):
         self.specs = tuple(specs)
         self.names = [s.name for s in self.specs]
-        self.table = zone_table(self.specs)
-        self._struct = None        # the table as a kernel StructRef (shares its arrays)
+        self.zones = zone_table(self.specs)
+        self.table = zone_views(self.zones)
 
     def __len__(self) -> int:
         return len(self.specs)
@@ -195,14 +236,18 @@ class WindField:
     def apply_event(self, payload: dict) -> None:
         self.set_zone(payload["zone"], payload.get("enabled"), payload.get("main"))
 
-    def update(self, solver_tables) -> None:
-        """Zone world poses, then every live team's zone selection (``selection.update_wind``,
-        one numba call; ``solver_tables``: the frame kernel's ``solver.tables.SolverTables``)."""
+    def kernel_table(self) -> np.ndarray:
+        """The zone table as the frame kernel takes it (``wind_zones``): the packed array."""
+        return self.zones
+
+    def update(self, tables, hierarchy) -> None:
+        """Zone world poses, then the zones every team feels (``selection.update_wind``, one
+        numba call); ``tables``: the solver's ``frame.Tables``, ``hierarchy``: its
+        ``frame.HierarchyArrays``."""
         from magica_py.wind.selection import update_wind
 
-        if self._struct is None:
-            self._struct = zone_kernel_table(self.table)
-        update_wind(self._struct, solver_tables)
+        update_wind(self.zones, tables.TS, tables.TI, tables.P, tables.BI, tables.PT, tables.topology,
+                    tables.blocks, hierarchy.world_position, hierarchy.world_rotation, hierarchy.lossy_scale)
 
     def capture_state(self) -> dict:
         return {"enabled": self.table.enabled.copy(), "main": self.table.main.copy()}

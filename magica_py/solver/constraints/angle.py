@@ -4,10 +4,10 @@ Restoration pulls each edge towards its *absolute* world direction in the step b
 (not parent-relative, Appendix 2.2). Masses use friction only (Appendix 2.3). Both parent and
 child move; the restoration pivot grows 0.1 -> 0.3 -> 0.5 over the iterations.
 
-``angle_team`` runs one team through the per-element functions ``angle_buffer_entry``
-(buffering pass), ``angle_limit_entry`` (D.5 half of an iteration) and
-``angle_restoration_entry`` (D.6 half): tuples in and out, no array access, the reference's
-early returns written as selects.
+``angle_block`` runs one block, every baseline entry's lanes side by side, through the
+per-element functions ``angle_buffer_entry`` (buffering pass), ``angle_limit_entry`` (D.5 half
+of an iteration) and ``angle_restoration_entry`` (D.6 half): tuples in and out, no array
+access, the reference's early returns written as selects.
 
 The solves are written on the edge v = cp - pp rather than on world positions, and the
 restoration's from-to rotation is applied as a turn in the plane of the edge and its rest
@@ -19,15 +19,20 @@ from __future__ import annotations
 
 import math
 
-
 from magica_py.jit import kernel
 from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
-    angle_between_vectors, clamp_angle, inverse_mass_friction, lerp, load3, load4, orthogonal_axis,
-    q_axis_angle, q_inverse, q_mul, q_rotate, saturate, store3, store4, v_add, v_cross, v_dot, v_length,
-    v_scale, v_sub,
+    angle_between_vectors_select, clamp_angle_select, inverse_mass_friction, lerp, orthogonal_axis_select, q_inverse,
+    q_mul, q_rotate, saturate, v_add, v_cross, v_dot, v_length, v_scale, v_sub,
 )
-from magica_py.solver.parameters import curve_at, curve_at_clamp01, step_rate
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
+from magica_py.solver.rotations import swing_select
+from magica_py.solver.parameters import (
+    PRM_LIMIT_STIFFNESS, PRM_RATE_MODE, PRM_RESTORATION_GRAVITY_FALLOFF, PRM_USE_ANGLE_LIMIT, PRM_USE_RESTORATION,
+    clamp01, step_rate,
+)
 
 MOVE = 0x02
 ITERATIONS = 3               # AngleLimitIteration
@@ -37,22 +42,14 @@ ZERO3 = (0.0, 0.0, 0.0)
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
 
-@kernel(inline="always")
+@kernel
 def swing_rotation(a, b):
-    """``rotations.full_swing(a, b)`` (unit a, b), the same bits on every path, without the
-    branch full_swing can never take: its degenerate cases call ``from_to_rotation_unit``
-    whose general (acos, sincos) branch is excluded by the very tests that led there.
-    Returns (rotation, opposite)."""
+    """``rotations.full_swing(a, b)`` (unit a, b) without a branch (``swing_select``), and
+    whether a and b are opposite. Returns (rotation, opposite)."""
     c = v_dot(a, b)
     c = 1.0 if c > 1.0 else c
     c = -1.0 if c < -1.0 else c
-    x = v_cross(a, b)
-    w = 1.0 + c
-    inv = 1.0 / math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + w * w)
-    half_angle = (x[0] * inv, x[1] * inv, x[2] * inv, w * inv)
-    opposite = abs(1.0 + c) < 1e-6
-    flip = q_axis_angle(orthogonal_axis(a), math.pi * 1.0)
-    return (flip if opposite else (IDENTITY if abs(1.0 - c) < 1e-6 else half_angle)), opposite
+    return swing_select(a, b), abs(1.0 + c) < 1e-6
 
 
 @kernel(inline="always")
@@ -75,7 +72,7 @@ def restoration_offset(a, v, vl, b, t):
     parallel = abs(1.0 - c) < 1e-6
     w = v_sub(b, v_scale(a, c))
     theta = trig.acos_fma(c)
-    w = v_cross(orthogonal_axis(a), a) if opposite else w
+    w = v_cross(orthogonal_axis_select(a), a) if opposite else w
     theta = math.pi if opposite else theta
     k = vl / v_length(w)   # off the chain: ready before the sincos
     s, co = trig.sincos_fma(theta * t)
@@ -85,16 +82,10 @@ def restoration_offset(a, v, vl, b, t):
 
 # ----------------------------------------------------------------------------- per element
 @kernel
-def limit_angle_at(prm, team, depth):
-    """D.5 limit angle (rad) of a particle at ``depth``."""
-    return math.radians(curve_at(prm.limit_angle_curve, team, depth))
-
-
-@kernel
-def restoration_rate_at(prm, team, depth, frequency_ratio, power_w):
-    """D.6 restoration stiffness of this step at ``depth``, before the team's gravity factor."""
-    kr = curve_at_clamp01(prm.restoration_stiffness_curve, team, depth)
-    return saturate(step_rate(kr, frequency_ratio, power_w, prm.rate_mode[team]))
+def restoration_rate(curve, frequency_ratio, power_w, rate_mode):
+    """D.6 restoration stiffness of this step of a particle whose stiffness curve value is
+    ``curve``, before the team's gravity factor."""
+    return saturate(step_rate(clamp01(curve), frequency_ratio, power_w, rate_mode))
 
 
 @kernel
@@ -173,16 +164,22 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     edge = v_scale(v, 1.0 + s)
     edge_length = vl * (1.0 + s)
     edge_unit = vn
-    if violated:
-        rescaled = v_scale(vn, lc)
-        alpha = angle_between_vectors(rescaled, tn)
-        if alpha > max_angle:
-            turn = v_sub(clamp_angle(rescaled, tn, lerp(alpha, max_angle, stiffness)), rescaled)
-            dp = v_scale(turn, -LIMIT_PIVOT * wp)
-            dc = v_scale(v_add(v_scale(v, stretch), v_scale(turn, 1.0 - LIMIT_PIVOT)), wc)
-            edge = v_add(v, v_sub(dc, dp) if p_move else dc)
-            edge_length = v_length(edge)
-            edge_unit = v_scale(edge, 1.0 / edge_length)
+    # the violation's path, computed either way and selected (branch-free: the lane loop
+    # vectorises; the same bits as the reference's branches)
+    rescaled = v_scale(vn, lc)
+    alpha = angle_between_vectors_select(rescaled, tn)
+    turn = v_sub(clamp_angle_select(rescaled, tn, lerp(alpha, max_angle, stiffness)), rescaled)
+    limited_dp = v_scale(turn, -LIMIT_PIVOT * wp)
+    limited_dc = v_scale(v_add(v_scale(v, stretch), v_scale(turn, 1.0 - LIMIT_PIVOT)), wc)
+    limited_edge = v_add(v, v_sub(limited_dc, limited_dp) if p_move else limited_dc)
+    limited_length = v_length(limited_edge)
+    limited_unit = v_scale(limited_edge, 1.0 / limited_length)
+    limited = violated & (alpha > max_angle)
+    dp = limited_dp if limited else dp
+    dc = limited_dc if limited else dc
+    edge = limited_edge if limited else edge
+    edge_length = limited_length if limited else edge_length
+    edge_unit = limited_unit if limited else edge_unit
     solved_c = v_add(cp, dc)
     solved_vel_c = v_add(vel_c, v_scale(dc, attenuation))
     solved_p = v_add(pp, dp) if p_move else pp
@@ -238,101 +235,102 @@ def angle_restoration_entry(cp, pp, edge, next_c, vel_c, next_p, vel_p, rest_len
     return next_c_out, vel_c_out, next_p, vel_p, solve & opposite
 
 
-# ----------------------------------------------------------------------------- per team
-@kernel
-def angle_team(m, ps, prm, ts, team, frequency_ratio, power_w, limit_attenuation, restoration_attenuation):
-    """D.5/D.6 over every baseline of one team.
+# ----------------------------------------------------------------------------- per block
+@kernel(forceinline=False)
+def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_attenuation, restoration_attenuation):
+    """D.5/D.6 over every baseline of block b, each entry's lanes side by side.
 
     The inverse mass (friction does not change in this routine), the restoration stiffness
     (curve, rate conversion, gravity factor) and the rest direction (length, unit vector) of
     each particle are computed once per step in the buffering pass
     rather than in each of the 3 iterations (same operations on the same values: same bits)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_baseline_count, m_baseline_data = m.attribute, m.baseline_count, m.baseline_data
-    m_baseline_start, m_depth, m_parent = m.baseline_start, m.depth, m.parent
-    m_team_baseline_count, ps_angle_inverse_mass = m.team_baseline_count, ps.angle_inverse_mass
-    ps_angle_length, ps_angle_limit, ps_angle_limit_cos = ps.angle_length, ps.angle_limit, ps.angle_limit_cos
-    ps_angle_local_pos, ps_angle_local_rot = ps.angle_local_pos, ps.angle_local_rot
-    ps_angle_rest_direction, ps_angle_rest_length = ps.angle_rest_direction, ps.angle_rest_length
-    ps_angle_rest_vector, ps_angle_restoration_k = ps.angle_rest_vector, ps.angle_restoration_k
-    ps_angle_rotation, ps_friction, ps_next_pos = ps.angle_rotation, ps.friction, ps.next_pos
-    ps_step_basic_pos, ps_step_basic_rot = ps.step_basic_pos, ps.step_basic_rot
-    ps_velocity_pos = ps.velocity_pos
-    use_limit = prm.use_angle_limit[team] != 0
-    use_restoration = prm.use_restoration[team] != 0
+    use_limit = P[b, PRM_USE_ANGLE_LIMIT] != 0.0
+    use_restoration = P[b, PRM_USE_RESTORATION] != 0.0
     if not use_limit and not use_restoration:
         return
-    limit_stiffness = prm.limit_stiffness[team]
-    gravity_factor = restoration_gravity_factor(prm.restoration_gravity_falloff[team], ts.gravity_dot[team])
-    b0 = m.team_baseline_start[team]
-    for b in range(b0, b0 + m_team_baseline_count[team]):
-        e0 = m_baseline_start[b]
-        e1 = e0 + m_baseline_count[b]
+    limit_stiffness = P[b, PRM_LIMIT_STIFFNESS]
+    falloff = P[b, PRM_RESTORATION_GRAVITY_FALLOFF]
+    rate_mode = int(P[b, PRM_RATE_MODE])
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute, parent = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_PARENT]
+    bl_start, bl_count, bl_data = BI[b, bk.BI_BASELINE_START], BI[b, bk.BI_BASELINE_COUNT], BI[b, bk.BI_BASELINE_DATA]
+    for line in range(BI[b, bk.BI_BASELINES]):
+        e0 = topology[bl_start + line]
+        e1 = e0 + topology[bl_count + line]
         # buffering pass
         for e in range(e0, e1):
-            c = m_baseline_data[e]
-            store4(ps_angle_rotation, c, load4(ps_step_basic_rot, c))
-            # parents come first in a baseline (B.6), so wp below is always this step's value
-            ps_angle_inverse_mass[c] = inverse_mass_friction(ps_friction[c])
+            c = topology[bl_data + e]
+            gc = g0 + c
+            for l in range(w):
+                put4(PS, gc, st.ANGLE_ROTATION, l, get4(PS, gc, st.STEP_BASIC_ROT, l))
+                # parents come first in a baseline (B.6), so wp below is always this step's value
+                put1(PS, gc, st.ANGLE_INVERSE_MASS, l, inverse_mass_friction(get1(PS, gc, st.FRICTION, l)))
             if e == e0:
                 continue
-            p = m_parent[c]
-            length, local_pos, local_rot, rest_vector, rest_length, rest_direction = angle_buffer_entry(
-                load3(ps_next_pos, c), load3(ps_next_pos, p), load3(ps_step_basic_pos, c),
-                load3(ps_step_basic_pos, p), load4(ps_step_basic_rot, c), load4(ps_step_basic_rot, p),
-                load3(ps_angle_rest_direction, c))
-            ps_angle_length[c] = length
-            store3(ps_angle_local_pos, c, local_pos)
-            store4(ps_angle_local_rot, c, local_rot)
-            store3(ps_angle_rest_vector, c, rest_vector)
-            if use_restoration:  # the rest direction does not change over the iterations
-                ps_angle_rest_length[c] = rest_length
-                store3(ps_angle_rest_direction, c, rest_direction)
-                ps_angle_restoration_k[c] = restoration_rate_at(prm, team, m_depth[c], frequency_ratio,
-                                                                power_w) * gravity_factor
-            if use_limit:
-                max_angle = limit_angle_at(prm, team, m_depth[c])
-                ps_angle_limit[c] = max_angle
-                ps_angle_limit_cos[c] = trig.cos(max_angle)
+            gp = g0 + topology[parent + c]
+            for l in range(w):
+                length, local_pos, local_rot, rest_vector, rest_length, rest_direction = angle_buffer_entry(
+                    get3(PS, gc, st.NEXT_POS, l), get3(PS, gp, st.NEXT_POS, l), get3(PS, gc, st.STEP_BASIC_POS, l),
+                    get3(PS, gp, st.STEP_BASIC_POS, l), get4(PS, gc, st.STEP_BASIC_ROT, l),
+                    get4(PS, gp, st.STEP_BASIC_ROT, l), get3(PS, gc, st.ANGLE_REST_DIRECTION, l))
+                put1(PS, gc, st.ANGLE_LENGTH, l, length)
+                put3(PS, gc, st.ANGLE_LOCAL_POS, l, local_pos)
+                put4(PS, gc, st.ANGLE_LOCAL_ROT, l, local_rot)
+                put3(PS, gc, st.ANGLE_REST_VECTOR, l, rest_vector)
+                if use_restoration:  # the rest direction does not change over the iterations
+                    put1(PS, gc, st.ANGLE_REST_LENGTH, l, rest_length)
+                    put3(PS, gc, st.ANGLE_REST_DIRECTION, l, rest_direction)
+                    gravity_factor = restoration_gravity_factor(falloff, get1(TS, b, st.GRAVITY_DOT, l))
+                    put1(PS, gc, st.ANGLE_RESTORATION_K, l,
+                         restoration_rate(get1(PP, gc, bk.CURVE_RESTORATION_STIFFNESS, l), frequency_ratio, power_w,
+                                          rate_mode) * gravity_factor)
+                if use_limit:
+                    max_angle = math.radians(get1(PP, gc, bk.CURVE_LIMIT_ANGLE, l))
+                    put1(PS, gc, st.ANGLE_LIMIT, l, max_angle)
+                    put1(PS, gc, st.ANGLE_LIMIT_COS, l, trig.cos(max_angle))
         for k in range(ITERATIONS):
             rest_pivot = lerp(0.1, 0.5, k / 2.0)
             for e in range(e0 + 1, e1):
-                c = m_baseline_data[e]
-                if (m_attribute[c] & MOVE) == 0:
+                c = topology[bl_data + e]
+                if (topology[attribute + c] & MOVE) == 0:
                     continue
-                p = m_parent[c]
-                p_move = (m_attribute[p] & MOVE) != 0
-                cp = load3(ps_next_pos, c)
-                pp = load3(ps_next_pos, p)
-                next_c = cp
-                vel_c = load3(ps_velocity_pos, c)
-                vel_p = load3(ps_velocity_pos, p)
-                wc = ps_angle_inverse_mass[c]
-                wp = ps_angle_inverse_mass[p]
-                if use_limit:
-                    cp, pp, next_c, vel_c, vel_p, rot_c, edge, _rare = angle_limit_entry(
-                        cp, pp, vel_c, vel_p, load4(ps_angle_rotation, c), load4(ps_angle_rotation, p),
-                        load3(ps_angle_local_pos, c), load4(ps_angle_local_rot, c), ps_angle_length[c],
-                        ps_angle_limit[c], ps_angle_limit_cos[c], wc, wp, p_move, limit_stiffness,
-                        limit_attenuation)
-                    store4(ps_angle_rotation, c, rot_c)
-                else:
-                    edge = edge_of(cp, pp)
-                next_p = pp
-                if use_restoration:
-                    next_c, vel_c, next_p, vel_p, _rare = angle_restoration_entry(
-                        cp, pp, edge, next_c, vel_c, next_p, vel_p, ps_angle_rest_length[c],
-                        load3(ps_angle_rest_direction, c), ps_angle_restoration_k[c], rest_pivot, wc, wp,
-                        p_move, restoration_attenuation)
-                store3(ps_next_pos, c, next_c)
-                store3(ps_velocity_pos, c, vel_c)
-                store3(ps_next_pos, p, next_p)
-                store3(ps_velocity_pos, p, vel_p)
+                p = topology[parent + c]
+                p_move = (topology[attribute + p] & MOVE) != 0
+                gc = g0 + c
+                gp = g0 + p
+                for l in range(w):
+                    cp = get3(PS, gc, st.NEXT_POS, l)
+                    pp = get3(PS, gp, st.NEXT_POS, l)
+                    next_c = cp
+                    vel_c = get3(PS, gc, st.VELOCITY_POS, l)
+                    vel_p = get3(PS, gp, st.VELOCITY_POS, l)
+                    wc = get1(PS, gc, st.ANGLE_INVERSE_MASS, l)
+                    wp = get1(PS, gp, st.ANGLE_INVERSE_MASS, l)
+                    if use_limit:
+                        cp, pp, next_c, vel_c, vel_p, rot_c, edge, _rare = angle_limit_entry(
+                            cp, pp, vel_c, vel_p, get4(PS, gc, st.ANGLE_ROTATION, l),
+                            get4(PS, gp, st.ANGLE_ROTATION, l), get3(PS, gc, st.ANGLE_LOCAL_POS, l),
+                            get4(PS, gc, st.ANGLE_LOCAL_ROT, l), get1(PS, gc, st.ANGLE_LENGTH, l),
+                            get1(PS, gc, st.ANGLE_LIMIT, l), get1(PS, gc, st.ANGLE_LIMIT_COS, l), wc, wp, p_move,
+                            limit_stiffness, limit_attenuation)
+                        put4(PS, gc, st.ANGLE_ROTATION, l, rot_c)
+                    else:
+                        edge = edge_of(cp, pp)
+                    next_p = pp
+                    if use_restoration:
+                        next_c, vel_c, next_p, vel_p, _rare = angle_restoration_entry(
+                            cp, pp, edge, next_c, vel_c, next_p, vel_p, get1(PS, gc, st.ANGLE_REST_LENGTH, l),
+                            get3(PS, gc, st.ANGLE_REST_DIRECTION, l), get1(PS, gc, st.ANGLE_RESTORATION_K, l),
+                            rest_pivot, wc, wp, p_move, restoration_attenuation)
+                    put3(PS, gc, st.NEXT_POS, l, next_c)
+                    put3(PS, gc, st.VELOCITY_POS, l, vel_c)
+                    put3(PS, gp, st.NEXT_POS, l, next_p)
+                    put3(PS, gp, st.VELOCITY_POS, l, vel_p)
         # clear the buffers
         for e in range(e0, e1):
-            c = m_baseline_data[e]
-            ps_angle_length[c] = 0.0
-            store3(ps_angle_local_pos, c, ZERO3)
-            store3(ps_angle_rest_vector, c, ZERO3)
-
-
+            gc = g0 + topology[bl_data + e]
+            for l in range(w):
+                put1(PS, gc, st.ANGLE_LENGTH, l, 0.0)
+                put3(PS, gc, st.ANGLE_LOCAL_POS, l, ZERO3)
+                put3(PS, gc, st.ANGLE_REST_VECTOR, l, ZERO3)

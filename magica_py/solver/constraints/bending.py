@@ -5,9 +5,10 @@ contribution truncated toward zero, §0.2), averaged by count and added to the m
 particles' ``next_pos`` (Jacobi, not Gauss-Seidel). ``velocity_pos`` is untouched, so the whole
 correction becomes velocity. The rest volume scales with scaleRatio, not its cube (Appendix 2.6).
 
-``bending_team`` / ``apply_accumulated`` run one team through array-free per-element
-functions (``particle_inverse_mass``, ``solve_dihedral``, ``solve_volume``, ``accumulated``,
-``averaged``), branch-free (degenerate pairs are computed through and selected away).
+``bending_block`` runs one block: each pair's lanes side by side through array-free
+per-element functions (``particle_inverse_mass``, ``solve_dihedral``, ``solve_volume``,
+``accumulated``), branch-free (degenerate pairs are computed through and selected away), then
+``apply_accumulated_block`` (``averaged``).
 """
 from __future__ import annotations
 
@@ -17,10 +18,12 @@ import math
 from magica_py.jit import kernel
 from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
-    inverse_mass_friction_depth, load3, saturate, store3, v_cross, v_dot, v_length, v_length_sq,
-    v_scale, v_sub,
+    inverse_mass_friction_depth, saturate, v_cross, v_dot, v_length, v_length_sq, v_scale, v_sub,
 )
-from magica_py.solver.parameters import constraint_stiffness
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import get1, get3, put1, put3
+from magica_py.solver.parameters import PRM_BENDING_STIFFNESS, PRM_QUALITY, PRM_RATE_MODE, constraint_stiffness
 
 MOVE = 0x02
 FIXED_POINT = 1e6
@@ -121,89 +124,104 @@ def solve_volume(p0, p1, p2, p3, w0, w1, w2, w3, rest_volume, stiffness):
 
 
 @kernel
-def bending_rate(prm, team, frequency_ratio, power_y):
-    """Per-step stiffness of the team's bending (negative: bending off)."""
-    stiffness = prm.bending_stiffness[team]
+def bending_rate(P, b, frequency_ratio, power_y):
+    """Per-step stiffness of block b's bending (negative: bending off)."""
+    stiffness = P[b, PRM_BENDING_STIFFNESS]
     if stiffness < 1e-6:
         return -1.0
-    return saturate(constraint_stiffness(stiffness, frequency_ratio, power_y, prm.rate_mode[team], prm.quality[team]))
+    return saturate(constraint_stiffness(stiffness, frequency_ratio, power_y, int(P[b, PRM_RATE_MODE]),
+                                         int(P[b, PRM_QUALITY])))
 
 
-# ----------------------------------------------------------------------------- per team
-@kernel
-def accumulate(ps, p, v):
-    """Add one contribution to particle p's accumulator (``accumulated``)."""
-    acc, n = accumulated(load3(ps.accum_vector, p), ps.accum_count[p], v, True)
-    store3(ps.accum_vector, p, acc)
-    ps.accum_count[p] = n
-
-
-@kernel
-def inverse_mass(m, ps, p):
-    return particle_inverse_mass((m.attribute[p] & MOVE) != 0, ps.friction[p], m.depth[p])
+# ----------------------------------------------------------------------------- per block
+@kernel(forceinline=False)
+def accumulate_lane(PS, g, l, v, ok):
+    """Add contribution v to particle slot g's accumulator in lane l when ok (``accumulated``)."""
+    acc, n = accumulated(get3(PS, g, st.ACCUM_VECTOR, l), get1(PS, g, st.ACCUM_COUNT, l), v, ok)
+    put3(PS, g, st.ACCUM_VECTOR, l, acc)
+    put1(PS, g, st.ACCUM_COUNT, l, n)
 
 
 @kernel
-def bending_team(m, ps, prm, ts, team, frequency_ratio, power_y):
-    """Accumulate the dihedral and volume corrections of one team (applied by ``apply_accumulated``).
-
-    The inverse mass of each particle is computed once per call into ``ps.bend_inverse_mass``
-    (friction and depth do not change during the routine): a mesh vertex belongs to several
-    bend pairs, so per-pair evaluation repeated the same division ~8 times per vertex."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_bend_rest_angle, m_bend_sign, m_bend_vertices = m.bend_rest_angle, m.bend_sign, m.bend_vertices
-    m_team_bend_count, m_team_particle_count = m.team_bend_count, m.team_particle_count
-    m_team_volume_count, m_volume_rest = m.team_volume_count, m.volume_rest
-    m_volume_vertices, ps_bend_inverse_mass, ps_next_pos = m.volume_vertices, ps.bend_inverse_mass, ps.next_pos
-    k = bending_rate(prm, team, frequency_ratio, power_y)
-    if k < 0.0:
-        return
-    start = m.team_particle_start[team]
-    for p in range(start, start + m_team_particle_count[team]):
-        ps_bend_inverse_mass[p] = inverse_mass(m, ps, p)
-    w = ps_bend_inverse_mass
-    b0 = m.team_bend_start[team]
-    for b in range(b0, b0 + m_team_bend_count[team]):
-        v0 = m_bend_vertices[b, 0]
-        v1 = m_bend_vertices[b, 1]
-        v2 = m_bend_vertices[b, 2]
-        v3 = m_bend_vertices[b, 3]
-        ok, c0, c1, c2, c3 = solve_dihedral(
-            load3(ps_next_pos, v0), load3(ps_next_pos, v1), load3(ps_next_pos, v2), load3(ps_next_pos, v3),
-            w[v0], w[v1], w[v2], w[v3], m_bend_rest_angle[b], m_bend_sign[b], k)
-        if ok:
-            accumulate(ps, v0, c0)
-            accumulate(ps, v1, c1)
-            accumulate(ps, v2, c2)
-            accumulate(ps, v3, c3)
-    scale = ts.scale_ratio[team]
-    b0 = m.team_volume_start[team]
-    for b in range(b0, b0 + m_team_volume_count[team]):
-        v0 = m_volume_vertices[b, 0]
-        v1 = m_volume_vertices[b, 1]
-        v2 = m_volume_vertices[b, 2]
-        v3 = m_volume_vertices[b, 3]
-        ok, c0, c1, c2, c3 = solve_volume(
-            load3(ps_next_pos, v0), load3(ps_next_pos, v1), load3(ps_next_pos, v2), load3(ps_next_pos, v3),
-            w[v0], w[v1], w[v2], w[v3], m_volume_rest[b] * scale, k)
-        if ok:
-            accumulate(ps, v0, c0)
-            accumulate(ps, v1, c1)
-            accumulate(ps, v2, c2)
-            accumulate(ps, v3, c3)
+def bending_inverse_masses(PS, PM, BI, topology, b):
+    """Every particle's inverse mass of this bending pass into ``BEND_INVERSE_MASS``, once per
+    particle: friction and depth do not change during the routine, and a mesh vertex belongs
+    to up to ~8 bend pairs."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    for j in range(BI[b, bk.BI_N]):
+        g = g0 + j
+        move = (topology[attribute + j] & MOVE) != 0
+        for l in range(w):
+            put1(PS, g, st.BEND_INVERSE_MASS, l,
+                 particle_inverse_mass(move, get1(PS, g, st.FRICTION, l), get1(PM, g, bk.DEPTH, l)))
 
 
-@kernel
-def apply_accumulated(m, ps, team, move_only):
-    """Add the averaged accumulator to next_pos (moving particles only when ``move_only``) and clear it."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_team_particle_count, ps_accum_count = m.attribute, m.team_particle_count, ps.accum_count
-    ps_accum_vector, ps_next_pos = ps.accum_vector, ps.next_pos
-    start = m.team_particle_start[team]
-    for p in range(start, start + m_team_particle_count[team]):
-        if not move_only or (m_attribute[p] & MOVE) != 0:
-            store3(ps_next_pos, p, averaged(load3(ps_next_pos, p), load3(ps_accum_vector, p), ps_accum_count[p]))
-        store3(ps_accum_vector, p, ZERO3)
-        ps_accum_count[p] = 0
+@kernel(forceinline=False)
+def bending_block(PS, PM, TS, BM, VM, P, BI, topology, b, frequency_ratio, power_y):
+    """D.7 over block b: the dihedral and volume corrections of every pair accumulated in fixed
+    point (pairs in order, every lane side by side), then the averages added to the moving
+    particles' ``next_pos`` and the accumulators cleared (Jacobi: every pair sees the positions
+    the pass started from)."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    k = bending_rate(P, b, frequency_ratio, power_y)
+    if k >= 0.0:
+        bending_inverse_masses(PS, PM, BI, topology, b)
+        bend0 = BI[b, bk.BI_BEND0]
+        vertices = BI[b, bk.BI_BEND_VERTICES]
+        for e in range(BI[b, bk.BI_BENDS]):
+            g_0 = g0 + topology[vertices + 4 * e]
+            g_1 = g0 + topology[vertices + 4 * e + 1]
+            g_2 = g0 + topology[vertices + 4 * e + 2]
+            g_3 = g0 + topology[vertices + 4 * e + 3]
+            ie = bend0 + e
+            for l in range(w):
+                ok, c0, c1, c2, c3 = solve_dihedral(
+                    get3(PS, g_0, st.NEXT_POS, l), get3(PS, g_1, st.NEXT_POS, l), get3(PS, g_2, st.NEXT_POS, l),
+                    get3(PS, g_3, st.NEXT_POS, l), get1(PS, g_0, st.BEND_INVERSE_MASS, l),
+                    get1(PS, g_1, st.BEND_INVERSE_MASS, l), get1(PS, g_2, st.BEND_INVERSE_MASS, l),
+                    get1(PS, g_3, st.BEND_INVERSE_MASS, l), get1(BM, ie, bk.BEND_REST_ANGLE, l),
+                    get1(BM, ie, bk.BEND_SIGN, l), k)
+                accumulate_lane(PS, g_0, l, c0, ok)
+                accumulate_lane(PS, g_1, l, c1, ok)
+                accumulate_lane(PS, g_2, l, c2, ok)
+                accumulate_lane(PS, g_3, l, c3, ok)
+        volume0 = BI[b, bk.BI_VOLUME0]
+        vertices = BI[b, bk.BI_VOLUME_VERTICES]
+        for e in range(BI[b, bk.BI_VOLUMES]):
+            g_0 = g0 + topology[vertices + 4 * e]
+            g_1 = g0 + topology[vertices + 4 * e + 1]
+            g_2 = g0 + topology[vertices + 4 * e + 2]
+            g_3 = g0 + topology[vertices + 4 * e + 3]
+            ie = volume0 + e
+            for l in range(w):
+                ok, c0, c1, c2, c3 = solve_volume(
+                    get3(PS, g_0, st.NEXT_POS, l), get3(PS, g_1, st.NEXT_POS, l), get3(PS, g_2, st.NEXT_POS, l),
+                    get3(PS, g_3, st.NEXT_POS, l), get1(PS, g_0, st.BEND_INVERSE_MASS, l),
+                    get1(PS, g_1, st.BEND_INVERSE_MASS, l), get1(PS, g_2, st.BEND_INVERSE_MASS, l),
+                    get1(PS, g_3, st.BEND_INVERSE_MASS, l),
+                    get1(VM, ie, bk.VOLUME_REST, l) * get1(TS, b, st.SCALE_RATIO, l), k)
+                accumulate_lane(PS, g_0, l, c0, ok)
+                accumulate_lane(PS, g_1, l, c1, ok)
+                accumulate_lane(PS, g_2, l, c2, ok)
+                accumulate_lane(PS, g_3, l, c3, ok)
+    apply_accumulated_block(PS, BI, topology, b)
 
 
+@kernel(forceinline=False)
+def apply_accumulated_block(PS, BI, topology, b):
+    """Add the averaged accumulator to the moving particles' next_pos (``averaged``) and clear it."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    for j in range(BI[b, bk.BI_N]):
+        g = g0 + j
+        if (topology[attribute + j] & MOVE) != 0:
+            for l in range(w):
+                put3(PS, g, st.NEXT_POS, l, averaged(get3(PS, g, st.NEXT_POS, l), get3(PS, g, st.ACCUM_VECTOR, l),
+                                                     get1(PS, g, st.ACCUM_COUNT, l)))
+        for l in range(w):
+            put3(PS, g, st.ACCUM_VECTOR, l, ZERO3)
+            put1(PS, g, st.ACCUM_COUNT, l, 0.0)

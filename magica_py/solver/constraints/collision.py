@@ -7,8 +7,11 @@ and averages (Jacobi). Neither touches ``velocity_pos``: the push becomes veloci
 Edge-mode friction is quantised to {0, 1} as MagicaCloth2's fixed-point max does (§0.2,
 Appendix 2.5): we reproduce it deliberately.
 
-``point_collision_team`` calls array-free per-element functions (``point_sphere``,
-``point_capsule``, ``point_plane``, ``point_contact_add``, ``point_contact_result``).
+``point_collision_block`` runs one block: per particle, per collider slot, the lanes side by
+side through array-free per-element functions (``point_sphere``, ``point_capsule``,
+``point_plane``, ``point_contact_add``), summed in scratch rows, then
+``point_contact_result``. ``edge_collision_block`` runs each edge's lanes one by one (its
+collider tests branch on the lane's data) through ``solve_edge_collider``.
 """
 from __future__ import annotations
 
@@ -17,11 +20,14 @@ import math
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    closest_segment_segment, load3, load4, q_rotate, saturate, store3, v_add, v_dot, v_length, v_length_sq, v_lerp,
-    v_normalize, v_scale, v_sub,
+    closest_segment_segment, q_rotate, saturate, v_add, v_dot, v_length, v_length_sq, v_lerp, v_normalize, v_scale,
+    v_sub,
 )
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import get1, get3, get4, put1, put3
+
 from magica_py.solver.constraints.bending import FIXED_POINT
-from magica_py.solver.parameters import curve_at, length_unit
 
 MOVE = 0x02
 INVALID_OR_NO_COLLISION = 0x10
@@ -60,10 +66,10 @@ def aabb_overlap(min_a, max_a, min_b, max_b):
 
 
 @kernel
-def particle_radius(radius_curve, team, depth, scale):
-    """A particle's collision radius (m): the team's radius curve at its depth, at least
-    0.1 mm, times ``scale`` (team scale ratio and, in quality mode, the length unit)."""
-    return max(curve_at(radius_curve, team, depth), 0.0001) * scale
+def particle_radius(curve, scale):
+    """A particle's collision radius (m) from its radius curve value (``blocks.CURVE_RADIUS``):
+    at least 0.1 mm, times ``scale`` (team scale ratio and, in quality mode, the length unit)."""
+    return max(curve, 0.0001) * scale
 
 
 # -- point mode, per element (array-free)
@@ -137,72 +143,98 @@ def point_contact_result(x, sum_push, sum_n, count, n_acc, min_dist, r, friction
 
 
 @kernel
-def solve_point_collider(cs, k, x, r, bmin, bmax):
-    """One particle (x, radius r, bounds) against collider slot k: (distance, normal, pushed x)."""
+def solve_point_collider(CS, k, l, shape, x, r, bmin, bmax):
+    """One particle (x, radius r, bounds) against collider slot k of lane l: (distance, normal,
+    pushed x); a missed bounding box gives (FAR, 0, x)."""
     z = (0.0, 0.0, 0.0)
-    shape = cs.shape[k]
     if shape == PLANE:
-        return point_plane(x, r, load3(cs.start_new, k), load3(cs.plane_normal, k))
-    if not aabb_overlap(bmin, bmax, load3(cs.aabb_min, k), load3(cs.aabb_max, k)):
+        return point_plane(x, r, get3(CS, k, st.START_NEW, l), get3(CS, k, st.PLANE_NORMAL, l))
+    if not aabb_overlap(bmin, bmax, get3(CS, k, st.AABB_MIN, l), get3(CS, k, st.AABB_MAX, l)):
         return FAR, z, x
     if shape == SPHERE:
-        return point_sphere(x, r, load3(cs.start_old, k), load3(cs.start_new, k), cs.radius_start[k])
-    return point_capsule(x, r, load3(cs.start_old, k), load3(cs.end_old, k), load3(cs.start_new, k),
-                         load3(cs.end_new, k), cs.radius_start[k], cs.radius_end[k],
-                         load4(cs.inverse_old_rot, k), load4(cs.now_rot, k))
+        return point_sphere(x, r, get3(CS, k, st.START_OLD, l), get3(CS, k, st.START_NEW, l),
+                            get1(CS, k, st.RADIUS_START, l))
+    return point_capsule(x, r, get3(CS, k, st.START_OLD, l), get3(CS, k, st.END_OLD, l), get3(CS, k, st.START_NEW, l),
+                         get3(CS, k, st.END_NEW, l), get1(CS, k, st.RADIUS_START, l), get1(CS, k, st.RADIUS_END, l),
+                         get4(CS, k, st.INVERSE_OLD_ROT, l), get4(CS, k, st.NOW_ROT, l))
 
 
-@kernel
-def point_collision_team(m, ps, prm, ts, cs, team):
-    """D.8 point mode over one team's moving particles."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    cs_scale_suspend, m_attribute, m_depth = cs.scale_suspend, m.attribute, m.depth
-    m_team_particle_count, prm_radius_curve = m.team_particle_count, prm.radius_curve
-    ps_collision_normal, ps_friction, ps_next_pos = ps.collision_normal, ps.friction, ps.next_pos
-    start = m.team_particle_start[team]
-    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
-    c0 = ts.collider_start[team]
-    c1 = c0 + ts.collider_count[team]
+@kernel(forceinline=False)
+def point_collision_block(PS, PP, TS, CS, BI, topology, b):
+    """D.8 point mode over block b's moving particles: per particle and collider slot, the
+    lanes side by side; the sums of ``point_contact_add`` in scratch rows (``ACCUM3`` push,
+    ``CONTACT_*``), then each particle's result."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    c0 = BI[b, bk.BI_COLLIDER0]
+    shapes = BI[b, bk.BI_COLLIDER_SHAPE]
     z = (0.0, 0.0, 0.0)
-    for p in range(start, start + m_team_particle_count[team]):
-        attr = m_attribute[p]
+    for j in range(BI[b, bk.BI_N]):
+        attr = topology[attribute + j]
         if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
             continue
-        r = particle_radius(prm_radius_curve, team, m_depth[p], scale)
-        x = load3(ps_next_pos, p)
-        bmin, bmax = point_bounds(x, r)
-        sum_push, sum_n, n_acc, count, min_dist = z, z, z, 0, FAR
-        for k in range(c0, c1):
-            if cs_scale_suspend[k] != 0:
-                continue
-            d, n, x2 = solve_point_collider(cs, k, x, r, bmin, bmax)
-            if d <= r:  # otherwise (out of range, or missed) the sums stay as they are: skip the work
-                sum_push, sum_n, n_acc, count, min_dist = point_contact_add(sum_push, sum_n, n_acc, count, min_dist,
-                                                                            x, r, d, n, x2)
-        if count > 0 or min_dist <= r:  # otherwise the result is (x, friction, n_acc): skip the work
-            new_x, friction, n_acc = point_contact_result(x, sum_push, sum_n, count, n_acc, min_dist, r,
-                                                          ps_friction[p])
-            store3(ps_next_pos, p, new_x)
-            ps_friction[p] = friction
-        store3(ps_collision_normal, p, n_acc)
+        g = g0 + j
+        for l in range(w):
+            put3(PS, g, st.ACCUM3, l, z)
+            put3(PS, g, st.CONTACT_NORMAL_SUM, l, z)
+            put3(PS, g, st.CONTACT_NEAR_SUM, l, z)
+            put1(PS, g, st.ACCUM_N, l, 0.0)
+            put1(PS, g, st.CONTACT_MIN_DIST, l, FAR)
+        for c in range(BI[b, bk.BI_COLLIDERS]):
+            k = c0 + c
+            shape = topology[shapes + c]
+            for l in range(w):
+                scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
+                r = particle_radius(get1(PP, g, bk.CURVE_RADIUS, l), scale)
+                x = get3(PS, g, st.NEXT_POS, l)
+                bmin, bmax = point_bounds(x, r)
+                d, n, x2 = solve_point_collider(CS, k, l, shape, x, r, bmin, bmax)
+                # out of range, missed or suspended: the sums stay as they are
+                hit = d <= r and get1(CS, k, st.SCALE_SUSPEND, l) == 0.0
+                sum_push, sum_n, n_acc, count, min_dist = point_contact_add(
+                    get3(PS, g, st.ACCUM3, l), get3(PS, g, st.CONTACT_NORMAL_SUM, l),
+                    get3(PS, g, st.CONTACT_NEAR_SUM, l), get1(PS, g, st.ACCUM_N, l),
+                    get1(PS, g, st.CONTACT_MIN_DIST, l), x, r, d, n, x2)
+                if hit:
+                    put3(PS, g, st.ACCUM3, l, sum_push)
+                    put3(PS, g, st.CONTACT_NORMAL_SUM, l, sum_n)
+                    put3(PS, g, st.CONTACT_NEAR_SUM, l, n_acc)
+                    put1(PS, g, st.ACCUM_N, l, count)
+                    put1(PS, g, st.CONTACT_MIN_DIST, l, min_dist)
+        for l in range(w):
+            scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
+            r = particle_radius(get1(PP, g, bk.CURVE_RADIUS, l), scale)
+            x = get3(PS, g, st.NEXT_POS, l)
+            count = get1(PS, g, st.ACCUM_N, l)
+            min_dist = get1(PS, g, st.CONTACT_MIN_DIST, l)
+            n_acc = get3(PS, g, st.CONTACT_NEAR_SUM, l)
+            # otherwise the result is (x, friction, n_acc): nothing else changes
+            if count > 0.0 or min_dist <= r:
+                new_x, friction, n_acc = point_contact_result(x, get3(PS, g, st.ACCUM3, l),
+                                                              get3(PS, g, st.CONTACT_NORMAL_SUM, l), count, n_acc,
+                                                              min_dist, r, get1(PS, g, st.FRICTION, l))
+                put3(PS, g, st.NEXT_POS, l, new_x)
+                put1(PS, g, st.FRICTION, l, friction)
+            put3(PS, g, st.COLLISION_NORMAL, l, n_acc)
 
 
 @kernel
-def solve_edge_collider(cs, k, a, b, ra, rb, cfr, bmin, bmax):
-    """Edge (a, b) against collider slot k: (distance, normal, pushed a, pushed b)."""
+def solve_edge_collider(CS, k, l, shape, a, b, ra, rb, cfr, bmin, bmax):
+    """Edge (a, b) against collider slot k of lane l: (distance, normal, pushed a, pushed b);
+    a missed bounding box or a collider out of range gives (FAR, 0, a, b)."""
     z = (0.0, 0.0, 0.0)
-    shape = cs.shape[k]
     if shape == PLANE:
-        n = load3(cs.plane_normal, k)
-        o = load3(cs.start_new, k)
+        n = get3(CS, k, st.PLANE_NORMAL, l)
+        o = get3(CS, k, st.START_NEW, l)
         da, a2 = plane_push(v_add(o, v_scale(n, ra)), n, a)
         db, b2 = plane_push(v_add(o, v_scale(n, rb)), n, b)
         return min(da, db), n, a2, b2
-    if not aabb_overlap(bmin, bmax, load3(cs.aabb_min, k), load3(cs.aabb_max, k)):
+    if not aabb_overlap(bmin, bmax, get3(CS, k, st.AABB_MIN, l), get3(CS, k, st.AABB_MAX, l)):
         return FAR, z, a, b
     if shape == SPHERE:
-        o_old = load3(cs.start_old, k)
-        o_new = load3(cs.start_new, k)
+        o_old = get3(CS, k, st.START_OLD, l)
+        o_new = get3(CS, k, st.START_NEW, l)
         s = segment_parameter(o_old, a, b)
         c = v_lerp(a, b, s)
         v = v_sub(c, o_old)
@@ -210,16 +242,16 @@ def solve_edge_collider(cs, k, a, b, ra, rb, cfr, bmin, bmax):
         if vl < 1e-9:
             return FAR, z, a, b
         n = v_scale(v, 1.0 / vl)
-        l = vl - v_dot(n, v_sub(o_new, o_old))
-        th = ra + (rb - ra) * s + cs.radius_start[k]
-        if l > th + cfr:
+        gap = vl - v_dot(n, v_sub(o_new, o_old))
+        th = ra + (rb - ra) * s + get1(CS, k, st.RADIUS_START, l)
+        if gap > th + cfr:
             return FAR, z, a, b
         l2 = v_dot(n, v_sub(c, o_new))
     else:
-        so = load3(cs.start_old, k)
-        eo = load3(cs.end_old, k)
-        rs = cs.radius_start[k]
-        re = cs.radius_end[k]
+        so = get3(CS, k, st.START_OLD, l)
+        eo = get3(CS, k, st.END_OLD, l)
+        rs = get1(CS, k, st.RADIUS_START, l)
+        re = get1(CS, k, st.RADIUS_END, l)
         s, t, ca, cb = closest_segment_segment(a, b, so, eo)
         v = v_sub(ca, cb)
         vl = v_length(v)
@@ -235,13 +267,15 @@ def solve_edge_collider(cs, k, a, b, ra, rb, cfr, bmin, bmax):
             if vl < 1e-9:
                 return FAR, z, a, b
             n = v_scale(v, 1.0 / vl)
-        ds = v_sub(load3(cs.start_new, k), so)
-        de = v_sub(load3(cs.end_new, k), eo)
-        l = vl - v_dot(n, v_lerp(ds, de, t))
+        sn = get3(CS, k, st.START_NEW, l)
+        en = get3(CS, k, st.END_NEW, l)
+        ds = v_sub(sn, so)
+        de = v_sub(en, eo)
+        gap = vl - v_dot(n, v_lerp(ds, de, t))
         th = ra + (rb - ra) * s + rs + (re - rs) * t
-        if l > th + cfr:
+        if gap > th + cfr:
             return FAR, z, a, b
-        d = v_lerp(load3(cs.start_new, k), load3(cs.end_new, k), t)
+        d = v_lerp(sn, en, t)
         l2 = v_dot(n, v_sub(ca, d))
     if l2 > th:
         return l2 - th, n, a, b
@@ -253,92 +287,102 @@ def solve_edge_collider(cs, k, a, b, ra, rb, cfr, bmin, bmax):
 
 
 @kernel
-def edge_collision_team(m, ps, prm, ts, cs, team):
-    """D.8 edge mode over one team's edges (accumulate), then the sum step."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    cs_scale_suspend, m_attribute, m_depth, m_edges = cs.scale_suspend, m.attribute, m.depth, m.edges
-    m_team_edge_count, m_team_particle_count = m.team_edge_count, m.team_particle_count
-    prm_radius_curve, ps_accum_count, ps_accum_friction = prm.radius_curve, ps.accum_count, ps.accum_friction
-    ps_accum_normal, ps_accum_vector = ps.accum_normal, ps.accum_vector
-    ps_collision_normal, ps_friction, ps_next_pos = ps.collision_normal, ps.friction, ps.next_pos
-    scale = ts.scale_ratio[team] * length_unit(m, prm, team)
-    c0 = ts.collider_start[team]
-    c1 = c0 + ts.collider_count[team]
-    e0 = m.team_edge_start[team]
-    for e in range(e0, e0 + m_team_edge_count[team]):
-        ia = m_edges[e, 0]
-        ib = m_edges[e, 1]
-        a_move = (m_attribute[ia] & MOVE) != 0
-        b_move = (m_attribute[ib] & MOVE) != 0
+def accumulate_push(PS, g, l, v):
+    """Add push v to particle slot g's fixed-point accumulator in lane l (truncated toward zero)."""
+    acc = get3(PS, g, st.ACCUM_VECTOR, l)
+    put3(PS, g, st.ACCUM_VECTOR, l, (acc[0] + float(math.trunc(v[0] * FIXED_POINT)),
+                                     acc[1] + float(math.trunc(v[1] * FIXED_POINT)),
+                                     acc[2] + float(math.trunc(v[2] * FIXED_POINT))))
+    put1(PS, g, st.ACCUM_COUNT, l, get1(PS, g, st.ACCUM_COUNT, l) + 1.0)
+
+
+@kernel(forceinline=False)
+def edge_collision_block(PS, PP, TS, CS, BI, topology, b):
+    """D.8 edge mode over block b: per edge (in order) and lane, the edge against every
+    collider slot of the lane, its pushes accumulated in fixed point at both ends and its
+    contact recorded (friction as a fixed-point max, normals summed); then the sum step.
+    The collider tests branch on the lane's data: the lanes run one after another per edge."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    pairs = BI[b, bk.BI_EDGE_PAIRS]
+    c0 = BI[b, bk.BI_COLLIDER0]
+    colliders = BI[b, bk.BI_COLLIDERS]
+    shapes = BI[b, bk.BI_COLLIDER_SHAPE]
+    z = (0.0, 0.0, 0.0)
+    for e in range(BI[b, bk.BI_EDGES]):
+        ja = topology[pairs + 2 * e]
+        jb = topology[pairs + 2 * e + 1]
+        a_move = (topology[attribute + ja] & MOVE) != 0
+        b_move = (topology[attribute + jb] & MOVE) != 0
         if not a_move and not b_move:
             continue
-        ra = curve_at(prm_radius_curve, team, m_depth[ia]) * scale
-        rb = curve_at(prm_radius_curve, team, m_depth[ib]) * scale
-        cfr = (ra + rb) * 0.5
-        a = load3(ps_next_pos, ia)
-        b = load3(ps_next_pos, ib)
-        bmin = (min(a[0] - ra, b[0] - rb) - cfr, min(a[1] - ra, b[1] - rb) - cfr, min(a[2] - ra, b[2] - rb) - cfr)
-        bmax = (max(a[0] + ra, b[0] + rb) + cfr, max(a[1] + ra, b[1] + rb) + cfr, max(a[2] + ra, b[2] + rb) + cfr)
-        push_a = (0.0, 0.0, 0.0)
-        push_b = (0.0, 0.0, 0.0)
-        sum_n = (0.0, 0.0, 0.0)
-        n_acc = (0.0, 0.0, 0.0)
-        cnt = 0
-        min_dist = FAR
-        touched = False
-        for k in range(c0, c1):
-            if cs_scale_suspend[k] != 0:
-                continue
-            d, n, a2, b2 = solve_edge_collider(cs, k, a, b, ra, rb, cfr, bmin, bmax)
-            if d <= 0.0:
-                push_a = v_add(push_a, v_sub(a2, a))
-                push_b = v_add(push_b, v_sub(b2, b))
-                sum_n = v_add(sum_n, n)
-                cnt += 1
-            if d <= cfr:
-                touched = True
-                n_acc = v_add(n_acc, n)
-                min_dist = min(min_dist, d)
-        if cnt > 0:
-            mag = v_length(v_scale(sum_n, 1.0 / cnt))
-            if mag >= 1e-8:
-                f = min(mag, 1.0) / cnt
-                _accumulate(ps, ia, v_scale(push_a, f))
-                _accumulate(ps, ib, v_scale(push_b, f))
-        if touched:
-            # fixed-point max: the value is cast to an integer before scaling (quirk, §0.2)
-            recorded = float(math.trunc(1.0 - saturate(min_dist / cfr)))
-            if a_move:
-                ps_accum_friction[ia] = max(ps_accum_friction[ia], recorded)
-                store3(ps_accum_normal, ia, v_add(load3(ps_accum_normal, ia), n_acc))
-            if b_move:
-                ps_accum_friction[ib] = max(ps_accum_friction[ib], recorded)
-                store3(ps_accum_normal, ib, v_add(load3(ps_accum_normal, ib), n_acc))
-    # sum step
-    start = m.team_particle_start[team]
-    for p in range(start, start + m_team_particle_count[team]):
-        n = ps_accum_count[p]
-        if n > 0:
-            s = 1.0 / (n * FIXED_POINT)
-            ps_next_pos[p, 0] += ps_accum_vector[p, 0] * s
-            ps_next_pos[p, 1] += ps_accum_vector[p, 1] * s
-            ps_next_pos[p, 2] += ps_accum_vector[p, 2] * s
-        if ps_accum_friction[p] > 0.0:
-            ps_friction[p] = max(ps_friction[p], ps_accum_friction[p])
-        nsum = load3(ps_accum_normal, p)
-        if v_length_sq(nsum) > 0.0:
-            store3(ps_collision_normal, p, v_normalize(nsum))
-        ps_accum_vector[p, 0] = 0.0
-        ps_accum_vector[p, 1] = 0.0
-        ps_accum_vector[p, 2] = 0.0
-        ps_accum_count[p] = 0
-        ps_accum_friction[p] = 0.0
-        store3(ps_accum_normal, p, (0.0, 0.0, 0.0))
-
-
-@kernel
-def _accumulate(ps, p, v):
-    ps.accum_vector[p, 0] += float(math.trunc(v[0] * FIXED_POINT))
-    ps.accum_vector[p, 1] += float(math.trunc(v[1] * FIXED_POINT))
-    ps.accum_vector[p, 2] += float(math.trunc(v[2] * FIXED_POINT))
-    ps.accum_count[p] += 1
+        ga = g0 + ja
+        gb = g0 + jb
+        for l in range(w):
+            scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
+            ra = get1(PP, ga, bk.CURVE_RADIUS, l) * scale
+            rb = get1(PP, gb, bk.CURVE_RADIUS, l) * scale
+            cfr = (ra + rb) * 0.5
+            pa = get3(PS, ga, st.NEXT_POS, l)
+            pb = get3(PS, gb, st.NEXT_POS, l)
+            bmin = (min(pa[0] - ra, pb[0] - rb) - cfr, min(pa[1] - ra, pb[1] - rb) - cfr,
+                    min(pa[2] - ra, pb[2] - rb) - cfr)
+            bmax = (max(pa[0] + ra, pb[0] + rb) + cfr, max(pa[1] + ra, pb[1] + rb) + cfr,
+                    max(pa[2] + ra, pb[2] + rb) + cfr)
+            push_a = z
+            push_b = z
+            sum_n = z
+            n_acc = z
+            cnt = 0
+            min_dist = FAR
+            touched = False
+            for c in range(colliders):
+                k = c0 + c
+                if get1(CS, k, st.SCALE_SUSPEND, l) != 0.0:
+                    continue
+                d, n, a2, b2 = solve_edge_collider(CS, k, l, topology[shapes + c], pa, pb, ra, rb, cfr, bmin, bmax)
+                if d <= 0.0:
+                    push_a = v_add(push_a, v_sub(a2, pa))
+                    push_b = v_add(push_b, v_sub(b2, pb))
+                    sum_n = v_add(sum_n, n)
+                    cnt += 1
+                if d <= cfr:
+                    touched = True
+                    n_acc = v_add(n_acc, n)
+                    min_dist = min(min_dist, d)
+            if cnt > 0:
+                mag = v_length(v_scale(sum_n, 1.0 / cnt))
+                if mag >= 1e-8:
+                    f = min(mag, 1.0) / cnt
+                    accumulate_push(PS, ga, l, v_scale(push_a, f))
+                    accumulate_push(PS, gb, l, v_scale(push_b, f))
+            if touched:
+                # fixed-point max: the value is cast to an integer before scaling (quirk, §0.2)
+                recorded = float(math.trunc(1.0 - saturate(min_dist / cfr)))
+                if a_move:
+                    put1(PS, ga, st.ACCUM_FRICTION, l, max(get1(PS, ga, st.ACCUM_FRICTION, l), recorded))
+                    put3(PS, ga, st.ACCUM_NORMAL, l, v_add(get3(PS, ga, st.ACCUM_NORMAL, l), n_acc))
+                if b_move:
+                    put1(PS, gb, st.ACCUM_FRICTION, l, max(get1(PS, gb, st.ACCUM_FRICTION, l), recorded))
+                    put3(PS, gb, st.ACCUM_NORMAL, l, v_add(get3(PS, gb, st.ACCUM_NORMAL, l), n_acc))
+    # sum step: every particle with contributions (Jacobi), then the accumulators cleared
+    for j in range(BI[b, bk.BI_N]):
+        g = g0 + j
+        for l in range(w):
+            n = get1(PS, g, st.ACCUM_COUNT, l)
+            if n > 0.0:
+                s = 1.0 / (n * FIXED_POINT)
+                acc = get3(PS, g, st.ACCUM_VECTOR, l)
+                x = get3(PS, g, st.NEXT_POS, l)
+                put3(PS, g, st.NEXT_POS, l, (x[0] + acc[0] * s, x[1] + acc[1] * s, x[2] + acc[2] * s))
+            accf = get1(PS, g, st.ACCUM_FRICTION, l)
+            if accf > 0.0:
+                put1(PS, g, st.FRICTION, l, max(get1(PS, g, st.FRICTION, l), accf))
+            nsum = get3(PS, g, st.ACCUM_NORMAL, l)
+            if v_length_sq(nsum) > 0.0:
+                put3(PS, g, st.COLLISION_NORMAL, l, v_normalize(nsum))
+            put3(PS, g, st.ACCUM_VECTOR, l, z)
+            put1(PS, g, st.ACCUM_COUNT, l, 0.0)
+            put1(PS, g, st.ACCUM_FRICTION, l, 0.0)
+            put3(PS, g, st.ACCUM_NORMAL, l, z)

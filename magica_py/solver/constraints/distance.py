@@ -2,19 +2,25 @@
 links' corrections. Vertical links (parent/child) use the stiffness curve, horizontal and
 shear links half of it; a zero-rest link *overwrites* the accumulated correction (Appendix 2.1).
 
-``distance_team`` runs one team through the per-element functions ``distance_link``,
-``distance_rest_length`` and ``distance_apply``.
+``distance_block`` runs one block: a first pass writes every particle's inverse mass and
+stiffness of this pass (``distance_particle_terms``), then the particles in order
+(Gauss-Seidel, §D.0), each link gathered (``PARTNER_*`` rows) and solved across the lanes
+(``distance_link``, ``distance_rest_length``), the mean applied (``distance_apply``).
 """
 from __future__ import annotations
 
 import math
 
-
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    inverse_mass_friction_depth, lerp, load3, saturate, store3, v_add, v_length, v_length_sq, v_scale, v_sub,
+    inverse_mass_friction_depth, lerp, saturate, v_add, v_length, v_length_sq, v_scale, v_sub,
 )
-from magica_py.solver.parameters import constraint_stiffness, curve_at_clamp01
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import get1, get3, put1, put3
+from magica_py.solver.parameters import (
+    PRM_ANIMATION_POSE_RATIO, PRM_QUALITY, PRM_RATE_MODE, clamp01, constraint_stiffness,
+)
 
 MOVE = 0x02
 FIXED = 0x01
@@ -60,57 +66,84 @@ def distance_apply(position, velocity_pos, acc, n, attenuation):
 
 
 @kernel
-def distance_stiffness(prm, team, depth, frequency_ratio, power_y):
-    """(vertical, horizontal) per-step stiffness of a particle at ``depth``."""
-    k = curve_at_clamp01(prm.distance_stiffness_curve, team, depth)
-    mode = prm.rate_mode[team]
-    quality = prm.quality[team]
+def distance_stiffness(curve, frequency_ratio, power_y, mode, quality):
+    """(vertical, horizontal) per-step stiffness of a particle whose stiffness curve value is
+    ``curve``."""
+    k = clamp01(curve)
     return (saturate(constraint_stiffness(k, frequency_ratio, power_y, mode, quality)),
             saturate(constraint_stiffness(k * 0.5, frequency_ratio, power_y, mode, quality)))
 
 
 @kernel
-def distance_team(m, ps, prm, ts, team, frequency_ratio, power_y, attenuation):
-    """D.4 over one team (Gauss-Seidel in particle order). The tables' arrays are read into
-    locals once (a table field read in the loop would take and release a reference each time)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_team_particle_count = m.team_particle_count
-    start = m.team_particle_start[team]
-    a = prm.animation_pose_ratio[team]
-    s = m.team_init_scale[team, 0] * ts.scale_ratio[team]
-    attribute, depth_of, friction = m.attribute, m.depth, ps.friction
-    distance_start, distance_count, distance_target, distance_rest = (
-        m.distance_start, m.distance_count, m.distance_target, m.distance_rest)
-    next_pos_a, base_pos_a, velocity_pos_a = ps.next_pos, ps.base_pos, ps.velocity_pos
-    for p in range(start, start + m_team_particle_count[team]):
-        if (attribute[p] & MOVE) == 0:
+def distance_particle_terms(PS, PM, PP, P, BI, topology, b, frequency_ratio, power_y):
+    """Every particle's inverse mass of this pass (1/50 when fixed) and its link stiffnesses,
+    written to ``INVERSE_MASS``, ``K_VERTICAL``, ``K_HORIZONTAL``."""
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    mode = int(P[b, PRM_RATE_MODE])
+    quality = int(P[b, PRM_QUALITY])
+    for j in range(BI[b, bk.BI_N]):
+        g = g0 + j
+        if (topology[attribute + j] & MOVE) == 0:
+            for l in range(w):
+                put1(PS, g, st.INVERSE_MASS, l, 1.0 / FIX_MASS)
             continue
-        depth = depth_of[p]
-        w_p = inverse_mass_friction_depth(friction[p], depth)
-        k_vertical, k_horizontal = distance_stiffness(prm, team, depth, frequency_ratio, power_y)
-        pp = load3(next_pos_a, p)
-        bp = load3(base_pos_a, p)
-        acc = ZERO3
-        n = 0
-        for link in range(distance_start[p], distance_start[p] + distance_count[p]):
-            q = distance_target[link]
-            r = distance_rest[link]
-            qp = load3(next_pos_a, q)
-            if r == 0.0:  # zero-distance link: assignment, not accumulation (quirk)
-                acc = v_scale(v_sub(qp, pp), 0.5)
-                n += 1
-                continue
-            if (attribute[q] & MOVE) == 0:
-                w_q = 1.0 / FIX_MASS
-            else:
-                w_q = inverse_mass_friction_depth(friction[q], depth_of[q])
-            rest = distance_rest_length(r, s, bp, load3(base_pos_a, q), a)
-            corr, ok = distance_link(pp, qp, rest, w_p, w_q, k_vertical if r > 0.0 else k_horizontal)
-            if ok:
-                acc = v_add(acc, corr)
-                n += 1
-        next_pos, velocity_pos = distance_apply(pp, load3(velocity_pos_a, p), acc, n, attenuation)
-        store3(next_pos_a, p, next_pos)
-        store3(velocity_pos_a, p, velocity_pos)
+        for l in range(w):
+            depth = get1(PM, g, bk.DEPTH, l)
+            put1(PS, g, st.INVERSE_MASS, l, inverse_mass_friction_depth(get1(PS, g, st.FRICTION, l), depth))
+            k_vertical, k_horizontal = distance_stiffness(get1(PP, g, bk.CURVE_DISTANCE_STIFFNESS, l), frequency_ratio,
+                                                          power_y, mode, quality)
+            put1(PS, g, st.K_VERTICAL, l, k_vertical)
+            put1(PS, g, st.K_HORIZONTAL, l, k_horizontal)
 
 
+@kernel(forceinline=False)
+def distance_block(PS, PM, PP, TS, TM, LM, P, BI, topology, b, frequency_ratio, power_y, attenuation):
+    """D.4 over block b (Gauss-Seidel in particle order, every lane side by side)."""
+    distance_particle_terms(PS, PM, PP, P, BI, topology, b, frequency_ratio, power_y)
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    link_start, link_count, link_target = (BI[b, bk.BI_DISTANCE_START], BI[b, bk.BI_DISTANCE_COUNT],
+                                           BI[b, bk.BI_DISTANCE_TARGET])
+    link0 = BI[b, bk.BI_LINK0]
+    a = P[b, PRM_ANIMATION_POSE_RATIO]
+    for j in range(BI[b, bk.BI_N]):
+        if (topology[attribute + j] & MOVE) == 0:
+            continue
+        g = g0 + j
+        for l in range(w):
+            put3(PS, g, st.ACCUM3, l, ZERO3)
+            put1(PS, g, st.ACCUM_N, l, 0.0)
+        k0 = topology[link_start + j]
+        for k in range(k0, k0 + topology[link_count + j]):
+            gq = g0 + topology[link_target + k]
+            for l in range(w):   # the partner's values next to p's (solving then reads item g only)
+                put3(PS, g, st.PARTNER_POS, l, get3(PS, gq, st.NEXT_POS, l))
+                put3(PS, g, st.PARTNER_BASE, l, get3(PS, gq, st.BASE_POS, l))
+                put1(PS, g, st.PARTNER_W, l, get1(PS, gq, st.INVERSE_MASS, l))
+            lk = link0 + k
+            for l in range(w):
+                r = get1(LM, lk, bk.DISTANCE_REST, l)
+                pp = get3(PS, g, st.NEXT_POS, l)
+                qp = get3(PS, g, st.PARTNER_POS, l)
+                s = get1(TM, b, bk.INIT_SCALE, l) * get1(TS, b, st.SCALE_RATIO, l)
+                rest = distance_rest_length(r, s, get3(PS, g, st.BASE_POS, l), get3(PS, g, st.PARTNER_BASE, l), a)
+                k_vertical = get1(PS, g, st.K_VERTICAL, l)
+                k_horizontal = get1(PS, g, st.K_HORIZONTAL, l)
+                corr, ok = distance_link(pp, qp, rest, get1(PS, g, st.INVERSE_MASS, l), get1(PS, g, st.PARTNER_W, l),
+                                         k_vertical if r > 0.0 else k_horizontal)
+                acc = get3(PS, g, st.ACCUM3, l)
+                n = get1(PS, g, st.ACCUM_N, l)
+                zero = r == 0.0   # zero-distance link: assignment, not accumulation (quirk)
+                half = v_scale(v_sub(qp, pp), 0.5)
+                summed = v_add(acc, corr)
+                acc = half if zero else (summed if ok else acc)
+                put3(PS, g, st.ACCUM3, l, acc)
+                put1(PS, g, st.ACCUM_N, l, n + (1.0 if (zero or ok) else 0.0))
+        for l in range(w):
+            next_pos, velocity_pos = distance_apply(get3(PS, g, st.NEXT_POS, l), get3(PS, g, st.VELOCITY_POS, l),
+                                                    get3(PS, g, st.ACCUM3, l), get1(PS, g, st.ACCUM_N, l), attenuation)
+            put3(PS, g, st.NEXT_POS, l, next_pos)
+            put3(PS, g, st.VELOCITY_POS, l, velocity_pos)

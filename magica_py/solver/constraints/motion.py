@@ -2,14 +2,21 @@
 behind it. The reference is always the animated ``base_pos``; distances are not scaled and the
 curves are evaluated at depth^2.
 
-``motion_team`` runs one team through the per-element function ``solve_motion``."""
+``motion_block`` runs one block through the per-element function ``solve_motion``, every lane
+side by side."""
 from __future__ import annotations
 
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import load3, load4, q_rotate, store3, v_add, v_length, v_lerp, v_scale, v_sub
+from magica_py.kernels.math3d import q_rotate, v_add, v_length, v_lerp, v_scale, v_sub
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
 from magica_py.solver.constraints.collision import particle_radius
-from magica_py.solver.parameters import curve_at, length_unit
+from magica_py.solver.lanes import get1, get3, get4, put3
+from magica_py.solver.parameters import (
+    PRM_BACKSTOP_RADIUS, PRM_MOTION_STIFFNESS, PRM_NORMAL_AXIS,
+    PRM_USE_BACKSTOP, PRM_USE_MAX_DISTANCE,
+)
 
 MOVE = 0x02
 INVALID_MOTION = 0x08
@@ -58,35 +65,33 @@ def solve_motion(x, base_pos, direction, max_distance, use_max, use_backstop,
     return v_lerp(o, x, stiffness)
 
 
-@kernel
-def motion_team(m, ps, prm, team, attenuation):
-    """D.9 over one team's moving particles (skipped when the team uses neither limit)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_depth, m_team_particle_count = m.attribute, m.depth, m.team_particle_count
-    prm_backstop_distance_curve, prm_backstop_radius = prm.backstop_distance_curve, prm.backstop_radius
-    prm_max_distance_curve, prm_motion_stiffness = prm.max_distance_curve, prm.motion_stiffness
-    prm_radius_curve, ps_base_pos, ps_base_rot = prm.radius_curve, ps.base_pos, ps.base_rot
-    ps_next_pos, ps_velocity_pos = ps.next_pos, ps.velocity_pos
-    use_max = prm.use_max_distance[team] != 0
-    use_backstop = prm.use_backstop[team] != 0
+@kernel(forceinline=False)
+def motion_block(PS, PP, TS, P, BI, topology, b, attenuation):
+    """D.9 over block b's moving particles (skipped when the block uses neither limit), every
+    lane side by side; the move is added to ``velocity_pos`` times ``attenuation``."""
+    use_max = P[b, PRM_USE_MAX_DISTANCE] != 0.0
+    use_backstop = P[b, PRM_USE_BACKSTOP] != 0.0
     if not use_max and not use_backstop:
         return
-    axis = normal_axis_vector(prm.normal_axis[team])
-    unit = length_unit(m, prm, team)   # 1.0 in faithful mode (the reference does not scale them)
-    start = m.team_particle_start[team]
-    for p in range(start, start + m_team_particle_count[team]):
-        attr = m_attribute[p]
+    axis = normal_axis_vector(int(P[b, PRM_NORMAL_AXIS]))
+    backstop_radius = P[b, PRM_BACKSTOP_RADIUS]
+    stiffness = P[b, PRM_MOTION_STIFFNESS]
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute = BI[b, bk.BI_ATTRIBUTE]
+    for j in range(BI[b, bk.BI_N]):
+        attr = topology[attribute + j]
         if (attr & MOVE) == 0 or (attr & INVALID_MOTION) != 0:
             continue
-        d2 = m_depth[p] * m_depth[p]
-        r = particle_radius(prm_radius_curve, team, m_depth[p], unit)
-        direction = q_rotate(load4(ps_base_rot, p), axis)
-        o = load3(ps_next_pos, p)
-        x = solve_motion(o, load3(ps_base_pos, p), direction,
-                         curve_at(prm_max_distance_curve, team, d2) * unit, use_max, use_backstop,
-                         curve_at(prm_backstop_distance_curve, team, d2) * unit, prm_backstop_radius[team] * unit,
-                         r, prm_motion_stiffness[team])
-        store3(ps_next_pos, p, x)
-        store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(v_sub(x, o), attenuation)))
-
-
+        g = g0 + j
+        for l in range(w):
+            unit = get1(TS, b, st.LENGTH_UNIT, l)   # 1.0 in faithful mode (the reference does not scale them)
+            r = particle_radius(get1(PP, g, bk.CURVE_RADIUS, l), unit)
+            direction = q_rotate(get4(PS, g, st.BASE_ROT, l), axis)
+            o = get3(PS, g, st.NEXT_POS, l)
+            x = solve_motion(o, get3(PS, g, st.BASE_POS, l), direction,
+                             get1(PP, g, bk.CURVE_MAX_DISTANCE, l) * unit, use_max, use_backstop,
+                             get1(PP, g, bk.CURVE_BACKSTOP_DISTANCE, l) * unit, backstop_radius * unit,
+                             r, stiffness)
+            put3(PS, g, st.NEXT_POS, l, x)
+            put3(PS, g, st.VELOCITY_POS, l, v_add(get3(PS, g, st.VELOCITY_POS, l), v_scale(v_sub(x, o), attenuation)))

@@ -1,12 +1,16 @@
 """Tether (docs/solver.md §D.3): keep each moving particle between (1 - compression) and 1.03 times its
 rest distance to its root. Only the particle moves; the root is infinitely heavy.
-``tether_team`` runs one team through the per-element function ``solve_tether``."""
+``tether_block`` runs one block through the per-element function ``solve_tether``: the root's
+position gathered next to each particle (``PARTNER_*`` rows), then solved across the lanes."""
 from __future__ import annotations
 
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import load3, saturate, store3, v_add, v_length, v_scale, v_sub
-from magica_py.solver.parameters import step_rate
+from magica_py.kernels.math3d import saturate, v_add, v_length, v_scale, v_sub
+from magica_py.solver import blocks as bk
+from magica_py.solver import state as st
+from magica_py.solver.lanes import get3, put3
+from magica_py.solver.parameters import PRM_QUALITY, PRM_RATE_MODE, PRM_TETHER_COMPRESSION, step_rate
 
 MOVE = 0x02
 STRETCH_LIMIT = 0.03          # TetherStretchLimit
@@ -42,26 +46,30 @@ def solve_tether(position, root_position, rest_length, compression_limit, freque
     return corr if active else ZERO3
 
 
-@kernel
-def tether_team(m, ps, prm, team, attenuation, frequency_ratio):
-    """D.3 over one team's moving particles; ``attenuation`` is the per-step velocity attenuation.
+@kernel(forceinline=False)
+def tether_block(PS, P, BI, topology, b, attenuation, frequency_ratio):
+    """D.3 over block b's moving particles; ``attenuation`` is the per-step velocity attenuation.
     Frequency-consistent mode (not quality mode, which keeps MagicaCloth2's tether here) converts
     the correction's per-step share by the step (``solve_tether``)."""
-    # the tables' arrays used in loops, read once (a table field read takes and releases a reference)
-    m_attribute, m_root_index, m_team_particle_count = m.attribute, m.root_index, m.team_particle_count
-    ps_next_pos, ps_step_basic_pos, ps_velocity_pos = ps.next_pos, ps.step_basic_pos, ps.velocity_pos
-    start = m.team_particle_start[team]
-    compression_limit = 1.0 - prm.tether_compression[team]
-    ratio = frequency_ratio if (prm.rate_mode[team] != 0 and prm.quality[team] == 0) else 1.0
-    for p in range(start, start + m_team_particle_count[team]):
-        if (m_attribute[p] & MOVE) == 0:
+    g0 = BI[b, bk.BI_G0]
+    w = bk.lane_width(BI, b)
+    attribute, root_index = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_ROOT_INDEX]
+    compression_limit = 1.0 - P[b, PRM_TETHER_COMPRESSION]
+    ratio = frequency_ratio if (P[b, PRM_RATE_MODE] != 0.0 and P[b, PRM_QUALITY] == 0.0) else 1.0
+    for j in range(BI[b, bk.BI_N]):
+        if (topology[attribute + j] & MOVE) == 0:
             continue
-        r = m_root_index[p]
+        r = topology[root_index + j]
         if r < 0:
             continue
-        rest = v_length(v_sub(load3(ps_step_basic_pos, p), load3(ps_step_basic_pos, r)))
-        delta = solve_tether(load3(ps_next_pos, p), load3(ps_next_pos, r), rest, compression_limit, ratio)
-        store3(ps_next_pos, p, v_add(load3(ps_next_pos, p), delta))
-        store3(ps_velocity_pos, p, v_add(load3(ps_velocity_pos, p), v_scale(delta, attenuation)))
-
-
+        g = g0 + j
+        gr = g0 + r
+        for l in range(w):   # the root's values next to the particle's
+            put3(PS, g, st.PARTNER_POS, l, get3(PS, gr, st.NEXT_POS, l))
+            put3(PS, g, st.PARTNER_BASE, l, get3(PS, gr, st.STEP_BASIC_POS, l))
+        for l in range(w):
+            p_pos = get3(PS, g, st.NEXT_POS, l)
+            rest = v_length(v_sub(get3(PS, g, st.STEP_BASIC_POS, l), get3(PS, g, st.PARTNER_BASE, l)))
+            delta = solve_tether(p_pos, get3(PS, g, st.PARTNER_POS, l), rest, compression_limit, ratio)
+            put3(PS, g, st.NEXT_POS, l, v_add(p_pos, delta))
+            put3(PS, g, st.VELOCITY_POS, l, v_add(get3(PS, g, st.VELOCITY_POS, l), v_scale(delta, attenuation)))

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from magica_py.solver.fields import F64, I32, U8, make_soa
+from reference_solver.solver.fields import F64, I32, U8, make_soa
 
 V3 = (3,)
 Q4 = (4,)

@@ -108,10 +108,10 @@ def _define(proxy, type_class, namedtuple_class) -> None:
 
 
 def _definitions():
-    from magica_py.solver.frame import HierarchyArrays, TimeArrays
-    from magica_py.solver.layout import SolverModel
-    from magica_py.solver.parameters import TeamParameters
-    from magica_py.solver.state import ColliderState, ParticleState, TeamState
+    from reference_solver.solver.frame import HierarchyArrays, TimeArrays
+    from reference_solver.solver.layout import SolverModel
+    from reference_solver.solver.parameters import TeamParameters
+    from reference_solver.solver.state import ColliderState, ParticleState, TeamState
 
     return ((ModelTable, ModelTableType, SolverModel), (ParticleTable, ParticleTableType, ParticleState),
             (ParameterTable, ParameterTableType, TeamParameters), (TeamTable, TeamTableType, TeamState),
