@@ -45,9 +45,9 @@ from magica_py.solver.blocks import (
 )
 from magica_py.solver.colliders import collider_shapes, fill_slots
 from magica_py.solver.frame import (
-    StageSwitches, Tables, frame_arguments, frame_entry, frame_entry_parallel, frame_input_values, hierarchy_arrays,
-    lane_save_area, time_arrays, worker_table,
+    StageSwitches, Tables, frame_input_values, hierarchy_arrays, lane_save_area, time_arrays, worker_table,
 )
+from magica_py.solver.frame_call import frame_arrays, frame_entry, frame_entry_parallel
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
 from magica_py.solver.parameters import (
     PARAMETER_COUNT, allocate_parameters, packed_row, particle_parameters_block, write_row,
@@ -147,6 +147,8 @@ class ClothSystem:
                                       team_count, sum(int(m.particle_count) for m in self.models))
         self.parallel = self.threads > 1
         self._frame_values = frame_input_values()
+        self._frame_arrays_of = None     # (tables, clocks, hierarchy) the frame's StructRef was made of
+        self._frame_arrays_made = None
         if self.parallel:  # the hierarchy propagation spreads over the same threads
             hierarchy.threads = max(hierarchy.threads, self.threads)
         self._tables_changed(register=False)
@@ -644,10 +646,20 @@ class ClothSystem:
         """One numba call per frame: the serial or the parallel kernel, with the stage switches;
         returns the frame's counts (``frame.frame_counts``)."""
         zones = self._wind_zones()
-        arrays = frame_arguments(self.tables, self._time, self._hierarchy)
+        F = self._frame_arrays()
         if self.parallel:
-            return frame_entry_parallel(*arrays, fi, self._save_area, zones, *self._workers, *self.stages)
-        return frame_entry(*arrays, fi, self._save_area, zones, *self.stages)
+            return frame_entry_parallel(F, fi, self._save_area, zones, *self._workers, *self.stages)
+        return frame_entry(F, fi, self._save_area, zones, *self.stages)
+
+    def _frame_arrays(self):
+        """The frame kernel's arrays in one StructRef (``frame_call.frame_arrays``), made again
+        whenever the tables, the team clocks or the hierarchy's arrays are new objects."""
+        key = (self.tables, self._time, self._hierarchy)
+        made = self._frame_arrays_of
+        if made is None or made[0] is not key[0] or made[1] is not key[1] or made[2] is not key[2]:
+            self._frame_arrays_made = frame_arrays(*key)
+            self._frame_arrays_of = key
+        return self._frame_arrays_made
 
     def _parameter(self, team, key, default):
         params = self.team_parameters[team]
