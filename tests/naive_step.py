@@ -258,7 +258,6 @@ def naive_step(M, S, P, T, C, team, frac, dt):
         for b in range(M["team_baseline_start"][t], M["team_baseline_start"][t] + M["team_baseline_count"][t]):
             e0 = M["baseline_start"][b]
             ents = [M["baseline_data"][e] for e in range(e0, e0 + M["baseline_count"][b])]
-            rot_buf = {x: S["step_basic_rot"][x].copy() for x in ents}
             length, lpos, lrot, rvec = {}, {}, {}, {}
             for c in ents[1:]:
                 pr = M["parent"][c]

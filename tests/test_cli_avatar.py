@@ -1,6 +1,5 @@
 """magica-py run AVATAR.vrm: the avatar's spring bones run without a scene file."""
 import numpy as np
-import pytest
 import yaml
 
 from magica_py import cli

@@ -1,7 +1,6 @@
 """The small frictions of a first run (issue 18 item 5): numbers, vectors, empty and huge
 files, non-scene files, missing output folders, recordings that are not written, units."""
 import io
-import pathlib
 import time
 
 import numpy as np

@@ -1,6 +1,5 @@
 """glTF / GLB import: hierarchy, skins, animation clips, malformed files (magica_py.io.gltf)."""
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np

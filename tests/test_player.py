@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from magica_py.runtime.clock import FixedFrameRate, FrameTimeList, TimeManager
-from magica_py.runtime.phases import Phase, Schedule, System
+from magica_py.runtime.phases import Phase, System
 from magica_py.runtime.player import FrameContext, Player, default_schedule
 from team_time_driver import begin_step, end_frame, frame_update
 from magica_py.runtime.team_time import (

@@ -7,7 +7,6 @@ settings by the bench harness (``SimulationTimeSettings(extended_range=True)`` d
 for scenes).
 """
 import numpy as np
-import pytest
 
 from magica_py.bench import metrics as M
 from magica_py.bench.reference import fit_order

@@ -139,7 +139,7 @@ def test_validate_warns_naming_the_entry(tmp_path, walk_bvh):
            "      - {name: thigh_r, parent: hips, position: [0.1, 0, 0]}\n"
            "      - {name: shin_r, parent: thigh_r, position: [0, -0.45, 0]}\n")
     path = _scene(tmp_path, f"  - {{clip: {bvh}, rig: body}}\n", rig=rig)
-    path.write_text(path.read_text().replace(f"rig: body}}", "rig: body, retarget: {}}"))
+    path.write_text(path.read_text().replace("rig: body}", "rig: body, retarget: {}}"))
     with pytest.warns(UserWarning, match=r"scene.yaml: animation\[0\]: retargeting biovision: source bones without "
                                          r"a target \(their motion is lost\): LeftCollar \(0.14 m\), RightCollar \(0.14 m\), LeftAnkle"):
         validate_file(path)

@@ -1,7 +1,6 @@
 """MagicaCloth2 per-team timing (magica_py/runtime/team_time.py) against docs/solver.md §A.3-§A.7."""
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pytest

@@ -4,7 +4,6 @@ import pathlib
 import threading
 import time
 
-import pytest
 
 from magica_py import watch as W
 from magica_py.sinks.readback import Recording

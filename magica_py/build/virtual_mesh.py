@@ -213,7 +213,6 @@ def connect_mesh(cloth_name: str, mode: str, pos: np.ndarray, parent_vertex: np.
     sequential = mode in ("sequential_loop_mesh", "sequential_non_loop_mesh")
     if mode == "automatic_mesh":
         roots, loop = automatic_root_chain(roots, pos)
-    last_root = len(roots) - 1
 
     # 3. hierarchy links (LIFO walk per root line), 4. horizontal links per level
     child_count = np.asarray([len(c) for c in child_vertices], dtype=np.int32)

@@ -515,7 +515,6 @@ def build_plan(parent: np.ndarray, nodes, threads: int = 1, width: int = SEGMENT
     roots = members[is_root]
     chunk_roots = np.searchsorted(chunk[is_root], np.arange(chunks + 1)).astype(np.int64)
     rest = members[~is_root]
-    rest_chunk = chunk[~is_root]
     rest_tile = tile_of[~is_root]
     rest_depth = depth[rest]
     key = np.lexsort((rest, rest_depth, rest_tile))
