@@ -518,7 +518,7 @@ def frame_counts(T, tt):
     return most_steps, particle_steps, guarded
 
 
-@kernel
+@kernel(forceinline=False)
 def simulate_frame(T, tt, h, frame_values, area, wind_zones, angle, bending, point_collision, edge_collision,
                    motion, quality, lines, triangles, wind):
     """The whole cloth frame, one block after another (see the module docstring): every
@@ -538,7 +538,7 @@ def simulate_frame(T, tt, h, frame_values, area, wind_zones, angle, bending, poi
     return frame_counts(T, tt)
 
 
-@kernel(parallel=True)
+@kernel(parallel=True, forceinline=False)
 def simulate_frame_parallel(T, tt, h, frame_values, area, wind_zones, wt, angle, bending, point_collision,
                             edge_collision, motion, quality, lines, triangles, wind):
     """``simulate_frame`` with the blocks dealt to ``fi.threads`` threads (``scene.threads``,
