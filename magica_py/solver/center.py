@@ -18,7 +18,7 @@ from magica_py.kernels import portable
 from magica_py.kernels.math3d import (
     clamp_length, lerp, q_angle, q_from_to, q_inverse, q_mul, q_normal_axis, q_rotate, q_slerp,
     q_tangent_axis, rot_from_normal_tangent, saturate, shift_position, unlerp, v_add, v_length, v_lerp,
-    v_normalize, v_scale, v_sub,
+    v_normalize, v_normalize_select, v_scale, v_sub,
 )
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
@@ -29,7 +29,7 @@ from magica_py.solver.parameters import (
     PRM_TELEPORT_DISTANCE, PRM_TELEPORT_MODE, PRM_TELEPORT_ROTATION, PRM_TIME_BASED_SMOOTHING, PRM_WORLD_INERTIA,
     length_unit,
 )
-from magica_py.solver.rotations import normalize_or_zero, rot_from_normal_tangent_select
+from magica_py.solver.rotations import rot_from_normal_tangent_select
 
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 ZERO3 = (0.0, 0.0, 0.0)
@@ -60,8 +60,8 @@ def skin_bound_vertex(l0, l1, l2, bound_position, bound_normal, bound_tangent):
     """C.1 for one vertex from its ``bind_point`` 4-vectors (position w = 1, normal and tangent
     w = 0) and its bone's local-to-world rows l0..l2. Branch-free (a loop vectorises)."""
     pos = world_point(l0, l1, l2, bound_position)
-    nor = normalize_or_zero(world_point(l0, l1, l2, bound_normal))
-    tan = normalize_or_zero(world_point(l0, l1, l2, bound_tangent))
+    nor = v_normalize_select(world_point(l0, l1, l2, bound_normal))
+    tan = v_normalize_select(world_point(l0, l1, l2, bound_tangent))
     return pos, rot_from_normal_tangent_select(nor, tan)
 
 

@@ -59,6 +59,7 @@ from magica_py.solver.constraints.collision import (
     INVALID_OR_NO_COLLISION, PLANE, SPHERE, particle_radius, plane_push, segment_parameter, solve_point_collider,
 )
 from magica_py.solver.constraints.distance import distance_block
+from magica_py.solver.constraints.tether import gather_partner_step_pose
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
 from magica_py.solver.lanes import get1, get3, get4, put1, put3
@@ -115,9 +116,7 @@ def tight_tether_block(PS, P, BI, topology, b):
             continue
         g = g0 + j
         gr = g0 + r
-        for l in range(w):   # the root's values next to the particle's
-            put3(PS, g, st.PARTNER_POS, l, get3(PS, gr, st.NEXT_POS, l))
-            put3(PS, g, st.PARTNER_BASE, l, get3(PS, gr, st.STEP_BASIC_POS, l))
+        gather_partner_step_pose(PS, g, gr, w)   # the root's values next to the particle's
         for l in range(w):
             rest = v_length(v_sub(get3(PS, g, st.STEP_BASIC_POS, l), get3(PS, g, st.PARTNER_BASE, l)))
             x, _move = clamp_to_sphere(get3(PS, g, st.NEXT_POS, l), get3(PS, g, st.PARTNER_POS, l), rest * limit)
@@ -146,9 +145,7 @@ def ftl_pass_block(PS, BI, topology, b, damping):
                 continue
             gv = g0 + v
             gp = g0 + p
-            for l in range(w):   # the parent's values next to the child's
-                put3(PS, gv, st.PARTNER_POS, l, get3(PS, gp, st.NEXT_POS, l))
-                put3(PS, gv, st.PARTNER_BASE, l, get3(PS, gp, st.STEP_BASIC_POS, l))
+            gather_partner_step_pose(PS, gv, gp, w)   # the parent's values next to the child's
             for l in range(w):
                 rest = v_length(v_sub(get3(PS, gv, st.STEP_BASIC_POS, l), get3(PS, gv, st.PARTNER_BASE, l)))
                 x, move = clamp_to_sphere(get3(PS, gv, st.NEXT_POS, l), get3(PS, gv, st.PARTNER_POS, l), rest)

@@ -13,8 +13,8 @@ import math
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     from_to_rotation_select, from_to_rotation_unit, orthogonal_axis_select, q_axis_angle, q_inverse, q_mul,
-    q_rotate, q_slerp, q_slerp_select, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp, v_normalize_select,
-    v_scale, v_sub,
+    q_normalize_select, q_rotate, q_slerp, q_slerp_select, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp,
+    v_normalize_select, v_scale, v_sub,
 )
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
@@ -26,25 +26,6 @@ MOVE = 0x02
 ZERO_DISTANCE = 0x20
 INCLUDE_LINE = 0x01
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
-
-
-@kernel
-def normalize_or_zero(a):
-    """``v_normalize`` without a branch."""
-    n = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-    inv = 1.0 / max(n, 1e-300)   # a zero vector: discarded below (and no 1/0 with the JIT off)
-    small = n < 1e-12
-    return (0.0 if small else a[0] * inv, 0.0 if small else a[1] * inv, 0.0 if small else a[2] * inv)
-
-
-@kernel
-def q_normalize_or_identity(q):
-    """``q_normalize`` without a branch."""
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    inv = 1.0 / max(n, 1e-300)   # a zero quaternion: discarded below
-    small = n < 1e-12
-    return (0.0 if small else q[0] * inv, 0.0 if small else q[1] * inv,
-            0.0 if small else q[2] * inv, 1.0 if small else q[3] * inv)
 
 
 @kernel
@@ -62,13 +43,13 @@ def q_from_matrix_select(m00, m01, m02, m10, m11, m12, m20, m21, m22):
     q = (qa[0] if first else qb[0], qa[1] if first else qb[1], qa[2] if first else qb[2], qa[3] if first else qb[3])
     r = (qc[0] if second else qd[0], qc[1] if second else qd[1], qc[2] if second else qd[2], qc[3] if second else qd[3])
     q = (q[0] if pos00 else r[0], q[1] if pos00 else r[1], q[2] if pos00 else r[2], q[3] if pos00 else r[3])
-    return q_normalize_or_identity(q)
+    return q_normalize_select(q)
 
 
 @kernel
 def look_rotation_select(forward, up):
     """``q_look_rotation`` (+Z = forward, +Y towards up, both unit) without branches."""
-    x_axis = normalize_or_zero(v_cross(up, forward))
+    x_axis = v_normalize_select(v_cross(up, forward))
     y_axis = v_cross(forward, x_axis)
     return q_from_matrix_select(x_axis[0], y_axis[0], forward[0], x_axis[1], y_axis[1], forward[1],
                                 x_axis[2], y_axis[2], forward[2])
@@ -245,7 +226,7 @@ def triangle_frame_from(p0, p1, p2, uv0, uv1, uv2):
     e1 = v_sub(p1, p0)
     e2 = v_sub(p2, p0)
     n = v_cross(e1, e2)
-    unit = normalize_or_zero(n)
+    unit = v_normalize_select(n)
     flat_triangle = not (v_length_sq(n) > 1e-16)
     normal = (0.0 if flat_triangle else unit[0], 0.0 if flat_triangle else unit[1], 0.0 if flat_triangle else unit[2])
     du1 = uv1[0] - uv0[0]
@@ -257,7 +238,7 @@ def triangle_frame_from(p0, p1, p2, uv0, uv1, uv2):
     r = inv_area if area != 0.0 else 1.0
     # standard uv tangent, negated for Unity's left-handed convention (B.4)
     tangent = v_scale(v_sub(v_scale(e1, dv2), v_scale(e2, dv1)), -r)
-    return normal, normalize_or_zero(tangent)
+    return normal, v_normalize_select(tangent)
 
 
 @kernel(inline="always")
@@ -271,10 +252,10 @@ def add_flipped(acc, v, flip):
 def vertex_frame_rotation(ns, ts_):
     """E.3's rotation of a vertex from its summed triangle normals ``ns`` and tangents ``ts_``:
     (valid, rotation); not valid when a sum is (near) zero or the two are parallel."""
-    nn = normalize_or_zero(ns)
-    tn = normalize_or_zero(ts_)
+    nn = v_normalize_select(ns)
+    tn = v_normalize_select(ts_)
     d = v_dot(nn, tn)
-    binormal = normalize_or_zero(v_cross(nn, tn))
+    binormal = v_normalize_select(v_cross(nn, tn))
     valid = (v_length(ns) > 1e-6) & (v_length(ts_) > 1e-6) & (abs(d) < 1.0 - 1e-9)
     return valid, look_rotation_select(binormal, nn)
 

@@ -11,11 +11,10 @@ from __future__ import annotations
 import math
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import q_inverse, q_mul, q_normalize, q_rotate, v_sub
+from magica_py.kernels.math3d import q_inverse, q_mul, q_normalize, q_normalize_select, q_rotate, v_sub
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
 from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
-from magica_py.solver.rotations import q_normalize_or_identity
 
 FIXED = 0x01
 MOVE = 0x02
@@ -34,7 +33,7 @@ def finite4(q):
 @kernel(inline="always")
 def bone_rotation(rotation, v2t):
     """E.4: the bone's world rotation from the particle's rotation and its v2t."""
-    return q_normalize_or_identity(q_mul(rotation, v2t))
+    return q_normalize_select(q_mul(rotation, v2t))
 
 
 @kernel(inline="always")

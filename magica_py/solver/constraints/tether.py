@@ -46,6 +46,16 @@ def solve_tether(position, root_position, rest_length, compression_limit, freque
     return corr if active else ZERO3
 
 
+@kernel
+def gather_partner_step_pose(PS, g, gp, w):
+    """Particle slot gp's predicted position and step-basic position copied next to slot g's
+    (``PARTNER_POS``, ``PARTNER_BASE``) for lanes 0..w, so the solving loop reads one item:
+    the tether's root, quality mode's tight tether and follow-the-leader parent."""
+    for l in range(w):
+        put3(PS, g, st.PARTNER_POS, l, get3(PS, gp, st.NEXT_POS, l))
+        put3(PS, g, st.PARTNER_BASE, l, get3(PS, gp, st.STEP_BASIC_POS, l))
+
+
 @kernel(forceinline=False)
 def tether_block(PS, P, BI, topology, b, attenuation, frequency_ratio):
     """D.3 over block b's moving particles; ``attenuation`` is the per-step velocity attenuation.
@@ -64,9 +74,7 @@ def tether_block(PS, P, BI, topology, b, attenuation, frequency_ratio):
             continue
         g = g0 + j
         gr = g0 + r
-        for l in range(w):   # the root's values next to the particle's
-            put3(PS, g, st.PARTNER_POS, l, get3(PS, gr, st.NEXT_POS, l))
-            put3(PS, g, st.PARTNER_BASE, l, get3(PS, gr, st.STEP_BASIC_POS, l))
+        gather_partner_step_pose(PS, g, gr, w)   # the root's values next to the particle's
         for l in range(w):
             p_pos = get3(PS, g, st.NEXT_POS, l)
             rest = v_length(v_sub(get3(PS, g, st.STEP_BASIC_POS, l), get3(PS, g, st.PARTNER_BASE, l)))
