@@ -129,3 +129,24 @@ def test_the_push_mark_flags_exactly_the_particles_d8_pushed(tmp_path, mode):
         c_old = c_new
     assert pushed_any                                   # the sphere reaches the chain within the run
     assert grazed                                       # and came within range of one before pushing it
+
+
+def test_the_body_velocity_is_read_in_the_solvers_frame_from_the_last_steps_collider_motion():
+    """``solver_body_velocity``: the collider slot's previous-step pose (``start_old``, the
+    inverse ``inverse_old_rot``) to its pose of the step (``start_new``, ``now_rot``), the frame
+    of ``particles.velocity``; hand values for a translation and a turn about z."""
+    from types import SimpleNamespace
+
+    a, dt = 0.1, 0.01
+    inverse_turn_back = (0.0, 0.0, math.sin(a / 2), math.cos(a / 2))   # the inverse of a turn by -a about z
+    cs = SimpleNamespace(start_old=np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]),
+                         start_new=np.array([[0.0, 0.01, 0.0], [0.0, 0.0, 0.0]]),
+                         inverse_old_rot=np.array([[0.0, 0.0, 0.0, 1.0], inverse_turn_back]),
+                         now_rot=np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0]]))
+    system = SimpleNamespace(collider_state=cs)
+    points = np.array([[3.0, 4.0, 5.0], [1.0, 0.0, 0.0]])
+    v = S.solver_body_velocity(system, np.array([0, 1]), points, dt)
+    # slot 0 moved 1 cm along y; slot 1 turned from -a to 0: the point (1, 0, 0) came from
+    # (cos a, -sin a, 0)
+    assert np.allclose(v[0], (0.0, 1.0, 0.0), atol=1e-12)
+    assert np.allclose(v[1], ((1.0 - math.cos(a)) / dt, math.sin(a) / dt, 0.0), atol=1e-12)

@@ -392,7 +392,8 @@ def main_stability(argv) -> int:
                    help="mocap suite: run only this frame rate (repeatable; default 30, 60, 144, 240)")
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="a cloth parameter applied to every case (validated; VALUE is YAML), e.g. "
-                        "solver.rate_mode=frequency_consistent; repeatable")
+                        "solver.rate_mode=frequency_consistent; repeatable (mocap suite: every run, "
+                        "solver.mode excepted)")
     p.add_argument("--out", default=None, help="report folder (default: reports/ in the current folder)")
     p.add_argument("--quiet", "-q", action="store_true")
     args = p.parse_args(argv)
@@ -437,8 +438,9 @@ def main_mocap(args) -> int:
     except KeyError as exc:
         print(f"magica-py stability: {exc.args[0]}", file=sys.stderr)
         return 2
-    if args.param:
-        print("magica-py stability: --param is not used by --suite mocap (it runs both modes as they are)",
+    _, params = parse_family("params:" + ",".join(args.param))
+    if "solver.mode" in params:
+        print("magica-py stability: --param solver.mode: the mocap suite sets the mode itself (use --mode)",
               file=sys.stderr)
         return 2
     bad = [f for f in args.fps if not 1.0 <= f <= 1000.0]
@@ -457,7 +459,7 @@ def main_mocap(args) -> int:
     bar = Progress(total, args.quiet)
     rows = []
     for c, m, f in runs:
-        run = S.run_case(c, m, f, duration, progress=bar.run_callback())
+        run = S.run_case(c, m, f, duration, progress=bar.run_callback(), parameters=params)
         rows.extend(S.run_rows(run))
     bar.close()
     elapsed = time.perf_counter() - started
@@ -469,6 +471,7 @@ def main_mocap(args) -> int:
     legend = " / ".join(m for m in S.MODES if m in modes)
     text = (f"# magica-py stability --suite mocap ({stamp})\n\n{machine_description()}; load average at the end "
             f"{load}; wall time {elapsed:.0f} s; {'0.5 s per run (--short)' if args.short else f'motion + {S.REST:g} s of rest per run'}"
+            f"{'; parameters ' + ', '.join(f'{k}={v}' for k, v in params.items()) if params else ''}"
             f"\n\nEach cell: {legend}.\n\n{S.side_by_side_table(rows)}\n\n## Issue 16 bounds\n\n"
             f"{S.bound_summary(rows)}\n")
     (out / "stability_mocap.md").write_text(text)

@@ -19,9 +19,13 @@ so, ``hair`` for every other cloth: hair, ribbons, hair balls):
   centre inside) and the deepest particle sphere, as % of its radius;
 * fastest ejection: for particles touching a body part at the end of a step (sphere within
   one radius of a collider carried by a bone; the static ground is not a body part), their
-  solver velocity against the body part's velocity at the particle (rigid motion of the
+  world velocity against the body part's velocity at the particle (rigid motion of the
   collider's bone over the frame, rotation included): ``|v| - |v_body|`` (the issue's bound:
-  at most 2 m/s), ``|v - v_body|`` and the ejection proper ``v.n - max(v_body.n, 0)`` (the
+  at most 2 m/s), ``|v - v_body|`` and the ejection proper ``v.n - max(v_body.n, 0)``. The
+  solver's velocity is in its inertia-shifted frame (C.3/C.4 carry part of the body's motion
+  rigidly, so a head that stops in the world still moves there): ``v`` is the body's world
+  velocity plus the particle's velocity relative to the collider slot's motion over the last
+  step in the solver's frame (``solver_body_velocity``) (the
   speed leaving the surface beyond the body's own push, ``metrics.ejection_speeds``: a strand
   swinging along the body or left behind by it counts 0);
 * the same two readings in contact only (``contact_pairs``): of those pairs, the ones whose
@@ -211,16 +215,18 @@ def cloth_kind(name: str) -> str:
 
 
 # ----------------------------------------------------------------------------- the run
-def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None, progress=None) -> MocapRun:
+def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None, progress=None,
+             parameters: dict | None = None) -> MocapRun:
     """Run one case in ``mode`` at ``fps`` for its motion and rest (or ``duration`` s), and
-    gather the maxima per cloth kind. ``progress(done, total)`` after every frame."""
+    gather the maxima per cloth kind. ``progress(done, total)`` after every frame;
+    ``parameters``: further cloth parameters applied to every cloth (validated)."""
     if mode not in MODES:
         raise ValueError(f"mode {mode!r}: expected one of {', '.join(MODES)}")
     if not fps > 0:
         raise ValueError(f"fps {fps!r}: expected a positive frame rate")
     started = time.perf_counter()
-    variant = Variant(f"{c.name}/{mode}@{fps:g}", c.path, parameters={"solver.mode": mode}, fps=fps,
-                      duration=c.duration if duration is None else duration, family="mocap")
+    variant = Variant(f"{c.name}/{mode}@{fps:g}", c.path, parameters={**(parameters or {}), "solver.mode": mode},
+                      fps=fps, duration=c.duration if duration is None else duration, family="mocap")
     p = prepare(variant)
     scene, player, system = p.scene, p.player, p.system
     model = system.model
@@ -290,7 +296,7 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
             # first frame jumps away from
             _contacts(system, state, velocity, radius_base, keep, step_pairs, slot_count, collider_index,
                       body_pair if i > 0 else np.zeros_like(body_pair), kind, shapes_before, shapes_now, dt,
-                      times[i], out)
+                      times[i], out, step_dt)
         previous, previous_time, shapes_before = now, times[i], shapes_now
         if progress is not None:
             progress(i + 1, p.frames)
@@ -301,8 +307,22 @@ def run_case(c: MocapCase, mode: str, fps: float, duration: float | None = None,
                     times, speed)
 
 
+def solver_body_velocity(system, slots: np.ndarray, points: np.ndarray, step_dt: float) -> np.ndarray:
+    """Velocity (m/s, (P,3)) over the last step of the body point of collider slot ``slots[i]``
+    at ``points[i]``, in the solver's frame (the slot's previous-step pose after the local
+    inertia shift to its pose of the step, G.3): the frame of ``particles.velocity``. Read
+    after the step: ``start_old`` and ``inverse_old_rot`` keep the previous pose (the start
+    point, a point fixed to the body), ``start_new`` and ``now_rot`` the step's."""
+    cs = system.collider_state
+    q_inv_old = cs.inverse_old_rot[slots]
+    q_old = q_inv_old * np.array([-1.0, -1.0, -1.0, 1.0]) / np.maximum(
+        np.einsum("ij,ij->i", q_inv_old, q_inv_old), 1e-30)[:, None]
+    return M.rigid_point_velocity(points, (cs.start_old[slots], q_old), (cs.start_new[slots], cs.now_rot[slots]),
+                                  step_dt)
+
+
 def _contacts(system, state, velocity, radius_base, keep, step_pairs, slot_count, collider_index, body_pair, kind,
-              shapes_before, shapes_now, dt, t, out) -> None:
+              shapes_before, shapes_now, dt, t, out, step_dt) -> None:
     """Penetration and ejection at the end of this frame's last step, into ``out``."""
     ts = system.teams
     team = np.asarray(system.model.particle_team, dtype=np.int64)
@@ -319,7 +339,10 @@ def _contacts(system, state, velocity, radius_base, keep, step_pairs, slot_count
         points = state[tp]
         vb = M.rigid_point_velocity(points, (shapes_before.position[tc], shapes_before.rotation[tc]),
                                     (shapes_now.position[tc], shapes_now.rotation[tc]), dt)
-        v = velocity[tp]
+        # the solver's velocity is in its inertia-shifted frame (C.3/C.4 carry part of the
+        # body's motion rigidly): its velocity relative to the body part, taken against the
+        # slot's motion over the last step in that same frame, plus the body's world velocity
+        v = vb + velocity[tp] - solver_body_velocity(system, step_pairs[1][touching], points, step_dt)
         relative, excess, outward = M.ejection_speeds(v, vb, normal[touching])
         strict = in_contact[touching]             # of those, the ones in contact (touching or pushed)
     for k, r in out.items():

@@ -125,6 +125,8 @@ PARAMETER_DEFS: tuple[ParameterDef, ...] = (
     _p("solver.distance_velocity", "enum", "auto", ref="docs/quality-mode.md",
        doc="attenuated: 70 % of each distance correction becomes velocity (MagicaCloth2); full: all of it (plain PBD, no artificial damping).",
        choices=("auto", "attenuated", "full")),
+    _p("solver.contact_speed_limit", "limit", 2.0, 0, 10, "m/s", "docs/quality-mode.md",
+       "Quality mode: a particle within the contact range of a collider (its sphere within one radius of the surface, D.8's friction range) at the end of a step moves at most this fast relative to the body point under it (a saturating kinetic friction; times the cloth's scale; false: off). Faithful mode ignores it; collision_mode none turns it off."),
     _p("solver.collision_last", "enum", "auto", ref="docs/quality-mode.md",
        doc="enabled: a final collider projection after the second distance pass and the inextensibility pass, so no particle ends a step inside a collider (a particle that started inside is carried out without its depth becoming velocity); with the time-based display, the display's push out of the colliders at this frame's pose.",
        choices=("auto", "enabled", "disabled")),

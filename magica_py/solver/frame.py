@@ -47,6 +47,7 @@ from magica_py.solver.center import (
 from magica_py.solver.colliders import (
     collider_end_frame_lane, collider_end_step_block, collider_frame_lane, collider_step_block,
 )
+from magica_py.solver.contact_speed import contact_speed_block
 from magica_py.solver.constraints.angle import angle_block
 from magica_py.solver.constraints.bending import bending_block
 from magica_py.solver.constraints.collision import edge_collision_block, point_collision_block
@@ -57,8 +58,8 @@ from magica_py.solver.display import display_block, display_fraction, record_dis
 from magica_py.solver.guards import check_block, lane_guard_code, reset_lane_to_base
 from magica_py.solver.lanes import LANES, get1, get3, put1
 from magica_py.solver.parameters import (
-    PRM_COLLISION_LAST, PRM_COLLISION_MODE, PRM_INEXTENSIBILITY, PRM_QUALITY, PRM_TELEPORT_DISTANCE,
-    PRM_TELEPORT_ROTATION, PRM_TIME_BASED_SMOOTHING,
+    PRM_COLLISION_LAST, PRM_COLLISION_MODE, PRM_CONTACT_SPEED_LIMIT, PRM_INEXTENSIBILITY, PRM_QUALITY,
+    PRM_TELEPORT_DISTANCE, PRM_TELEPORT_ROTATION, PRM_TIME_BASED_SMOOTHING,
 )
 from magica_py.solver.quality import drift_applies, drift_begin_block, drift_end_block, quality_end_of_step_block
 from magica_py.solver.quality_display import display_constraints_block
@@ -338,6 +339,8 @@ def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, moti
                                       distance_attenuation, drift)
     end_step_block(PS, PM, TS, P, BI, topology, b, dt, ratio)
     if quality is not None:
+        if P[b, PRM_CONTACT_SPEED_LIMIT] >= 0.0 and BI[b, bk.BI_COLLIDERS] > 0 and P[b, PRM_COLLISION_MODE] != 0.0:
+            contact_speed_block(PS, PP, TS, CS, P, BI, topology, b, dt)   # quality mode: after D.10
         if P[b, PRM_TIME_BASED_SMOOTHING] != 0.0:   # quality display: keep this step's state (display.py)
             record_display_state_block(PS, TS, BI, topology, b)
     collider_end_step_block(CS, BI, b)

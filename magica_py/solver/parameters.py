@@ -87,6 +87,7 @@ TEAM_PARAMETER_FIELDS = [
     ("restoration_drift", "team", (), U8, "1: the passes do not see the restoration's kept-out drift (quality)"),
     ("distance_full_velocity", "team", (), U8, "1: distance corrections become velocity in full"),
     ("collision_last", "team", (), U8, "1: final collision projection at the end of the step"),
+    ("contact_speed_limit", "team", (), F64, "m/s or -1; quality mode's speed limit relative to a touched collider"),
     # depth tables (§0.3)
     ("damping_curve", "team", CURVE, F64, "x0.2 applied"),
     ("radius_curve", "team", CURVE, F64, "m"),
@@ -235,6 +236,7 @@ def _write_quality(table, t: int, g) -> None:
     table.restoration_drift[t] = 1 if _switch(g, "solver.restoration_drift", quality) == "enabled" else 0
     table.distance_full_velocity[t] = 1 if _switch(g, "solver.distance_velocity", quality) == "full" else 0
     table.collision_last[t] = 1 if _switch(g, "solver.collision_last", quality) == "enabled" else 0
+    table.contact_speed_limit[t] = _limit(g("solver.contact_speed_limit")) if quality else -1.0
 
 
 def allocate_parameters(team_count: int):
@@ -317,6 +319,7 @@ PRM_FTL_DAMPING = _column("ftl_damping")
 PRM_RESTORATION_DRIFT = _column("restoration_drift")
 PRM_DISTANCE_FULL_VELOCITY = _column("distance_full_velocity")
 PRM_COLLISION_LAST = _column("collision_last")
+PRM_CONTACT_SPEED_LIMIT = _column("contact_speed_limit")
 PRM_DAMPING_CURVE = _column("damping_curve")
 PRM_RADIUS_CURVE = _column("radius_curve")
 PRM_DISTANCE_STIFFNESS_CURVE = _column("distance_stiffness_curve")

@@ -68,7 +68,10 @@ LOCAL_OUT_ROTATION = _p("local_out_rotation", 4, "xyzw; scratch of E.4: the loca
 PARENT_HAS_NODE = _p("parent_has_node", 1, "scratch of E.4: 1 when a fixed bone has a parent node")
 CHILD_REST_SUM = _p("child_rest_sum", 3, "scratch of E.2: the children's rest edges summed (ctv)")
 CHILD_EDGE_SUM = _p("child_edge_sum", 3, "scratch of E.2: the children's simulated edges summed (cv)")
-CONTACT_MIN_DIST = _p("contact_min_dist", 1, "m; scratch of D.8 point mode: closest distance within range")
+CONTACT_MIN_DIST = _p("contact_min_dist", 1, "m; scratch of D.8 point mode and of the contact speed limit: closest "
+                      "distance within range")
+CONTACT_BODY_VELOCITY = _p("contact_body_velocity", 3, "m/s; scratch of the contact speed limit (contact_speed.py): "
+                           "velocity of the nearest collider's body point at the particle")
 # display of quality mode (display.py): the last two step states in their display frame
 # (the particle's fixed root, or the team center), written at the end of each step (D.10)
 DISPLAY_LOCAL = _p("display_local", 3, "m; state of the last step in its display frame (D.10)")
