@@ -3,12 +3,15 @@
 One recipe for every scene: scale suspension and distance culling, the runtime's team time
 (§A.4); then per block its begin of frame (skinning, center, inertia, reset or shift,
 collider frame: §C, §G.2) and its steps (each: §A.6 time, §C.3 team update, §G.3 colliders,
-§D.1-§D.10); then per block its end of frame (guards, display §E.1, rotations §E.2/§E.3,
-transform data and write-back §E.4, §A.7). Within a team everything runs in particle order
-(Gauss-Seidel, §D.0), the block's teams side by side (``solver/lanes.py``). Blocks are
-independent until the write-back, so the serial kernel (``simulate_frame``) and the parallel
-one (``simulate_frame_parallel``, blocks dealt to threads) call the same per-block functions
-and give the same bits.
+§D.1-§D.10) and, right after them, its end of frame (guards, display §E.1, rotations
+§E.2/§E.3, transform data and write-back §E.4, §A.7), while the block's rows are still in the
+cache. Within a team everything runs in particle order (Gauss-Seidel, §D.0), the block's teams
+side by side (``solver/lanes.py``). Blocks are independent: the frame reads the hierarchy's
+world arrays (the pose propagated before LATE_UPDATE) and the write-back writes only its local
+arrays, which no block reads, so a block written back before another's begin changes nothing
+that block sees (MagicaCloth2 reads every cloth's transforms before it writes any: docs/solver.md
+§A.3). The serial kernel (``simulate_frame``) and the parallel one (``simulate_frame_parallel``,
+blocks dealt to threads) call the same per-block functions and give the same bits.
 
 **Lanes that do not run.** A block runs every stage for all its lanes. A lane whose team is
 not simulated this frame (disabled, culled, scale-suspended: ``ACTIVE`` 0) or that runs
@@ -524,9 +527,8 @@ def frame_counts(T, tt):
 @kernel(forceinline=False)
 def simulate_frame(T, tt, h, frame_values, area, wind_zones, angle, bending, point_collision, edge_collision,
                    motion, quality, lines, triangles, wind):
-    """The whole cloth frame, one block after another (see the module docstring): every
-    block's begin and steps, then every block's end (all reads of this frame's transforms
-    come before any write-back). ``T``: ``Tables``; ``tt``: ``TimeArrays``; ``h``:
+    """The whole cloth frame, one block after another (see the module docstring): each
+    block's begin, steps and end. ``T``: ``Tables``; ``tt``: ``TimeArrays``; ``h``:
     ``HierarchyArrays``; ``frame_values``: the frame inputs (``frame_input_values``);
     ``area``: ``lane_save_area``. Returns ``frame_counts``."""
     fi = frame_inputs(frame_values)
@@ -535,7 +537,6 @@ def simulate_frame(T, tt, h, frame_values, area, wind_zones, angle, bending, poi
     for i in range(T.blocks.shape[0]):
         block_frame_steps(T, tt, h, T.blocks[i], fi, area[0], angle, bending, point_collision, edge_collision,
                           motion, quality, wind, wind_zones)
-    for i in range(T.blocks.shape[0]):
         block_frame_end(T, tt, h, T.blocks[i], fi, area[0], quality, lines, triangles)
     _frame_close(tt, h, fi)
     return frame_counts(T, tt)
@@ -546,8 +547,8 @@ def simulate_frame_parallel(T, tt, h, frame_values, area, wind_zones, wt, angle,
                             edge_collision, motion, quality, lines, triangles, wind):
     """``simulate_frame`` with the blocks dealt to ``fi.threads`` threads (``scene.threads``,
     ``system.choose_threads``). ``assign_workers`` deals the blocks each frame (greedy, in
-    block order); each thread runs its blocks' begin and steps in one parallel region and
-    their ends in a second: two thread launches per frame. Blocks are independent and each
+    block order); each thread runs its blocks' begin, steps and end in one parallel region:
+    one thread launch per frame. Blocks are independent and each
     runs in its own order, so the results are the serial kernel's bits."""
     fi = frame_inputs(frame_values)
     prepare_lanes(T.TS, T.TI, T.P, T.BI, T.blocks, tt, h)
@@ -563,11 +564,6 @@ def simulate_frame_parallel(T, tt, h, frame_values, area, wind_zones, wt, angle,
             if wt.block_worker[b] == w:
                 block_frame_steps(T, tt, h, b, fw, area[w], angle, bending, point_collision, edge_collision,
                                   motion, quality, wind, wind_zones)
-    for w in prange(workers):
-        fw = frame_inputs(frame_values)
-        for i in range(T.blocks.shape[0]):
-            b = T.blocks[i]
-            if wt.block_worker[b] == w:
                 block_frame_end(T, tt, h, b, fw, area[w], quality, lines, triangles)
     _frame_close(tt, h, fi)
     return frame_counts(T, tt)

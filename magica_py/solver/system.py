@@ -67,7 +67,8 @@ _STATE_TABLES = (("PS", st.PARTICLE, "particle"), ("CS", st.COLLIDER, "collider"
 
 
 # "auto" runs the frame on numba's threads from this many teams and particles: below it the
-# two thread launches per frame cost more than they save (docs/BENCHMARKS.md)
+# thread launches per frame (the frame's and the propagation's) cost more than they save
+# (docs/BENCHMARKS.md)
 AUTO_PARALLEL_TEAMS = 8
 AUTO_PARALLEL_PARTICLES = 2000
 
