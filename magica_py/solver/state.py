@@ -50,6 +50,9 @@ K_HORIZONTAL = _p("k_horizontal", 1, "D.4's stiffness of horizontal and shear li
 PARTNER_POS = _p("partner_pos", 3, "m; scratch: a partner's position (gathered within a stage)")
 PARTNER_BASE = _p("partner_base", 3, "m; scratch: a partner's rest reference (gathered within a stage)")
 PARTNER_W = _p("partner_w", 1, "scratch: a partner's inverse mass (gathered within a stage)")
+PARTNER_VELOCITY_POS = _p("partner_velocity_pos", 3, "m; scratch: a partner's velocity_pos (gathered within a stage)")
+PARTNER_ROTATION = _p("partner_rotation", 4, "xyzw; scratch: a partner's rotation (gathered within a stage)",
+                      QUATERNION)
 ACCUM3 = _p("accum3", 3, "m; scratch: a correction summed over a particle's links within a stage")
 ACCUM_N = _p("accum_n", 1, "scratch: the number of links summed in accum3")
 CONTACT_NORMAL_SUM = _p("contact_normal_sum", 3, "scratch of D.8 point mode: normals of the colliders penetrated")

@@ -269,11 +269,15 @@ def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
             if e == e0:
                 continue
             gp = g0 + topology[parent + c]
+            for l in range(w):   # the parent's rows next to the child: the loop below reads one item
+                put3(PS, gc, st.PARTNER_POS, l, get3(PS, gp, st.NEXT_POS, l))
+                put3(PS, gc, st.PARTNER_BASE, l, get3(PS, gp, st.STEP_BASIC_POS, l))
+                put4(PS, gc, st.PARTNER_ROTATION, l, get4(PS, gp, st.STEP_BASIC_ROT, l))
             for l in range(w):
                 length, local_pos, local_rot, rest_vector, rest_length, rest_direction = angle_buffer_entry(
-                    get3(PS, gc, st.NEXT_POS, l), get3(PS, gp, st.NEXT_POS, l), get3(PS, gc, st.STEP_BASIC_POS, l),
-                    get3(PS, gp, st.STEP_BASIC_POS, l), get4(PS, gc, st.STEP_BASIC_ROT, l),
-                    get4(PS, gp, st.STEP_BASIC_ROT, l), get3(PS, gc, st.ANGLE_REST_DIRECTION, l))
+                    get3(PS, gc, st.NEXT_POS, l), get3(PS, gc, st.PARTNER_POS, l), get3(PS, gc, st.STEP_BASIC_POS, l),
+                    get3(PS, gc, st.PARTNER_BASE, l), get4(PS, gc, st.STEP_BASIC_ROT, l),
+                    get4(PS, gc, st.PARTNER_ROTATION, l), get3(PS, gc, st.ANGLE_REST_DIRECTION, l))
                 put1(PS, gc, st.ANGLE_LENGTH, l, length)
                 put3(PS, gc, st.ANGLE_LOCAL_POS, l, local_pos)
                 put4(PS, gc, st.ANGLE_LOCAL_ROT, l, local_rot)
@@ -299,18 +303,27 @@ def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
                 p_move = (topology[attribute + p] & MOVE) != 0
                 gc = g0 + c
                 gp = g0 + p
+                # gather, solve, scatter: the solving loop reads and writes one item (the
+                # child's rows and the parent's copied next to them), so it vectorises across
+                # the lanes; the parent's results go back before the next entry reads them
+                for l in range(w):
+                    put3(PS, gc, st.PARTNER_POS, l, get3(PS, gp, st.NEXT_POS, l))
+                    put3(PS, gc, st.PARTNER_VELOCITY_POS, l, get3(PS, gp, st.VELOCITY_POS, l))
+                    put1(PS, gc, st.PARTNER_W, l, get1(PS, gp, st.ANGLE_INVERSE_MASS, l))
+                    if use_limit:
+                        put4(PS, gc, st.PARTNER_ROTATION, l, get4(PS, gp, st.ANGLE_ROTATION, l))
                 for l in range(w):
                     cp = get3(PS, gc, st.NEXT_POS, l)
-                    pp = get3(PS, gp, st.NEXT_POS, l)
+                    pp = get3(PS, gc, st.PARTNER_POS, l)
                     next_c = cp
                     vel_c = get3(PS, gc, st.VELOCITY_POS, l)
-                    vel_p = get3(PS, gp, st.VELOCITY_POS, l)
+                    vel_p = get3(PS, gc, st.PARTNER_VELOCITY_POS, l)
                     wc = get1(PS, gc, st.ANGLE_INVERSE_MASS, l)
-                    wp = get1(PS, gp, st.ANGLE_INVERSE_MASS, l)
+                    wp = get1(PS, gc, st.PARTNER_W, l)
                     if use_limit:
                         cp, pp, next_c, vel_c, vel_p, rot_c, edge, _rare = angle_limit_entry(
                             cp, pp, vel_c, vel_p, get4(PS, gc, st.ANGLE_ROTATION, l),
-                            get4(PS, gp, st.ANGLE_ROTATION, l), get3(PS, gc, st.ANGLE_LOCAL_POS, l),
+                            get4(PS, gc, st.PARTNER_ROTATION, l), get3(PS, gc, st.ANGLE_LOCAL_POS, l),
                             get4(PS, gc, st.ANGLE_LOCAL_ROT, l), get1(PS, gc, st.ANGLE_LENGTH, l),
                             get1(PS, gc, st.ANGLE_LIMIT, l), get1(PS, gc, st.ANGLE_LIMIT_COS, l), wc, wp, p_move,
                             limit_stiffness, limit_attenuation)
@@ -325,8 +338,11 @@ def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
                             rest_pivot, wc, wp, p_move, restoration_attenuation)
                     put3(PS, gc, st.NEXT_POS, l, next_c)
                     put3(PS, gc, st.VELOCITY_POS, l, vel_c)
-                    put3(PS, gp, st.NEXT_POS, l, next_p)
-                    put3(PS, gp, st.VELOCITY_POS, l, vel_p)
+                    put3(PS, gc, st.PARTNER_POS, l, next_p)
+                    put3(PS, gc, st.PARTNER_VELOCITY_POS, l, vel_p)
+                for l in range(w):
+                    put3(PS, gp, st.NEXT_POS, l, get3(PS, gc, st.PARTNER_POS, l))
+                    put3(PS, gp, st.VELOCITY_POS, l, get3(PS, gc, st.PARTNER_VELOCITY_POS, l))
         # clear the buffers
         for e in range(e0, e1):
             gc = g0 + topology[bl_data + e]

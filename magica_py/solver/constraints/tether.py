@@ -75,9 +75,20 @@ def tether_block(PS, P, BI, topology, b, attenuation, frequency_ratio):
         g = g0 + j
         gr = g0 + r
         gather_partner_step_pose(PS, g, gr, w)   # the root's values next to the particle's
-        for l in range(w):
-            p_pos = get3(PS, g, st.NEXT_POS, l)
-            rest = v_length(v_sub(get3(PS, g, st.STEP_BASIC_POS, l), get3(PS, g, st.PARTNER_BASE, l)))
-            delta = solve_tether(p_pos, get3(PS, g, st.PARTNER_POS, l), rest, compression_limit, ratio)
-            put3(PS, g, st.NEXT_POS, l, v_add(p_pos, delta))
-            put3(PS, g, st.VELOCITY_POS, l, v_add(get3(PS, g, st.VELOCITY_POS, l), v_scale(delta, attenuation)))
+        # at 90 Hz or in MagicaCloth2 mode the rate conversion (a pow, an opaque call that
+        # stops the vectoriser) is left out of the compiled loop by the constant argument
+        if ratio == 1.0:
+            tether_lanes(PS, g, w, compression_limit, 1.0, attenuation)
+        else:
+            tether_lanes(PS, g, w, compression_limit, ratio, attenuation)
+
+
+@kernel
+def tether_lanes(PS, g, w, compression_limit, ratio, attenuation):
+    """D.3 of particle slot g, lanes 0..w, its root's rows gathered next to it."""
+    for l in range(w):
+        p_pos = get3(PS, g, st.NEXT_POS, l)
+        rest = v_length(v_sub(get3(PS, g, st.STEP_BASIC_POS, l), get3(PS, g, st.PARTNER_BASE, l)))
+        delta = solve_tether(p_pos, get3(PS, g, st.PARTNER_POS, l), rest, compression_limit, ratio)
+        put3(PS, g, st.NEXT_POS, l, v_add(p_pos, delta))
+        put3(PS, g, st.VELOCITY_POS, l, v_add(get3(PS, g, st.VELOCITY_POS, l), v_scale(delta, attenuation)))
