@@ -89,13 +89,26 @@ def distance_particle_terms(PS, PM, PP, P, BI, topology, b, frequency_ratio, pow
             for l in range(w):
                 put1(PS, g, st.INVERSE_MASS, l, 1.0 / FIX_MASS)
             continue
-        for l in range(w):
-            depth = get1(PM, g, bk.DEPTH, l)
-            put1(PS, g, st.INVERSE_MASS, l, inverse_mass_friction_depth(get1(PS, g, st.FRICTION, l), depth))
-            k_vertical, k_horizontal = distance_stiffness(get1(PP, g, bk.CURVE_DISTANCE_STIFFNESS, l), frequency_ratio,
-                                                          power_y, mode, quality)
-            put1(PS, g, st.K_VERTICAL, l, k_vertical)
-            put1(PS, g, st.K_HORIZONTAL, l, k_horizontal)
+        # the stiffness's rate conversion (a pow, an opaque call that keeps a loop scalar) is
+        # left out of the compiled loop by constant arguments where it cannot apply
+        if mode == 0:
+            distance_terms_lanes(PS, PM, PP, g, w, frequency_ratio, power_y, 0, quality)
+        elif quality == 0 or frequency_ratio == 1.0:
+            distance_terms_lanes(PS, PM, PP, g, w, 1.0, power_y, mode, quality)
+        else:
+            distance_terms_lanes(PS, PM, PP, g, w, frequency_ratio, power_y, mode, quality)
+
+
+@kernel
+def distance_terms_lanes(PS, PM, PP, g, w, frequency_ratio, power_y, mode, quality):
+    """``distance_particle_terms`` of the Move particle in slot g, lanes 0..w."""
+    for l in range(w):
+        depth = get1(PM, g, bk.DEPTH, l)
+        put1(PS, g, st.INVERSE_MASS, l, inverse_mass_friction_depth(get1(PS, g, st.FRICTION, l), depth))
+        k_vertical, k_horizontal = distance_stiffness(get1(PP, g, bk.CURVE_DISTANCE_STIFFNESS, l), frequency_ratio,
+                                                      power_y, mode, quality)
+        put1(PS, g, st.K_VERTICAL, l, k_vertical)
+        put1(PS, g, st.K_HORIZONTAL, l, k_horizontal)
 
 
 @kernel(forceinline=False)
