@@ -395,38 +395,52 @@ def end_step_block(PS, PM, TS, P, BI, topology, b, dt, frequency_ratio):
                 put3(PS, g, st.REAL_VELOCITY, l, v_scale(v_sub(next_pos, get3(PS, g, st.OLD_POS, l)), 1.0 / dt))
                 put3(PS, g, st.OLD_POS, l, next_pos)
             continue
-        for l in range(w):
-            scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
-            static_threshold = dynamic * scale
-            angular_velocity = get1(TS, b, st.ANGULAR_VELOCITY, l)
-            next_pos = get3(PS, g, st.NEXT_POS, l)
-            old_pos = get3(PS, g, st.OLD_POS, l)
-            cn = get3(PS, g, st.COLLISION_NORMAL, l)
-            f = get1(PS, g, st.FRICTION, l)
-            contact = v_length_sq(cn) > 1e-8 and f > 1e-8
-            velocity_pos = get3(PS, g, st.VELOCITY_POS, l)
-            static_friction = get1(PS, g, st.STATIC_FRICTION, l)
-            if contact and static_threshold > 0.0:
-                next_pos, velocity_pos, sf = static_friction_step(next_pos, old_pos, velocity_pos, cn,
-                                                                  static_friction, dt, static_threshold, gain,
-                                                                  loss_scale)
+        # the consistent brake's pow (an opaque call that keeps a loop scalar) is left out of
+        # the compiled loop by a constant argument where it cannot apply
+        if consistent:
+            end_step_lanes(PS, PM, TS, g, b, w, dt, frequency_ratio, True, dynamic, speed_limit, centrifugal,
+                           friction_keep, gain, loss_scale)
+        else:
+            end_step_lanes(PS, PM, TS, g, b, w, dt, 1.0, False, dynamic, speed_limit, centrifugal, friction_keep,
+                           gain, loss_scale)
+
+
+@kernel
+def end_step_lanes(PS, PM, TS, g, b, w, dt, frequency_ratio, consistent, dynamic, speed_limit, centrifugal,
+                   friction_keep, gain, loss_scale):
+    """``end_step_block`` of the Move particle in slot g of block b, lanes 0..w."""
+    for l in range(w):
+        scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
+        static_threshold = dynamic * scale
+        angular_velocity = get1(TS, b, st.ANGULAR_VELOCITY, l)
+        next_pos = get3(PS, g, st.NEXT_POS, l)
+        old_pos = get3(PS, g, st.OLD_POS, l)
+        cn = get3(PS, g, st.COLLISION_NORMAL, l)
+        f = get1(PS, g, st.FRICTION, l)
+        contact = v_length_sq(cn) > 1e-8 and f > 1e-8
+        velocity_pos = get3(PS, g, st.VELOCITY_POS, l)
+        static_friction = get1(PS, g, st.STATIC_FRICTION, l)
+        if contact and static_threshold > 0.0:
+            next_pos, velocity_pos, sf = static_friction_step(next_pos, old_pos, velocity_pos, cn,
+                                                              static_friction, dt, static_threshold, gain,
+                                                              loss_scale)
+        else:
+            sf = saturate(static_friction - STATIC_FRICTION_LOSS * loss_scale)
+        put1(PS, g, st.STATIC_FRICTION, l, sf)
+        vel, direction, moving = end_step_velocity(next_pos, velocity_pos, dt)
+        if moving and contact and dynamic > 0.0:
+            if consistent:
+                vel = dynamic_friction_keep(vel, direction, cn, f, dynamic, frequency_ratio)
             else:
-                sf = saturate(static_friction - STATIC_FRICTION_LOSS * loss_scale)
-            put1(PS, g, st.STATIC_FRICTION, l, sf)
-            vel, direction, moving = end_step_velocity(next_pos, velocity_pos, dt)
-            if moving and contact and dynamic > 0.0:
-                if consistent:
-                    vel = dynamic_friction_keep(vel, direction, cn, f, dynamic, frequency_ratio)
-                else:
-                    vel = dynamic_friction_brake(vel, direction, cn, f, dynamic)
-            put1(PS, g, st.FRICTION, l, f * friction_keep)
-            if speed_limit >= 0.0:
-                vel = clamp_length(vel, speed_limit * scale)
-            if angular_velocity > 1e-8 and centrifugal > 1e-8:
-                vel = centrifugal_velocity(vel, next_pos, direction, moving, get1(PM, g, bk.DEPTH, l),
-                                           angular_velocity, centrifugal, get3(TS, b, st.ROTATION_AXIS, l),
-                                           get3(TS, b, st.NOW_WORLD_POS, l))
-            put3(PS, g, st.VELOCITY, l, v_scale(vel, get1(TS, b, st.VELOCITY_WEIGHT, l)))
-            put3(PS, g, st.REAL_VELOCITY, l, v_scale(v_sub(next_pos, old_pos), 1.0 / dt))
-            put3(PS, g, st.OLD_POS, l, next_pos)
-            put3(PS, g, st.NEXT_POS, l, next_pos)
+                vel = dynamic_friction_brake(vel, direction, cn, f, dynamic)
+        put1(PS, g, st.FRICTION, l, f * friction_keep)
+        if speed_limit >= 0.0:
+            vel = clamp_length(vel, speed_limit * scale)
+        if angular_velocity > 1e-8 and centrifugal > 1e-8:
+            vel = centrifugal_velocity(vel, next_pos, direction, moving, get1(PM, g, bk.DEPTH, l),
+                                       angular_velocity, centrifugal, get3(TS, b, st.ROTATION_AXIS, l),
+                                       get3(TS, b, st.NOW_WORLD_POS, l))
+        put3(PS, g, st.VELOCITY, l, v_scale(vel, get1(TS, b, st.VELOCITY_WEIGHT, l)))
+        put3(PS, g, st.REAL_VELOCITY, l, v_scale(v_sub(next_pos, old_pos), 1.0 / dt))
+        put3(PS, g, st.OLD_POS, l, next_pos)
+        put3(PS, g, st.NEXT_POS, l, next_pos)
