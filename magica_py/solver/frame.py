@@ -156,6 +156,23 @@ def lane_save_area(max_particles: int, max_colliders: int, threads: int) -> np.n
     return np.zeros((max(threads, 1), max(width, 1)))
 
 
+@kernel
+def frame_tuples(F):
+    """The three namedtuples of the frame's arrays from ``F`` (``frame_call.FrameArrays``, the
+    StructRef the system passes; with the JIT off its namedtuple twin): ``Tables``,
+    ``TimeArrays``, ``HierarchyArrays``."""
+    T = Tables(F.PS, F.TS, F.CS, F.TRS, F.EDS, F.PM, F.PP, F.TM, F.LM, F.TRM, F.BM, F.VM, F.P, F.BI, F.topology,
+               F.PT, F.TI, F.CT, F.blocks)
+    tt = TimeArrays(F.tt_active, F.tt_suspended, F.tt_update_mode, F.tt_team_time_scale, F.tt_time, F.tt_old_time,
+                    F.tt_now_update_time, F.tt_old_update_time, F.tt_frame_update_time, F.tt_frame_old_time,
+                    F.tt_update_count, F.tt_skip_count, F.tt_frame_delta_time, F.tt_now_time_scale,
+                    F.tt_frame_add, F.tt_frame_interpolation, F.tt_running, F.tt_step_running)
+    h = HierarchyArrays(F.h_parent, F.h_local_position, F.h_local_rotation, F.h_world_position, F.h_world_rotation,
+                        F.h_lossy_scale, F.h_local_to_world, F.h_build_world_position, F.h_build_world_rotation,
+                        F.h_build_lossy_scale, F.h_build_local_to_world, F.h_build_pose_pending)
+    return T, tt, h
+
+
 # ----------------------------------------------------------------------------- lanes that do not run
 @kernel(forceinline=False)
 def save_lane(PS, TS, CS, BI, b, l, area):
@@ -525,12 +542,16 @@ def frame_counts(T, tt):
 
 
 @kernel(forceinline=False)
-def simulate_frame(T, tt, h, frame_values, area, wind_zones, angle, bending, point_collision, edge_collision,
-                   motion, quality, lines, triangles, wind):
+def simulate_frame(F, frame_values, area, wind_zones, angle, bending, point_collision, edge_collision, motion,
+                   quality, lines, triangles, wind):
     """The whole cloth frame, one block after another (see the module docstring): each
-    block's begin, steps and end. ``T``: ``Tables``; ``tt``: ``TimeArrays``; ``h``:
-    ``HierarchyArrays``; ``frame_values``: the frame inputs (``frame_input_values``);
-    ``area``: ``lane_save_area``. Returns ``frame_counts``."""
+    block's begin, steps and end. ``F``: the frame's arrays (``frame_call.FrameArrays``:
+    ``Tables``, ``TimeArrays``, ``HierarchyArrays`` in one StructRef, ``frame_tuples``);
+    ``frame_values``: the frame inputs (``frame_input_values``); ``area``: ``lane_save_area``.
+    Returns ``frame_counts``. The system calls it directly (one compiled function between
+    Python and the stages: a wrapper kernel around it would optimise and emit every stage's
+    code once more on the first run)."""
+    T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
     prepare_lanes(T.TS, T.TI, T.P, T.BI, T.blocks, tt, h)
     _time_frame_update(tt, fi)
@@ -543,28 +564,32 @@ def simulate_frame(T, tt, h, frame_values, area, wind_zones, angle, bending, poi
 
 
 @kernel(parallel=True, forceinline=False)
-def simulate_frame_parallel(T, tt, h, frame_values, area, wind_zones, wt, angle, bending, point_collision,
-                            edge_collision, motion, quality, lines, triangles, wind):
+def simulate_frame_parallel(F, frame_values, area, wind_zones, block_worker, worker_load, angle, bending,
+                            point_collision, edge_collision, motion, quality, lines, triangles, wind):
     """``simulate_frame`` with the blocks dealt to ``fi.threads`` threads (``scene.threads``,
-    ``system.choose_threads``). ``assign_workers`` deals the blocks each frame (greedy, in
-    block order); each thread runs its blocks' begin, steps and end in one parallel region:
-    one thread launch per frame. Blocks are independent and each
-    runs in its own order, so the results are the serial kernel's bits."""
+    ``system.choose_threads``); ``block_worker`` and ``worker_load``: its ``WorkerTable``.
+    ``assign_workers`` deals the blocks each frame (greedy, in block order); each thread runs
+    its blocks' begin, steps and end in one parallel region: one thread launch per frame.
+    Blocks are independent and each runs in its own order, so the results are the serial
+    kernel's bits."""
+    T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
     prepare_lanes(T.TS, T.TI, T.P, T.BI, T.blocks, tt, h)
     _time_frame_update(tt, fi)
-    workers = max(1, min(fi.threads, min(wt.worker_load.shape[0], area.shape[0])))
-    assign_workers(T, tt, wt, workers)
-    # each region rebuilds the frame inputs from the array: a namedtuple made in the kernel
-    # cannot enter a prange body (numba's parfor lowering looks its class up by name)
+    workers = max(1, min(fi.threads, min(worker_load.shape[0], area.shape[0])))
+    assign_workers(T, tt, WorkerTable(block_worker, worker_load), workers)
+    # each region rebuilds the namedtuples from F and the frame inputs from the array: a
+    # namedtuple made in the kernel cannot enter a prange body (numba's parfor lowering looks
+    # its class up by name)
     for w in prange(workers):
+        Tw, ttw, hw = frame_tuples(F)
         fw = frame_inputs(frame_values)
-        for i in range(T.blocks.shape[0]):
-            b = T.blocks[i]
-            if wt.block_worker[b] == w:
-                block_frame_steps(T, tt, h, b, fw, area[w], angle, bending, point_collision, edge_collision,
+        for i in range(Tw.blocks.shape[0]):
+            b = Tw.blocks[i]
+            if block_worker[b] == w:
+                block_frame_steps(Tw, ttw, hw, b, fw, area[w], angle, bending, point_collision, edge_collision,
                                   motion, quality, wind, wind_zones)
-                block_frame_end(T, tt, h, b, fw, area[w], quality, lines, triangles)
+                block_frame_end(Tw, ttw, hw, b, fw, area[w], quality, lines, triangles)
     _frame_close(tt, h, fi)
     return frame_counts(T, tt)
 

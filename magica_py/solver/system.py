@@ -45,9 +45,10 @@ from magica_py.solver.blocks import (
 )
 from magica_py.solver.colliders import collider_shapes, fill_slots
 from magica_py.solver.frame import (
-    StageSwitches, Tables, frame_input_values, hierarchy_arrays, lane_save_area, time_arrays, worker_table,
+    StageSwitches, Tables, frame_input_values, hierarchy_arrays, lane_save_area, simulate_frame,
+    simulate_frame_parallel, time_arrays, worker_table,
 )
-from magica_py.solver.frame_call import frame_arrays, frame_entry, frame_entry_parallel
+from magica_py.solver.frame_call import frame_arrays
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
 from magica_py.solver.parameters import (
     PARAMETER_COUNT, allocate_parameters, packed_row, particle_parameters_block, write_row,
@@ -649,8 +650,8 @@ class ClothSystem:
         zones = self._wind_zones()
         F = self._frame_arrays()
         if self.parallel:
-            return frame_entry_parallel(F, fi, self._save_area, zones, *self._workers, *self.stages)
-        return frame_entry(F, fi, self._save_area, zones, *self.stages)
+            return simulate_frame_parallel(F, fi, self._save_area, zones, *self._workers, *self.stages)
+        return simulate_frame(F, fi, self._save_area, zones, *self.stages)
 
     def _frame_arrays(self):
         """The frame kernel's arrays in one StructRef (``frame_call.frame_arrays``), made again
