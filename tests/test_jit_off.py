@@ -105,7 +105,10 @@ def test_tail_orbit_runs_bounds_checked_and_compiles_only_the_stages_it_uses(tmp
     The run has a cache of its own (checked and unchecked code must not share cache entries),
     so every kernel it needs is compiled here: numba's compile events name them, and the
     optional stages the scene does not use are not among them (``frame.StageSwitches``)."""
-    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
+    # no compile helper (solver/compile_helper.py): every kernel compiles in this process, where
+    # the compile events see it
+    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"),
+               MAGICA_COMPILE_HELPER="0")
     env.pop("NUMBA_DISABLE_JIT", None)
     out = subprocess.run([sys.executable, "-c", COMPILE_SNIPPET], cwd=ROOT, env=env, capture_output=True,
                          text=True, timeout=3600)

@@ -624,3 +624,15 @@ def block_load(T, tt, b):
         if t >= 0:
             steps = max(steps, tt.update_count[t])
     return np.int64(T.BI[b, bk.BI_N]) * np.int64(T.BI[b, bk.BI_LANES_USED]) * np.int64(steps + 1)
+
+
+@kernel(forceinline=False)
+def compile_end_stages(F, frame_values, area, run, quality, lines, triangles):
+    """The end-of-frame stages (``block_frame_end``) typed and compiled with exactly the frame
+    kernels' argument types, run only when ``run`` is not 0 (``solver/compile_helper.py`` passes
+    0: a first run's forked helper compiles them into numba's cache while the system's process
+    compiles the rest of the frame)."""
+    T, tt, h = frame_tuples(F)
+    fi = frame_inputs(frame_values)
+    if run != 0 and T.blocks.shape[0] > 0:
+        block_frame_end(T, tt, h, T.blocks[0], fi, area[0], quality, lines, triangles)

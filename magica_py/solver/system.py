@@ -39,6 +39,7 @@ import numpy as np
 from magica_py.kernels import portable
 from magica_py.params import default_parameters
 from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, update_mode_code
+from magica_py.solver import compile_helper
 from magica_py.solver import state as st
 from magica_py.solver.blocks import (
     BI_COLLIDERS, BI_N, LANES, PARTICLE_PARAMETERS, TI_ANCHOR, TI_CULLING_REFERENCE, BlockLayout,
@@ -151,6 +152,7 @@ class ClothSystem:
         self._frame_values = frame_input_values()
         self._frame_arrays_of = None     # (tables, clocks, hierarchy) the frame's StructRef was made of
         self._frame_arrays_made = None
+        self._first_call = True   # (_call_frame)
         if self.parallel:  # the hierarchy propagation spreads over the same threads
             hierarchy.threads = max(hierarchy.threads, self.threads)
         self._tables_changed(register=False)
@@ -647,11 +649,27 @@ class ClothSystem:
     def _call_frame(self, fi) -> tuple:
         """One numba call per frame: the serial or the parallel kernel, with the stage switches;
         returns the frame's counts (``frame.frame_counts``)."""
+        if self._first_call:
+            return self._first_frame_call(fi)
         zones = self._wind_zones()
         F = self._frame_arrays()
         if self.parallel:
             return simulate_frame_parallel(F, fi, self._save_area, zones, *self._workers, *self.stages)
         return simulate_frame(F, fi, self._save_area, zones, *self.stages)
+
+    def _first_frame_call(self, fi) -> tuple:
+        """The system's first frame call: on a first run (the frame kernel not yet compiled in
+        this process) a helper process compiles the end-of-frame stages meanwhile
+        (``solver/compile_helper.py``)."""
+        self._first_call = False
+        kernel = simulate_frame_parallel if self.parallel else simulate_frame
+        helper = None
+        if compile_helper.wanted(kernel):
+            helper = compile_helper.start(self._frame_arrays(), fi, self._save_area, self.stages)
+        try:
+            return self._call_frame(fi)
+        finally:
+            compile_helper.finish(helper)
 
     def _frame_arrays(self):
         """The frame kernel's arrays in one StructRef (``frame_call.frame_arrays``), made again

@@ -1,0 +1,73 @@
+"""A first run's compile on two cores: a forked process compiles the end-of-frame stages.
+
+numba compiles one function at a time in a process (a process-wide compiler lock), and a
+scene's first frame with an empty kernel cache compiles every stage it uses (docs/BENCHMARKS.md,
+*First run*). The frame kernel's typing reaches the stages in order: each block's begin of
+frame, its steps, then its end of frame (guards, display, rotations, write-back). So while the
+system's process compiles the first two, a forked copy of it compiles the third with exactly
+the frame kernel's argument types (``frame.compile_end_stages``: typed and compiled, run with
+``run=0`` so nothing executes) and writes them to numba's on-disk cache (``cache=True``, the
+documented cache; the cache starts empty and is filled by the two processes). When the frame
+kernel's typing reaches those stages it finds them in the cache, or compiles itself any the
+helper has not finished. The results are the same functions, so the same bits.
+
+Only where it is safe and useful: Linux (``os.fork``), the JIT and the cache on, at least two
+CPUs, called from the main thread (a batch runner's worker threads never fork), and only while
+the frame kernel has no compiled signature in this process. ``MAGICA_COMPILE_HELPER=0`` turns it
+off. The helper leaves with ``os._exit`` (no buffered output is flushed twice, no exit handler
+runs); ``finish`` reaps it after the frame kernel's first call, ending it if it is still
+compiling (what it had not finished, the system's process has compiled by then).
+"""
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+
+from numba import config
+
+from magica_py import jit
+from magica_py.solver.frame import compile_end_stages
+
+
+def wanted(kernel) -> bool:
+    """Is a helper worth starting before ``kernel``'s (``simulate_frame`` or its parallel
+    twin) call: its first in this process, with a cache to share, on two or more CPUs?"""
+    if os.environ.get("MAGICA_COMPILE_HELPER", "1") == "0" or config.DISABLE_JIT or not jit.CACHE:
+        return False
+    if not sys.platform.startswith("linux") or threading.current_thread() is not threading.main_thread():
+        return False
+    if len(os.sched_getaffinity(0)) < 2:
+        return False
+    return not kernel.signatures
+
+
+def start(F, frame_values, area, stages) -> int | None:
+    """Fork the helper (``compile_end_stages`` with the frame's arrays ``F``, frame inputs,
+    save area and ``frame.StageSwitches``); returns its pid, or None where fork failed."""
+    try:
+        pid = os.fork()
+    except OSError:
+        return None
+    if pid == 0:   # the helper: compile, then leave without any of the parent's exit work
+        code = 0
+        try:
+            compile_end_stages(F, frame_values, area, 0, stages.quality, stages.lines, stages.triangles)
+        except BaseException:
+            code = 1
+        os._exit(code)
+    return pid
+
+
+def finish(pid: int | None) -> None:
+    """Reap the helper after the frame kernel's first call (ending it if still compiling)."""
+    if pid is None:
+        return
+    try:
+        done, _ = os.waitpid(pid, os.WNOHANG)
+        if done == 0:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+    except (ChildProcessError, ProcessLookupError):
+        pass
