@@ -12,7 +12,9 @@ kernel's typing reaches those stages it finds them in the cache, or compiles its
 helper has not finished. The results are the same functions, so the same bits.
 
 Only where it is safe and useful: Linux (``os.fork``), the JIT and the cache on, at least two
-CPUs, called from the main thread (a batch runner's worker threads never fork), and only while
+CPUs of which one is free (the 1-minute load average at most the CPUs less a half: on a machine
+kept busy by other jobs the helper would share this process's CPU and lengthen the run), called
+from the main thread (a batch runner's worker threads never fork), and only while
 the frame kernel has no compiled signature in this process. ``MAGICA_COMPILE_HELPER=0`` turns it
 off. The helper leaves with ``os._exit`` (no buffered output is flushed twice, no exit handler
 runs); ``finish`` reaps it after the frame kernel's first call, ending it if it is still
@@ -38,7 +40,10 @@ def wanted(kernel) -> bool:
         return False
     if not sys.platform.startswith("linux") or threading.current_thread() is not threading.main_thread():
         return False
-    if len(os.sched_getaffinity(0)) < 2:
+    cpus = len(os.sched_getaffinity(0))
+    # a helper pays only with a CPU to itself: with another job keeping every CPU but this
+    # process's busy (the 1-minute load average), it would take its compile time from ours
+    if cpus < 2 or os.getloadavg()[0] > cpus - 0.5:
         return False
     return not kernel.signatures
 
