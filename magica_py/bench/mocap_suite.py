@@ -313,10 +313,10 @@ def solver_body_velocity(system, slots: np.ndarray, points: np.ndarray, step_dt:
     inertia shift to its pose of the step, G.3): the frame of ``particles.velocity``. Read
     after the step: ``start_old`` and ``inverse_old_rot`` keep the previous pose (the start
     point, a point fixed to the body), ``start_new`` and ``now_rot`` the step's."""
+    from magica_py.io.quat import qconj
+
     cs = system.collider_state
-    q_inv_old = cs.inverse_old_rot[slots]
-    q_old = q_inv_old * np.array([-1.0, -1.0, -1.0, 1.0]) / np.maximum(
-        np.einsum("ij,ij->i", q_inv_old, q_inv_old), 1e-30)[:, None]
+    q_old = qconj(cs.inverse_old_rot[slots])   # unit quaternions: the inverse of the inverse
     return M.rigid_point_velocity(points, (cs.start_old[slots], q_old), (cs.start_new[slots], cs.now_rot[slots]),
                                   step_dt)
 

@@ -26,32 +26,23 @@ clamp.
 from __future__ import annotations
 
 from magica_py.jit import kernel
-from magica_py.kernels.math3d import (
-    clamp_length, q_inverse, q_rotate, v_add, v_dot, v_length, v_lerp, v_scale, v_sub,
-)
+from magica_py.kernels.math3d import clamp_length, q_inverse, q_rotate, v_add, v_dot, v_length, v_scale, v_sub
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
-from magica_py.solver.constraints.collision import (
-    FAR, INVALID_OR_NO_COLLISION, MOVE, PLANE, SPHERE, particle_radius, segment_parameter,
-)
+from magica_py.solver.constraints.collision import FAR, INVALID_OR_NO_COLLISION, MOVE, PLANE, particle_radius
 from magica_py.solver.lanes import get1, get3, get4, put1, put3
 from magica_py.solver.parameters import PRM_CONTACT_SPEED_LIMIT, PRM_PARTICLE_SPEED_LIMIT
+from magica_py.solver.quality import step_axis_point
 
 
 @kernel
 def surface_gap(CS, k, l, shape, x, r):
     """Gap (m) between the particle sphere (x, r) and collider slot k of lane l at its pose of
     this step (``START_NEW`` / ``END_NEW``); negative inside."""
-    a = get3(CS, k, st.START_NEW, l)
     if shape == PLANE:
-        return v_dot(v_sub(x, a), get3(CS, k, st.PLANE_NORMAL, l)) - r
-    radius_start = get1(CS, k, st.RADIUS_START, l)
-    if shape == SPHERE:
-        return v_length(v_sub(x, a)) - radius_start - r
-    e = get3(CS, k, st.END_NEW, l)
-    t = segment_parameter(x, a, e)
-    radius = radius_start + (get1(CS, k, st.RADIUS_END, l) - radius_start) * t
-    return v_length(v_sub(x, v_lerp(a, e, t))) - radius - r
+        return v_dot(v_sub(x, get3(CS, k, st.START_NEW, l)), get3(CS, k, st.PLANE_NORMAL, l)) - r
+    c, radius = step_axis_point(CS, k, l, shape, x)
+    return v_length(v_sub(x, c)) - radius - r
 
 
 @kernel

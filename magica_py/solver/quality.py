@@ -567,11 +567,20 @@ def step_collider_push(CS, k, l, shape, x, r):
     moving plane (normal from the previous pose) the set it projects onto does not depend on
     the collider's motion: the alternation of ``ftl_collision_lane`` projects onto two fixed
     sets."""
-    a = get3(CS, k, st.START_NEW, l)
     if shape == PLANE:
         n = get3(CS, k, st.PLANE_NORMAL, l)
-        d = v_dot(v_sub(x, a), n) - r
+        d = v_dot(v_sub(x, get3(CS, k, st.START_NEW, l)), n) - r
         return v_sub(x, v_scale(n, d)) if d < 0.0 else x
+    c, radius = step_axis_point(CS, k, l, shape, x)
+    return push_out_of_ball(x, c, radius + r)
+
+
+@kernel
+def step_axis_point(CS, k, l, shape, x):
+    """The point of sphere or capsule slot k of lane l at its pose of this step (``START_NEW``
+    / ``END_NEW``) nearest to x on its centre or axis, and the collider's radius there:
+    (point, radius). The surface nearest to x lies ``radius`` from the point."""
+    a = get3(CS, k, st.START_NEW, l)
     if shape == SPHERE:
         t = 0.0
         c = a
@@ -580,8 +589,7 @@ def step_collider_push(CS, k, l, shape, x, r):
         t = segment_parameter(x, a, e)
         c = v_lerp(a, e, t)
     radius_start = get1(CS, k, st.RADIUS_START, l)
-    reach = radius_start + (get1(CS, k, st.RADIUS_END, l) - radius_start) * t + r
-    return push_out_of_ball(x, c, reach)
+    return c, radius_start + (get1(CS, k, st.RADIUS_END, l) - radius_start) * t
 
 
 @kernel
