@@ -37,8 +37,15 @@ from magica_py.solver.constraints.tether import tether_block
 from magica_py.solver.display import display_block
 from magica_py.solver.guards import check_block
 from magica_py.solver.lanes import get1
-from magica_py.solver.parameters import PRM_COLLISION_LAST, PRM_COLLISION_MODE, PRM_INEXTENSIBILITY
-from magica_py.solver.quality import quality_end_of_step_block
+from magica_py.solver.parameters import (PRM_COLLISION_LAST, PRM_COLLISION_MODE, PRM_CONTACT_SPEED_LIMIT,
+                                         PRM_FTL_DAMPING, PRM_INEXTENSIBILITY, PRM_QUALITY,
+                                         PRM_TIME_BASED_SMOOTHING)
+from magica_py.solver.contact_speed import contact_speed_block
+from magica_py.solver.display import record_display_state_block
+from magica_py.solver.quality import (INEXT_FTL_EDGES, drift_applies, drift_begin_block, drift_end_block,
+                                      drift_in_block, has_cross_links, inextensibility_passes,
+                                      quality_end_of_step_block)
+from magica_py.solver.quality_display import display_constraints_block
 from magica_py.solver.rotations import line_rotations_block, triangle_rotations_block
 from magica_py.solver.step import end_step_block, predict_block, step_basic_pose_block, team_step_lane
 from magica_py.solver.writeback import transform_block, write_transforms_lane
@@ -160,6 +167,62 @@ def _quality(T, h, q, zones, calls):
 
 
 @numba.njit(**JIT)
+def _quality_passes_only(T, h, q, zones, calls):
+    for _call in range(calls):
+        for i in range(T.blocks.shape[0]):
+            b = T.blocks[i]
+            mode = int(T.P[b, PRM_INEXTENSIBILITY])
+            if mode != 0:
+                _tether, distance, _limit, _restoration, _motion = step_attenuations(T.P, b, RATIO)
+                mesh = mode == INEXT_FTL_EDGES and has_cross_links(T.BI, T.topology, b)
+                inextensibility_passes(T.PS, T.PM, T.PP, T.TS, T.TM, T.LM, T.EDS, T.P, T.BI, T.topology, b, RATIO,
+                                       POWER, distance, mode, mesh, T.P[b, PRM_FTL_DAMPING])
+
+
+@numba.njit(**JIT)
+def _quality_drift(T, h, q, zones, calls):
+    for _call in range(calls):
+        for i in range(T.blocks.shape[0]):
+            b = T.blocks[i]
+            if drift_applies(T.P, b):
+                mode = int(T.P[b, PRM_INEXTENSIBILITY])
+                _tether, distance, _limit, _restoration, _motion = step_attenuations(T.P, b, RATIO)
+                mesh = mode == INEXT_FTL_EDGES and has_cross_links(T.BI, T.topology, b)
+                drift_begin_block(T.PS, T.BI, b)
+                drift_end_block(T.PS, T.BI, T.topology, b)
+                drift_in_block(T.PS, T.PM, T.PP, T.TS, T.TM, T.LM, T.EDS, T.P, T.BI, T.topology, b, RATIO, POWER,
+                               distance, mode, mesh)
+
+
+@numba.njit(**JIT)
+def _contact_speed(T, h, q, zones, calls):
+    for _call in range(calls):
+        for i in range(T.blocks.shape[0]):
+            b = T.blocks[i]
+            if (T.P[b, PRM_CONTACT_SPEED_LIMIT] >= 0.0 and T.BI[b, bk.BI_COLLIDERS] > 0
+                    and T.P[b, PRM_COLLISION_MODE] != 0.0):
+                contact_speed_block(T.PS, T.PP, T.TS, T.CS, T.P, T.BI, T.topology, b, DT)
+
+
+@numba.njit(**JIT)
+def _record_display(T, h, q, zones, calls):
+    for _call in range(calls):
+        for i in range(T.blocks.shape[0]):
+            b = T.blocks[i]
+            if T.P[b, PRM_TIME_BASED_SMOOTHING] != 0.0:
+                record_display_state_block(T.PS, T.TS, T.BI, T.topology, b)
+
+
+@numba.njit(**JIT)
+def _display_constraints(T, h, q, zones, calls):
+    for _call in range(calls):
+        for i in range(T.blocks.shape[0]):
+            b = T.blocks[i]
+            if T.P[b, PRM_QUALITY] != 0.0:
+                display_constraints_block(T.PS, T.PP, T.TS, T.CS, T.EDS, T.P, T.BI, T.topology, b, DT)
+
+
+@numba.njit(**JIT)
 def _end_step(T, h, q, zones, calls):
     for _call in range(calls):
         for i in range(T.blocks.shape[0]):
@@ -231,11 +294,16 @@ STEP_STAGES = [("team update (C.3)", _team_update, None), ("colliders (G.3)", _c
                ("distance x2 (D.4)", _distance_x2, None), ("angle (D.5/D.6)", _angle, "angle"),
                ("bending (D.7)", _bending, "bending"), ("collision (D.8)", _collision, "collision"),
                ("motion (D.9)", _motion, "motion"), ("quality passes", _quality, "quality"),
-               ("end of step (D.10)", _end_step, None)]
+               ("  of which inextensibility", _quality_passes_only, "quality"),
+               ("quality drift", _quality_drift, "quality"),
+               ("end of step (D.10)", _end_step, None),
+               ("quality contact speed", _contact_speed, "quality"),
+               ("quality display record", _record_display, "quality")]
 FRAME_STAGES = [("skinning (C.1)", _skin, None), ("center/shift (C.2-C.5, G.2)", _center, None),
                 ("guards + display (E.1)", _guards_display, None),
                 ("line rotations (E.2)", _line_rotations, "lines"),
                 ("triangle rotations (E.3)", _triangle_rotations, "triangles"),
+                ("quality display (E.1)", _display_constraints, "quality"),
                 ("write-back (E.4)", _write_back, None)]
 
 

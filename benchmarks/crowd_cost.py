@@ -1,13 +1,14 @@
 """Quality mode's cost on the crowd against faithful mode, both in one process (issue 16: at most 1.5x).
 
-    python benchmarks/crowd_cost.py [--blocks 30] [--scene crowd]
+    python benchmarks/crowd_cost.py [--blocks 30] [--scene crowd] [--quality-param solver.KEY=VALUE ...]
 
 Separate ``bench_solver.py`` runs of the two modes on a shared machine differ by 10-30 % from
 process to process, more than the cost being measured. This script builds the scene twice in
 one process (faithful; every cloth in quality mode), runs 30 warm-up frames on each, then
 alternates 10-frame blocks between them over frames 30-330 (``bench_solver.py``'s window) and
 prints the ratio of the mean frame times, the median of the per-block ratios and the ratio per
-50 frames.
+50 frames. ``--quality-param`` sets a parameter of every quality cloth besides the mode (e.g.
+``solver.time_based_smoothing=disabled``: what one quality feature costs).
 """
 from __future__ import annotations
 
@@ -30,11 +31,14 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default="crowd")
     ap.add_argument("--blocks", type=int, default=30)
+    ap.add_argument("--quality-param", action="append", default=[], metavar="KEY=VALUE",
+                    help="a parameter of every quality cloth besides solver.mode (repeatable)")
     args = ap.parse_args(argv)
     path = ROOT / "configs" / f"{args.scene}.yaml"
     cloths = len(load_scene(path).cloths)
     base = len({c.name.split("#")[0] for c in load_scene(path).cloths}) if cloths else 0
-    quality = [f"cloths[{i}].parameters={{solver.mode: quality}}" for i in range(base)]
+    extra = "".join(f", {key}: {value}" for key, value in (kv.split("=", 1) for kv in args.quality_param))
+    quality = [f"cloths[{i}].parameters={{solver.mode: quality{extra}}}" for i in range(base)]
     players = {}
     for name, overrides in (("faithful", []), ("quality", quality)):
         scene = load_scene(path, overrides=overrides)

@@ -479,7 +479,7 @@ def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles):
     display_block(PS, TS, P, BI, topology, b, dt, quality)
     if quality is not None:
         if P[b, PRM_TIME_BASED_SMOOTHING] != 0.0:
-            display_constraints_block(PS, T.PP, TS, CS, P, BI, topology, b, dt)  # quality mode (§E.1)
+            display_constraints_block(PS, T.PP, TS, CS, T.EDS, P, BI, topology, b, dt)  # quality mode (§E.1)
     if lines is not None:
         line_rotations_block(PS, PM, TS, P, BI, topology, b)
     if triangles is not None:

@@ -281,6 +281,30 @@ def edge_pass_lanes(PS, PM, BI, topology, b, l0, l1):
             put3(PS, gb, st.NEXT_POS, l, get3(PS, ga, st.ACCUM3, l))
 
 
+@kernel(forceinline=False)
+def stretched_lanes(PS, TS, BI, topology, b, w):
+    """``PROJECTION_NEEDED`` of lanes ``0 .. w - 1`` of block b: has the lane an edge with a moving
+    end stretched by more than ``PROJECTION_THRESHOLD`` of its step-basic rest length (the
+    condition under which ``edge_projection_lane`` solves)? Every lane side by side, so that
+    the lane-by-lane projection runs only for the lanes that need it."""
+    g0 = BI[b, bk.BI_G0]
+    attribute, pairs = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_EDGE_PAIRS]
+    for l in range(w):
+        put1(TS, b, st.PROJECTION_NEEDED, l, 0.0)
+    for e in range(BI[b, bk.BI_EDGES]):
+        ia = topology[pairs + 2 * e]
+        ib = topology[pairs + 2 * e + 1]
+        if (topology[attribute + ia] & MOVE) == 0 and (topology[attribute + ib] & MOVE) == 0:
+            continue   # both ends fixed: not in the projection
+        ga = g0 + ia
+        gb = g0 + ib
+        for l in range(w):
+            rest = v_length(v_sub(get3(PS, ga, st.STEP_BASIC_POS, l), get3(PS, gb, st.STEP_BASIC_POS, l)))
+            length = v_length(v_sub(get3(PS, gb, st.NEXT_POS, l), get3(PS, ga, st.NEXT_POS, l)))
+            stretched = length >= 1e-12 and length > rest * (1.0 + PROJECTION_THRESHOLD)
+            put1(TS, b, st.PROJECTION_NEEDED, l, 1.0 if stretched else get1(TS, b, st.PROJECTION_NEEDED, l))
+
+
 @kernel
 def has_cross_links(BI, topology, b):
     """Does block b's topology have a proxy edge that is not a parent link (a mesh cloth's
@@ -660,8 +684,10 @@ def inextensibility_passes(PS, PM, PP, TS, TM, LM, EDS, P, BI, topology, b, freq
     iterations = int(P[b, PRM_DISTANCE_ITERATIONS])
     if mode == INEXT_FTL_EDGES:
         if mesh:
+            stretched_lanes(PS, TS, BI, topology, b, w)
             for l in range(w):
-                edge_projection_lane(PS, PM, EDS, BI, topology, b, l, PROJECTION_ITERATIONS, False)
+                if get1(TS, b, st.PROJECTION_NEEDED, l) != 0.0:
+                    edge_projection_lane(PS, PM, EDS, BI, topology, b, l, PROJECTION_ITERATIONS, False)
         for _ in range(iterations):
             edge_pass_lanes(PS, PM, BI, topology, b, 0, w)
     if mode == INEXT_TETHER or mode == INEXT_FTL_TETHER or mode == INEXT_FTL_EDGES:

@@ -107,6 +107,8 @@ PROJECTION_GATHER = _p("projection_gather", 3, "W J^T p of the projection's conj
 PROJECTION_CONTACT = _p("projection_contact", 3, "unit or 0; direction collision last pushed it this step")
 QUALITY_DRIFT = _p("quality_drift", 3, "m; the angle pass's share of this step's correction kept out of the "
                    "velocity (restoration drift)")
+DISPLAY_FRACTION = _p("display_fraction", 1, "[0,1]; scratch of the quality display: the particle's move "
+                      "fraction in a move pass (quality_display.py, the frame)")
 del _p
 
 TRIANGLE_STATE = RowTable("triangle state", "triangle slot")
@@ -123,6 +125,8 @@ EDGE_PRODUCT = _e("edge_product", 1, "m; (J W J^T + compliance) times the search
 EDGE_DIAGONAL = _e("edge_diagonal", 1, "the edge's diagonal entry of J W J^T + compliance")
 EDGE_COMPLIANCE = _e("edge_compliance", 1, "the edge's compliance times (w_a + w_b)")
 EDGE_ACTIVE = _e("edge_active", 1, "the stretched edges of a team, listed from its first edge slot", INTEGER)
+EDGE_DISPLAY_BOUND = _e("edge_display_bound", 1, "m; the longest the quality display may show the edge "
+                        "(quality_display.display_edge_bound, the frame)")
 del _e
 
 WIND_SLOTS = 4   # one area (or global) zone and up to three additive zones (§C, TeamWindData)
@@ -149,6 +153,11 @@ STEP_RUNS = _t("step_runs", 1, "1: the team runs the block's current step (A.6, 
 FRAME_INTERPOLATION = _t("frame_interpolation", 1, "[0,1]: the team's frame interpolation at this step (A.6)")
 DISPLAY_T = _t("display_t", 1, "[0,1]: E.1's frame interpolation of the display (the frame, before the end stages)")
 DISPLAY_ALPHA = _t("display_alpha", 1, "[0,1): quality display's time since the last step / dt (the frame)")
+DISPLAY_LANE = _t("display_lane", 1, "quality display's progress of the lane (quality_display.py, the frame): "
+                  "0 done, 1 shown, 2 moving, 3 in the move passes", INTEGER)
+PROJECTION_NEEDED = _t("projection_needed", 1, "1: an edge of the lane is stretched beyond the edge projection's "
+                       "threshold (quality.stretched_lanes, the inextensibility pass)", INTEGER)
+DISPLAY_COMMON = _t("display_common", 1, "[0,1]; quality display: the team's common move fraction (the frame)")
 RAMP_FROM_BUILD = _t("ramp_from_build", 1, "1 while the team's last reset was the build reset (quality)", INTEGER)
 # component pose (C.2)
 COMPONENT_POS = _t("component_pos", 3, "m; component world position read this frame")
@@ -247,4 +256,10 @@ PLANE_NORMAL = _c("plane_normal", 3, "unit; plane normal this step")
 INVERSE_OLD_ROT = _c("inverse_old_rot", 4, "qinv(old rotation)", QUATERNION)
 AABB_MIN = _c("aabb_min", 3, "m; swept bounds")
 AABB_MAX = _c("aabb_max", 3, "m")
+# the quality display's colliders at this frame's pose (quality_display.display_colliders_block)
+DISPLAY_START = _c("display_start", 3, "m; sphere centre / capsule start / plane point, this frame's pose")
+DISPLAY_END = _c("display_end", 3, "m; capsule end (a sphere's: its centre), this frame's pose")
+DISPLAY_RADIUS_START = _c("display_radius_start", 1, "m; sphere / capsule start radius, this frame's scale")
+DISPLAY_RADIUS_END = _c("display_radius_end", 1, "m; capsule end radius (a sphere's: its radius)")
+DISPLAY_NORMAL = _c("display_normal", 3, "unit; plane normal, this frame's pose")
 del _c
