@@ -185,7 +185,9 @@ class Player:
                 handler(self, payload)
         totals = self.metric_totals
         for name, value in ctx.metrics.items():
-            if isinstance(value, _NUMBERS):
+            if type(value) is float:   # the common case first: a dozen metrics a frame
+                totals[name] = totals.get(name, 0.0) + value
+            elif isinstance(value, _NUMBERS):
                 totals[name] = totals.get(name, 0.0) + float(value)
         self.frame += 1
         self.last_context = ctx

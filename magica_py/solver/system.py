@@ -447,38 +447,29 @@ class ClothSystem:
         self.step_frame(t.delta_time, t.unscaled_delta_time, t.fixed_delta_time, fixed_count,
                         events=ctx.events, metrics=ctx.metrics)
 
-    def _time_constants(self) -> tuple:
-        """The frame inputs that follow from the time settings alone (recomputed when a
-        setting changes: the power terms take two ``pow`` each)."""
+    def _write_time_constants(self, fi) -> None:
+        """The frame inputs that follow from the time settings and the thread count alone,
+        ``fi[4:13]`` (frame.FrameInputs' fields, in order), written when one of them changes
+        (the power terms take two ``pow`` each; a write per frame would cost a microsecond of a
+        single tail's frame)."""
         s = self.time_settings
-        key = (s.frequency, s.max_steps_per_frame, s.global_time_scale, s.timing)
+        key = (s.frequency, s.max_steps_per_frame, s.global_time_scale, s.timing, self.threads, id(fi))
         if key != getattr(self, "_time_key", None):
             power = s.simulation_power
-            self._time_values = (float(s.global_time_scale), float(s.simulation_delta_time),
-                                 int(s.max_steps_per_frame), int(s.timing_code), 90.0 / s.frequency,
-                                 float(power[1]), float(power[2]), float(power[3]))
+            fi[4:13] = (float(s.global_time_scale), float(s.simulation_delta_time), int(s.max_steps_per_frame),
+                        int(s.timing_code), 90.0 / s.frequency, float(power[1]), float(power[2]), float(power[3]),
+                        self.threads)
             self._time_key = key
-        return self._time_values
 
     def step_frame(self, delta_time, unscaled_delta_time=None, fixed_delta_time=0.02,
                    fixed_update_count=0, events=None, metrics=None) -> None:
         """One frame of every team (usable without a player: tests, benchmarks)."""
-        (global_time_scale, dt, max_steps, timing, frequency_ratio, power_y, power_z,
-         power_w) = self._time_constants()
         fi = self._frame_values   # frame.FrameInputs' fields, in order
+        self._write_time_constants(fi)
         fi[0] = delta_time
         fi[1] = delta_time if unscaled_delta_time is None else unscaled_delta_time
         fi[2] = fixed_delta_time
-        fi[3] = int(fixed_update_count)
-        fi[4] = global_time_scale
-        fi[5] = dt
-        fi[6] = max_steps
-        fi[7] = timing
-        fi[8] = frequency_ratio
-        fi[9] = power_y
-        fi[10] = power_z
-        fi[11] = power_w
-        fi[12] = self.threads
+        fi[3] = fixed_update_count
         clock = _time.perf_counter
         self.hierarchy.flush()   # the kernel reads the world poses through kept references
         t0 = clock()
