@@ -94,17 +94,16 @@ def contact_speed_block(PS, PP, TS, CS, P, BI, topology, b, dt):
                 r = particle_radius(get1(PP, g, bk.CURVE_RADIUS, l), scale)
                 x = get3(PS, g, st.OLD_POS, l)
                 gap = surface_gap(CS, k, l, shape, x, r)
-                nearest = (gap <= r and gap < get1(PS, g, st.CONTACT_MIN_DIST, l)
-                           and get1(CS, k, st.SCALE_SUSPEND, l) == 0.0)
-                if nearest:
-                    put1(PS, g, st.CONTACT_MIN_DIST, l, gap)
-                    put3(PS, g, st.CONTACT_BODY_VELOCITY, l,
-                         body_point_velocity(get3(CS, k, st.NOW_POS, l), get4(CS, k, st.NOW_ROT, l),
-                                             get3(CS, k, st.C_OLD_POS, l), get4(CS, k, st.C_OLD_ROT, l), x, dt))
+                # selects, not branches (and no short-circuit): the lane loop vectorises
+                min_dist = get1(PS, g, st.CONTACT_MIN_DIST, l)
+                nearest = (gap <= r) & (gap < min_dist) & (get1(CS, k, st.SCALE_SUSPEND, l) == 0.0)
+                body = body_point_velocity(get3(CS, k, st.NOW_POS, l), get4(CS, k, st.NOW_ROT, l),
+                                           get3(CS, k, st.C_OLD_POS, l), get4(CS, k, st.C_OLD_ROT, l), x, dt)
+                put1(PS, g, st.CONTACT_MIN_DIST, l, gap if nearest else min_dist)
+                put3(PS, g, st.CONTACT_BODY_VELOCITY, l, body if nearest else get3(PS, g, st.CONTACT_BODY_VELOCITY, l))
         for l in range(w):
-            if get1(PS, g, st.CONTACT_MIN_DIST, l) < FAR:
-                scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
-                put3(PS, g, st.VELOCITY, l,
-                     contact_velocity(get3(PS, g, st.VELOCITY, l), get3(PS, g, st.CONTACT_BODY_VELOCITY, l),
-                                      get1(TS, b, st.VELOCITY_WEIGHT, l), limit * scale,
-                                      speed_limit * scale if speed_limit >= 0.0 else -1.0))
+            scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
+            v = get3(PS, g, st.VELOCITY, l)
+            limited = contact_velocity(v, get3(PS, g, st.CONTACT_BODY_VELOCITY, l), get1(TS, b, st.VELOCITY_WEIGHT, l),
+                                       limit * scale, speed_limit * scale if speed_limit >= 0.0 else -1.0)
+            put3(PS, g, st.VELOCITY, l, limited if get1(PS, g, st.CONTACT_MIN_DIST, l) < FAR else v)

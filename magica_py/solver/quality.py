@@ -62,7 +62,7 @@ from magica_py.solver.constraints.distance import distance_block
 from magica_py.solver.constraints.tether import gather_partner_step_pose
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
-from magica_py.solver.lanes import get1, get3, get4, put1, put3
+from magica_py.solver.lanes import LANES, get1, get3, get4, put1, put3
 from magica_py.solver.parameters import (
     PRM_COLLISION_LAST, PRM_COLLISION_MODE, PRM_DISTANCE_FULL_VELOCITY, PRM_DISTANCE_ITERATIONS, PRM_FTL_DAMPING,
     PRM_INEXTENSIBILITY, PRM_QUALITY, PRM_RESTORATION_ATTENUATION, PRM_RESTORATION_DRIFT, PRM_TETHER_LIMIT,
@@ -229,6 +229,7 @@ def projection_masses(PS, PM, BI, topology, b, l0, l1):
     """Every particle's inverse mass of the edge passes and the edge projection, lanes
     ``l0 .. l1 - 1`` of block b, in ``PROJECTION_INVERSE_MASS``: D.4's depth mass
     (``inverse_mass_friction_depth``), 0 when fixed."""
+    l1 = min(l1, LANES)   # a lane loop bounded by LANES vectorises (lanes.py)
     g0 = BI[b, bk.BI_G0]
     attribute = BI[b, bk.BI_ATTRIBUTE]
     for j in range(BI[b, bk.BI_N]):
@@ -252,6 +253,7 @@ def edge_pass_lanes(PS, PM, BI, topology, b, l0, l1):
     solved there (the second's result in ``ACCUM3``), then the second's copied back; an edge
     left as it is writes its ends' positions back unchanged."""
     projection_masses(PS, PM, BI, topology, b, l0, l1)
+    l1 = min(l1, LANES)   # a lane loop bounded by LANES vectorises (lanes.py)
     g0 = BI[b, bk.BI_G0]
     attribute, pairs = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_EDGE_PAIRS]
     for e in range(BI[b, bk.BI_EDGES]):
@@ -273,7 +275,7 @@ def edge_pass_lanes(PS, PM, BI, topology, b, l0, l1):
             pb = get3(PS, ga, st.PARTNER_POS, l)
             d = v_sub(pb, pa)
             length = v_length(d)
-            keep = wa + wb <= 0.0 or length <= rest or length < 1e-12
+            keep = (wa + wb <= 0.0) | (length <= rest) | (length < 1e-12)   # no short-circuit: a select
             c = v_scale(d, (length - rest) / (length * (wa + wb)))   # discarded when kept
             put3(PS, ga, st.NEXT_POS, l, pa if keep else v_add(pa, v_scale(c, wa)))
             put3(PS, ga, st.ACCUM3, l, pb if keep else v_sub(pb, v_scale(c, wb)))
