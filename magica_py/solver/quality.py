@@ -289,6 +289,7 @@ def stretched_lanes(PS, TS, BI, topology, b, w):
     end stretched by more than ``PROJECTION_THRESHOLD`` of its step-basic rest length (the
     condition under which ``edge_projection_lane`` solves)? Every lane side by side, so that
     the lane-by-lane projection runs only for the lanes that need it."""
+    w = min(w, LANES)   # a lane loop bounded by LANES vectorises (lanes.py)
     g0 = BI[b, bk.BI_G0]
     attribute, pairs = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_EDGE_PAIRS]
     for l in range(w):
@@ -303,7 +304,7 @@ def stretched_lanes(PS, TS, BI, topology, b, w):
         for l in range(w):
             rest = v_length(v_sub(get3(PS, ga, st.STEP_BASIC_POS, l), get3(PS, gb, st.STEP_BASIC_POS, l)))
             length = v_length(v_sub(get3(PS, gb, st.NEXT_POS, l), get3(PS, ga, st.NEXT_POS, l)))
-            stretched = length >= 1e-12 and length > rest * (1.0 + PROJECTION_THRESHOLD)
+            stretched = (length >= 1e-12) & (length > rest * (1.0 + PROJECTION_THRESHOLD))   # a select
             put1(TS, b, st.PROJECTION_NEEDED, l, 1.0 if stretched else get1(TS, b, st.PROJECTION_NEEDED, l))
 
 
