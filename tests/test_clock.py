@@ -5,6 +5,7 @@ import math
 import random
 from fractions import Fraction
 
+import numpy as np
 import pytest
 
 from magica_py.runtime.clock import (
@@ -190,3 +191,21 @@ def test_time_from_settings_picks_the_source_and_unity_parameters():
     assert [src.next_delta() for _ in range(4)] == [0.1, 0.2, 0.2, 0.2]
     src, _ = time_from_settings({"clock": "realtime", "fps": 50})
     assert isinstance(src, RealClock) and src.first_delta == 1 / 50
+
+
+def test_unity_time_is_immutable_and_lists_its_fields_in_order():
+    t = TimeManager().advance(1.0 / 60.0)
+    assert t._fields == ("frame_count", "delta_time", "unscaled_delta_time", "time", "unscaled_time",
+                         "fixed_delta_time", "fixed_time", "fixed_update_count", "time_scale",
+                         "maximum_delta_time")
+    with pytest.raises(AttributeError):
+        t.time = 2.0
+
+
+def test_frame_times_that_are_not_python_floats_give_the_same_clock():
+    a, b = TimeManager(), TimeManager()
+    for raw in (1 / 60, 1 / 30, 0.5, 1 / 144):
+        assert a.advance(raw) == b.advance(np.float64(raw))
+    for bad in (float("nan"), float("inf"), 0.0, -1 / 60):
+        with pytest.raises(ValueError, match="frame time"):
+            TimeManager().advance(bad)

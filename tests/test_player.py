@@ -339,3 +339,15 @@ def test_profile_systems_records_per_system_wall_time_and_reset_restarts_time():
     ctx = player.step()
     assert ctx.frame == 0 and ctx.time.frame_count == 1 and ctx.time.time == pytest.approx(1 / 30)
     assert player.metric_totals["time.update"] == ctx.metrics["time.update"]
+
+
+def test_systems_added_or_removed_between_frames_run_from_the_next_frame():
+    log = []
+    player = make_player()
+    player.schedule.add(Phase.LATE_UPDATE, System("first", tracer(log, "first")))
+    player.step()
+    player.schedule.add(Phase.LATE_UPDATE, System("second", tracer(log, "second")), before="first")
+    player.step()
+    player.schedule.remove("first")
+    player.step()
+    assert log == [(0, "first"), (1, "second"), (1, "first"), (2, "second")]

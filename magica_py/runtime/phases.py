@@ -106,6 +106,7 @@ class Schedule:
     def __init__(self):
         self._systems: dict[Phase, list[System]] = {phase: [] for phase in Phase}
         self.restore = RestoreRegistry()
+        self._order: tuple | None = None   # ``order()``, made again after add / remove
 
     def add(self, phase: Phase, system: System, before: str | None = None,
             after: str | None = None) -> System:
@@ -121,6 +122,7 @@ class Schedule:
                              f"{self.find(system.name).name}")
         systems = self._systems[phase]
         anchor = before if before is not None else after
+        self._order = None
         if anchor is None:
             systems.append(system)
             return system
@@ -136,6 +138,7 @@ class Schedule:
         for systems in self._systems.values():
             for i, s in enumerate(systems):
                 if s.name == name:
+                    self._order = None
                     return systems.pop(i)
         raise KeyError(f"no system named {name!r} in the schedule")
 
@@ -151,6 +154,13 @@ class Schedule:
         if systems is None:
             systems = self._systems[Phase(phase)]
         return tuple(systems)
+
+    def order(self) -> tuple[tuple[Phase, tuple[System, ...]], ...]:
+        """``((phase, its systems), ...)`` for every phase in execution order: what the player
+        walks each frame (kept until the next ``add`` / ``remove``)."""
+        if self._order is None:
+            self._order = tuple((phase, tuple(self._systems[phase])) for phase in Phase)
+        return self._order
 
     def describe(self) -> list[tuple[str, list[str]]]:
         """``[(phase name, [system names in order]), ...]`` for every phase, in order."""

@@ -14,7 +14,6 @@ name, a failed one deletes it.
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 from dataclasses import dataclass
 from typing import Any
@@ -188,7 +187,7 @@ class Recorder:
         if not self.toggles.replay:
             return
         if not self.time_fields:
-            self.time_fields = tuple(f.name for f in dataclasses.fields(ctx.time))
+            self.time_fields = tuple(ctx.time._fields)
         if self.replay_nodes is None:
             self.replay_nodes = driven_nodes(self.scene, self.player)
         h, d = self.scene.hierarchy, self.replay_nodes

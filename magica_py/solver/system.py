@@ -436,11 +436,12 @@ class ClothSystem:
     # ------------------------------------------------------------------ frame
     def run(self, ctx) -> None:
         """The LATE_UPDATE system: apply pending events, simulate every team, propagate."""
-        for kind, payload in list(ctx.events):
-            if kind == "set_parameter":
-                self.set_parameter(payload["cloth"], payload["key"], payload["value"])
-            elif kind == "wind" and self.wind is not None:
-                self.wind.apply_event(payload)
+        if ctx.events:
+            for kind, payload in list(ctx.events):
+                if kind == "set_parameter":
+                    self.set_parameter(payload["cloth"], payload["key"], payload["value"])
+                elif kind == "wind" and self.wind is not None:
+                    self.wind.apply_event(payload)
         t = ctx.time
         counters = getattr(ctx, "counters", None)
         fixed_count = counters.fixed_update_count if counters is not None else t.fixed_update_count
@@ -471,15 +472,17 @@ class ClothSystem:
         fi[2] = fixed_delta_time
         fi[3] = fixed_update_count
         clock = _time.perf_counter
-        self.hierarchy.flush()   # the kernel reads the world poses through kept references
+        hierarchy = self.hierarchy
+        hierarchy.flush()   # the kernel reads the world poses through kept references
         t0 = clock()
-        self.select_wind()
+        if self.wind is not None:
+            self.select_wind()
         most_steps, particle_steps, guarded = self._call_frame(fi)
         t1 = clock()
-        if self._written_plan.threads != self.hierarchy.threads:
-            self._written_plan = self.hierarchy.plan(self.restored_bones())
+        if self._written_plan.threads != hierarchy.threads:
+            self._written_plan = hierarchy.plan(self.restored_bones())
         # the subtrees of the bones written back, computed when next read (scene/hierarchy.py)
-        self.hierarchy.propagate_later(self._written_plan)
+        hierarchy.propagate_later(self._written_plan)
         t2 = clock()
         self.frame_count += 1
         if guarded:
@@ -642,7 +645,7 @@ class ClothSystem:
         returns the frame's counts (``frame.frame_counts``)."""
         if self._first_call:
             return self._first_frame_call(fi)
-        zones = self._wind_zones()
+        zones = self.wind.kernel_table() if self.wind is not None else None
         F = self._frame_arrays()
         if self.parallel:
             return simulate_frame_parallel(F, fi, self._save_area, zones, *self._workers, *self.stages)
