@@ -161,11 +161,11 @@ def test_the_display_stays_outside_a_capsule_the_root_passes_through(bq, tmp_pat
     assert off_step > 1e-3                       # without collision last the tail enters it
 
 
-def test_inside_old_pose_oracle():
+def test_start_depth_finds_particles_already_inside_at_the_previous_pose():
     """The "was already inside" test of collision last: sphere, tapered capsule and plane at
     their previous-step pose, with the particle radius and the 1 um tolerance."""
     from magica_py.solver import state as st
-    from magica_py.solver.quality import inside_old_pose
+    from magica_py.solver.quality import INSIDE_TOLERANCE, start_depth
 
     # three collider slots (sphere, tapered capsule along x, plane y = 0) of lane 0
     cs = st.COLLIDER.allocate(3)
@@ -177,7 +177,7 @@ def test_inside_old_pose_oracle():
         st.COLLIDER.write(cs, name, slice(None), 0, values)
 
     def inside(k, x, r):
-        return inside_old_pose(cs, k, 0, shape[k], x, r)
+        return start_depth(cs, k, 0, shape[k], x, r) > INSIDE_TOLERANCE
 
     r = 0.02
     assert inside(0, (0.5, 0.0, 0.0), r)             # inside sphere + radius

@@ -56,17 +56,3 @@ def grow(cls, soa, sizes: dict[str, int], fill: dict | None = None):
         n = min(old.shape[0], sizes[per])
         getattr(fresh, name)[:n] = old[:n]
     return fresh
-
-
-def reset_rows(cls, soa, per: str, start: int, stop: int, fill: dict | None = None) -> None:
-    """Put rows ``start:stop`` of every ``per`` field back to their freshly allocated values
-    (zero, identity quaternions, then ``fill``), in place; other rows are untouched."""
-    for name, p, shape, dtype, _doc in cls.FIELDS:
-        if p != per:
-            continue
-        rows = getattr(soa, name)[start:stop]
-        rows[...] = 0
-        if shape == (4,) and dtype == F64 and ("rot" in name or "quat" in name):
-            rows[..., 3] = 1.0
-        if fill and name in fill:
-            rows[...] = fill[name]

@@ -166,10 +166,3 @@ def put4(a, i, col, l, q):
     a[i, col + LANES + l] = q[1]
     a[i, col + 2 * LANES + l] = q[2]
     a[i, col + 3 * LANES + l] = q[3]
-
-
-@kernel
-def copy_rows(a, i_from, i_to, col, rows, l):
-    """Lane ``l`` of ``rows`` rows from column ``col`` of item ``i_from`` to item ``i_to``."""
-    for r in range(rows):
-        a[i_to, col + r * LANES + l] = a[i_from, col + r * LANES + l]

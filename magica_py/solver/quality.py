@@ -636,13 +636,6 @@ def start_depth(CS, k, l, shape, x, r):
 
 
 @kernel
-def inside_old_pose(CS, k, l, shape, x, r):
-    """Is x (with radius r) deeper than ``INSIDE_TOLERANCE`` inside collider slot k of lane l
-    at its previous-step pose? (A particle projected by the last step lies on the surface.)"""
-    return start_depth(CS, k, l, shape, x, r) > INSIDE_TOLERANCE
-
-
-@kernel
 def quality_distance_attenuation(P, b, faithful_attenuation):
     """D.4's velocity attenuation: 0 (full PBD velocity) when distance_full_velocity is on."""
     if P[b, PRM_DISTANCE_FULL_VELOCITY] != 0.0:
