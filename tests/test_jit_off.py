@@ -85,9 +85,26 @@ class Names(event.Listener):
         pass
 
 
+# first what a first run's helper process and the system's process compile before the frame
+# kernel (solver/compile_helper.py), with another system of the same scene's arrays
+from magica_py.config import load_scene
+from magica_py.solver.frame import compile_end_stages, compile_step_stages
+from magica_py.solver.system import ClothSystem
+
+scene = load_scene("configs/tail_orbit.yaml")
+system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings)
+s = system.stages
+with event.install_listener("numba:compile", Names()):
+    F = system._frame_arrays()
+    compile_step_stages(F, system._frame_values, 0, None, s.angle, s.bending, s.point_collision, s.edge_collision,
+                        s.motion, s.quality, s.wind)
+    compile_end_stages(F, system._frame_values, system._save_area, 0, s.quality, s.lines, s.triangles)
+before_frames = set(compiled)
+compiled.clear()
 with event.install_listener("numba:compile", Names()):
     result = magica_py.simulate("configs/tail_orbit.yaml", frames=4)
-print(json.dumps({"positions": result.cloths["tail"].positions.tolist(), "compiled": sorted(compiled)}))
+print(json.dumps({"positions": result.cloths["tail"].positions.tolist(), "compiled": sorted(compiled | before_frames),
+                  "before_frames": sorted(before_frames), "in_frames": sorted(compiled)}))
 """
 # the optional stages tail_orbit (line mode, angle restoration, no collider, no motion
 # constraint, faithful mode, no wind: ``ClothSystem.stages`` has angle and lines only) does not
@@ -118,4 +135,11 @@ def test_tail_orbit_runs_bounds_checked_and_compiles_only_the_stages_it_uses(tmp
     assert {"simulate_frame", "predict_block", "distance_block", "angle_block",
             "line_rotations_block"} <= compiled
     assert not compiled & set(UNUSED_BY_TAIL_ORBIT), sorted(compiled & set(UNUSED_BY_TAIL_ORBIT))
+    # the stages compiled ahead of the frame kernel (a first run's helper compiles the step's
+    # stages into the cache, the system's process the end-of-frame stages) are the ones the
+    # frame kernel calls: it compiles none of them again with other argument types
+    ahead = {name for name in checked["before_frames"] if name.endswith(("_block", "_lane", "_lanes"))}
+    assert {"predict_block", "distance_block", "angle_block", "end_step_block", "line_rotations_block",
+            "transform_block"} <= ahead, sorted(ahead)
+    assert not ahead & set(checked["in_frames"]), sorted(ahead & set(checked["in_frames"]))
     assert np.array(checked["positions"]).tobytes() == np.array(_run(False)["positions"]).tobytes()

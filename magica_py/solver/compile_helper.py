@@ -1,15 +1,20 @@
-"""A first run's compile on two cores: a forked process compiles the end-of-frame stages.
+"""A first run's compile on two cores: a forked process compiles the step's stages.
 
 numba compiles one function at a time in a process (a process-wide compiler lock), and a
 scene's first frame with an empty kernel cache compiles every stage it uses (docs/BENCHMARKS.md,
 *First run*). The frame kernel's typing reaches the stages in order: each block's begin of
-frame, its steps, then its end of frame (guards, display, rotations, write-back). So while the
-system's process compiles the first two, a forked copy of it compiles the third with exactly
-the frame kernel's argument types (``frame.compile_end_stages``: typed and compiled, run with
-``run=0`` so nothing executes) and writes them to numba's on-disk cache (``cache=True``, the
-documented cache; the cache starts empty and is filled by the two processes). When the frame
-kernel's typing reaches those stages it finds them in the cache, or compiles itself any the
-helper has not finished. The results are the same functions, so the same bits.
+frame, its steps, then its end of frame (guards, display, rotations, write-back). On a first
+run the work is split in two: a forked copy of the process compiles the step's stages with
+exactly the frame kernel's argument types (``frame.compile_step_stages``: typed and compiled,
+run with ``run=0`` so nothing executes) and writes them to numba's on-disk cache
+(``cache=True``, the documented cache; the cache starts empty and is filled by the two
+processes), while the system's process compiles the end-of-frame stages
+(``frame.compile_end_stages``, likewise not run) and then, typing the frame kernel, the begin
+of frame. The step's stages are the largest of the three shares (on the tail about 14 s
+against about 10 s each for the other two), so the helper has finished them when the frame
+kernel's typing reaches them, and that typing loads them from the cache; any the helper has
+not finished, the system's process compiles itself. The results are the same functions, so
+the same bits.
 
 Only where it is safe and useful: Linux (``os.fork``), the JIT and the cache on, at least two
 CPUs of which one is free (the 1-minute load average at most the CPUs less a half: on a machine
@@ -30,7 +35,7 @@ import threading
 from numba import config
 
 from magica_py import jit
-from magica_py.solver.frame import compile_end_stages
+from magica_py.solver.frame import compile_end_stages, compile_step_stages
 
 
 def wanted(kernel) -> bool:
@@ -48,9 +53,11 @@ def wanted(kernel) -> bool:
     return not kernel.signatures
 
 
-def start(F, frame_values, area, stages) -> int | None:
-    """Fork the helper (``compile_end_stages`` with the frame's arrays ``F``, frame inputs,
-    save area and ``frame.StageSwitches``); returns its pid, or None where fork failed."""
+def start(F, frame_values, area, wind_zones, stages) -> int | None:
+    """Fork the helper (``compile_step_stages`` with the frame's arrays ``F``, frame inputs,
+    wind table and ``frame.StageSwitches``), then compile the end-of-frame stages here
+    (``compile_end_stages`` with the save area); returns the helper's pid, or None where fork
+    failed (the frame kernel then compiles everything in this process)."""
     try:
         pid = os.fork()
     except OSError:
@@ -58,10 +65,16 @@ def start(F, frame_values, area, stages) -> int | None:
     if pid == 0:   # the helper: compile, then leave without any of the parent's exit work
         code = 0
         try:
-            compile_end_stages(F, frame_values, area, 0, stages.quality, stages.lines, stages.triangles)
+            compile_step_stages(F, frame_values, 0, wind_zones, stages.angle, stages.bending, stages.point_collision,
+                                stages.edge_collision, stages.motion, stages.quality, stages.wind)
         except BaseException:
             code = 1
         os._exit(code)
+    try:
+        compile_end_stages(F, frame_values, area, 0, stages.quality, stages.lines, stages.triangles)
+    except BaseException:
+        finish(pid)
+        raise
     return pid
 
 

@@ -630,9 +630,22 @@ def block_load(T, tt, b):
 def compile_end_stages(F, frame_values, area, run, quality, lines, triangles):
     """The end-of-frame stages (``block_frame_end``) typed and compiled with exactly the frame
     kernels' argument types, run only when ``run`` is not 0 (``solver/compile_helper.py`` passes
-    0: a first run's forked helper compiles them into numba's cache while the system's process
-    compiles the rest of the frame)."""
+    0: on a first run the system's process compiles them while a forked helper compiles the
+    step's stages, ``compile_step_stages``)."""
     T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
     if run != 0 and T.blocks.shape[0] > 0:
         block_frame_end(T, tt, h, T.blocks[0], fi, area[0], quality, lines, triangles)
+
+
+@kernel(forceinline=False)
+def compile_step_stages(F, frame_values, run, wind_zones, angle, bending, point_collision, edge_collision, motion,
+                        quality, wind):
+    """The step's stages (``run_step``) typed and compiled with exactly the frame kernels'
+    argument types, run only when ``run`` is not 0 (``solver/compile_helper.py``: a first run's
+    forked helper compiles them into numba's cache)."""
+    T, tt, h = frame_tuples(F)
+    fi = frame_inputs(frame_values)
+    if run != 0 and T.blocks.shape[0] > 0:
+        run_step(T, tt, T.blocks[0], fi, angle, bending, point_collision, edge_collision, motion, quality, wind,
+                 wind_zones)

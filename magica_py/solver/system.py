@@ -653,13 +653,14 @@ class ClothSystem:
 
     def _first_frame_call(self, fi) -> tuple:
         """The system's first frame call: on a first run (the frame kernel not yet compiled in
-        this process) a helper process compiles the end-of-frame stages meanwhile
-        (``solver/compile_helper.py``)."""
+        this process) a helper process compiles the step's stages meanwhile, while this process
+        compiles the end of frame, then the frame kernel (``solver/compile_helper.py``)."""
         self._first_call = False
         kernel = simulate_frame_parallel if self.parallel else simulate_frame
         helper = None
         if compile_helper.wanted(kernel):
-            helper = compile_helper.start(self._frame_arrays(), fi, self._save_area, self.stages)
+            zones = self.wind.kernel_table() if self.wind is not None else None
+            helper = compile_helper.start(self._frame_arrays(), fi, self._save_area, zones, self.stages)
         try:
             return self._call_frame(fi)
         finally:
