@@ -10,8 +10,10 @@ side by side (``solver/lanes.py``). Blocks are independent: the frame reads the 
 world arrays (the pose propagated before LATE_UPDATE) and the write-back writes only its local
 arrays, which no block reads, so a block written back before another's begin changes nothing
 that block sees (MagicaCloth2 reads every cloth's transforms before it writes any: docs/solver.md
-§A.3). The serial kernel (``simulate_frame``) and the parallel one (``simulate_frame_parallel``,
-blocks dealt to threads) call the same per-block functions and give the same bits.
+§A.3). The serial kernel (``simulate_frame``) and a frame on several threads
+(``begin_parallel_frame``, then ``simulate_worker`` on each Python thread of the system's pool
+with the blocks dealt to it, then ``end_parallel_frame``) call the same per-block functions and
+give the same bits.
 
 **Lanes that do not run.** A block runs every stage for all its lanes. A lane whose team is
 not simulated this frame (disabled, culled, scale-suspended: ``ACTIVE`` 0) or that runs
@@ -33,7 +35,6 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import prange
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import q_angle, v_length, v_sub
@@ -92,7 +93,7 @@ FrameInputs = namedtuple("FrameInputs", [
     "delta_time", "unscaled_delta_time", "fixed_delta_time", "fixed_update_count",
     "global_time_scale", "dt", "max_steps", "timing", "frequency_ratio",
     "power_y", "power_z", "power_w",
-    "threads"])   # threads the parallel kernel deals its work to (numba.get_num_threads() at the call)
+    "threads"])   # threads a parallel frame deals its blocks to (the system's thread count)
 # The frame inputs travel into the kernel as one float64 array in FrameInputs' field order
 # (``frame_input_values``; typing a namedtuple argument costs ~6-9 us per call, an array
 # 0.2 us) and the kernel rebuilds the namedtuple (``frame_inputs``); every value is a float64
@@ -106,7 +107,7 @@ FRAME_INPUT_COUNT = len(FrameInputs._fields)
 # ``system.stage_switches`` derives them from the live blocks.
 StageSwitches = namedtuple("StageSwitches", [
     "angle", "bending", "point_collision", "edge_collision", "motion", "quality", "lines", "triangles", "wind"])
-# the per-thread work table of the parallel kernel: block_worker (blocks,) int32, worker_load
+# the per-thread work table of a parallel frame: block_worker (blocks,) int32, worker_load
 # (threads,) int64 particle-steps (written by ``assign_workers`` each frame)
 WorkerTable = namedtuple("WorkerTable", ["block_worker", "worker_load"])
 
@@ -563,33 +564,44 @@ def simulate_frame(F, frame_values, area, wind_zones, angle, bending, point_coll
     return frame_counts(T, tt)
 
 
-@kernel(parallel=True, forceinline=False)
-def simulate_frame_parallel(F, frame_values, area, wind_zones, block_worker, worker_load, angle, bending,
-                            point_collision, edge_collision, motion, quality, lines, triangles, wind):
-    """``simulate_frame`` with the blocks dealt to ``fi.threads`` threads (``scene.threads``,
-    ``system.choose_threads``); ``block_worker`` and ``worker_load``: its ``WorkerTable``.
-    ``assign_workers`` deals the blocks each frame (greedy, in block order); each thread runs
-    its blocks' begin, steps and end in one parallel region: one thread launch per frame.
-    Blocks are independent and each runs in its own order, so the results are the serial
-    kernel's bits."""
+@kernel(forceinline=False)
+def begin_parallel_frame(F, frame_values, block_worker, worker_load):
+    """A frame on several threads, before the threads: ``simulate_frame``'s scale suspension,
+    culling and team clocks, then the blocks dealt to the threads (``assign_workers``,
+    ``WorkerTable``). Returns the number of threads that get blocks. The system then runs
+    ``simulate_worker`` on each thread (Python threads: the kernels release the GIL) and
+    ``end_parallel_frame``; blocks are independent and each runs in its own order, so the
+    results are the serial kernel's bits."""
     T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
     prepare_lanes(T.TS, T.TI, T.P, T.BI, T.blocks, tt, h)
     _time_frame_update(tt, fi)
-    workers = max(1, min(fi.threads, min(worker_load.shape[0], area.shape[0])))
+    workers = max(1, min(fi.threads, worker_load.shape[0]))
     assign_workers(T, tt, WorkerTable(block_worker, worker_load), workers)
-    # each region rebuilds the namedtuples from F and the frame inputs from the array: a
-    # namedtuple made in the kernel cannot enter a prange body (numba's parfor lowering looks
-    # its class up by name)
-    for w in prange(workers):
-        Tw, ttw, hw = frame_tuples(F)
-        fw = frame_inputs(frame_values)
-        for i in range(Tw.blocks.shape[0]):
-            b = Tw.blocks[i]
-            if block_worker[b] == w:
-                block_frame_steps(Tw, ttw, hw, b, fw, area[w], angle, bending, point_collision, edge_collision,
-                                  motion, quality, wind, wind_zones)
-                block_frame_end(Tw, ttw, hw, b, fw, area[w], quality, lines, triangles)
+    return workers
+
+
+@kernel(forceinline=False)
+def simulate_worker(F, frame_values, area, wind_zones, block_worker, worker, angle, bending, point_collision,
+                    edge_collision, motion, quality, lines, triangles, wind):
+    """Thread ``worker``'s share of a parallel frame: the begin, steps and end of each block
+    ``assign_workers`` dealt to it (``block_worker``), with its own row of the save area."""
+    T, tt, h = frame_tuples(F)
+    fi = frame_inputs(frame_values)
+    for i in range(T.blocks.shape[0]):
+        b = T.blocks[i]
+        if block_worker[b] == worker:
+            block_frame_steps(T, tt, h, b, fi, area[worker], angle, bending, point_collision, edge_collision,
+                              motion, quality, wind, wind_zones)
+            block_frame_end(T, tt, h, b, fi, area[worker], quality, lines, triangles)
+
+
+@kernel(forceinline=False)
+def end_parallel_frame(F, frame_values):
+    """A frame on several threads, after the threads: ``simulate_frame``'s close of frame
+    (§A.7) and its counts (``frame_counts``)."""
+    T, tt, h = frame_tuples(F)
+    fi = frame_inputs(frame_values)
     _frame_close(tt, h, fi)
     return frame_counts(T, tt)
 

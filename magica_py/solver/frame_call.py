@@ -8,9 +8,9 @@ a StructRef (``numba.experimental.structref``, the documented API: ``register``,
 ``define_proxy``) holding the 49 arrays is typed in well under a microsecond. On the single
 tail (a frame of ~32 us) that is worth having. ``frame_arrays`` builds the StructRef once per
 change of tables (``ClothSystem._frame_arrays``); it shares the numpy arrays, so the kernel
-sees every write made to them. The frame kernels (``frame.simulate_frame`` and
-``simulate_frame_parallel``) take it and rebuild the namedtuples from its fields
-(``frame.frame_tuples``).
+sees every write made to them. The frame kernels (``frame.simulate_frame``, and a parallel
+frame's ``begin_parallel_frame``, ``simulate_worker``, ``end_parallel_frame``) take it and
+rebuild the namedtuples from its fields (``frame.frame_tuples``).
 
 With ``NUMBA_DISABLE_JIT=1`` the StructRef is a plain namedtuple with the same field names
 (``FrameArraysTuple``), so the frame runs as Python.

@@ -32,6 +32,7 @@ Guards: a team reset by ``solver/guards.py`` raises ``("cloth_reset", {"cloth", 
 from __future__ import annotations
 
 import time as _time
+from functools import partial
 
 import numba
 import numpy as np
@@ -47,9 +48,10 @@ from magica_py.solver.blocks import (
 from magica_py.solver.colliders import collider_shapes, fill_slots
 from magica_py.solver.frame import (
     StageSwitches, Tables, frame_input_values, hierarchy_arrays, lane_save_area, simulate_frame,
-    simulate_frame_parallel, time_arrays, worker_table,
+    begin_parallel_frame, end_parallel_frame, simulate_worker, time_arrays, worker_table,
 )
 from magica_py.solver.frame_call import frame_arrays
+from magica_py.solver.threads import FrameThreads
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
 from magica_py.solver.parameters import (
     PARAMETER_COUNT, allocate_parameters, packed_row, particle_parameters_block, write_row,
@@ -153,6 +155,7 @@ class ClothSystem:
         self._frame_arrays_of = None     # (tables, clocks, hierarchy) the frame's StructRef was made of
         self._frame_arrays_made = None
         self._first_call = True   # (_call_frame)
+        self._pool = None         # the threads of a parallel frame, made at the first (_parallel_frame)
         if self.parallel:  # the hierarchy propagation spreads over the same threads
             hierarchy.threads = max(hierarchy.threads, self.threads)
         self._tables_changed(register=False)
@@ -648,15 +651,39 @@ class ClothSystem:
         zones = self.wind.kernel_table() if self.wind is not None else None
         F = self._frame_arrays()
         if self.parallel:
-            return simulate_frame_parallel(F, fi, self._save_area, zones, *self._workers, *self.stages)
+            return self._parallel_frame(F, fi, zones)
         return simulate_frame(F, fi, self._save_area, zones, *self.stages)
+
+    def _parallel_frame(self, F, fi, zones) -> tuple:
+        """The frame on ``threads`` threads: ``begin_parallel_frame`` deals the blocks, each
+        thread runs ``simulate_worker`` over its blocks (this one and the system's
+        ``FrameThreads``; the kernels release the GIL), ``end_parallel_frame`` closes the frame
+        (solver/frame.py). The first frame runs the workers one after the other in this thread,
+        so that their kernel compiles here (the compile's announcement and timing, the compile
+        helper)."""
+        block_worker, worker_load = self._workers
+        workers = begin_parallel_frame(F, fi, block_worker, worker_load)
+        head = (F, fi, self._save_area, zones, block_worker)
+        stages = self.stages
+        pool = self._pool
+        if pool is None:
+            for w in range(workers):
+                simulate_worker(*head, w, *stages)
+            self._pool = FrameThreads(self.threads - 1)
+        else:
+            pool.run([partial(simulate_worker, *head, w, *stages) for w in range(1, workers)])
+            try:
+                simulate_worker(*head, 0, *stages)
+            finally:   # every thread's blocks finish before the frame closes or an error leaves
+                pool.join()
+        return end_parallel_frame(F, fi)
 
     def _first_frame_call(self, fi) -> tuple:
         """The system's first frame call: on a first run (the frame kernel not yet compiled in
         this process) a helper process compiles the step's stages meanwhile, while this process
         compiles the end of frame, then the frame kernel (``solver/compile_helper.py``)."""
         self._first_call = False
-        kernel = simulate_frame_parallel if self.parallel else simulate_frame
+        kernel = simulate_worker if self.parallel else simulate_frame
         helper = None
         if compile_helper.wanted(kernel):
             zones = self.wind.kernel_table() if self.wind is not None else None
