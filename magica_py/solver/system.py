@@ -47,16 +47,16 @@ from magica_py.solver.blocks import (
 )
 from magica_py.solver.colliders import collider_shapes, fill_slots
 from magica_py.solver.frame import (
-    StageSwitches, Tables, frame_input_values, hierarchy_arrays, lane_save_area, simulate_frame,
-    begin_parallel_frame, end_parallel_frame, simulate_worker, time_arrays, worker_table,
+    StageSwitches, Tables, begin_parallel_frame, end_parallel_frame, frame_input_values, hierarchy_arrays,
+    lane_save_area, simulate_frame, simulate_worker, time_arrays, worker_table,
 )
 from magica_py.solver.frame_call import frame_arrays
-from magica_py.solver.threads import FrameThreads
 from magica_py.solver.guards import GUARD_NON_FINITE, GUARD_SPEED
 from magica_py.solver.parameters import (
     PARAMETER_COUNT, allocate_parameters, packed_row, particle_parameters_block, write_row,
 )
 from magica_py.solver.fields import grow
+from magica_py.solver.threads import FrameThreads
 from magica_py.solver.views import TableView, team_model
 
 FORCE_MODES = {"velocity_add": 1, "velocity_add_without_depth": 2, "velocity_change": 3,
