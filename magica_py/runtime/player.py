@@ -159,7 +159,8 @@ class Player:
                 ctx.metrics[key] = ctx.metrics.get(key, 0.0) + clock() - start
 
     def step(self) -> FrameContext:
-        """Run one frame; returns its context."""
+        """Run one frame; returns its context. The frame walks the schedule as it was when the
+        frame began: a system added or removed by a system takes effect from the next frame."""
         t = self.time_manager.advance(self.time_source.next_delta())
         ctx = FrameContext(frame=self.frame, time=t, scene=self.scene, counters=self.counters)
         clock = _time.perf_counter
