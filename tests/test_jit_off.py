@@ -69,6 +69,41 @@ def test_character_in_quality_mode_runs_with_the_jit_off_and_gives_the_compiled_
         assert np.array(a).tobytes() == np.array(b).tobytes()
 
 
+# a strand hanging at rest straight down: every edge is exactly along its rest direction, so the
+# angle restoration takes its parallel path (its discarded turn divides by a zero length)
+HANGING_SNIPPET = """
+import json
+import numba
+import magica_py
+SCENE = '''
+version: 1
+scene: {name: hanging, fps: 60, duration: 1.0, simulation_frequency: 90, gravity: [0, -9.81, 0]}
+rigs:
+  - name: strand
+    bones:
+      - {name: root, position: [0, 1.5, 0]}
+    parts:
+      - chain: {name: hair, parent: root, bones: 6, length: 0.5, direction: [0, -1, 0]}
+cloths:
+  - {name: hair, type: bone_cloth, root_bones: [hair_0], connection: line, collision_mode: none}
+'''
+track = magica_py.simulate(SCENE, frames=3).cloths["hair"]
+print(json.dumps({"jit_off": bool(numba.config.DISABLE_JIT),
+                  "positions": track.positions.tolist(), "rotations": track.rotations.tolist()}))
+"""
+
+
+def test_a_strand_hanging_at_rest_runs_with_the_jit_off_and_gives_the_compiled_bits():
+    off = _run(True, HANGING_SNIPPET)
+    on = _run(False, HANGING_SNIPPET)
+    assert off["jit_off"] and not on["jit_off"]
+    positions = np.array(off["positions"])
+    assert positions.shape == (3, 6, 3) and np.isfinite(positions).all()
+    assert np.array_equal(positions[:, :, [0, 2]], np.zeros((3, 6, 2)))   # it stays in its vertical line
+    assert positions.tobytes() == np.array(on["positions"]).tobytes()
+    assert np.array(off["rotations"]).tobytes() == np.array(on["rotations"]).tobytes()
+
+
 COMPILE_SNIPPET = """
 import json
 from numba.core import event

@@ -40,6 +40,7 @@ LIMIT_ATTENUATION = 0.9      # AngleLimitAttenuation
 LIMIT_PIVOT = 0.4
 ZERO3 = (0.0, 0.0, 0.0)
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
+MIN_NORMAL = 2.2250738585072014e-308   # the smallest normal float64 (sys.float_info.min)
 
 
 @kernel
@@ -74,7 +75,10 @@ def restoration_offset(a, v, vl, b, t):
     theta = trig.acos_fma(c)
     w = v_cross(orthogonal_axis_select(a), a) if opposite else w
     theta = math.pi if opposite else theta
-    k = vl / v_length(w)   # off the chain: ready before the sincos
+    # off the chain: ready before the sincos. |w| is 0 only on the parallel path, whose result
+    # is discarded (|w| >= ~1e-3 on the kept ones): the floor keeps the discarded division
+    # finite, which the JIT-off run needs (a Python float division by 0 raises)
+    k = vl / max(v_length(w), MIN_NORMAL)
     s, co = trig.sincos_fma(theta * t)
     d = v_sub(v_scale(w, s * k), v_scale(v, 1.0 - co))
     return (ZERO3 if (not opposite) & parallel else d), opposite
