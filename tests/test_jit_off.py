@@ -123,7 +123,7 @@ class Names(event.Listener):
 # first what a first run's helper process and the system's process compile before the frame
 # kernel (solver/compile_helper.py), with another system of the same scene's arrays
 from magica_py.config import load_scene
-from magica_py.solver.frame import compile_end_stages, compile_step_stages
+from magica_py.solver.frame import compile_end_stages, compile_late_stages, compile_step_stages
 from magica_py.solver.system import ClothSystem
 
 scene = load_scene("configs/tail_orbit.yaml")
@@ -133,6 +133,7 @@ with event.install_listener("numba:compile", Names()):
     F = system._frame_arrays()
     compile_step_stages(F, system._frame_values, 0, None, s.angle, s.bending, s.point_collision, s.edge_collision,
                         s.motion, s.quality, s.wind)
+    compile_late_stages(F, system._frame_values, 0)
     compile_end_stages(F, system._frame_values, system._save_area, 0, s.quality, s.lines, s.triangles)
 before_frames = set(compiled)
 compiled.clear()
@@ -171,10 +172,13 @@ def test_tail_orbit_runs_bounds_checked_and_compiles_only_the_stages_it_uses(tmp
             "line_rotations_block"} <= compiled
     assert not compiled & set(UNUSED_BY_TAIL_ORBIT), sorted(compiled & set(UNUSED_BY_TAIL_ORBIT))
     # the stages compiled ahead of the frame kernel (a first run's helper compiles the step's
-    # stages into the cache, the system's process the end-of-frame stages) are the ones the
-    # frame kernel calls: it compiles none of them again with other argument types
-    ahead = {name for name in checked["before_frames"] if name.endswith(("_block", "_lane", "_lanes"))}
+    # stages and then the last of the begin and close of frame into the cache, the system's
+    # process the end-of-frame stages) are the ones the frame kernel calls: it compiles none of
+    # them again with other argument types
+    late = {"frame_counts", "_frame_close", "team_time_begin_step_team", "team_time_end_frame"}
+    ahead = {name for name in checked["before_frames"] if name.endswith(("_block", "_lane", "_lanes")) or name in late}
     assert {"predict_block", "distance_block", "angle_block", "end_step_block", "line_rotations_block",
-            "transform_block"} <= ahead, sorted(ahead)
+            "transform_block", "collider_frame_lane", "reset_or_shift_block", "center_and_inertia_lane"} | late <= ahead, \
+        sorted(ahead)
     assert not ahead & set(checked["in_frames"]), sorted(ahead & set(checked["in_frames"]))
     assert np.array(checked["positions"]).tobytes() == np.array(_run(False)["positions"]).tobytes()

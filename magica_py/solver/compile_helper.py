@@ -1,4 +1,5 @@
-"""A first run's compile on two cores: a forked process compiles the step's stages.
+"""A first run's compile on two cores: a forked process compiles the step's stages and the last
+of the begin of frame.
 
 numba compiles one function at a time in a process (a process-wide compiler lock), and a
 scene's first frame with an empty kernel cache compiles every stage it uses (docs/BENCHMARKS.md,
@@ -12,9 +13,13 @@ processes), while the system's process compiles the end-of-frame stages
 (``frame.compile_end_stages``, likewise not run) and then, typing the frame kernel, the begin
 of frame. The step's stages are the largest of the three shares (on the tail about 14 s
 against about 10 s each for the other two), so the helper has finished them when the frame
-kernel's typing reaches them, and that typing loads them from the cache; any the helper has
-not finished, the system's process compiles itself. The results are the same functions, so
-the same bits.
+kernel's typing reaches them, and that typing loads them from the cache. The helper then
+compiles what that typing reaches last, in reverse order (``frame.compile_late_stages``: the
+close of frame, the team clocks' step, the colliders' frame, the center and inertia), so that
+the two processes meet in the middle of the begin of frame instead of the helper leaving
+while the system's process works through it alone (the tail's last stage compiled ~2 s
+sooner). Any function the helper has not finished, the system's process compiles itself. The
+results are the same functions, so the same bits.
 
 Only where it is safe and useful: Linux (``os.fork``), the JIT and the cache on, at least two
 CPUs of which one is free (the 1-minute load average at most the CPUs less a half: on a machine
@@ -35,7 +40,7 @@ import threading
 from numba import config
 
 from magica_py import jit
-from magica_py.solver.frame import compile_end_stages, compile_step_stages
+from magica_py.solver.frame import compile_end_stages, compile_late_stages, compile_step_stages
 
 
 def wanted(kernel) -> bool:
@@ -67,6 +72,7 @@ def start(F, frame_values, area, wind_zones, stages) -> int | None:
         try:
             compile_step_stages(F, frame_values, 0, wind_zones, stages.angle, stages.bending, stages.point_collision,
                                 stages.edge_collision, stages.motion, stages.quality, stages.wind)
+            compile_late_stages(F, frame_values, 0)
         except BaseException:
             code = 1
         os._exit(code)

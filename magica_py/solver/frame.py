@@ -699,3 +699,38 @@ def compile_step_stages(F, frame_values, run, wind_zones, angle, bending, point_
     if run != 0 and T.blocks.shape[0] > 0:
         run_step(T, tt, T.blocks[0], fi, angle, bending, point_collision, edge_collision, motion, quality, wind,
                  wind_zones)
+
+
+@kernel(forceinline=False)
+def compile_late_stages(F, frame_values, run):
+    """The functions the frame kernel's typing reaches last (the close of frame and the end of
+    the begin of frame), typed in the reverse of that order with exactly the frame kernels'
+    argument types, run only when ``run`` is not 0: a first run's helper compiles them after
+    the step's stages (``solver/compile_helper.py``), while the system's process is still
+    working forward through the begin of frame, so that the two meet in between."""
+    T, tt, h = frame_tuples(F)
+    fi = frame_inputs(frame_values)
+    if run != 0 and T.blocks.shape[0] > 0:
+        frame_counts(T, tt)
+        _frame_close(tt, h, fi)
+        b = T.blocks[0]
+        PS, TS, CS, PM, TM, TI, P, BI, topology = T.PS, T.TS, T.CS, T.PM, T.TM, T.TI, T.P, T.BI, T.topology
+        w = bk.lane_width(BI, b)
+        steps = 0
+        for l in range(w):
+            t = lane_team(TI, b, l)
+            if t >= 0:
+                steps = max(steps, tt.update_count[t])
+        for step in range(steps):
+            for l in range(w):
+                t = lane_team(TI, b, l)
+                team_time_begin_step_team(step, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
+                                          tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
+        for l in range(w):
+            collider_frame_lane(CS, TS, BI, T.CT, b, l, h.world_position, h.world_rotation, h.lossy_scale)
+        reset_or_shift_block(PS, TS, BI, b)
+        for l in range(w):
+            t = lane_team(TI, b, l)
+            center_and_inertia_lane(PS, PM, TS, TM, TI, P, BI, topology, b, l, h.world_position, h.world_rotation,
+                                    h.lossy_scale, tt.frame_delta_time[t], tt.now_time_scale[t], tt.skip_count[t],
+                                    tt.running[t], fi.dt, get1(TS, b, st.DISPLAY_T, l))
