@@ -92,6 +92,8 @@ ANGLE_ROTATION = _p("angle_rotation", 4, "xyzw; working rotation of the limit pa
 ANGLE_LIMIT = _p("angle_limit", 1, "rad; limit angle at the particle's depth (per step)")
 ANGLE_LIMIT_COS = _p("angle_limit_cos", 1, "cos of angle_limit: the no-violation test without acos")
 ANGLE_RESTORATION_K = _p("angle_restoration_k", 1, "restoration stiffness of this step (curve, rate, gravity factor)")
+ANGLE_RARE = _p("angle_rare", 1, "scratch of D.5: 1 where this iteration's limit pass met a violation or an opposite "
+                "swing (the lane is solved again on the full path)")
 # fixed-point accumulators of bending and edge collision (§0.2; 1 unit = 1e-6 m)
 ACCUM_VECTOR = _p("accum_vector", 3, "1e-6 m integer units summed as float64 (exact below 2^53)")
 ACCUM_COUNT = _p("accum_count", 1, "number of contributions", INTEGER)

@@ -7,7 +7,12 @@ child move; the restoration pivot grows 0.1 -> 0.3 -> 0.5 over the iterations.
 ``angle_block`` runs one block, every baseline entry's lanes side by side, through the
 per-element functions ``angle_buffer_entry`` (buffering pass), ``angle_limit_entry`` (D.5 half
 of an iteration) and ``angle_restoration_entry`` (D.6 half): tuples in and out, no array
-access, the reference's early returns written as selects.
+access, the reference's early returns written as selects. An iteration runs its lanes side
+by side without the limit's violation path (``angle_iteration_lanes`` with ``full`` False: its
+acos, sincos and normalisations left out), flags the lanes that met a violation or an
+opposite swing, and runs again on the full path for them when there are any: the same bits
+as the full path everywhere, with the rare path's cost only where it is taken (the crowd's
+and the character's kernels ~8-10 % faster, docs/BENCHMARKS.md, session 14).
 
 The solves are written on the edge v = cp - pp rather than on world positions, and the
 restoration's from-to rotation is applied as a turn in the plane of the edge and its rest
@@ -27,7 +32,7 @@ from magica_py.kernels.math3d import (
 )
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
-from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
+from magica_py.solver.lanes import LANES, get1, get3, get4, put1, put3, put4
 from magica_py.solver.rotations import swing_select
 from magica_py.solver.parameters import (
     PRM_LIMIT_STIFFNESS, PRM_RATE_MODE, PRM_RESTORATION_GRAVITY_FALLOFF, PRM_USE_ANGLE_LIMIT, PRM_USE_RESTORATION,
@@ -132,7 +137,7 @@ def edge_of(cp, pp):
 
 @kernel(inline="always")
 def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, length, max_angle,
-                      max_angle_cos, wc, wp, p_move, stiffness, attenuation):
+                      max_angle_cos, wc, wp, p_move, stiffness, attenuation, full=True):
     """The angle-limit half of one iteration for child c (positions cp, pp read at its start).
 
     ``vel_*`` velocity_pos, ``rot_*`` angle_rotation, ``local_*`` / ``length`` the buffered
@@ -146,7 +151,9 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     nothing; otherwise the limit is solved about the pivot at 0.4 and c's rotation swung
     (kept when the new segment is degenerate).
 
-    Also returns ``rare``: the solve path met a limit violation or an opposite swing."""
+    Also returns ``rare``: the solve path met a limit violation or an opposite swing.
+    ``full`` False leaves the violation's path out (passed as a constant, LLVM removes its
+    maths): the results are then exact wherever ``rare`` is False (``angle_iteration_lanes``)."""
     v = v_sub(cp, pp)
     vl = v_length(v)
     tv = q_rotate(rot_p, local_pos)
@@ -178,7 +185,7 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     limited_edge = v_add(v, v_sub(limited_dc, limited_dp) if p_move else limited_dc)
     limited_length = v_length(limited_edge)
     limited_unit = v_scale(limited_edge, 1.0 / limited_length)
-    limited = violated & (alpha > max_angle)
+    limited = violated & (alpha > max_angle) & full
     dp = limited_dp if limited else dp
     dc = limited_dc if limited else dc
     edge = limited_edge if limited else edge
@@ -237,6 +244,49 @@ def angle_restoration_entry(cp, pp, edge, next_c, vel_c, next_p, vel_p, rest_len
     next_p = solved_next_p if move_p else next_p
     vel_p = solved_vel_p if move_p else vel_p
     return next_c_out, vel_c_out, next_p, vel_p, solve & opposite
+
+
+@kernel
+def angle_iteration_lanes(PS, gc, w, p_move, rest_pivot, use_limit, use_restoration, limit_stiffness,
+                          limit_attenuation, restoration_attenuation, full):
+    """One iteration of D.5 then D.6 for child slot gc, every lane, from its rows (the
+    parent's gathered next to them). ``full`` False: without the limit's violation path, the
+    lanes where it was needed (``angle_limit_entry``'s ``rare``) flagged in ``ANGLE_RARE`` and
+    their rows left as they were; ``full`` True: the flagged lanes solved on the full path
+    (every lane computed, the others' results discarded: a vector loop needs no branch)."""
+    for l in range(min(w, LANES)):
+        cp = get3(PS, gc, st.NEXT_POS, l)
+        pp = get3(PS, gc, st.PARTNER_POS, l)
+        vel_c = get3(PS, gc, st.VELOCITY_POS, l)
+        vel_p = get3(PS, gc, st.PARTNER_VELOCITY_POS, l)
+        rot_c = get4(PS, gc, st.ANGLE_ROTATION, l)
+        kept_c, kept_p, kept_vel_c, kept_vel_p, kept_rot = cp, pp, vel_c, vel_p, rot_c
+        next_c = cp
+        wc = get1(PS, gc, st.ANGLE_INVERSE_MASS, l)
+        wp = get1(PS, gc, st.PARTNER_W, l)
+        rare = False
+        if use_limit:
+            cp, pp, next_c, vel_c, vel_p, rot_c, edge, rare = angle_limit_entry(
+                cp, pp, vel_c, vel_p, rot_c, get4(PS, gc, st.PARTNER_ROTATION, l),
+                get3(PS, gc, st.ANGLE_LOCAL_POS, l), get4(PS, gc, st.ANGLE_LOCAL_ROT, l),
+                get1(PS, gc, st.ANGLE_LENGTH, l), get1(PS, gc, st.ANGLE_LIMIT, l), get1(PS, gc, st.ANGLE_LIMIT_COS, l),
+                wc, wp, p_move, limit_stiffness, limit_attenuation, full)
+        else:
+            edge = edge_of(cp, pp)
+        next_p = pp
+        if use_restoration:
+            next_c, vel_c, next_p, vel_p, _rare = angle_restoration_entry(
+                cp, pp, edge, next_c, vel_c, next_p, vel_p, get1(PS, gc, st.ANGLE_REST_LENGTH, l),
+                get3(PS, gc, st.ANGLE_REST_DIRECTION, l), get1(PS, gc, st.ANGLE_RESTORATION_K, l),
+                rest_pivot, wc, wp, p_move, restoration_attenuation)
+        flagged = get1(PS, gc, st.ANGLE_RARE, l) != 0.0
+        keep = (not flagged) if full else rare
+        put3(PS, gc, st.NEXT_POS, l, kept_c if keep else next_c)
+        put3(PS, gc, st.VELOCITY_POS, l, kept_vel_c if keep else vel_c)
+        put3(PS, gc, st.PARTNER_POS, l, kept_p if keep else next_p)
+        put3(PS, gc, st.PARTNER_VELOCITY_POS, l, kept_vel_p if keep else vel_p)
+        put4(PS, gc, st.ANGLE_ROTATION, l, kept_rot if keep else rot_c)
+        put1(PS, gc, st.ANGLE_RARE, l, (1.0 if flagged else 0.0) if full else (1.0 if rare else 0.0))
 
 
 # ----------------------------------------------------------------------------- per block
@@ -316,34 +366,17 @@ def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
                     put1(PS, gc, st.PARTNER_W, l, get1(PS, gp, st.ANGLE_INVERSE_MASS, l))
                     if use_limit:
                         put4(PS, gc, st.PARTNER_ROTATION, l, get4(PS, gp, st.ANGLE_ROTATION, l))
+                # the lanes side by side without the limit's violation path (its acos, sincos
+                # and normalisations for every lane); where a lane met a violation or an
+                # opposite swing (rare), the iteration runs again on the full path for it
+                angle_iteration_lanes(PS, gc, w, p_move, rest_pivot, use_limit, use_restoration, limit_stiffness,
+                                      limit_attenuation, restoration_attenuation, False)
+                rare = False
                 for l in range(w):
-                    cp = get3(PS, gc, st.NEXT_POS, l)
-                    pp = get3(PS, gc, st.PARTNER_POS, l)
-                    next_c = cp
-                    vel_c = get3(PS, gc, st.VELOCITY_POS, l)
-                    vel_p = get3(PS, gc, st.PARTNER_VELOCITY_POS, l)
-                    wc = get1(PS, gc, st.ANGLE_INVERSE_MASS, l)
-                    wp = get1(PS, gc, st.PARTNER_W, l)
-                    if use_limit:
-                        cp, pp, next_c, vel_c, vel_p, rot_c, edge, _rare = angle_limit_entry(
-                            cp, pp, vel_c, vel_p, get4(PS, gc, st.ANGLE_ROTATION, l),
-                            get4(PS, gc, st.PARTNER_ROTATION, l), get3(PS, gc, st.ANGLE_LOCAL_POS, l),
-                            get4(PS, gc, st.ANGLE_LOCAL_ROT, l), get1(PS, gc, st.ANGLE_LENGTH, l),
-                            get1(PS, gc, st.ANGLE_LIMIT, l), get1(PS, gc, st.ANGLE_LIMIT_COS, l), wc, wp, p_move,
-                            limit_stiffness, limit_attenuation)
-                        put4(PS, gc, st.ANGLE_ROTATION, l, rot_c)
-                    else:
-                        edge = edge_of(cp, pp)
-                    next_p = pp
-                    if use_restoration:
-                        next_c, vel_c, next_p, vel_p, _rare = angle_restoration_entry(
-                            cp, pp, edge, next_c, vel_c, next_p, vel_p, get1(PS, gc, st.ANGLE_REST_LENGTH, l),
-                            get3(PS, gc, st.ANGLE_REST_DIRECTION, l), get1(PS, gc, st.ANGLE_RESTORATION_K, l),
-                            rest_pivot, wc, wp, p_move, restoration_attenuation)
-                    put3(PS, gc, st.NEXT_POS, l, next_c)
-                    put3(PS, gc, st.VELOCITY_POS, l, vel_c)
-                    put3(PS, gc, st.PARTNER_POS, l, next_p)
-                    put3(PS, gc, st.PARTNER_VELOCITY_POS, l, vel_p)
+                    rare = rare or get1(PS, gc, st.ANGLE_RARE, l) != 0.0
+                if rare:
+                    angle_iteration_lanes(PS, gc, w, p_move, rest_pivot, use_limit, use_restoration, limit_stiffness,
+                                          limit_attenuation, restoration_attenuation, True)
                 for l in range(w):
                     put3(PS, gp, st.NEXT_POS, l, get3(PS, gc, st.PARTNER_POS, l))
                     put3(PS, gp, st.VELOCITY_POS, l, get3(PS, gc, st.PARTNER_VELOCITY_POS, l))
