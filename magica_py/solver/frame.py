@@ -352,6 +352,17 @@ def lane_team(TI, b, l):
     return TI[b, bk.TI_TEAM + l]
 
 
+@kernel
+def busiest_lane_steps(TI, tt, b, w):
+    """The steps this frame of block b's busiest lane (its lanes' team clocks)."""
+    steps = 0
+    for l in range(w):
+        t = lane_team(TI, b, l)
+        if t >= 0:
+            steps = max(steps, tt.update_count[t])
+    return steps
+
+
 @kernel(forceinline=False, inline="always")
 def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones):
     """One simulation step of block b (§D.0 order): every lane at its own frame
@@ -458,12 +469,7 @@ def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, ed
             collider_frame_lane(CS, TS, BI, T.CT, b, l, h.world_position, h.world_rotation, h.lossy_scale)
     if frozen:
         restore_frozen(PS, TS, CS, TI, BI, b, w, area)
-    steps = 0
-    for l in range(w):
-        t = lane_team(TI, b, l)
-        if t >= 0:
-            steps = max(steps, tt.update_count[t])
-    for step in range(steps):
+    for step in range(busiest_lane_steps(TI, tt, b, w)):
         runs = 0
         idle = 0
         for l in range(w):
@@ -668,11 +674,7 @@ def assign_workers(T, tt, wt, workers):
 
 @kernel
 def block_load(T, tt, b):
-    steps = 0
-    for l in range(bk.lane_width(T.BI, b)):
-        t = T.TI[b, bk.TI_TEAM + l]
-        if t >= 0:
-            steps = max(steps, tt.update_count[t])
+    steps = busiest_lane_steps(T.TI, tt, b, bk.lane_width(T.BI, b))
     return np.int64(T.BI[b, bk.BI_N]) * np.int64(T.BI[b, bk.BI_LANES_USED]) * np.int64(steps + 1)
 
 
@@ -716,12 +718,7 @@ def compile_late_stages(F, frame_values, run):
         b = T.blocks[0]
         PS, TS, CS, PM, TM, TI, P, BI, topology = T.PS, T.TS, T.CS, T.PM, T.TM, T.TI, T.P, T.BI, T.topology
         w = bk.lane_width(BI, b)
-        steps = 0
-        for l in range(w):
-            t = lane_team(TI, b, l)
-            if t >= 0:
-                steps = max(steps, tt.update_count[t])
-        for step in range(steps):
+        for step in range(busiest_lane_steps(TI, tt, b, w)):
             for l in range(w):
                 t = lane_team(TI, b, l)
                 team_time_begin_step_team(step, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
