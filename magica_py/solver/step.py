@@ -22,7 +22,7 @@ from magica_py.kernels.math3d import (
 )
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
-from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
+from magica_py.solver.lanes import LANES, get1, get3, get4, put1, put3, put4
 from magica_py.solver.parameters import (
     PRM_BLEND_WEIGHT, PRM_CENTRIFUGAL_ACCELERATION, PRM_DEPTH_INERTIA, PRM_FRICTION, PRM_GRAVITY,
     PRM_GRAVITY_DIRECTION, PRM_GRAVITY_FALLOFF, PRM_LOCAL_INERTIA, PRM_LOCAL_MOVEMENT_SPEED_LIMIT,
@@ -227,26 +227,40 @@ def predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, frequency_ratio, power
                 put3(PS, g, st.NEXT_POS, l, base_pos)
                 put3(PS, g, st.VELOCITY_POS, l, base_pos)
             continue
-        for l in range(w):
-            depth = get1(PM, g, bk.DEPTH, l)
-            gravity = v_scale(g_dir, g_mag * get1(TS, b, st.GRAVITY_RATIO, l))
-            scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)   # forces follow the scale
-            iv = get3(TS, b, st.INERTIA_VECTOR, l)
-            iq = get4(TS, b, st.INERTIA_ROTATION, l)
-            if depth_inertia != 0.0:   # predict_move's depth-inertia mix, where k != 0
-                k = depth_inertia * (1.0 - depth * depth)
-                mixed_v = v_lerp(iv, get3(TS, b, st.STEP_VECTOR, l), k)
-                mixed_q = q_slerp_select(iq, get4(TS, b, st.STEP_ROTATION, l), k)
-                iv = mixed_v if k != 0.0 else iv
-                iq = mixed_q if k != 0.0 else iq
-            velocity, velocity_pos, next_pos = predict_move_shifted(
-                get3(PS, g, st.OLD_POS, l), get3(PS, g, st.VELOCITY, l), depth, get3(TS, b, st.OLD_WORLD_POS, l),
-                iv, iq, get1(TS, b, st.VELOCITY_WEIGHT, l),
-                damping_keep(get1(PP, g, bk.CURVE_DAMPING, l), frequency_ratio, power_z, rate_mode), gravity,
-                int(get1(TS, b, st.EXTERNAL_FORCE_MODE, l)), get3(TS, b, st.EXTERNAL_FORCE, l), scale, dt)
-            put3(PS, g, st.VELOCITY, l, velocity)
-            put3(PS, g, st.VELOCITY_POS, l, velocity_pos)
-            put3(PS, g, st.NEXT_POS, l, next_pos)
+        # the damping's rate conversion needs a power only in frequency-consistent mode off
+        # 90 Hz: elsewhere the ratio goes in as the constant 1.0, which takes the power (a call
+        # LLVM cannot see into, that would keep the lane loop scalar) out of the compiled loop
+        if rate_mode == 0 or frequency_ratio == 1.0:
+            predict_move_lanes(PS, PM, PP, TS, b, g, w, depth_inertia, g_dir, g_mag, 1.0, power_z, rate_mode, dt)
+        else:
+            predict_move_lanes(PS, PM, PP, TS, b, g, w, depth_inertia, g_dir, g_mag, frequency_ratio, power_z,
+                               rate_mode, dt)
+
+
+@kernel
+def predict_move_lanes(PS, PM, PP, TS, b, g, w, depth_inertia, g_dir, g_mag, frequency_ratio, power_z, rate_mode, dt):
+    """D.1's inertia shift, damping, forces and prediction of the moving particle in slot g,
+    every lane of block b."""
+    for l in range(min(w, LANES)):
+        depth = get1(PM, g, bk.DEPTH, l)
+        gravity = v_scale(g_dir, g_mag * get1(TS, b, st.GRAVITY_RATIO, l))
+        scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)   # forces follow the scale
+        iv = get3(TS, b, st.INERTIA_VECTOR, l)
+        iq = get4(TS, b, st.INERTIA_ROTATION, l)
+        if depth_inertia != 0.0:   # predict_move's depth-inertia mix, where k != 0
+            k = depth_inertia * (1.0 - depth * depth)
+            mixed_v = v_lerp(iv, get3(TS, b, st.STEP_VECTOR, l), k)
+            mixed_q = q_slerp_select(iq, get4(TS, b, st.STEP_ROTATION, l), k)
+            iv = mixed_v if k != 0.0 else iv
+            iq = mixed_q if k != 0.0 else iq
+        velocity, velocity_pos, next_pos = predict_move_shifted(
+            get3(PS, g, st.OLD_POS, l), get3(PS, g, st.VELOCITY, l), depth, get3(TS, b, st.OLD_WORLD_POS, l),
+            iv, iq, get1(TS, b, st.VELOCITY_WEIGHT, l),
+            damping_keep(get1(PP, g, bk.CURVE_DAMPING, l), frequency_ratio, power_z, rate_mode), gravity,
+            int(get1(TS, b, st.EXTERNAL_FORCE_MODE, l)), get3(TS, b, st.EXTERNAL_FORCE, l), scale, dt)
+        put3(PS, g, st.VELOCITY, l, velocity)
+        put3(PS, g, st.VELOCITY_POS, l, velocity_pos)
+        put3(PS, g, st.NEXT_POS, l, next_pos)
 
 
 @kernel
