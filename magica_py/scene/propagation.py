@@ -64,6 +64,7 @@ import numpy as np
 from numba import prange
 
 from magica_py.jit import kernel
+from magica_py.kernels.cache_lines import read_lines
 from magica_py.kernels.math3d import (
     load3, load4, q_inverse, q_mul, q_normalize, q_rotate, q_to_matrix, store4,
 )
@@ -269,19 +270,6 @@ def _slot_rows(lanes, slot):
     return lanes[first:first + LANE_OUTPUT * LANE_STRIDE]
 
 
-@kernel(inline="always")
-def _warm_span(rows, lo, hi):
-    """One read per cache line of ``rows[lo:hi]`` (a flat view), summed. A plain sum: without
-    fastmath LLVM keeps it a chain of scalar loads (an integer fold would be vectorised into
-    gathers, which fetch the lines half as fast here)."""
-    acc = 0.0
-    for k in range(lo, hi, 8):
-        acc += rows[k]
-    if hi > lo:
-        acc += rows[hi - 1]
-    return acc
-
-
 @kernel
 def warm_rows(warm_start, warm_stop, w0, w1, local_position, local_rotation, local_scale,
               world_position, world_rotation, lossy_scale, local_to_world):
@@ -301,13 +289,13 @@ def warm_rows(warm_start, warm_stop, w0, w1, local_position, local_rotation, loc
     for w in range(w0, w1):
         a = warm_start[w]
         b = warm_stop[w]
-        acc += _warm_span(lp, 3 * a, 3 * b)
-        acc += _warm_span(lr, 4 * a, 4 * b)
-        acc += _warm_span(ls, 3 * a, 3 * b)
-        acc += _warm_span(m, 16 * a, 16 * b)
-        acc += _warm_span(wp, 3 * a, 3 * b)
-        acc += _warm_span(wr, 4 * a, 4 * b)
-        acc += _warm_span(sc, 3 * a, 3 * b)
+        acc += read_lines(lp, 3 * a, 3 * b)
+        acc += read_lines(lr, 4 * a, 4 * b)
+        acc += read_lines(ls, 3 * a, 3 * b)
+        acc += read_lines(m, 16 * a, 16 * b)
+        acc += read_lines(wp, 3 * a, 3 * b)
+        acc += read_lines(wr, 4 * a, 4 * b)
+        acc += read_lines(sc, 3 * a, 3 * b)
     return acc
 
 

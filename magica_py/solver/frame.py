@@ -37,6 +37,7 @@ from collections import namedtuple
 import numpy as np
 
 from magica_py.jit import kernel
+from magica_py.kernels.cache_lines import read_lines
 from magica_py.kernels.math3d import q_angle, v_length, v_sub
 from magica_py.runtime.team_time import (
     TeamTimeState, team_time_begin_step_team, team_time_end_frame, team_time_frame_update,
@@ -167,12 +168,8 @@ WARM_MIN_STATE_VALUES = (1 << 20) // 8
 
 @kernel
 def _warm_rows(a, i0, i1):
-    """One read per cache line (8 float64) of rows ``i0:i1`` of the 2-D table ``a``, summed."""
-    acc = 0.0
-    for i in range(i0, i1):
-        for k in range(0, a.shape[1], 8):
-            acc += a[i, k]
-    return acc
+    """``read_lines`` over rows ``i0:i1`` of the C-contiguous 2-D table ``a``."""
+    return read_lines(a.reshape(-1), i0 * a.shape[1], i1 * a.shape[1])
 
 
 @kernel

@@ -286,7 +286,7 @@ def angle_iteration_lanes(PS, gc, w, p_move, rest_pivot, use_limit, use_restorat
         put3(PS, gc, st.PARTNER_POS, l, kept_p if keep else next_p)
         put3(PS, gc, st.PARTNER_VELOCITY_POS, l, kept_vel_p if keep else vel_p)
         put4(PS, gc, st.ANGLE_ROTATION, l, kept_rot if keep else rot_c)
-        put1(PS, gc, st.ANGLE_RARE, l, (1.0 if flagged else 0.0) if full else (1.0 if rare else 0.0))
+        put1(PS, gc, st.ANGLE_RARE, l, 1.0 if (flagged if full else rare) else 0.0)
 
 
 # ----------------------------------------------------------------------------- per block
