@@ -121,17 +121,19 @@ class ClothSystem:
         self.colliders = colliders
         self.time_settings = SimulationTimeSettings.from_scene_settings(settings or {})
         self._scene_update_mode = getattr(settings, "update_mode", None) if settings is not None else None
-        if models is None:
-            models = [build_cloth(hierarchy, spec) for spec in self.specs]
-        self.models = list(models)
-        self._check_positive_scale(hierarchy)
         self.team_names = [str(getattr(s, "name", f"cloth{i}")) for i, s in enumerate(self.specs)]
-        team_count = len(self.models)
+        team_count = len(self.specs)
         self.team_parameters = [getattr(s, "parameters", None) or {} for s in self.specs]
         self.collision_modes = [getattr(s, "collision_mode", None) for s in self.specs]
         self.parameters = allocate_parameters(team_count)   # per team id: the source of the block rows
         for t in range(team_count):
             self._write_parameters(t)
+        # a first run: a helper process starts compiling the step's stages now, beside the build
+        self._helper = compile_helper.start_early(self, settings, parallel, wind) if team_count else None
+        if models is None:
+            models = [build_cloth(hierarchy, spec) for spec in self.specs]
+        self.models = list(models)
+        self._check_positive_scale(hierarchy)
         self.layout = BlockLayout()
         self.PS = st.PARTICLE.allocate(0)
         self.CS = st.COLLIDER.allocate(0)
@@ -324,28 +326,49 @@ class ClothSystem:
         called where a block asks, None neither): from the teams' models, parameters and
         colliders. Recomputed after any change of teams or parameters; a stage that becomes
         needed at run time compiles then (once per machine: the kernels are cached)."""
+        m = self.model
+        bends = [len(getattr(mm, "bend_vertices", ())) + len(getattr(mm, "volume_vertices", ()))
+                 if mm is not None else 0 for mm in self.models]
+        lines = [len(getattr(mm, "lines", ())) if mm is not None else 0 for mm in self.models]
+        colliders = [int(c) for c in m.team_collider_count]
+        return self._switches(self.live_teams, bends, lines, m.team_triangle_count, colliders)
+
+    def expected_stage_switches(self) -> StageSwitches:
+        """``stage_switches`` as far as the specs tell before the build: the same, except that a
+        mesh cloth with triangle bending is assumed to have bending pairs and every cloth line
+        and triangle rotations (what only its model tells). Used to start a first run's compile
+        of the step's stages beside the build (``compile_helper.start_early``)."""
+        from magica_py.build.constraints import parameter
+
+        teams = range(len(self.specs))
+        bends = [int(getattr(s, "connection_mode", "line") != "line"
+                     and float(parameter(self.team_parameters[t], "triangle_bending.stiffness")) > 1e-8)
+                 for t, s in zip(teams, self.specs)]
+        colliders = [len(self._collider_indices(s)) for s in self.specs]
+        ones = [1] * len(self.specs)
+        return self._switches(list(teams), bends, ones, ones, colliders)
+
+    def _switches(self, teams, bends, lines, triangles, colliders) -> StageSwitches:
+        """The stage switches of ``teams`` from the parameter rows and, per team id, the counts
+        of bending pairs, lines, triangles and colliders."""
         prm = self.parameters
-        live = np.asarray(self.live_teams, dtype=np.int64)
+        live = np.asarray(teams, dtype=np.int64)
 
         def any_of(values) -> int | None:
             return 1 if live.size and bool(np.any(np.asarray(values)[live])) else None
 
-        m = self.model
-        colliding = m.team_collider_count[live] > 0 if live.size else np.zeros(0, bool)
+        colliding = np.asarray(colliders)[live] > 0 if live.size else np.zeros(0, bool)
         mode = prm.collision_mode[live] if live.size else np.zeros(0, np.int32)
-        bends = np.array([len(getattr(mm, "bend_vertices", ())) + len(getattr(mm, "volume_vertices", ()))
-                          if mm is not None else 0 for mm in self.models])
-        lines = np.array([len(getattr(mm, "lines", ())) if mm is not None else 0 for mm in self.models])
         return StageSwitches(
             angle=any_of((prm.use_angle_limit != 0) | (prm.use_restoration != 0)),
-            bending=any_of(bends > 0),
+            bending=any_of(np.asarray(bends) > 0),
             point_collision=1 if bool(np.any(colliding & (mode == 1))) else None,
             edge_collision=1 if bool(np.any(colliding & (mode == 2))) else None,
             motion=any_of((prm.use_max_distance != 0) | (prm.use_backstop != 0)),
             quality=any_of((prm.quality != 0) | (prm.inextensibility != 0) | (prm.collision_last != 0)
                            | (prm.time_based_smoothing != 0)),
-            lines=any_of(lines > 0),
-            triangles=any_of(m.team_triangle_count > 0),
+            lines=any_of(np.asarray(lines) > 0),
+            triangles=any_of(np.asarray(triangles) > 0),
             wind=1 if self.wind is not None else any_of(prm.wind_moving_wind > 0.01))
 
     def _tables_changed(self, register: bool = True) -> None:
@@ -684,8 +707,10 @@ class ClothSystem:
         compiles the end of frame, then the frame kernel (``solver/compile_helper.py``)."""
         self._first_call = False
         kernel = simulate_worker if self.parallel else simulate_frame
-        helper = None
-        if compile_helper.wanted(kernel):
+        helper, self._helper = self._helper, None
+        if helper is not None:
+            helper = compile_helper.meet(helper, self._frame_arrays(), fi, self._save_area, self.stages)
+        elif compile_helper.wanted(kernel):
             zones = self.wind.kernel_table() if self.wind is not None else None
             helper = compile_helper.start(self._frame_arrays(), fi, self._save_area, zones, self.stages)
         try:
