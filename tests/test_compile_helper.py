@@ -92,3 +92,35 @@ def test_the_early_helper_compiles_its_share_without_an_error():
     assert pid is not None
     _pid, status = os.waitpid(pid, 0)
     assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
+
+
+class _Kernel:
+    def __init__(self, signatures):
+        self.signatures = signatures
+
+
+@pytest.mark.skipif(numba.config.DISABLE_JIT or not os.path.exists("/proc/stat"),
+                    reason="the helper is only wanted with the JIT on, on Linux")
+def test_a_helper_is_wanted_where_a_cpu_is_free_now_even_if_the_load_average_still_counts_a_past_run(monkeypatch):
+    monkeypatch.setenv("MAGICA_COMPILE_HELPER", "1")
+    monkeypatch.setattr(compile_helper.os, "sched_getaffinity", lambda pid: {0, 1})
+    fresh = _Kernel([])
+    # the 1-minute load average says free: no need to look further
+    monkeypatch.setattr(compile_helper.os, "getloadavg", lambda: (0.4, 0.4, 0.4))
+    monkeypatch.setattr(compile_helper, "idle_cpus", lambda window=0.1: 0.0)
+    assert compile_helper.wanted(fresh)
+    # it says busy (a run that just ended): the CPUs' idle time now decides
+    monkeypatch.setattr(compile_helper.os, "getloadavg", lambda: (1.9, 1.2, 0.8))
+    assert not compile_helper.wanted(fresh)
+    monkeypatch.setattr(compile_helper, "idle_cpus", lambda window=0.1: 1.9)
+    assert compile_helper.wanted(fresh)
+    # never once the frame kernel is compiled in this process, nor when turned off
+    assert not compile_helper.wanted(_Kernel(["signature"]))
+    monkeypatch.setenv("MAGICA_COMPILE_HELPER", "0")
+    assert not compile_helper.wanted(fresh)
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/stat"), reason="/proc/stat is Linux's")
+def test_idle_cpus_is_a_share_of_the_machine_s_cpus():
+    idle = compile_helper.idle_cpus(0.05)
+    assert 0.0 <= idle <= os.cpu_count()

@@ -34,7 +34,8 @@ added later) forks at its first frame call instead (``start``), as does any syst
 early helper was not wanted.
 
 Only where it is safe and useful: Linux (``os.fork``), the JIT and the cache on, at least two
-CPUs of which one is free (the 1-minute load average at most the CPUs less a half: on a machine
+CPUs of which one is free (the 1-minute load average at most the CPUs less a half, or, where it
+still counts a run just ended, one and a half CPUs idle over a tenth of a second: on a machine
 kept busy by other jobs the helper would share this process's CPU and lengthen the run), called
 from the main thread (a batch runner's worker threads never fork), and only while the frame
 kernels have no compiled signature in this process; one early helper per process.
@@ -51,6 +52,7 @@ import os
 import signal
 import sys
 import threading
+import time
 
 from numba import config
 
@@ -69,12 +71,35 @@ def wanted(*kernels) -> bool:
         return False
     if not sys.platform.startswith("linux") or threading.current_thread() is not threading.main_thread():
         return False
+    if any(k.signatures for k in kernels):
+        return False
     cpus = len(os.sched_getaffinity(0))
     # a helper pays only with a CPU to itself: with another job keeping every CPU but this
-    # process's busy (the 1-minute load average), it would take its compile time from ours
-    if cpus < 2 or os.getloadavg()[0] > cpus - 0.5:
+    # process's busy, it would take its compile time from ours. The 1-minute load average
+    # lags: right after another run it still counts that run, so where it says busy the CPUs'
+    # idle time over a tenth of a second decides
+    if cpus < 2:
         return False
-    return not any(k.signatures for k in kernels)
+    return os.getloadavg()[0] <= cpus - 0.5 or idle_cpus() >= 1.5
+
+
+def idle_cpus(window: float = 0.1) -> float:
+    """How many CPUs were idle on average over the next ``window`` seconds (``/proc/stat``:
+    idle and I/O-wait time over all time), this process sleeping meanwhile; 0 where it cannot
+    be read."""
+    def times():
+        with open("/proc/stat") as f:
+            values = [int(v) for v in f.readline().split()[1:9]]
+        return values[3] + values[4], sum(values)
+
+    try:
+        idle0, total0 = times()
+        time.sleep(window)
+        idle1, total1 = times()
+    except (OSError, ValueError, IndexError):
+        return 0.0
+    total = total1 - total0
+    return os.cpu_count() * (idle1 - idle0) / total if total > 0 else 0.0
 
 
 def start_early(system, settings, parallel, wind) -> int | None:
