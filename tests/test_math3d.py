@@ -137,6 +137,21 @@ def test_slerp_of_nearly_equal_quaternions_uses_normalized_lerp():
     np.testing.assert_allclose(out, quat_of((0, 1, 0), 0.2 + 5e-4), atol=1e-9)
 
 
+def test_slerp_from_a_precomputed_path_is_the_branch_free_slerp_bit_for_bit():
+    """``q_slerp_path`` (once per pair) and ``q_slerp_along`` (per t) give ``q_slerp_select``'s
+    bits, on both of its paths (far apart, nearly equal) and both hemispheres, and match the
+    rotation oracle."""
+    pairs = [(random_quat(), random_quat()) for _ in range(40)]
+    pairs += [(quat_of((0, 1, 0), 0.2), quat_of((0, 1, 0), 0.2 + 1e-3))]   # the lerp path
+    pairs += [(q1, tuple(-c for c in q2)) for q1, q2 in pairs[:10]]
+    for q1, q2 in pairs:
+        path = m.q_slerp_path(q1, q2)
+        for t in (0.0, 0.3, 0.75, 1.0):
+            along = m.q_slerp_along(q1, *path, t)
+            assert np.array(along).tobytes() == np.array(m.q_slerp_select(q1, q2, t)).tobytes()
+            np.testing.assert_allclose(matrix_of(along), slerp_oracle(q1, q2, t), atol=1e-9)
+
+
 # ----------------------------------------------------------------------------- from-to
 def test_from_to_rotation_maps_a_onto_b_and_scales_the_angle_by_t():
     for _ in range(50):

@@ -539,21 +539,38 @@ def orthogonal_axis_select(a):
 @kernel
 def q_slerp_select(q1, q2, t):
     """``q_slerp`` without a branch (both of its paths computed)."""
+    to, angle, inv_sin, far = q_slerp_path(q1, q2)
+    return q_slerp_along(q1, to, angle, inv_sin, far, t)
+
+
+@kernel
+def q_slerp_path(q1, q2):
+    """The part of ``q_slerp_select(q1, q2, t)`` that does not depend on t: the target on q1's
+    side of the double cover, the angle between them, 1 / its sine, and 1.0 where the slerp
+    takes its far (sine-weighted) path, 0.0 where the normalised lerp. ``q_slerp_along`` finishes
+    it for a t; computed once for many t, the acos and a sine are left out of each."""
     d = q_dot(q1, q2)
     negative = d < 0.0
-    b = (-q2[0], -q2[1], -q2[2], -q2[3]) if negative else q2
+    to = (-q2[0], -q2[1], -q2[2], -q2[3]) if negative else q2
     d = -d if negative else d
     angle = trig.acos(d)
+    inv_sin = 1.0 / trig.sin(angle)
+    return to, angle, inv_sin, 1.0 if d < 0.9995 else 0.0
+
+
+@kernel
+def q_slerp_along(q1, to, angle, inv_sin, far, t):
+    """``q_slerp_select(q1, q2, t)`` from ``q_slerp_path(q1, q2)``'s values (the same bits)."""
     w1 = trig.sin((1.0 - t) * angle)
     w2 = trig.sin(t * angle)
-    inv_s = 1.0 / trig.sin(angle)
-    far = q_normalize_select(((q1[0] * w1 + b[0] * w2) * inv_s, (q1[1] * w1 + b[1] * w2) * inv_s,
-                              (q1[2] * w1 + b[2] * w2) * inv_s, (q1[3] * w1 + b[3] * w2) * inv_s))
+    b = to
+    sine = q_normalize_select(((q1[0] * w1 + b[0] * w2) * inv_sin, (q1[1] * w1 + b[1] * w2) * inv_sin,
+                               (q1[2] * w1 + b[2] * w2) * inv_sin, (q1[3] * w1 + b[3] * w2) * inv_sin))
     near = q_normalize_select((q1[0] + (b[0] - q1[0]) * t, q1[1] + (b[1] - q1[1]) * t,
                                q1[2] + (b[2] - q1[2]) * t, q1[3] + (b[3] - q1[3]) * t))
-    use_far = d < 0.9995
-    return (far[0] if use_far else near[0], far[1] if use_far else near[1], far[2] if use_far else near[2],
-            far[3] if use_far else near[3])
+    use_far = far != 0.0
+    return (sine[0] if use_far else near[0], sine[1] if use_far else near[1], sine[2] if use_far else near[2],
+            sine[3] if use_far else near[3])
 
 
 @kernel

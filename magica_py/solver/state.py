@@ -184,6 +184,12 @@ STEP_VECTOR = _t("step_vector", 3, "m; center motion of this step")
 STEP_ROTATION = _t("step_rotation", 4, "center rotation of this step", QUATERNION)
 INERTIA_VECTOR = _t("inertia_vector", 3, "m; part of step_vector removed rigidly (C.3)")
 INERTIA_ROTATION = _t("inertia_rotation", 4, "", QUATERNION)
+INERTIA_SLERP_TO = _t("inertia_slerp_to", 4, "xyzw; step_rotation on inertia_rotation's side (math3d.q_slerp_path), "
+                      "D.1's depth-inertia slerp from inertia_rotation towards step_rotation (C.3, per step)",
+                      QUATERNION)
+INERTIA_SLERP_ANGLE = _t("inertia_slerp_angle", 1, "rad; the angle of that slerp (q_slerp_path)")
+INERTIA_SLERP_INV_SIN = _t("inertia_slerp_inv_sin", 1, "1 / sin(inertia_slerp_angle) (q_slerp_path)")
+INERTIA_SLERP_FAR = _t("inertia_slerp_far", 1, "1 where that slerp takes its sine path, 0 its lerp (q_slerp_path)")
 STEP_MOVE_INERTIA_RATIO = _t("step_move_inertia_ratio", 1, "C.3 m")
 STEP_ROTATION_INERTIA_RATIO = _t("step_rotation_inertia_ratio", 1, "C.3 r")
 ANGULAR_VELOCITY = _t("angular_velocity", 1, "rad/s of the center this step")

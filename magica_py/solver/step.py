@@ -17,8 +17,8 @@ from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     lerp, q_angle, q_from_to, q_to_angle_axis,
     clamp_length, depth_mass, project_on_plane, q_mul,
-    q_normalize, q_normalize_select, q_rotate, q_slerp, q_slerp_select, saturate, v_add, v_cross,
-    v_dot, v_length, v_length_sq, v_lerp, v_mul, v_normalize, v_scale, v_sub,
+    q_normalize, q_normalize_select, q_rotate, q_slerp, q_slerp_along, q_slerp_path, q_slerp_select, saturate,
+    v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp, v_mul, v_normalize, v_scale, v_sub,
 )
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
@@ -119,6 +119,12 @@ def team_step_lane(TS, TM, P, b, l, dt):
     put1(TS, b, st.STEP_ROTATION_INERTIA_RATIO, l, rv)
     put3(TS, b, st.INERTIA_VECTOR, l, inertia_vector)
     put4(TS, b, st.INERTIA_ROTATION, l, inertia_rotation)
+    if P[b, PRM_DEPTH_INERTIA] != 0.0:   # what D.1's depth-inertia slerp needs of the lane, once a step
+        slerp_to, slerp_angle, slerp_inv_sin, slerp_far = q_slerp_path(inertia_rotation, step_rotation)
+        put4(TS, b, st.INERTIA_SLERP_TO, l, slerp_to)
+        put1(TS, b, st.INERTIA_SLERP_ANGLE, l, slerp_angle)
+        put1(TS, b, st.INERTIA_SLERP_INV_SIN, l, slerp_inv_sin)
+        put1(TS, b, st.INERTIA_SLERP_FAR, l, slerp_far)
     put1(TS, b, st.ANGULAR_VELOCITY, l, w)
     put3(TS, b, st.ROTATION_AXIS, l, axis)
     put1(TS, b, st.SCALE_RATIO, l, scale_ratio)
@@ -250,7 +256,8 @@ def predict_move_lanes(PS, PM, PP, TS, b, g, w, depth_inertia, g_dir, g_mag, fre
         if depth_inertia != 0.0:   # predict_move's depth-inertia mix, where k != 0
             k = depth_inertia * (1.0 - depth * depth)
             mixed_v = v_lerp(iv, get3(TS, b, st.STEP_VECTOR, l), k)
-            mixed_q = q_slerp_select(iq, get4(TS, b, st.STEP_ROTATION, l), k)
+            mixed_q = q_slerp_along(iq, get4(TS, b, st.INERTIA_SLERP_TO, l), get1(TS, b, st.INERTIA_SLERP_ANGLE, l),
+                                    get1(TS, b, st.INERTIA_SLERP_INV_SIN, l), get1(TS, b, st.INERTIA_SLERP_FAR, l), k)
             iv = mixed_v if k != 0.0 else iv
             iq = mixed_q if k != 0.0 else iq
         velocity, velocity_pos, next_pos = predict_move_shifted(
