@@ -53,6 +53,7 @@ class RowTable:
         self.fields: dict[str, tuple[int, int, str, str]] = {}   # name -> (first row, rows, kind, doc)
         self.rows = 0
         self.fill: dict[str, float] = {}
+        self.shared: dict[str, tuple[int, int, str, str]] = {}   # name -> (first row, rows, field, doc)
         self._fresh = None   # fresh_row's result, made on first use
 
     def add(self, name: str, size: int, doc: str, kind: str = FLOAT, fill: float | None = None) -> int:
@@ -66,6 +67,19 @@ class RowTable:
             self.fill[name] = float(fill)
         self.rows += size
         return self.fields[name][0] * LANES
+
+    def share(self, name: str, size: int, over: str, doc: str, offset: int = 0) -> int:
+        """A scratch field in rows ``offset .. offset + size`` of the scratch field ``over``,
+        for a stage that never runs while ``over``'s stage keeps values there (both use their
+        rows only within one call); returns its first column. It adds no rows: it is not a
+        field of its own (no fresh value, no view), only a second name for those rows."""
+        if name in self.fields or name in self.shared:
+            raise ValueError(f"{self.name}: field {name!r} declared twice")
+        first, rows, _kind, _doc = self.fields[over]
+        if offset < 0 or offset + size > rows:
+            raise ValueError(f"{self.name}: {name!r} does not fit in the {rows} rows of {over!r}")
+        self.shared[name] = (first + offset, size, over, doc)
+        return (first + offset) * LANES
 
     @property
     def width(self) -> int:

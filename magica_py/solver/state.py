@@ -57,8 +57,8 @@ ACCUM3 = _p("accum3", 3, "m; scratch: a correction summed over a particle's link
 ACCUM_N = _p("accum_n", 1, "scratch: the number of links summed in accum3")
 CONTACT_NORMAL_SUM = _p("contact_normal_sum", 3, "scratch of D.8 point mode: normals of the colliders penetrated")
 CONTACT_NEAR_SUM = _p("contact_near_sum", 3, "scratch of D.8 point mode: normals of the colliders within range")
-BONE_MATRIX = _p("bone_matrix", 12, "scratch of C.1: the first three rows of the bone's local-to-world matrix, "
-                 "row major (gathered from the hierarchy)")
+BONE_MATRIX = _p("bone_matrix", 12, "scratch of C.1 (and of D.7, bend_partner_*): the first three rows of the "
+                 "bone's local-to-world matrix, row major (gathered from the hierarchy)")
 PARENT_ROTATION = _p("parent_rotation", 4, "scratch of E.2: the parent bone's rotation (gathered)", QUATERNION)
 PARENT_BASE_ROT = _p("parent_base_rot", 4, "scratch of E.2: the parent bone's animated rotation (gathered)", QUATERNION)
 PARENT_BASE_POS = _p("parent_base_pos", 3, "m; scratch of E.2: the parent bone's animated position (gathered)")
@@ -69,12 +69,25 @@ LOCAL_OUT_POSITION = _p("local_out_position", 3, "m; scratch of E.4: the local p
 LOCAL_OUT_ROTATION = _p("local_out_rotation", 4, "xyzw; scratch of E.4: the local rotation the bone is written with",
                         QUATERNION)
 PARENT_HAS_NODE = _p("parent_has_node", 1, "scratch of E.4: 1 when a fixed bone has a parent node")
-CHILD_REST_SUM = _p("child_rest_sum", 3, "scratch of E.2: the children's rest edges summed (ctv)")
+CHILD_REST_SUM = _p("child_rest_sum", 3, "scratch of E.2 (and of D.7, bend_rest / sign / ok): the children's rest "
+                    "edges summed (ctv)")
 CHILD_EDGE_SUM = _p("child_edge_sum", 3, "scratch of E.2: the children's simulated edges summed (cv)")
 CONTACT_MIN_DIST = _p("contact_min_dist", 1, "m; scratch of D.8 point mode and of the contact speed limit: closest "
                       "distance within range")
 CONTACT_BODY_VELOCITY = _p("contact_body_velocity", 3, "m/s; scratch of the contact speed limit (contact_speed.py): "
                            "velocity of the nearest collider's body point at the particle")
+# D.7's per-pair scratch (constraints/bending.py): a pair's vertices 1-3 and rest values
+# gathered into its vertex 0's slot, solved there, the corrections scattered back; in rows of
+# the frame's C.1 and E.2 scratch, which hold values only within their own stage
+BEND_PARTNER_POS = PARTICLE.share("bend_partner_pos", 9, "bone_matrix", "m; D.7: next_pos of the pair's vertices "
+                                  "1, 2, 3 (gathered), then their corrections (solved)")
+BEND_PARTNER_W = PARTICLE.share("bend_partner_w", 3, "bone_matrix", "D.7: inverse masses of the pair's vertices "
+                                "1, 2, 3 (gathered)", offset=9)
+BEND_REST = PARTICLE.share("bend_rest", 1, "child_rest_sum", "rad or 1000 m^3; D.7: the pair's rest angle or rest "
+                           "volume x scale ratio (gathered)")
+BEND_SIGN = PARTICLE.share("bend_sign", 1, "child_rest_sum", "D.7: the dihedral pair's sign (gathered)", offset=1)
+BEND_OK = PARTICLE.share("bend_ok", 1, "child_rest_sum", "D.7: 1 where the pair's correction applies (solved)",
+                         offset=2)
 # display of quality mode (display.py): the last two step states in their display frame
 # (the particle's fixed root, or the team center), written at the end of each step (D.10)
 DISPLAY_LOCAL = _p("display_local", 3, "m; state of the last step in its display frame (D.10)")

@@ -22,7 +22,7 @@ from magica_py.kernels.math3d import (
 )
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
-from magica_py.solver.lanes import get1, get3, put1, put3
+from magica_py.solver.lanes import LANES, get1, get3, put1, put3
 from magica_py.solver.parameters import PRM_BENDING_STIFFNESS, PRM_QUALITY, PRM_RATE_MODE, constraint_stiffness
 
 MOVE = 0x02
@@ -134,7 +134,7 @@ def bending_rate(P, b, frequency_ratio, power_y):
 
 
 # ----------------------------------------------------------------------------- per block
-@kernel(forceinline=False)
+@kernel
 def accumulate_lane(PS, g, l, v, ok):
     """Add contribution v to particle slot g's accumulator in lane l when ok (``accumulated``)."""
     acc, n = accumulated(get3(PS, g, st.ACCUM_VECTOR, l), get1(PS, g, st.ACCUM_COUNT, l), v, ok)
@@ -158,12 +158,69 @@ def bending_inverse_masses(PS, PM, BI, topology, b):
                  particle_inverse_mass(move, get1(PS, g, st.FRICTION, l), get1(PM, g, bk.DEPTH, l)))
 
 
+@kernel
+def gather_pair(PS, g, g_1, g_2, g_3, w):
+    """The pair's vertices 1-3 (next_pos, inverse mass) into vertex 0's slot g
+    (``BEND_PARTNER_POS``, ``BEND_PARTNER_W``): the solving loop then reads one item."""
+    for l in range(min(w, LANES)):
+        put3(PS, g, st.BEND_PARTNER_POS, l, get3(PS, g_1, st.NEXT_POS, l))
+        put1(PS, g, st.BEND_PARTNER_W, l, get1(PS, g_1, st.BEND_INVERSE_MASS, l))
+    for l in range(min(w, LANES)):
+        put3(PS, g, st.BEND_PARTNER_POS + 3 * LANES, l, get3(PS, g_2, st.NEXT_POS, l))
+        put1(PS, g, st.BEND_PARTNER_W + LANES, l, get1(PS, g_2, st.BEND_INVERSE_MASS, l))
+    for l in range(min(w, LANES)):
+        put3(PS, g, st.BEND_PARTNER_POS + 6 * LANES, l, get3(PS, g_3, st.NEXT_POS, l))
+        put1(PS, g, st.BEND_PARTNER_W + 2 * LANES, l, get1(PS, g_3, st.BEND_INVERSE_MASS, l))
+
+
+@kernel
+def solve_pair_lanes(PS, g, w, volume, k):
+    """One dihedral pair (``volume`` False) or volume pair (True), every lane, on vertex 0's
+    slot g alone: vertex 0's correction into its accumulator, vertices 1-3's over their gathered
+    positions, ``BEND_OK`` where they apply (``scatter_pair``)."""
+    for l in range(min(w, LANES)):
+        p0 = get3(PS, g, st.NEXT_POS, l)
+        p1 = get3(PS, g, st.BEND_PARTNER_POS, l)
+        p2 = get3(PS, g, st.BEND_PARTNER_POS + 3 * LANES, l)
+        p3 = get3(PS, g, st.BEND_PARTNER_POS + 6 * LANES, l)
+        w0 = get1(PS, g, st.BEND_INVERSE_MASS, l)
+        w1 = get1(PS, g, st.BEND_PARTNER_W, l)
+        w2 = get1(PS, g, st.BEND_PARTNER_W + LANES, l)
+        w3 = get1(PS, g, st.BEND_PARTNER_W + 2 * LANES, l)
+        if volume:
+            ok, c0, c1, c2, c3 = solve_volume(p0, p1, p2, p3, w0, w1, w2, w3, get1(PS, g, st.BEND_REST, l), k)
+        else:
+            ok, c0, c1, c2, c3 = solve_dihedral(p0, p1, p2, p3, w0, w1, w2, w3, get1(PS, g, st.BEND_REST, l),
+                                                get1(PS, g, st.BEND_SIGN, l), k)
+        accumulate_lane(PS, g, l, c0, ok)
+        put3(PS, g, st.BEND_PARTNER_POS, l, c1)
+        put3(PS, g, st.BEND_PARTNER_POS + 3 * LANES, l, c2)
+        put3(PS, g, st.BEND_PARTNER_POS + 6 * LANES, l, c3)
+        put1(PS, g, st.BEND_OK, l, 1.0 if ok else 0.0)
+
+
+@kernel
+def scatter_pair(PS, g, g_1, g_2, g_3, w):
+    """Vertices 1-3's corrections (``solve_pair_lanes``, in vertex 0's slot g) into their
+    accumulators where the pair applies. The fixed-point sums are exact, so the order of the
+    additions does not matter."""
+    for l in range(min(w, LANES)):
+        accumulate_lane(PS, g_1, l, get3(PS, g, st.BEND_PARTNER_POS, l), get1(PS, g, st.BEND_OK, l) != 0.0)
+    for l in range(min(w, LANES)):
+        accumulate_lane(PS, g_2, l, get3(PS, g, st.BEND_PARTNER_POS + 3 * LANES, l), get1(PS, g, st.BEND_OK, l) != 0.0)
+    for l in range(min(w, LANES)):
+        accumulate_lane(PS, g_3, l, get3(PS, g, st.BEND_PARTNER_POS + 6 * LANES, l), get1(PS, g, st.BEND_OK, l) != 0.0)
+
+
 @kernel(forceinline=False)
 def bending_block(PS, PM, TS, BM, VM, P, BI, topology, b, frequency_ratio, power_y):
     """D.7 over block b: the dihedral and volume corrections of every pair accumulated in fixed
     point (pairs in order, every lane side by side), then the averages added to the moving
     particles' ``next_pos`` and the accumulators cleared (Jacobi: every pair sees the positions
-    the pass started from)."""
+    the pass started from). Each pair is gathered into its vertex 0's slot, solved there and
+    scattered back (``gather_pair``, ``solve_pair_lanes``, ``scatter_pair``): a loop that reads
+    and writes rows of four slots at run-time distances stays scalar (docs/architecture.md,
+    *Lane form*)."""
     g0 = BI[b, bk.BI_G0]
     w = bk.lane_width(BI, b)
     k = bending_rate(P, b, frequency_ratio, power_y)
@@ -172,41 +229,28 @@ def bending_block(PS, PM, TS, BM, VM, P, BI, topology, b, frequency_ratio, power
         bend0 = BI[b, bk.BI_BEND0]
         vertices = BI[b, bk.BI_BEND_VERTICES]
         for e in range(BI[b, bk.BI_BENDS]):
-            g_0 = g0 + topology[vertices + 4 * e]
+            g = g0 + topology[vertices + 4 * e]
             g_1 = g0 + topology[vertices + 4 * e + 1]
             g_2 = g0 + topology[vertices + 4 * e + 2]
             g_3 = g0 + topology[vertices + 4 * e + 3]
-            ie = bend0 + e
+            gather_pair(PS, g, g_1, g_2, g_3, w)
             for l in range(w):
-                ok, c0, c1, c2, c3 = solve_dihedral(
-                    get3(PS, g_0, st.NEXT_POS, l), get3(PS, g_1, st.NEXT_POS, l), get3(PS, g_2, st.NEXT_POS, l),
-                    get3(PS, g_3, st.NEXT_POS, l), get1(PS, g_0, st.BEND_INVERSE_MASS, l),
-                    get1(PS, g_1, st.BEND_INVERSE_MASS, l), get1(PS, g_2, st.BEND_INVERSE_MASS, l),
-                    get1(PS, g_3, st.BEND_INVERSE_MASS, l), get1(BM, ie, bk.BEND_REST_ANGLE, l),
-                    get1(BM, ie, bk.BEND_SIGN, l), k)
-                accumulate_lane(PS, g_0, l, c0, ok)
-                accumulate_lane(PS, g_1, l, c1, ok)
-                accumulate_lane(PS, g_2, l, c2, ok)
-                accumulate_lane(PS, g_3, l, c3, ok)
+                put1(PS, g, st.BEND_REST, l, get1(BM, bend0 + e, bk.BEND_REST_ANGLE, l))
+                put1(PS, g, st.BEND_SIGN, l, get1(BM, bend0 + e, bk.BEND_SIGN, l))
+            solve_pair_lanes(PS, g, w, False, k)
+            scatter_pair(PS, g, g_1, g_2, g_3, w)
         volume0 = BI[b, bk.BI_VOLUME0]
         vertices = BI[b, bk.BI_VOLUME_VERTICES]
         for e in range(BI[b, bk.BI_VOLUMES]):
-            g_0 = g0 + topology[vertices + 4 * e]
+            g = g0 + topology[vertices + 4 * e]
             g_1 = g0 + topology[vertices + 4 * e + 1]
             g_2 = g0 + topology[vertices + 4 * e + 2]
             g_3 = g0 + topology[vertices + 4 * e + 3]
-            ie = volume0 + e
+            gather_pair(PS, g, g_1, g_2, g_3, w)
             for l in range(w):
-                ok, c0, c1, c2, c3 = solve_volume(
-                    get3(PS, g_0, st.NEXT_POS, l), get3(PS, g_1, st.NEXT_POS, l), get3(PS, g_2, st.NEXT_POS, l),
-                    get3(PS, g_3, st.NEXT_POS, l), get1(PS, g_0, st.BEND_INVERSE_MASS, l),
-                    get1(PS, g_1, st.BEND_INVERSE_MASS, l), get1(PS, g_2, st.BEND_INVERSE_MASS, l),
-                    get1(PS, g_3, st.BEND_INVERSE_MASS, l),
-                    get1(VM, ie, bk.VOLUME_REST, l) * get1(TS, b, st.SCALE_RATIO, l), k)
-                accumulate_lane(PS, g_0, l, c0, ok)
-                accumulate_lane(PS, g_1, l, c1, ok)
-                accumulate_lane(PS, g_2, l, c2, ok)
-                accumulate_lane(PS, g_3, l, c3, ok)
+                put1(PS, g, st.BEND_REST, l, get1(VM, volume0 + e, bk.VOLUME_REST, l) * get1(TS, b, st.SCALE_RATIO, l))
+            solve_pair_lanes(PS, g, w, True, k)
+            scatter_pair(PS, g, g_1, g_2, g_3, w)
     apply_accumulated_block(PS, BI, topology, b)
 
 
