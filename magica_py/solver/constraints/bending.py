@@ -159,9 +159,14 @@ def bending_inverse_masses(PS, PM, BI, topology, b):
 
 
 @kernel
-def gather_pair(PS, g, g_1, g_2, g_3, w):
-    """The pair's vertices 1-3 (next_pos, inverse mass) into vertex 0's slot g
-    (``BEND_PARTNER_POS``, ``BEND_PARTNER_W``): the solving loop then reads one item."""
+def gather_pair(PS, topology, first, g0, w):
+    """The pair whose four block-local vertices start at ``topology[first]``: vertices 1-3's
+    next_pos and inverse mass into vertex 0's slot (``BEND_PARTNER_POS``, ``BEND_PARTNER_W``), so
+    that the solving loop reads one item. Returns the four slots."""
+    g = g0 + topology[first]
+    g_1 = g0 + topology[first + 1]
+    g_2 = g0 + topology[first + 2]
+    g_3 = g0 + topology[first + 3]
     for l in range(min(w, LANES)):
         put3(PS, g, st.BEND_PARTNER_POS, l, get3(PS, g_1, st.NEXT_POS, l))
         put1(PS, g, st.BEND_PARTNER_W, l, get1(PS, g_1, st.BEND_INVERSE_MASS, l))
@@ -171,6 +176,7 @@ def gather_pair(PS, g, g_1, g_2, g_3, w):
     for l in range(min(w, LANES)):
         put3(PS, g, st.BEND_PARTNER_POS + 6 * LANES, l, get3(PS, g_3, st.NEXT_POS, l))
         put1(PS, g, st.BEND_PARTNER_W + 2 * LANES, l, get1(PS, g_3, st.BEND_INVERSE_MASS, l))
+    return g, g_1, g_2, g_3
 
 
 @kernel
@@ -229,11 +235,7 @@ def bending_block(PS, PM, TS, BM, VM, P, BI, topology, b, frequency_ratio, power
         bend0 = BI[b, bk.BI_BEND0]
         vertices = BI[b, bk.BI_BEND_VERTICES]
         for e in range(BI[b, bk.BI_BENDS]):
-            g = g0 + topology[vertices + 4 * e]
-            g_1 = g0 + topology[vertices + 4 * e + 1]
-            g_2 = g0 + topology[vertices + 4 * e + 2]
-            g_3 = g0 + topology[vertices + 4 * e + 3]
-            gather_pair(PS, g, g_1, g_2, g_3, w)
+            g, g_1, g_2, g_3 = gather_pair(PS, topology, vertices + 4 * e, g0, w)
             for l in range(w):
                 put1(PS, g, st.BEND_REST, l, get1(BM, bend0 + e, bk.BEND_REST_ANGLE, l))
                 put1(PS, g, st.BEND_SIGN, l, get1(BM, bend0 + e, bk.BEND_SIGN, l))
@@ -242,11 +244,7 @@ def bending_block(PS, PM, TS, BM, VM, P, BI, topology, b, frequency_ratio, power
         volume0 = BI[b, bk.BI_VOLUME0]
         vertices = BI[b, bk.BI_VOLUME_VERTICES]
         for e in range(BI[b, bk.BI_VOLUMES]):
-            g = g0 + topology[vertices + 4 * e]
-            g_1 = g0 + topology[vertices + 4 * e + 1]
-            g_2 = g0 + topology[vertices + 4 * e + 2]
-            g_3 = g0 + topology[vertices + 4 * e + 3]
-            gather_pair(PS, g, g_1, g_2, g_3, w)
+            g, g_1, g_2, g_3 = gather_pair(PS, topology, vertices + 4 * e, g0, w)
             for l in range(w):
                 put1(PS, g, st.BEND_REST, l, get1(VM, volume0 + e, bk.VOLUME_REST, l) * get1(TS, b, st.SCALE_RATIO, l))
             solve_pair_lanes(PS, g, w, True, k)
