@@ -26,12 +26,11 @@ run the work is split in two:
   the begin of frame; the step's stages it finds in the cache.
 
 Any function the helper has not finished, the system's process compiles itself. The results
-are the same functions, so the same bits. Started at construction rather than at the first
-frame call, the helper has the build, the animation's compile and the end of frame to work
-beside: the tail's first run 39 -> 33 s, the character's 53 -> 39 s, the crowd's 60 -> 45 s
-(docs/BENCHMARKS.md, *Figures of session 15*). A system constructed without cloths (teams
-added later) forks at its first frame call instead (``start``), as does any system whose
-early helper was not wanted.
+are the same functions, so the same bits. Started at construction, the helper has the build,
+the first frame's animation and the end of frame to work beside (docs/BENCHMARKS.md, *Figures
+of session 15*: first runs 5-9 s shorter than with a helper forked at the first frame call). A
+system constructed without cloths (teams added later) forks at its first frame call instead
+(``start``), as does any system whose early helper was not wanted.
 
 Only where it is safe and useful: Linux (``os.fork``), the JIT and the cache on, at least two
 CPUs of which one is free (the 1-minute load average at most the CPUs less a half, or, where it
