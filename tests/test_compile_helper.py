@@ -124,3 +124,25 @@ def test_a_helper_is_wanted_where_a_cpu_is_free_now_even_if_the_load_average_sti
 def test_idle_cpus_is_a_share_of_the_machine_s_cpus():
     idle = compile_helper.idle_cpus(0.05)
     assert 0.0 <= idle <= os.cpu_count()
+
+
+@pytest.mark.skipif(numba.config.DISABLE_JIT or not os.path.exists("/proc/stat"),
+                    reason="the helper is only wanted with the JIT on, on Linux")
+def test_no_second_helper_while_the_early_one_compiles(monkeypatch):
+    """A second system's first frame forks no helper while the first system's early helper is
+    still running (a child process standing in for it here), and does once it has ended."""
+    import subprocess
+    import sys
+
+    monkeypatch.setenv("MAGICA_COMPILE_HELPER", "1")
+    monkeypatch.setattr(compile_helper.os, "getloadavg", lambda: (0.1, 0.1, 0.1))
+    stand_in = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        monkeypatch.setitem(compile_helper._early, "pid", stand_in.pid)
+        assert compile_helper.early_helper_running()
+        assert not compile_helper.wanted(_Kernel([]))
+    finally:
+        stand_in.kill()
+        stand_in.wait()
+    assert not compile_helper.early_helper_running()   # reaped (here by Popen.wait)
+    assert compile_helper.wanted(_Kernel([]))

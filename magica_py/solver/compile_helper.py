@@ -60,7 +60,7 @@ from magica_py.solver.frame import (
     compile_end_stages, compile_late_stages, compile_step_stages, simulate_frame, simulate_worker,
 )
 
-_early = {"started": False}   # one early helper per process (start_early)
+_early = {"started": False, "pid": None}   # one early helper per process (start_early) and its pid
 
 
 def wanted(*kernels) -> bool:
@@ -70,7 +70,7 @@ def wanted(*kernels) -> bool:
         return False
     if not sys.platform.startswith("linux") or threading.current_thread() is not threading.main_thread():
         return False
-    if any(k.signatures for k in kernels):
+    if any(k.signatures for k in kernels) or early_helper_running():
         return False
     cpus = len(os.sched_getaffinity(0))
     # a helper pays only with a CPU to itself: with another job keeping every CPU but this
@@ -80,6 +80,21 @@ def wanted(*kernels) -> bool:
     if cpus < 2:
         return False
     return os.getloadavg()[0] <= cpus - 0.5 or idle_cpus() >= 1.5
+
+
+def early_helper_running() -> bool:
+    """Is this process's early helper (``start_early``) still compiling? Another system's first
+    frame then forks no second helper: the two would share the CPU that one of them needs."""
+    pid = _early.get("pid")
+    if pid is None:
+        return False
+    try:
+        done, _status = os.waitpid(pid, os.WNOHANG)
+    except ChildProcessError:   # already reaped (``finish``)
+        done = pid
+    if done != 0:
+        _early["pid"] = None
+    return done == 0
 
 
 def idle_cpus(window: float = 0.1) -> float:
@@ -114,6 +129,7 @@ def start_early(system, settings, parallel, wind) -> int | None:
     _early["started"] = True
     pid = fork_early(system, settings, parallel, wind)
     if pid is not None:
+        _early["pid"] = pid
         atexit.register(finish, pid)   # a system never run: the helper does not outlive this process
     return pid
 
