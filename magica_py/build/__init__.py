@@ -216,10 +216,9 @@ def _build(setup, spec, name, mode, root_names) -> ClothModel:
     _feature(features, skipped, "angle", features["angle_restoration"] or features["angle_limit"],
              "angle_restoration.use and angle_limit.use are off" if not (use_restoration or use_limit)
              else "no baselines")
-    stiffness = float(constraints.parameter(params, "triangle_bending.stiffness"))
     empty4 = np.zeros((0, 4), dtype=np.int32)
     bend = (empty4, np.zeros(0), np.zeros(0), empty4, np.zeros(0))
-    if len(triangles) and stiffness > 1e-8:
+    if len(triangles) and constraints.wants_bending(params):
         bend = constraints.bending_and_volume(attribute, triangles, pos, setup.init_render_local_to_world)
         _feature(features, skipped, "bending", len(bend[0]) > 0, "no triangle pair below 120°")
         _feature(features, skipped, "volume", len(bend[3]) > 0, "no triangle pair between 90° and 179°")

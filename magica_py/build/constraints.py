@@ -29,6 +29,12 @@ def parameter(params: Mapping | None, key: str):
     return default_parameters()[key]
 
 
+def wants_bending(params: Mapping | None) -> bool:
+    """Does a mesh cloth with these parameters build triangle bending and volume pairs (§D.7:
+    only when ``triangle_bending.stiffness`` is above 1e-8)?"""
+    return float(parameter(params, "triangle_bending.stiffness")) > 1e-8
+
+
 def curve_samples(value) -> np.ndarray:
     """16-sample depth table of a curve parameter (§0.3, ``ConvertFloatArray``).
 

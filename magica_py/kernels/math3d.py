@@ -563,11 +563,10 @@ def q_slerp_along(q1, to, angle, inv_sin, far, t):
     """``q_slerp_select(q1, q2, t)`` from ``q_slerp_path(q1, q2)``'s values (the same bits)."""
     w1 = trig.sin((1.0 - t) * angle)
     w2 = trig.sin(t * angle)
-    b = to
-    sine = q_normalize_select(((q1[0] * w1 + b[0] * w2) * inv_sin, (q1[1] * w1 + b[1] * w2) * inv_sin,
-                               (q1[2] * w1 + b[2] * w2) * inv_sin, (q1[3] * w1 + b[3] * w2) * inv_sin))
-    near = q_normalize_select((q1[0] + (b[0] - q1[0]) * t, q1[1] + (b[1] - q1[1]) * t,
-                               q1[2] + (b[2] - q1[2]) * t, q1[3] + (b[3] - q1[3]) * t))
+    sine = q_normalize_select(((q1[0] * w1 + to[0] * w2) * inv_sin, (q1[1] * w1 + to[1] * w2) * inv_sin,
+                               (q1[2] * w1 + to[2] * w2) * inv_sin, (q1[3] * w1 + to[3] * w2) * inv_sin))
+    near = q_normalize_select((q1[0] + (to[0] - q1[0]) * t, q1[1] + (to[1] - q1[1]) * t,
+                               q1[2] + (to[2] - q1[2]) * t, q1[3] + (to[3] - q1[3]) * t))
     use_far = far != 0.0
     return (sine[0] if use_far else near[0], sine[1] if use_far else near[1], sine[2] if use_far else near[2],
             sine[3] if use_far else near[3])

@@ -338,15 +338,13 @@ class ClothSystem:
         mesh cloth with triangle bending is assumed to have bending pairs and every cloth line
         and triangle rotations (what only its model tells). Used to start a first run's compile
         of the step's stages beside the build (``compile_helper.start_early``)."""
-        from magica_py.build.constraints import parameter
+        from magica_py.build.constraints import wants_bending
 
-        teams = range(len(self.specs))
-        bends = [int(getattr(s, "connection_mode", "line") != "line"
-                     and float(parameter(self.team_parameters[t], "triangle_bending.stiffness")) > 1e-8)
-                 for t, s in zip(teams, self.specs)]
+        bends = [int(getattr(s, "connection_mode", "line") != "line" and wants_bending(self.team_parameters[t]))
+                 for t, s in enumerate(self.specs)]
         colliders = [len(self._collider_indices(s)) for s in self.specs]
         ones = [1] * len(self.specs)
-        return self._switches(list(teams), bends, ones, ones, colliders)
+        return self._switches(list(range(len(self.specs))), bends, ones, ones, colliders)
 
     def _switches(self, teams, bends, lines, triangles, colliders) -> StageSwitches:
         """The stage switches of ``teams`` from the parameter rows and, per team id, the counts
@@ -671,7 +669,7 @@ class ClothSystem:
         returns the frame's counts (``frame.frame_counts``)."""
         if self._first_call:
             return self._first_frame_call(fi)
-        zones = self.wind.kernel_table() if self.wind is not None else None
+        zones = self._wind_zones()
         F = self._frame_arrays()
         if self.parallel:
             return self._parallel_frame(F, fi, zones)
@@ -711,7 +709,7 @@ class ClothSystem:
         if helper is not None:
             helper = compile_helper.meet(helper, self._frame_arrays(), fi, self._save_area, self.stages)
         elif compile_helper.wanted(kernel):
-            zones = self.wind.kernel_table() if self.wind is not None else None
+            zones = self._wind_zones()
             helper = compile_helper.start(self._frame_arrays(), fi, self._save_area, zones, self.stages)
         try:
             return self._call_frame(fi)
