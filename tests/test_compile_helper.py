@@ -146,3 +146,23 @@ def test_no_second_helper_while_the_early_one_compiles(monkeypatch):
         stand_in.wait()
     assert not compile_helper.early_helper_running()   # reaped (here by Popen.wait)
     assert compile_helper.wanted(_Kernel([]))
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="the helper is a forked process (POSIX)")
+def test_a_reaped_helper_is_never_waited_for_or_killed_again(monkeypatch):
+    """Once a helper's pid is reaped (by ``early_helper_running`` or a first ``finish``), the
+    system may reuse it for another child; ``finish`` then leaves that pid alone. Here a live
+    child stands for the process that got the pid: it is neither killed nor reaped."""
+    import subprocess
+    import sys
+
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        monkeypatch.setattr(compile_helper, "_reaped", {other.pid})
+        compile_helper.finish(other.pid)
+        monkeypatch.setitem(compile_helper._early, "pid", other.pid)
+        assert not compile_helper.early_helper_running()
+        assert other.poll() is None
+    finally:
+        other.kill()
+        other.wait()

@@ -61,6 +61,7 @@ from magica_py.solver.frame import (
 )
 
 _early = {"started": False, "pid": None}   # one early helper per process (start_early) and its pid
+_reaped: set[int] = set()   # helpers reaped (finish, early_helper_running): never waited for again
 
 
 def wanted(*kernels) -> bool:
@@ -88,12 +89,16 @@ def early_helper_running() -> bool:
     pid = _early.get("pid")
     if pid is None:
         return False
-    try:
-        done, _status = os.waitpid(pid, os.WNOHANG)
-    except ChildProcessError:   # already reaped (``finish``)
+    if pid in _reaped:
         done = pid
+    else:
+        try:
+            done, _status = os.waitpid(pid, os.WNOHANG)
+        except ChildProcessError:   # reaped elsewhere
+            done = pid
     if done != 0:
         _early["pid"] = None
+        _reaped.add(pid)
     return done == 0
 
 
@@ -204,8 +209,9 @@ def meet(pid: int, F, frame_values, area, stages) -> int:
 
 
 def finish(pid: int | None) -> None:
-    """Reap the helper after the frame kernel's first call (ending it if still compiling)."""
-    if pid is None:
+    """Reap the helper after the frame kernel's first call (ending it if still compiling).
+    A helper already reaped is left alone: its pid may since belong to another process."""
+    if pid is None or pid in _reaped:
         return
     try:
         done, _ = os.waitpid(pid, os.WNOHANG)
@@ -214,3 +220,4 @@ def finish(pid: int | None) -> None:
             os.waitpid(pid, 0)
     except (ChildProcessError, ProcessLookupError):
         pass
+    _reaped.add(pid)
