@@ -12,10 +12,19 @@ the list as a tree: ``simulate_frame`` holds everything below it.
 the passes of the callees it compiled meanwhile, from the ``numba:run_pass`` events), and the
 seconds spent inside LLVM (the ``numba:llvm_lock`` events: every call into llvmlite's
 binding, i.e. LLVM's optimisation passes, machine-code emission, module parsing and linking).
+
+    NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/compile_profile.py tail_orbit 3 --signatures
+
+``--signatures``: how many functions numba compiled, and every function compiled for more than
+one signature with the argument types that differ (a literal constant or an int32 index makes
+a signature of its own: docs/tech-notes.md §7).
+
+The compile helper is left out (``MAGICA_COMPILE_HELPER=0``): everything compiles in this process.
 """
 from __future__ import annotations
 
 import collections
+import os
 import pathlib
 import sys
 import time
@@ -26,16 +35,19 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     passes = "--passes" in argv
-    argv = [a for a in argv if a != "--passes"]
+    signatures = "--signatures" in argv
+    argv = [a for a in argv if a not in ("--passes", "--signatures")]
     if not argv:
         print(__doc__)
         return 2
     scene_name = argv[0]
     frames = int(argv[1]) if len(argv) > 1 else 3
     sys.path.insert(0, str(ROOT))
+    os.environ["MAGICA_COMPILE_HELPER"] = "0"   # every compile in this process, where the events are seen
     from numba.core import event
 
     seconds: dict[str, float] = collections.defaultdict(float)
+    compiled: dict[str, list[tuple]] = collections.defaultdict(list)   # function -> argument types
 
     class Listener(event.Listener):
         def __init__(self):
@@ -50,6 +62,7 @@ def main(argv=None) -> int:
             if start is not None:
                 fn = dispatcher.py_func
                 seconds[f"{fn.__module__}.{fn.__qualname__}"] += time.perf_counter() - start
+                compiled[f"{fn.__module__}.{fn.__qualname__}"].append(tuple(ev.data["args"]))
 
     event.register("numba:compile", Listener())
     pass_seconds: dict[str, float] = collections.defaultdict(float)
@@ -95,6 +108,16 @@ def main(argv=None) -> int:
     ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player)
     player.run(frames)
     print(f"{scene_name}: wall {time.perf_counter() - wall:.1f} s, cpu {time.process_time() - cpu:.1f} s")
+    if signatures:
+        print(f"{sum(len(v) for v in compiled.values())} compiles of {len(compiled)} functions")
+        for name, sigs in sorted(compiled.items(), key=lambda kv: -len(kv[1])):
+            if len(sigs) < 2:
+                continue
+            differ = [i for i in range(len(sigs[0])) if len({str(sig[i]) for sig in sigs}) > 1]
+            print(f"{len(sigs):4d}  {name}: argument {', '.join(str(i) for i in differ)}")
+            for sig in sigs:
+                print(f"        {', '.join(str(sig[i]) for i in differ)}")
+        return 0
     if passes:
         print(f"inside LLVM: {llvm[0]:.1f} s over {llvm[1]} calls into llvmlite's binding")
         print("exclusive seconds per compiler pass:")

@@ -214,8 +214,8 @@ def vertex_frames_kernel(tri_normals, tri_tangents, vt_start, vt_count, vt_data,
         if c == 0:
             continue
         s = vt_start[v]
-        ns = _aligned_sum(tri_normals, vt_data, s, c, flip, FLIP_NORMAL)
-        ts = _aligned_sum(tri_tangents, vt_data, s, c, flip, FLIP_TANGENT)
+        ns = _aligned_sum(tri_normals, vt_data, s, c, flip, np.int64(FLIP_NORMAL))
+        ts = _aligned_sum(tri_tangents, vt_data, s, c, flip, np.int64(FLIP_TANGENT))
         nn = v_normalize(ns)
         tn = v_normalize(ts)
         b = v_normalize(v_cross(nn, tn))

@@ -309,7 +309,7 @@ def propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_tiles
     lane for lane the nodes of the tile's segment one level up (``parent_slot`` >= 0) reads
     their results from that segment's output rows."""
     for k in range(chunk_roots[chunk], chunk_roots[chunk + 1]):
-        propagate_node(roots[k], parent, local_position, local_rotation, local_scale,
+        propagate_node(np.int64(roots[k]), parent, local_position, local_rotation, local_scale,
                        world_position, world_rotation, lossy_scale, local_to_world)
     lanes = scratch[chunk]
     inputs = lanes[:LANE_INPUT * LANE_STRIDE]
@@ -358,7 +358,7 @@ def propagate_plan_parallel(roots, chunk_roots, order, segment_start, chunk_tile
                             world_rotation, lossy_scale, local_to_world):
     """The chunks of a plan on numba's threads (chunks share no node: same bits as serial)."""
     for chunk in prange(chunk_roots.shape[0] - 1):
-        propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_tiles,
+        propagate_chunk(np.int64(chunk), roots, chunk_roots, order, segment_start, chunk_tiles,
                         tile_segments, tile_warm, warm_start, warm_stop, segment_slot,
                         parent_slot, scratch, parent, local_position, local_rotation,
                         local_scale, world_position, world_rotation, lossy_scale, local_to_world)
@@ -369,7 +369,7 @@ def propagate_listed(nodes, parent, local_position, local_rotation, local_scale,
                      world_position, world_rotation, lossy_scale, local_to_world):
     """``propagate_node`` for ``nodes`` (sorted: parents before children), one after another."""
     for k in range(nodes.shape[0]):
-        propagate_node(nodes[k], parent, local_position, local_rotation, local_scale,
+        propagate_node(np.int64(nodes[k]), parent, local_position, local_rotation, local_scale,
                        world_position, world_rotation, lossy_scale, local_to_world)
 
 

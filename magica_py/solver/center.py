@@ -74,11 +74,15 @@ def skin_vertex(l0, l1, l2, b0, b1, b2, b3, local_position, local_normal, local_
                              bind_point(b0, b1, b2, b3, local_tangent, 0.0))
 
 
+MATRIX_ROW = 4 * LANES   # columns from one row of a row-major 4x4 matrix field to the next
+
+
 @kernel
-def bind_row(PM, g, k, l):
-    """Row k of lane l's bind pose (``blocks.SKIN_BIND_POSE``, row major) as a 4-tuple."""
-    c = bk.SKIN_BIND_POSE + 4 * k * LANES
-    return (PM[g, c + l], PM[g, c + LANES + l], PM[g, c + 2 * LANES + l], PM[g, c + 3 * LANES + l])
+def bind_rows(PM, g, l):
+    """The four rows of lane l's bind pose (``blocks.SKIN_BIND_POSE``, row major)."""
+    c = bk.SKIN_BIND_POSE
+    return (get4(PM, g, c, l), get4(PM, g, c + MATRIX_ROW, l), get4(PM, g, c + 2 * MATRIX_ROW, l),
+            get4(PM, g, c + 3 * MATRIX_ROW, l))
 
 
 @kernel(forceinline=False)
@@ -98,19 +102,19 @@ def skin_block(PS, PM, BI, PT, local_to_world, b, l0, l1):
                 for c in range(4):
                     PS[g, st.BONE_MATRIX + (4 * k + c) * LANES + l] = local_to_world[node, k, c]
         for l in range(l0, l1):
-            pos, rot = skin_vertex(bone_row(PS, g, 0, l), bone_row(PS, g, 1, l), bone_row(PS, g, 2, l),
-                                   bind_row(PM, g, 0, l), bind_row(PM, g, 1, l), bind_row(PM, g, 2, l),
-                                   bind_row(PM, g, 3, l), get3(PM, g, bk.LOCAL_POSITION, l),
+            m0, m1, m2 = bone_rows(PS, g, l)
+            i0, i1, i2, i3 = bind_rows(PM, g, l)
+            pos, rot = skin_vertex(m0, m1, m2, i0, i1, i2, i3, get3(PM, g, bk.LOCAL_POSITION, l),
                                    get3(PM, g, bk.LOCAL_NORMAL, l), get3(PM, g, bk.LOCAL_TANGENT, l))
             put3(PS, g, st.POSITION, l, pos)
             put4(PS, g, st.ROTATION, l, rot)
 
 
 @kernel
-def bone_row(PS, g, k, l):
-    """Row k of lane l's gathered bone matrix (``BONE_MATRIX``) as a 4-tuple."""
-    c = st.BONE_MATRIX + 4 * k * LANES
-    return (PS[g, c + l], PS[g, c + LANES + l], PS[g, c + 2 * LANES + l], PS[g, c + 3 * LANES + l])
+def bone_rows(PS, g, l):
+    """The three top rows of lane l's gathered bone matrix (``BONE_MATRIX``, row major)."""
+    c = st.BONE_MATRIX
+    return get4(PS, g, c, l), get4(PS, g, c + MATRIX_ROW, l), get4(PS, g, c + 2 * MATRIX_ROW, l)
 
 
 SMOOTHING_REFERENCE_RATE = 90.0   # 1/s: the frame rate at which the C.4 ratio is taken as is

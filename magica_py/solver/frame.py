@@ -183,9 +183,9 @@ def warm_block(T, b, area):
     that the reads are kept; nothing else is written."""
     if T.BI[b, bk.BI_LANES_USED] < WARM_MIN_LANES or T.PS.shape[0] * T.PS.shape[1] < WARM_MIN_STATE_VALUES:
         return
-    g0 = T.BI[b, bk.BI_G0]
+    g0 = np.int64(T.BI[b, bk.BI_G0])
     g1 = g0 + T.BI[b, bk.BI_N]
-    c0 = T.BI[b, bk.BI_COLLIDER0]
+    c0 = np.int64(T.BI[b, bk.BI_COLLIDER0])
     acc = _warm_rows(T.PS, g0, g1) + _warm_rows(T.PM, g0, g1) + _warm_rows(T.PP, g0, g1)
     acc += _warm_rows(T.TS, b, b + 1) + _warm_rows(T.CS, c0, c0 + T.BI[b, bk.BI_COLLIDERS])
     area[area.shape[0] - 1] = acc

@@ -433,19 +433,21 @@ def constraint_stiffness(k, frequency_ratio, power, rate_mode, quality):
 @kernel(forceinline=False)
 def particle_parameters_block(PP, PM, P, BI, b):
     """Block b's depth curves at every particle's depth, every lane (``blocks.PARTICLE_PARAMETERS``):
-    the values ``curve_at`` gives, computed when the block's row or a lane changes."""
+    the values ``curve_at`` gives, computed when the block's row or a lane changes. The columns
+    go in as plain int64 (``np.int64``): one compile of ``curve_at``, not one per column
+    (docs/tech-notes.md §7)."""
     g0 = BI[b, bk.BI_G0]
     for g in range(g0, g0 + BI[b, bk.BI_N]):
         for l in range(bk.lane_width(BI, b)):
             depth = PM[g, bk.DEPTH + l]
-            PP[g, bk.CURVE_DAMPING + l] = curve_at(P, b, PRM_DAMPING_CURVE, depth)
-            PP[g, bk.CURVE_RADIUS + l] = curve_at(P, b, PRM_RADIUS_CURVE, depth)
-            PP[g, bk.CURVE_DISTANCE_STIFFNESS + l] = curve_at(P, b, PRM_DISTANCE_STIFFNESS_CURVE, depth)
-            PP[g, bk.CURVE_RESTORATION_STIFFNESS + l] = curve_at(P, b, PRM_RESTORATION_STIFFNESS_CURVE, depth)
-            PP[g, bk.CURVE_LIMIT_ANGLE + l] = curve_at(P, b, PRM_LIMIT_ANGLE_CURVE, depth)
+            PP[g, bk.CURVE_DAMPING + l] = curve_at(P, b, np.int64(PRM_DAMPING_CURVE), depth)
+            PP[g, bk.CURVE_RADIUS + l] = curve_at(P, b, np.int64(PRM_RADIUS_CURVE), depth)
+            PP[g, bk.CURVE_DISTANCE_STIFFNESS + l] = curve_at(P, b, np.int64(PRM_DISTANCE_STIFFNESS_CURVE), depth)
+            PP[g, bk.CURVE_RESTORATION_STIFFNESS + l] = curve_at(P, b, np.int64(PRM_RESTORATION_STIFFNESS_CURVE), depth)
+            PP[g, bk.CURVE_LIMIT_ANGLE + l] = curve_at(P, b, np.int64(PRM_LIMIT_ANGLE_CURVE), depth)
             # D.9 reads its curves at the depth squared
-            PP[g, bk.CURVE_MAX_DISTANCE + l] = curve_at(P, b, PRM_MAX_DISTANCE_CURVE, depth * depth)
-            PP[g, bk.CURVE_BACKSTOP_DISTANCE + l] = curve_at(P, b, PRM_BACKSTOP_DISTANCE_CURVE, depth * depth)
+            PP[g, bk.CURVE_MAX_DISTANCE + l] = curve_at(P, b, np.int64(PRM_MAX_DISTANCE_CURVE), depth * depth)
+            PP[g, bk.CURVE_BACKSTOP_DISTANCE + l] = curve_at(P, b, np.int64(PRM_BACKSTOP_DISTANCE_CURVE), depth * depth)
 
 
 @kernel

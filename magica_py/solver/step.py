@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
@@ -368,7 +369,7 @@ def dynamic_friction_keep(vel, direction, normal, friction, dynamic_friction, fr
     brake keeps in a step, ``1 - share`` at 90 Hz, is a per-step retention, converted as
     ``keep^(90/f)`` (``step_keep``)."""
     keep = 1.0 - dynamic_friction_share(direction, normal, friction, dynamic_friction)
-    return v_scale(vel, step_keep(keep, frequency_ratio, 1))
+    return v_scale(vel, step_keep(keep, frequency_ratio, np.int64(1)))
 
 
 @kernel
@@ -417,12 +418,13 @@ def end_step_block(PS, PM, TS, P, BI, topology, b, dt, frequency_ratio):
                 put3(PS, g, st.OLD_POS, l, next_pos)
             continue
         # the consistent brake's pow (an opaque call that keeps a loop scalar) is left out of
-        # the compiled loop by a constant argument where it cannot apply
+        # the compiled loop by a constant argument where it cannot apply (a plain bool, which
+        # LLVM folds after inlining: one compile for both, docs/tech-notes.md §7)
         if consistent:
-            end_step_lanes(PS, PM, TS, g, b, w, dt, frequency_ratio, True, dynamic, speed_limit, centrifugal,
+            end_step_lanes(PS, PM, TS, g, b, w, dt, frequency_ratio, np.bool_(True), dynamic, speed_limit, centrifugal,
                            friction_keep, gain, loss_scale)
         else:
-            end_step_lanes(PS, PM, TS, g, b, w, dt, 1.0, False, dynamic, speed_limit, centrifugal, friction_keep,
+            end_step_lanes(PS, PM, TS, g, b, w, dt, 1.0, np.bool_(False), dynamic, speed_limit, centrifugal, friction_keep,
                            gain, loss_scale)
 
 

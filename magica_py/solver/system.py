@@ -377,7 +377,7 @@ class ClothSystem:
         self.model = team_model(self.models, collider_counts)
         self._views()
         lay = self.layout
-        blocks = np.asarray([b for b, blk in enumerate(lay.blocks) if blk is not None], dtype=np.int32)
+        blocks = np.asarray([b for b, blk in enumerate(lay.blocks) if blk is not None], dtype=np.int64)
         self.tables = Tables(self.PS, self.TS, self.CS, self.TRS, self.EDS, lay.particle_model, self.PP, lay.team_model,
                              lay.link_model, lay.triangle_model, lay.bend_model, lay.volume_model, self.P,
                              lay.block_ints, lay.topology, lay.particle_transform, lay.team_ints,

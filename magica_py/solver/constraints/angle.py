@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from magica_py.jit import kernel
 from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
@@ -368,15 +370,16 @@ def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
                         put4(PS, gc, st.PARTNER_ROTATION, l, get4(PS, gp, st.ANGLE_ROTATION, l))
                 # the lanes side by side without the limit's violation path (its acos, sincos
                 # and normalisations for every lane); where a lane met a violation or an
-                # opposite swing (rare), the iteration runs again on the full path for it
+                # opposite swing (rare), the iteration runs again on the full path for it (the
+                # path switch a plain bool that LLVM folds: one compile, docs/tech-notes.md §7)
                 angle_iteration_lanes(PS, gc, w, p_move, rest_pivot, use_limit, use_restoration, limit_stiffness,
-                                      limit_attenuation, restoration_attenuation, False)
+                                      limit_attenuation, restoration_attenuation, np.bool_(False))
                 rare = False
                 for l in range(w):
                     rare = rare or get1(PS, gc, st.ANGLE_RARE, l) != 0.0
                 if rare:
                     angle_iteration_lanes(PS, gc, w, p_move, rest_pivot, use_limit, use_restoration, limit_stiffness,
-                                          limit_attenuation, restoration_attenuation, True)
+                                          limit_attenuation, restoration_attenuation, np.bool_(True))
                 for l in range(w):
                     put3(PS, gp, st.NEXT_POS, l, get3(PS, gc, st.PARTNER_POS, l))
                     put3(PS, gp, st.VELOCITY_POS, l, get3(PS, gc, st.PARTNER_VELOCITY_POS, l))

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     inverse_mass_friction_depth, lerp, saturate, v_add, v_length, v_length_sq, v_scale, v_sub,
@@ -90,9 +92,10 @@ def distance_particle_terms(PS, PM, PP, P, BI, topology, b, frequency_ratio, pow
                 put1(PS, g, st.INVERSE_MASS, l, 1.0 / FIX_MASS)
             continue
         # the stiffness's rate conversion (a pow, an opaque call that keeps a loop scalar) is
-        # left out of the compiled loop by constant arguments where it cannot apply
+        # left out of the compiled loop by constant arguments where it cannot apply (plain
+        # int64 values, which LLVM folds after inlining: docs/tech-notes.md §7)
         if mode == 0:
-            distance_terms_lanes(PS, PM, PP, g, w, frequency_ratio, power_y, 0, quality)
+            distance_terms_lanes(PS, PM, PP, g, w, frequency_ratio, power_y, np.int64(0), quality)
         elif quality == 0 or frequency_ratio == 1.0:
             distance_terms_lanes(PS, PM, PP, g, w, 1.0, power_y, mode, quality)
         else:

@@ -4,6 +4,7 @@ rest distance to its root. Only the particle moves; the root is infinitely heavy
 position gathered next to each particle (``PARTNER_*`` rows), then solved across the lanes."""
 from __future__ import annotations
 
+import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import saturate, v_add, v_length, v_scale, v_sub
@@ -40,7 +41,7 @@ def solve_tether(position, root_position, rest_length, compression_limit, freque
     d = length - limit * rest_length
     k = saturate(excess / STIFFNESS_WIDTH) * (COMPRESSION_STIFFNESS if compressed else STRETCH_STIFFNESS)
     if frequency_ratio != 1.0:
-        k = step_rate(k, frequency_ratio, 1.0, 1)
+        k = step_rate(k, frequency_ratio, 1.0, np.int64(1))
     corr = v_scale(v, d * k / length)
     active = (compressed | stretched) & (length >= 1e-8) & (rest_length != 0.0)
     return corr if active else ZERO3
