@@ -338,8 +338,8 @@ def baseline_pose(baseline_data, parent, local_position, local_normal, local_tan
                   baseline_local_position, baseline_local_rotation, attribute, zero_distance_bit):
     """Rest pose of each baseline vertex relative to its parent (§B.7); flags ZeroDistance."""
     for k in range(baseline_data.shape[0]):
-        v = baseline_data[k]
-        p = parent[v]
+        v = np.int64(baseline_data[k])   # int64 ids: one signature of the row helpers (docs/tech-notes.md §7)
+        p = np.int64(parent[v])
         if p < 0:
             continue
         qp = rot_from_normal_tangent(load3(local_normal, p), load3(local_tangent, p))
@@ -363,7 +363,7 @@ def root_index_and_length(parent, attribute, local_position, move_bit, root_inde
         root_length[i] = 0.0
         if (attribute[i] & move_bit) == 0:
             continue
-        p = parent[i]
+        p = np.int64(parent[i])
         if p < 0:
             continue
         seg = v_length(v_sub(load3(local_position, i), load3(local_position, p)))

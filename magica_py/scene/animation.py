@@ -221,13 +221,13 @@ def apply_drivers(t, kind, target, start, end, phase_offset, fade, params, key_f
     radial vectors are evaluated first, all at once (``orbit_radials``)."""
     orbit_radials(t, orbit_columns, orbit_radial)
     for m in range(driven.shape[0]):
-        i = driven[m]
+        i = np.int64(driven[m])   # int64 node ids: one signature of the row helpers (docs/tech-notes.md §7)
         store3(local_position, i, load3(rest_position, i))
         store4(local_rotation, i, load4(rest_rotation, i))
         store3(local_scale, i, load3(rest_scale, i))
     two_pi = 2.0 * math.pi
     for d in range(kind.shape[0]):
-        i = target[d]
+        i = np.int64(target[d])
         k = kind[d]
         tau = min(max(t, start[d]), end[d]) - start[d] + phase_offset[d]
         if k == KEYFRAMES:
@@ -300,7 +300,7 @@ def apply_drivers(t, kind, target, start, end, phase_offset, fade, params, key_f
             q = q_mul(load4(local_rotation, i), q_mul(yaw, roll))
             store4(local_rotation, i, q_normalize(q))
     for m in range(driven.shape[0]):
-        i = driven[m]
+        i = np.int64(driven[m])   # int64 node ids: one signature of the row helpers (docs/tech-notes.md §7)
         dq = load4(offset_rotation, m)
         moved = q_rotate(dq, load3(local_position, i))
         store3(local_position, i, (offset_position[m, 0] + moved[0],

@@ -112,7 +112,7 @@ def propagate_node(i, parent, local_position, local_rotation, local_scale,
     lp = load3(local_position, i)
     lr = q_normalize(load4(local_rotation, i))
     ls = load3(local_scale, i)
-    p = parent[i]
+    p = np.int64(parent[i])   # int64 node ids: one signature of the row helpers (docs/tech-notes.md §7)
     r0, r1, r2 = q_to_matrix(lr)
     if p < 0:
         for c in range(3):
