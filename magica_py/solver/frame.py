@@ -79,6 +79,7 @@ TimeArrays = namedtuple("TimeArrays", TeamTimeState.FIELDS)
 # triangle, BM bend, VM volume), parameters P (one row per block) and PP (its depth curves at
 # each particle: ``blocks.PARTICLE_PARAMETERS``), block ints BI and topology,
 # per-lane hierarchy nodes (PT particles, TI teams, CT collider slots), the live block ids
+# (int64: a block id goes on to every stage and row helper; one signature, docs/tech-notes.md §7)
 Tables = namedtuple("Tables", [
     "PS", "TS", "CS", "TRS", "EDS", "PM", "PP", "TM", "LM", "TRM", "BM", "VM", "P", "BI", "topology", "PT", "TI", "CT",
     "blocks"])

@@ -240,7 +240,7 @@ def bending_block(PS, PM, TS, BM, VM, P, BI, topology, b, frequency_ratio, power
                 put1(PS, g, st.BEND_REST, l, get1(BM, bend0 + e, bk.BEND_REST_ANGLE, l))
                 put1(PS, g, st.BEND_SIGN, l, get1(BM, bend0 + e, bk.BEND_SIGN, l))
             # a literal switch (one compile per value, docs/tech-notes.md §7): numba prunes the
-            # other pair kind before LLVM sees the loop, 8 % faster than the folded plain bool
+            # other pair kind before LLVM sees the loop, ~9 % faster than the folded plain bool
             solve_pair_lanes(PS, g, w, False, k)
             scatter_pair(PS, g, g_1, g_2, g_3, w)
         volume0 = BI[b, bk.BI_VOLUME0]
