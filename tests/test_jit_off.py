@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 SNIPPET = """
@@ -110,11 +111,15 @@ from numba.core import event
 import magica_py
 
 compiled = set()
+signatures = []   # (module.name, argument types) of every compile of a package function
 
 
 class Names(event.Listener):
     def on_start(self, ev):
-        compiled.add(ev.data["dispatcher"].py_func.__name__)
+        fn = ev.data["dispatcher"].py_func
+        compiled.add(fn.__name__)
+        if str(fn.__module__).startswith("magica_py"):
+            signatures.append((f"{fn.__module__}.{fn.__qualname__}", str(ev.data["args"])))
 
     def on_end(self, ev):
         pass
@@ -140,7 +145,7 @@ compiled.clear()
 with event.install_listener("numba:compile", Names()):
     result = magica_py.simulate("configs/tail_orbit.yaml", frames=4)
 print(json.dumps({"positions": result.cloths["tail"].positions.tolist(), "compiled": sorted(compiled | before_frames),
-                  "before_frames": sorted(before_frames), "in_frames": sorted(compiled)}))
+                  "before_frames": sorted(before_frames), "in_frames": sorted(compiled), "signatures": signatures}))
 """
 # the optional stages tail_orbit (line mode, angle restoration, no collider, no motion
 # constraint, faithful mode, no wind: ``ClothSystem.stages`` has angle and lines only) does not
@@ -152,21 +157,28 @@ UNUSED_BY_TAIL_ORBIT = ("bending_block", "apply_accumulated_block", "point_colli
                         "triangle_rotations_block", "wind_block")
 
 
-def test_tail_orbit_runs_bounds_checked_and_compiles_only_the_stages_it_uses(tmp_path):
+@pytest.fixture(scope="module")
+def bounds_checked_tail(tmp_path_factory):
+    """The tail's first frames compiled from an empty cache with ``NUMBA_BOUNDSCHECK=1``, in a
+    subprocess (``COMPILE_SNIPPET``): its positions and what numba compiled."""
+    # no compile helper (solver/compile_helper.py): every kernel compiles in this process, where
+    # the compile events see it
+    cache = tmp_path_factory.mktemp("numba-cache")
+    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", NUMBA_CACHE_DIR=str(cache), MAGICA_COMPILE_HELPER="0")
+    env.pop("NUMBA_DISABLE_JIT", None)
+    out = subprocess.run([sys.executable, "-c", COMPILE_SNIPPET], cwd=ROOT, env=env, capture_output=True,
+                         text=True, timeout=3600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_tail_orbit_runs_bounds_checked_and_compiles_only_the_stages_it_uses(bounds_checked_tail):
     """``NUMBA_BOUNDSCHECK=1`` compiles every index with a check (an out-of-range index raises
     IndexError instead of reading memory); the frame path has no access outside its arrays.
     The run has a cache of its own (checked and unchecked code must not share cache entries),
     so every kernel it needs is compiled here: numba's compile events name them, and the
     optional stages the scene does not use are not among them (``frame.StageSwitches``)."""
-    # no compile helper (solver/compile_helper.py): every kernel compiles in this process, where
-    # the compile events see it
-    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"),
-               MAGICA_COMPILE_HELPER="0")
-    env.pop("NUMBA_DISABLE_JIT", None)
-    out = subprocess.run([sys.executable, "-c", COMPILE_SNIPPET], cwd=ROOT, env=env, capture_output=True,
-                         text=True, timeout=3600)
-    assert out.returncode == 0, out.stderr[-3000:]
-    checked = json.loads(out.stdout.strip().splitlines()[-1])
+    checked = bounds_checked_tail
     compiled = set(checked["compiled"])
     assert {"simulate_frame", "predict_block", "distance_block", "angle_block",
             "line_rotations_block"} <= compiled
@@ -182,3 +194,25 @@ def test_tail_orbit_runs_bounds_checked_and_compiles_only_the_stages_it_uses(tmp
         sorted(ahead)
     assert not ahead & set(checked["in_frames"]), sorted(ahead & set(checked["in_frames"]))
     assert np.array(checked["positions"]).tobytes() == np.array(_run(False)["positions"]).tobytes()
+
+
+def repeated_signatures(signatures):
+    """{function: [argument types, ...]} of the functions compiled for more than one signature."""
+    seen = {}
+    for name, args in signatures:
+        seen.setdefault(name, set()).add(args)
+    return {name: sorted(args) for name, args in seen.items() if len(args) > 1}
+
+
+def test_repeated_signatures_names_a_function_compiled_twice():
+    signatures = [("m.f", "(int64,)"), ("m.f", "(int32,)"), ("m.g", "(int64,)"), ("m.g", "(int64,)")]
+    assert repeated_signatures(signatures) == {"m.f": ["(int32,)", "(int64,)"]}
+
+
+def test_tail_orbit_compiles_each_package_function_for_one_signature(bounds_checked_tail):
+    """A constant argument (``Literal``) or an int32 index where another call passes an int64
+    makes numba compile a function again (docs/tech-notes.md §7): every package function the
+    tail's first frames compile (the solver's stages and helpers, the animation, the
+    propagation) has one signature."""
+    assert bounds_checked_tail["signatures"], "no compile seen: the run used a warm cache"
+    assert repeated_signatures(bounds_checked_tail["signatures"]) == {}
