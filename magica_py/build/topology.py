@@ -75,6 +75,8 @@ def key_insert(table, key):
 
 @kernel
 def opposite_vertex(triangles, t, a, b):
+    """The corner of triangle t that is neither a nor b (-1 when none). Callers pass t as int64:
+    one signature (docs/tech-notes.md §7)."""
     for k in range(3):
         v = triangles[t, k]
         if v != a and v != b:
@@ -113,8 +115,8 @@ def remove_duplicate_quads(pos, triangles, edge_pairs, et_start, et_count, et_da
                 t2 = et_data[et_start[e] + y]
                 if removed[t1] or removed[t2]:
                     continue
-                z = opposite_vertex(triangles, t1, a, b)
-                w = opposite_vertex(triangles, t2, a, b)
+                z = opposite_vertex(triangles, np.int64(t1), a, b)
+                w = opposite_vertex(triangles, np.int64(t2), a, b)
                 if fold_angle(pos, a, b, z, w) > max_angle:
                     continue
                 s, t, _ca, _cb = closest_segment_segment(load3(pos, a), load3(pos, b), load3(pos, z), load3(pos, w))
@@ -164,8 +166,8 @@ def orient_flood_fill(pos, triangles, normals, tri_edges, edge_pairs, et_start, 
                     u = et_data[et_start[e] + x]
                     if visited[u]:
                         continue
-                    z = opposite_vertex(triangles, k, a, b)
-                    w = opposite_vertex(triangles, u, a, b)
+                    z = opposite_vertex(triangles, np.int64(k), a, b)
+                    w = opposite_vertex(triangles, np.int64(u), a, b)
                     if fold_angle(pos, a, b, z, w) > max_angle:
                         continue
                     if (normals[k, 0] * normals[u, 0] + normals[k, 1] * normals[u, 1]
@@ -220,8 +222,8 @@ def shear_links(pos, triangles, normals, edge_pairs, et_start, et_count, et_data
             for y in range(x + 1, et_count[e]):
                 t1 = et_data[et_start[e] + x]
                 t2 = et_data[et_start[e] + y]
-                p3 = opposite_vertex(triangles, t1, p1, p2)
-                p4 = opposite_vertex(triangles, t2, p1, p2)
+                p3 = opposite_vertex(triangles, np.int64(t1), p1, p2)
+                p4 = opposite_vertex(triangles, np.int64(t2), p1, p2)
                 if not (move[p3] or move[p4]) or not (valid[p3] and valid[p4]):
                     continue
                 d = (normals[t1, 0] * normals[t2, 0] + normals[t1, 1] * normals[t2, 1]
@@ -257,8 +259,8 @@ def bending_pairs(pos, world, triangles, edge_pairs, et_start, et_count, et_data
         v3 = edge_pairs[e, 1]
         for x in range(et_count[e]):
             for y in range(x + 1, et_count[e]):
-                v0 = opposite_vertex(triangles, et_data[et_start[e] + x], v2, v3)
-                v1 = opposite_vertex(triangles, et_data[et_start[e] + y], v2, v3)
+                v0 = opposite_vertex(triangles, np.int64(et_data[et_start[e] + x]), v2, v3)
+                v1 = opposite_vertex(triangles, np.int64(et_data[et_start[e] + y]), v2, v3)
                 if not (valid[v0] and valid[v1] and valid[v2] and valid[v3]):
                     continue
                 if not (move[v0] or move[v1] or move[v2] or move[v3]):

@@ -130,7 +130,8 @@ def automatic_root_chain(roots: list[int], pos: np.ndarray) -> tuple[list[int], 
 
 @kernel
 def _add_link(links, link_count, v, u):
-    """Append u to v's insertion-ordered link set (capacity 31, like Unity's FixedList)."""
+    """Append u to v's insertion-ordered link set (capacity 31, like Unity's FixedList). Callers
+    pass int64 ids: one signature (docs/tech-notes.md §7)."""
     c = link_count[v]
     for k in range(c):
         if links[v, k] == u:
@@ -158,10 +159,10 @@ def hierarchy_links(parent, child_start, child_count, child_data, roots, links, 
             walk[w] = v
             w += 1
             if parent[v] >= 0:
-                _add_link(links, link_count, v, parent[v])
+                _add_link(links, link_count, np.int64(v), np.int64(parent[v]))
             for k in range(child_count[v]):
                 c = child_data[child_start[v] + k]
-                _add_link(links, link_count, v, c)
+                _add_link(links, link_count, np.int64(v), np.int64(c))
                 stack_vertex[top] = c
                 stack_level[top] = lv + 1
                 top += 1
@@ -197,11 +198,11 @@ def horizontal_links(pos, members, level_start, level_count, level, root_line, r
                         best_d = d
                         best = j
                 elif j != best and (sequential or d <= 1.5 * best_d):
-                    _add_link(links, link_count, i, j)
+                    _add_link(links, link_count, np.int64(i), np.int64(j))
             if best < 0:
                 break
             if pass_ == 0:
-                _add_link(links, link_count, i, best)
+                _add_link(links, link_count, np.int64(i), np.int64(best))
 
 
 def connect_mesh(cloth_name: str, mode: str, pos: np.ndarray, parent_vertex: np.ndarray,
