@@ -32,6 +32,16 @@ import time
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 
+def repeated_signatures(signatures) -> dict[str, list[tuple[str, ...]]]:
+    """{function: its distinct argument-type tuples} of the functions compiled for more than one
+    signature; ``signatures`` is ``(function name, argument types as strings)`` per compile
+    (also used by ``tests/test_jit_off.py``)."""
+    seen: dict[str, set] = {}
+    for name, args in signatures:
+        seen.setdefault(name, set()).add(tuple(args))
+    return {name: sorted(args) for name, args in seen.items() if len(args) > 1}
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     passes = "--passes" in argv
@@ -47,7 +57,7 @@ def main(argv=None) -> int:
     from numba.core import event
 
     seconds: dict[str, float] = collections.defaultdict(float)
-    compiled: dict[str, list[tuple]] = collections.defaultdict(list)   # function -> argument types
+    compiled: list[tuple[str, tuple[str, ...]]] = []   # (function, argument types) per compile
 
     class Listener(event.Listener):
         def __init__(self):
@@ -62,7 +72,7 @@ def main(argv=None) -> int:
             if start is not None:
                 fn = dispatcher.py_func
                 seconds[f"{fn.__module__}.{fn.__qualname__}"] += time.perf_counter() - start
-                compiled[f"{fn.__module__}.{fn.__qualname__}"].append(tuple(ev.data["args"]))
+                compiled.append((f"{fn.__module__}.{fn.__qualname__}", tuple(str(a) for a in ev.data["args"])))
 
     event.register("numba:compile", Listener())
     pass_seconds: dict[str, float] = collections.defaultdict(float)
@@ -109,14 +119,12 @@ def main(argv=None) -> int:
     player.run(frames)
     print(f"{scene_name}: wall {time.perf_counter() - wall:.1f} s, cpu {time.process_time() - cpu:.1f} s")
     if signatures:
-        print(f"{sum(len(v) for v in compiled.values())} compiles of {len(compiled)} functions")
-        for name, sigs in sorted(compiled.items(), key=lambda kv: -len(kv[1])):
-            if len(sigs) < 2:
-                continue
-            differ = [i for i in range(len(sigs[0])) if len({str(sig[i]) for sig in sigs}) > 1]
+        print(f"{len(compiled)} compiles of {len({name for name, _ in compiled})} functions")
+        for name, sigs in sorted(repeated_signatures(compiled).items(), key=lambda kv: -len(kv[1])):
+            differ = [i for i in range(len(sigs[0])) if len({sig[i] for sig in sigs}) > 1]
             print(f"{len(sigs):4d}  {name}: argument {', '.join(str(i) for i in differ)}")
             for sig in sigs:
-                print(f"        {', '.join(str(sig[i]) for i in differ)}")
+                print(f"        {', '.join(sig[i] for i in differ)}")
         return 0
     if passes:
         print(f"inside LLVM: {llvm[0]:.1f} s over {llvm[1]} calls into llvmlite's binding")
