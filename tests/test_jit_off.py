@@ -136,10 +136,10 @@ system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.setti
 s = system.stages
 with event.install_listener("numba:compile", Names()):
     F = system._frame_arrays()
-    compile_step_stages(F, system._frame_values, 0, None, s.angle, s.bending, s.point_collision, s.edge_collision,
+    compile_step_stages(F, system._frame_values, None, s.angle, s.bending, s.point_collision, s.edge_collision,
                         s.motion, s.quality, s.wind)
-    compile_late_stages(F, system._frame_values, 0)
-    compile_end_stages(F, system._frame_values, system._save_area, 0, s.quality, s.lines, s.triangles)
+    compile_late_stages(F, system._frame_values)
+    compile_end_stages(F, system._frame_values, system._save_area, s.quality, s.lines, s.triangles)
 before_frames = set(compiled)
 compiled.clear()
 with event.install_listener("numba:compile", Names()):

@@ -11,8 +11,8 @@ run the work is split in two:
   (``start_early``). It makes the tables of a system with no cloth: the frame kernel's argument
   types are those of any system's tables (arrays of fixed dtypes and dimensions, checked by
   ``tests/test_compile_helper.py``), so nothing has to be built to know them. It compiles the
-  step's stages with those types (``frame.compile_step_stages``: typed and compiled, run with
-  ``run=0`` so nothing executes) for the stages the specs announce
+  step's stages with those types (``frame.compile_step_stages``: typed and compiled, never
+  run) for the stages the specs announce
   (``ClothSystem.expected_stage_switches``: what the parameters, connection modes and
   colliders ask for, a superset of what the built models use) and writes them to numba's
   on-disk cache (``cache=True``, the documented cache; the cache starts empty and is filled by
@@ -171,9 +171,9 @@ def _quiet() -> None:
 
 
 def _compile_helper_share(F, frame_values, wind_zones, stages) -> None:
-    compile_step_stages(F, frame_values, 0, wind_zones, stages.angle, stages.bending, stages.point_collision,
+    compile_step_stages(F, frame_values, wind_zones, stages.angle, stages.bending, stages.point_collision,
                         stages.edge_collision, stages.motion, stages.quality, stages.wind)
-    compile_late_stages(F, frame_values, 0)
+    compile_late_stages(F, frame_values)
 
 
 def start(F, frame_values, area, wind_zones, stages) -> int | None:
@@ -201,7 +201,7 @@ def meet(pid: int, F, frame_values, area, stages) -> int:
     (``compile_end_stages`` with the save area, not run); the frame kernel's typing then finds
     the helper's stages in the cache. Returns ``pid``."""
     try:
-        compile_end_stages(F, frame_values, area, 0, stages.quality, stages.lines, stages.triangles)
+        compile_end_stages(F, frame_values, area, stages.quality, stages.lines, stages.triangles)
     except BaseException:
         finish(pid)
         raise

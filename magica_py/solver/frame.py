@@ -676,41 +676,54 @@ def block_load(T, tt, b):
     return np.int64(T.BI[b, bk.BI_N]) * np.int64(T.BI[b, bk.BI_LANES_USED]) * np.int64(steps + 1)
 
 
+@kernel(inline="always")
+def typed_only(n):
+    """False for every n. The ``compile_*`` functions below call the stages under
+    ``if typed_only(...)``: numba types (and so compiles into its cache) every callee of a branch
+    it cannot decide, while LLVM folds ``n * 0 != 0`` to false in the function's own module
+    and drops the calls, so that the callees are not linked, optimised and turned into machine
+    code once more inside the ``compile_*`` function itself (~5 s of a first run's compile:
+    docs/tech-notes.md §7). Inlined at numba's level (``inline="always"``), so that the constant
+    is in the caller's own module when LLVM optimises it; a module-level constant instead
+    would be pruned before typing, and the callees would not be compiled at all."""
+    return n * 0 != 0
+
+
 @kernel(forceinline=False)
-def compile_end_stages(F, frame_values, area, run, quality, lines, triangles):
+def compile_end_stages(F, frame_values, area, quality, lines, triangles):
     """The end-of-frame stages (``block_frame_end``) typed and compiled with exactly the frame
-    kernels' argument types, run only when ``run`` is not 0 (``solver/compile_helper.py`` passes
-    0: on a first run the system's process compiles them while a forked helper compiles the
-    step's stages, ``compile_step_stages``)."""
+    kernels' argument types, never run (see ``typed_only``): on a first run the system's process
+    compiles them while a forked helper compiles the step's stages (``compile_step_stages``,
+    ``solver/compile_helper.py``)."""
     T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
-    if run != 0 and T.blocks.shape[0] > 0:
+    if typed_only(T.blocks.shape[0]):
         block_frame_end(T, tt, h, T.blocks[0], fi, area[0], quality, lines, triangles)
 
 
 @kernel(forceinline=False)
-def compile_step_stages(F, frame_values, run, wind_zones, angle, bending, point_collision, edge_collision, motion,
+def compile_step_stages(F, frame_values, wind_zones, angle, bending, point_collision, edge_collision, motion,
                         quality, wind):
     """The step's stages (``run_step``) typed and compiled with exactly the frame kernels'
-    argument types, run only when ``run`` is not 0 (``solver/compile_helper.py``: a first run's
-    forked helper compiles them into numba's cache)."""
+    argument types, never run (see ``typed_only``): a first run's forked helper compiles them
+    into numba's cache (``solver/compile_helper.py``)."""
     T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
-    if run != 0 and T.blocks.shape[0] > 0:
+    if typed_only(T.blocks.shape[0]):
         run_step(T, tt, T.blocks[0], fi, angle, bending, point_collision, edge_collision, motion, quality, wind,
                  wind_zones)
 
 
 @kernel(forceinline=False)
-def compile_late_stages(F, frame_values, run):
+def compile_late_stages(F, frame_values):
     """The functions the frame kernel's typing reaches last (the close of frame and the end of
     the begin of frame), typed in the reverse of that order with exactly the frame kernels'
-    argument types, run only when ``run`` is not 0: a first run's helper compiles them after
+    argument types, never run (see ``typed_only``): a first run's helper compiles them after
     the step's stages (``solver/compile_helper.py``), while the system's process is still
     working forward through the begin of frame, so that the two meet in between."""
     T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
-    if run != 0 and T.blocks.shape[0] > 0:
+    if typed_only(T.blocks.shape[0]):
         frame_counts(T, tt)
         _frame_close(tt, h, fi)
         b = T.blocks[0]
