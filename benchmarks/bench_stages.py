@@ -288,7 +288,7 @@ def _write_back(T, h, q, zones, calls):
 
 
 # (label, driver wrapper, the StageSwitches entry that compiles it in the frame or None: always)
-STEP_STAGES = [("team update (C.3)", _team_update, None), ("colliders (G.3)", _colliders_step, None),
+STEP_STAGES = [("team update (C.3)", _team_update, None), ("colliders (G.3)", _colliders_step, "colliders"),
                ("predict (D.1)", _predict, None), ("wind (D.1)", _wind, "wind"),
                ("basic pose (D.2)", _basic_pose, None), ("tether (D.3)", _tether, None),
                ("distance x2 (D.4)", _distance_x2, None), ("angle (D.5/D.6)", _angle, "angle"),

@@ -137,9 +137,9 @@ s = system.stages
 with event.install_listener("numba:compile", Names()):
     F = system._frame_arrays()
     compile_step_stages(F, system._frame_values, None, s.angle, s.bending, s.point_collision, s.edge_collision,
-                        s.motion, s.quality, s.wind)
-    compile_late_stages(F, system._frame_values)
-    compile_end_stages(F, system._frame_values, system._save_area, s.quality, s.lines, s.triangles)
+                        s.motion, s.quality, s.wind, s.colliders)
+    compile_late_stages(F, system._frame_values, s.colliders)
+    compile_end_stages(F, system._frame_values, system._save_area, s.quality, s.lines, s.triangles, s.colliders)
 before_frames = set(compiled)
 compiled.clear()
 with event.install_listener("numba:compile", Names()):
@@ -154,7 +154,8 @@ UNUSED_BY_TAIL_ORBIT = ("bending_block", "apply_accumulated_block", "point_colli
                         "motion_block", "quality_end_of_step_block", "drift_begin_block", "drift_end_block",
                         "ftl_collision_lane", "edge_projection_lane", "collision_last_lane", "build_reset_lane",
                         "display_constraints_block", "record_display_state_block", "display_interpolated",
-                        "triangle_rotations_block", "wind_block")
+                        "triangle_rotations_block", "wind_block", "collider_step_block", "collider_end_step_block",
+                        "collider_frame_lane", "collider_end_frame_lane")
 
 
 @pytest.fixture(scope="module")
@@ -190,7 +191,7 @@ def test_tail_orbit_runs_bounds_checked_and_compiles_only_the_stages_it_uses(bou
     late = {"frame_counts", "_frame_close", "team_time_begin_step_team", "team_time_end_frame"}
     ahead = {name for name in checked["before_frames"] if name.endswith(("_block", "_lane", "_lanes")) or name in late}
     assert {"predict_block", "distance_block", "angle_block", "end_step_block", "line_rotations_block",
-            "transform_block", "collider_frame_lane", "reset_or_shift_block", "center_and_inertia_lane"} | late <= ahead, \
+            "transform_block", "reset_or_shift_block", "center_and_inertia_lane"} | late <= ahead, \
         sorted(ahead)
     assert not ahead & set(checked["in_frames"]), sorted(ahead & set(checked["in_frames"]))
     assert np.array(checked["positions"]).tobytes() == np.array(_run(False)["positions"]).tobytes()

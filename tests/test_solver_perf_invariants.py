@@ -215,13 +215,14 @@ def test_baselines_list_every_parent_before_its_child(config):
 
 ON = 1
 # the optional stages each showcase's cloths use (frame.StageSwitches), from the configs:
-# tail_orbit is one line-mode tail with angle restoration and no collider; the character's
-# skirt is a sequential loop mesh (bending, triangles) with point-mode colliders
+# tail_orbit is one line-mode tail with angle restoration and no collider (so not even the
+# colliders' poses are tracked); the character's skirt is a sequential loop mesh (bending,
+# triangles) with point-mode colliders
 STAGES = {
     "tail_orbit": dict(angle=ON, bending=None, point_collision=None, edge_collision=None, motion=None,
-                       quality=None, lines=ON, triangles=None, wind=None),
+                       quality=None, lines=ON, triangles=None, wind=None, colliders=None),
     "character_walk": dict(angle=ON, bending=ON, point_collision=ON, edge_collision=None, motion=None,
-                           quality=None, lines=ON, triangles=ON, wind=None),
+                           quality=None, lines=ON, triangles=ON, wind=None, colliders=ON),
 }
 
 
@@ -249,6 +250,12 @@ def test_a_runtime_change_switches_a_stage_on_and_off():
     assert system.stages.edge_collision == ON and system.stages.point_collision == ON   # the hair still points
     system.set_parameter("hair", "collider_collision.mode", "edge")
     assert system.stages.point_collision is None
+    # collision off everywhere: the colliders' poses are still tracked (a cloth with colliders),
+    # so that collision switched on again starts from their current pose, not a stale one
+    system.set_parameter("hair", "collider_collision.mode", "none")
+    system.set_parameter("skirt", "collider_collision.mode", "none")
+    assert system.stages.edge_collision is None and system.stages.point_collision is None
+    assert system.stages.colliders == ON
     system.set_parameter("hair", "motion.use_max_distance", True)
     assert system.stages.motion == ON
     system.set_parameter("hair", "motion.use_max_distance", False)

@@ -172,8 +172,8 @@ def _quiet() -> None:
 
 def _compile_helper_share(F, frame_values, wind_zones, stages) -> None:
     compile_step_stages(F, frame_values, wind_zones, stages.angle, stages.bending, stages.point_collision,
-                        stages.edge_collision, stages.motion, stages.quality, stages.wind)
-    compile_late_stages(F, frame_values)
+                        stages.edge_collision, stages.motion, stages.quality, stages.wind, stages.colliders)
+    compile_late_stages(F, frame_values, stages.colliders)
 
 
 def start(F, frame_values, area, wind_zones, stages) -> int | None:
@@ -201,7 +201,7 @@ def meet(pid: int, F, frame_values, area, stages) -> int:
     (``compile_end_stages`` with the save area, not run); the frame kernel's typing then finds
     the helper's stages in the cache. Returns ``pid``."""
     try:
-        compile_end_stages(F, frame_values, area, stages.quality, stages.lines, stages.triangles)
+        compile_end_stages(F, frame_values, area, stages.quality, stages.lines, stages.triangles, stages.colliders)
     except BaseException:
         finish(pid)
         raise

@@ -105,10 +105,13 @@ FRAME_INPUT_COUNT = len(FrameInputs._fields)
 # angle (D.5/D.6), bending (D.7 dihedral and volume), point and edge collision (D.8),
 # motion (D.9), quality (quality mode's build reset, end-of-step passes and display collision),
 # lines (E.2 line rotations), triangles (E.3 triangle rotations), wind (the wind's share of
-# D.1, ``wind.force.wind_block``: a scene with wind zones or a cloth with moving wind).
-# ``system.stage_switches`` derives them from the live blocks.
+# D.1, ``wind.force.wind_block``: a scene with wind zones or a cloth with moving wind),
+# colliders (§G.2/§G.3, the colliders' frame and step poses: a team with a collider; a scene
+# without any neither compiles nor runs them). ``system.stage_switches`` derives them from the
+# live blocks.
 StageSwitches = namedtuple("StageSwitches", [
-    "angle", "bending", "point_collision", "edge_collision", "motion", "quality", "lines", "triangles", "wind"])
+    "angle", "bending", "point_collision", "edge_collision", "motion", "quality", "lines", "triangles", "wind",
+    "colliders"])
 # the per-thread work table of a parallel frame: block_worker (blocks,) int32, worker_load
 # (threads,) int64 particle-steps (written by ``assign_workers`` each frame)
 WorkerTable = namedtuple("WorkerTable", ["block_worker", "worker_load"])
@@ -362,7 +365,8 @@ def busiest_lane_steps(TI, tt, b, w):
 
 
 @kernel(forceinline=False, inline="always")
-def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones):
+def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones,
+             colliders):
     """One simulation step of block b (§D.0 order): every lane at its own frame
     interpolation (``FRAME_INTERPOLATION``)."""
     PS, TS, CS, PM, PP, TM, P, BI, topology = T.PS, T.TS, T.CS, T.PM, T.PP, T.TM, T.P, T.BI, T.topology
@@ -372,7 +376,8 @@ def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, moti
         step_attenuations(P, b, ratio)
     for l in range(bk.lane_width(BI, b)):
         team_step_lane(TS, TM, P, b, l, dt)
-    collider_step_block(CS, TS, BI, topology, b)
+    if colliders is not None:
+        collider_step_block(CS, TS, BI, topology, b)
     predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, ratio, fi.power_z)
     if wind is not None:
         wind_block(PS, PM, TS, T.TI, P, BI, topology, b, dt, wind_zones)
@@ -410,7 +415,8 @@ def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, moti
             contact_speed_block(PS, PP, TS, CS, P, BI, topology, b, dt)   # quality mode: after D.10
         if P[b, PRM_TIME_BASED_SMOOTHING] != 0.0:   # quality display: keep this step's state (display.py)
             record_display_state_block(PS, TS, BI, topology, b)
-    collider_end_step_block(CS, BI, b)
+    if colliders is not None:
+        collider_end_step_block(CS, BI, b)
 
 
 @kernel(forceinline=False)
@@ -438,7 +444,7 @@ def restore_frozen(PS, TS, CS, TI, BI, b, w, area):
 
 @kernel(forceinline=False, inline="always")
 def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, edge_collision, motion, quality,
-                      wind, wind_zones):
+                      wind, wind_zones, colliders):
     """Block b's frame up to the write-back: its lanes' begin of frame and the steps (each
     lane advancing its own clock, §A.6; the clock of a suspended but enabled team advances
     too). Lanes that do not run keep their state (module docstring)."""
@@ -461,10 +467,11 @@ def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, ed
                                     h.lossy_scale, tt.frame_delta_time[t], tt.now_time_scale[t], tt.skip_count[t],
                                     tt.running[t], fi.dt, get1(TS, b, st.DISPLAY_T, l))
     reset_or_shift_block(PS, TS, BI, b)
-    for l in range(w):
-        t = lane_team(TI, b, l)
-        if t >= 0 and get1(TS, b, st.ACTIVE, l) != 0.0:
-            collider_frame_lane(CS, TS, BI, T.CT, b, l, h.world_position, h.world_rotation, h.lossy_scale)
+    if colliders is not None:
+        for l in range(w):
+            t = lane_team(TI, b, l)
+            if t >= 0 and get1(TS, b, st.ACTIVE, l) != 0.0:
+                collider_frame_lane(CS, TS, BI, T.CT, b, l, h.world_position, h.world_rotation, h.lossy_scale)
     if frozen:
         restore_frozen(PS, TS, CS, TI, BI, b, w, area)
     for step in range(busiest_lane_steps(TI, tt, b, w)):
@@ -488,7 +495,8 @@ def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, ed
                 t = lane_team(TI, b, l)
                 if t >= 0 and not (get1(TS, b, st.ACTIVE, l) != 0.0 and tt.step_running[t]):
                     save_lane(PS, TS, CS, BI, b, l, area)
-        run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones)
+        run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones,
+                 colliders)
         if idle > 0:
             for l in range(w):
                 t = lane_team(TI, b, l)
@@ -497,7 +505,7 @@ def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, ed
 
 
 @kernel(forceinline=False, inline="always")
-def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles):
+def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles, colliders):
     """Block b's stages after the steps: guards, E.1-E.4 and A.7 of every active lane (the
     frame's team clocks read per lane); lanes that are not simulated keep their state."""
     PS, TS, CS, PM, TI, P, BI, PT, topology = T.PS, T.TS, T.CS, T.PM, T.TI, T.P, T.BI, T.PT, T.topology
@@ -538,7 +546,7 @@ def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles):
             reset_lane_to_base(PS, TS, BI, b, l)
             put1(TS, b, st.GUARD_CODE, l, 1.0)
         end_frame_lane(TS, b, l, tt.running[t])
-        if tt.running[t]:
+        if colliders is not None and tt.running[t]:
             collider_end_frame_lane(CS, BI, b, l)
     if frozen:
         restore_frozen(PS, TS, CS, TI, BI, b, w, area)
@@ -586,7 +594,7 @@ def frame_counts(T, tt):
 
 @kernel(forceinline=False)
 def simulate_frame(F, frame_values, area, wind_zones, angle, bending, point_collision, edge_collision, motion,
-                   quality, lines, triangles, wind):
+                   quality, lines, triangles, wind, colliders):
     """The whole cloth frame, one block after another (see the module docstring): each
     block's begin, steps and end. ``F``: the frame's arrays (``frame_call.FrameArrays``:
     ``Tables``, ``TimeArrays``, ``HierarchyArrays`` in one StructRef, ``frame_tuples``);
@@ -600,8 +608,8 @@ def simulate_frame(F, frame_values, area, wind_zones, angle, bending, point_coll
     _time_frame_update(tt, fi)
     for i in range(T.blocks.shape[0]):
         block_frame_steps(T, tt, h, T.blocks[i], fi, area[0], angle, bending, point_collision, edge_collision,
-                          motion, quality, wind, wind_zones)
-        block_frame_end(T, tt, h, T.blocks[i], fi, area[0], quality, lines, triangles)
+                          motion, quality, wind, wind_zones, colliders)
+        block_frame_end(T, tt, h, T.blocks[i], fi, area[0], quality, lines, triangles, colliders)
     _frame_close(tt, h, fi)
     return frame_counts(T, tt)
 
@@ -625,7 +633,7 @@ def begin_parallel_frame(F, frame_values, block_worker, worker_load):
 
 @kernel(forceinline=False)
 def simulate_worker(F, frame_values, area, wind_zones, block_worker, worker, angle, bending, point_collision,
-                    edge_collision, motion, quality, lines, triangles, wind):
+                    edge_collision, motion, quality, lines, triangles, wind, colliders):
     """Thread ``worker``'s share of a parallel frame: the begin, steps and end of each block
     ``assign_workers`` dealt to it (``block_worker``), with its own row of the save area."""
     T, tt, h = frame_tuples(F)
@@ -634,8 +642,8 @@ def simulate_worker(F, frame_values, area, wind_zones, block_worker, worker, ang
         b = T.blocks[i]
         if block_worker[b] == worker:
             block_frame_steps(T, tt, h, b, fi, area[worker], angle, bending, point_collision, edge_collision,
-                              motion, quality, wind, wind_zones)
-            block_frame_end(T, tt, h, b, fi, area[worker], quality, lines, triangles)
+                              motion, quality, wind, wind_zones, colliders)
+            block_frame_end(T, tt, h, b, fi, area[worker], quality, lines, triangles, colliders)
 
 
 @kernel(forceinline=False)
@@ -690,7 +698,7 @@ def typed_only(n):
 
 
 @kernel(forceinline=False)
-def compile_end_stages(F, frame_values, area, quality, lines, triangles):
+def compile_end_stages(F, frame_values, area, quality, lines, triangles, colliders):
     """The end-of-frame stages (``block_frame_end``) typed and compiled with exactly the frame
     kernels' argument types, never run (see ``typed_only``): on a first run the system's process
     compiles them while a forked helper compiles the step's stages (``compile_step_stages``,
@@ -698,12 +706,12 @@ def compile_end_stages(F, frame_values, area, quality, lines, triangles):
     T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
     if typed_only(T.blocks.shape[0]):
-        block_frame_end(T, tt, h, T.blocks[0], fi, area[0], quality, lines, triangles)
+        block_frame_end(T, tt, h, T.blocks[0], fi, area[0], quality, lines, triangles, colliders)
 
 
 @kernel(forceinline=False)
 def compile_step_stages(F, frame_values, wind_zones, angle, bending, point_collision, edge_collision, motion,
-                        quality, wind):
+                        quality, wind, colliders):
     """The step's stages (``run_step``) typed and compiled with exactly the frame kernels'
     argument types, never run (see ``typed_only``): a first run's forked helper compiles them
     into numba's cache (``solver/compile_helper.py``)."""
@@ -711,11 +719,11 @@ def compile_step_stages(F, frame_values, wind_zones, angle, bending, point_colli
     fi = frame_inputs(frame_values)
     if typed_only(T.blocks.shape[0]):
         run_step(T, tt, T.blocks[0], fi, angle, bending, point_collision, edge_collision, motion, quality, wind,
-                 wind_zones)
+                 wind_zones, colliders)
 
 
 @kernel(forceinline=False)
-def compile_late_stages(F, frame_values):
+def compile_late_stages(F, frame_values, colliders):
     """The functions the frame kernel's typing reaches last (the close of frame and the end of
     the begin of frame), typed in the reverse of that order with exactly the frame kernels'
     argument types, never run (see ``typed_only``): a first run's helper compiles them after
@@ -734,8 +742,9 @@ def compile_late_stages(F, frame_values):
                 t = lane_team(TI, b, l)
                 team_time_begin_step_team(step, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
                                           tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
-        for l in range(w):
-            collider_frame_lane(CS, TS, BI, T.CT, b, l, h.world_position, h.world_rotation, h.lossy_scale)
+        if colliders is not None:
+            for l in range(w):
+                collider_frame_lane(CS, TS, BI, T.CT, b, l, h.world_position, h.world_rotation, h.lossy_scale)
         reset_or_shift_block(PS, TS, BI, b)
         for l in range(w):
             t = lane_team(TI, b, l)

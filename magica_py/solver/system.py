@@ -367,7 +367,8 @@ class ClothSystem:
                            | (prm.time_based_smoothing != 0)),
             lines=any_of(np.asarray(lines) > 0),
             triangles=any_of(np.asarray(triangles) > 0),
-            wind=1 if self.wind is not None else any_of(prm.wind_moving_wind > 0.01))
+            wind=1 if self.wind is not None else any_of(prm.wind_moving_wind > 0.01),
+            colliders=1 if bool(np.any(colliding)) else None)
 
     def _tables_changed(self, register: bool = True) -> None:
         """After a change of teams: the team-ordered views, the kernels' tables, the work
