@@ -527,3 +527,23 @@ def test_orbits_evaluated_all_at_once_give_the_per_driver_formula_bit_for_bit():
             radial = q_rotate(turn, tuple(p[8:11]))
             expected = [p[c] + p[3] * radial[c] for c in range(3)]
             np.testing.assert_array_equal(h.local_position[anim.target[d]], expected)
+
+
+def test_drivers_compile_only_the_kinds_a_scene_uses():
+    """``Animation.kinds_used`` switches each driver kind's code on (1) or off (None, pruned by
+    numba before typing): an orbit-only list is compiled without the keyframe, oscillate, spin
+    and walk code, and still gives the orbit's closed form."""
+    import numba
+
+    from magica_py.scene.animation import apply_drivers
+
+    orbit = {"target": "root", "orbit": {"radius": 1.0, "period": 4.0}}
+    spin = {"target": "root", "spin": {"axis": [0, 1, 0], "speed": 30}}
+    assert Animation.from_specs([orbit], rig()).kinds_used == (None, 1, None, None, None)
+    assert Animation.from_specs([orbit, spin], rig()).kinds_used == (None, 1, None, 1, None)
+    assert Animation.from_specs([], rig()).kinds_used == (None,) * 5
+    np.testing.assert_allclose(local(pose_at([orbit], 1.0), "root")[0], (0, 0, -1), atol=1e-12)
+    if not numba.config.DISABLE_JIT:
+        none, one = numba.types.none, numba.typeof(1)
+        assert any(tuple(sig[-5:]) == (none, one, none, none, none) for sig in apply_drivers.signatures), \
+            apply_drivers.signatures

@@ -215,11 +215,16 @@ def apply_drivers(t, kind, target, start, end, phase_offset, fade, params, key_f
                   key_count, key_time, key_value, driven, offset_position, offset_rotation,
                   rest_position, rest_rotation, rest_scale,
                   local_position, local_rotation, local_scale,
-                  orbit_slot, orbit_columns, orbit_radial):
+                  orbit_slot, orbit_columns, orbit_radial, keyframes, orbit, oscillate, spin, walk):
     """UPDATE phase: rest pose of every driven node, then each driver in list order, then
     the teleport offsets (see the module docstring for the composition rule). The orbits'
-    radial vectors are evaluated first, all at once (``orbit_radials``)."""
-    orbit_radials(t, orbit_columns, orbit_radial)
+    radial vectors are evaluated first, all at once (``orbit_radials``).
+
+    ``keyframes`` ... ``walk`` (``Animation.kinds_used``): 1 where a driver of that kind
+    exists, None where none does; numba removes an ``if switch is not None`` branch whose
+    argument is None before typing it, so a scene compiles only the driver kinds it uses."""
+    if orbit is not None:
+        orbit_radials(t, orbit_columns, orbit_radial)
     for m in range(driven.shape[0]):
         i = np.int64(driven[m])   # int64 node ids: one signature of the row helpers (docs/tech-notes.md §7)
         store3(local_position, i, load3(rest_position, i))
@@ -230,75 +235,80 @@ def apply_drivers(t, kind, target, start, end, phase_offset, fade, params, key_f
         i = np.int64(target[d])
         k = kind[d]
         tau = min(max(t, start[d]), end[d]) - start[d] + phase_offset[d]
-        if k == KEYFRAMES:
-            interpolation = int(params[d, 0])
-            loop = params[d, 1] != 0.0
-            for ch in range(3):
-                n = key_count[d, ch]
-                if n == 0:
+        if keyframes is not None:
+            if k == KEYFRAMES:
+                interpolation = int(params[d, 0])
+                loop = params[d, 1] != 0.0
+                for ch in range(3):
+                    n = key_count[d, ch]
+                    if n == 0:
+                        continue
+                    first = key_first[d, ch]
+                    k0, k1, f = track_segment(key_time, first, n, tau, loop)
+                    f = ease(f, interpolation)
+                    if ch == CHANNEL_ROTATION:
+                        q = q_slerp(load4(key_value, k0), load4(key_value, k1), f)
+                        store4(local_rotation, i, q)
+                    else:
+                        if interpolation == CUBIC:
+                            v = cubic_segment(key_time, key_value, first, first + n - 1, k0, k1, f)
+                        else:
+                            v = v_lerp(load3(key_value, k0), load3(key_value, k1), f)
+                        if ch == CHANNEL_POSITION:
+                            store3(local_position, i, v)
+                        else:
+                            store3(local_scale, i, v)
+        if orbit is not None:
+            if k == ORBIT:
+                axis = (params[d, 5], params[d, 6], params[d, 7])
+                o = orbit_slot[d]
+                radial = (orbit_radial[0, o], orbit_radial[1, o], orbit_radial[2, o])
+                radius = params[d, 3]
+                store3(local_position, i, (params[d, 0] + radius * radial[0],
+                                           params[d, 1] + radius * radial[1],
+                                           params[d, 2] + radius * radial[2]))
+                if params[d, 12] != 0.0:
+                    forward = v_normalize(v_cross(axis, radial))
+                    if params[d, 4] < 0.0:  # a negative period runs the circle backwards
+                        forward = (-forward[0], -forward[1], -forward[2])
+                    store4(local_rotation, i, q_look_rotation(forward, axis))
+        if oscillate is not None:
+            if k == OSCILLATE:
+                w = window_weight(t, start[d], end[d], fade[d])
+                if w == 0.0:
                     continue
-                first = key_first[d, ch]
-                k0, k1, f = track_segment(key_time, first, n, tau, loop)
-                f = ease(f, interpolation)
-                if ch == CHANNEL_ROTATION:
-                    q = q_slerp(load4(key_value, k0), load4(key_value, k1), f)
-                    store4(local_rotation, i, q)
+                value = w * params[d, 3] * portable.sin(two_pi * params[d, 4] * tau + params[d, 5])
+                if params[d, 6] != 0.0:
+                    axis = (params[d, 0], params[d, 1], params[d, 2])
+                    q = q_mul(load4(local_rotation, i), q_axis_angle(axis, value))
+                    store4(local_rotation, i, q_normalize(q))
                 else:
-                    if interpolation == CUBIC:
-                        v = cubic_segment(key_time, key_value, first, first + n - 1, k0, k1, f)
-                    else:
-                        v = v_lerp(load3(key_value, k0), load3(key_value, k1), f)
-                    if ch == CHANNEL_POSITION:
-                        store3(local_position, i, v)
-                    else:
-                        store3(local_scale, i, v)
-        elif k == ORBIT:
-            axis = (params[d, 5], params[d, 6], params[d, 7])
-            o = orbit_slot[d]
-            radial = (orbit_radial[0, o], orbit_radial[1, o], orbit_radial[2, o])
-            radius = params[d, 3]
-            store3(local_position, i, (params[d, 0] + radius * radial[0],
-                                       params[d, 1] + radius * radial[1],
-                                       params[d, 2] + radius * radial[2]))
-            if params[d, 12] != 0.0:
-                forward = v_normalize(v_cross(axis, radial))
-                if params[d, 4] < 0.0:  # a negative period runs the circle backwards
-                    forward = (-forward[0], -forward[1], -forward[2])
-                store4(local_rotation, i, q_look_rotation(forward, axis))
-        elif k == OSCILLATE:
-            w = window_weight(t, start[d], end[d], fade[d])
-            if w == 0.0:
-                continue
-            value = w * params[d, 3] * portable.sin(two_pi * params[d, 4] * tau + params[d, 5])
-            if params[d, 6] != 0.0:
+                    for c in range(3):
+                        local_position[i, c] += params[d, c] * value
+        if spin is not None:
+            if k == SPIN:
                 axis = (params[d, 0], params[d, 1], params[d, 2])
-                q = q_mul(load4(local_rotation, i), q_axis_angle(axis, value))
+                q = q_mul(load4(local_rotation, i), q_axis_angle(axis, params[d, 3] * tau))
                 store4(local_rotation, i, q_normalize(q))
-            else:
+        if walk is not None:
+            if k == WALK:
+                direction = (params[d, 0], params[d, 1], params[d, 2])
+                up = (params[d, 9], params[d, 10], params[d, 11])
                 for c in range(3):
-                    local_position[i, c] += params[d, c] * value
-        elif k == SPIN:
-            axis = (params[d, 0], params[d, 1], params[d, 2])
-            q = q_mul(load4(local_rotation, i), q_axis_angle(axis, params[d, 3] * tau))
-            store4(local_rotation, i, q_normalize(q))
-        elif k == WALK:
-            direction = (params[d, 0], params[d, 1], params[d, 2])
-            up = (params[d, 9], params[d, 10], params[d, 11])
-            for c in range(3):
-                local_position[i, c] += direction[c] * params[d, 3] * tau
-            w = window_weight(t, start[d], end[d], fade[d])
-            if w == 0.0:
-                continue
-            phase = two_pi * params[d, 4] * tau
-            bob = w * params[d, 5] * portable.sin(2.0 * phase)
-            lateral = w * params[d, 7] * portable.sin(phase)
-            side = v_normalize(v_cross(up, direction))
-            for c in range(3):
-                local_position[i, c] += up[c] * bob + side[c] * lateral
-            roll = q_axis_angle((0.0, 0.0, 1.0), w * params[d, 6] * portable.sin(phase))
-            yaw = q_axis_angle((0.0, 1.0, 0.0), w * params[d, 8] * portable.sin(phase))
-            q = q_mul(load4(local_rotation, i), q_mul(yaw, roll))
-            store4(local_rotation, i, q_normalize(q))
+                    local_position[i, c] += direction[c] * params[d, 3] * tau
+                w = window_weight(t, start[d], end[d], fade[d])
+                if w == 0.0:
+                    continue
+                phase = two_pi * params[d, 4] * tau
+                bob = w * params[d, 5] * portable.sin(2.0 * phase)
+                lateral = w * params[d, 7] * portable.sin(phase)
+                side = v_normalize(v_cross(up, direction))
+                for c in range(3):
+                    local_position[i, c] += up[c] * bob + side[c] * lateral
+                roll = q_axis_angle((0.0, 0.0, 1.0), w * params[d, 6] * portable.sin(phase))
+                yaw = q_axis_angle((0.0, 1.0, 0.0), w * params[d, 8] * portable.sin(phase))
+                q = q_mul(load4(local_rotation, i), q_mul(yaw, roll))
+                store4(local_rotation, i, q_normalize(q))
     for m in range(driven.shape[0]):
         i = np.int64(driven[m])   # int64 node ids: one signature of the row helpers (docs/tech-notes.md §7)
         dq = load4(offset_rotation, m)
@@ -450,6 +460,10 @@ class Animation:
             self.params[orbits, 4], self.params[orbits, 11], self.params[orbits, 5:8].T,
             self.params[orbits, 8:11].T]).reshape(11, orbits.size))
         self.orbit_radial = np.zeros((3, orbits.size))
+        # per driver kind (keyframes, orbit, oscillate, spin, walk): 1 where a driver of that
+        # kind exists, else None (``apply_drivers`` compiles only the kinds a scene uses)
+        self.kinds_used = tuple(1 if bool(np.any(self.kind == k)) else None
+                                for k in (KEYFRAMES, ORBIT, OSCILLATE, SPIN, WALK))
 
     def _add_keys(self, n, params, key_time, key_value, where) -> None:
         keys = params.get("keys") or []
@@ -492,7 +506,7 @@ class Animation:
                       hierarchy.rest_local_position, hierarchy.rest_local_rotation,
                       hierarchy.rest_local_scale, hierarchy.local_position,
                       hierarchy.local_rotation, hierarchy.local_scale,
-                      self.orbit_slot, self.orbit_columns, self.orbit_radial)
+                      self.orbit_slot, self.orbit_columns, self.orbit_radial, *self.kinds_used)
 
     def apply(self, hierarchy, ctx) -> None:
         """UPDATE phase: drivers at ``ctx.time.time``, then the events now due, in ``at``
