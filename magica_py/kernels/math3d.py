@@ -262,7 +262,7 @@ def slerp_is_near(q1, q2):
     return not d < 0.9995
 
 
-@kernel
+@kernel(inline="always")
 def slerp_near(q1, q2, t):
     """``q_slerp(q1, q2, t)`` where ``slerp_is_near(q1, q2)``: its lerp path alone (the same
     bits without the trigonometry)."""
@@ -292,7 +292,7 @@ def q_from_euler_degrees(x, y, z):
     return q_mul(qy, q_mul(qx, qz))
 
 
-@kernel
+@kernel(inline="always")
 def q_from_matrix(m00, m01, m02, m10, m11, m12, m20, m21, m22):
     """Quaternion of a rotation matrix (row r, column c = m{rc}), as Unity.Mathematics does.
 
@@ -343,13 +343,13 @@ def rot_from_normal_tangent(normal, tangent):
     return q_look_rotation(tangent, normal)
 
 
-@kernel
+@kernel(inline="always")
 def q_normal_axis(q):
     """``nor(q) = q * up``."""
     return q_rotate(q, (0.0, 1.0, 0.0))
 
 
-@kernel
+@kernel(inline="always")
 def q_tangent_axis(q):
     """``tan(q) = q * forward``."""
     return q_rotate(q, (0.0, 0.0, 1.0))
@@ -399,7 +399,7 @@ def q_angle(a, b):
     return 0.0
 
 
-@kernel
+@kernel(inline="always")
 def q_to_angle_axis(q):
     """``ToAngleAxis`` of §0.2: returns (angle radians, axis 3-tuple; zero axis when degenerate)."""
     a = trig.acos(q[3]) if abs(q[3]) < 0.9999 else 0.0
@@ -572,7 +572,7 @@ def q_slerp_along(q1, to, angle, inv_sin, far, t):
             sine[3] if use_far else near[3])
 
 
-@kernel
+@kernel(inline="always")
 def from_to_rotation_unit_select(a, b, t):
     """``from_to_rotation_unit`` without a branch."""
     c = v_dot(a, b)
@@ -586,7 +586,7 @@ def from_to_rotation_unit_select(a, b, t):
     return opposite if is_opposite else q
 
 
-@kernel
+@kernel(inline="always")
 def from_to_rotation_select(a, b, t):
     """``from_to_rotation`` without a branch."""
     return from_to_rotation_unit_select(v_normalize_select(a), v_normalize_select(b), t)

@@ -113,7 +113,7 @@ CHANNEL_POSITION, CHANNEL_ROTATION, CHANNEL_SCALE = 0, 1, 2
 
 
 # ----------------------------------------------------------------------------- kernels
-@kernel
+@kernel(inline="always")
 def track_segment(key_time, first, count, tau, loop):
     """Keys (k0, k1) around tau in one track and the fraction between them."""
     last = first + count - 1
@@ -138,7 +138,7 @@ def track_segment(key_time, first, count, tau, loop):
     return lo, hi, (tau - key_time[lo]) / (key_time[hi] - key_time[lo])
 
 
-@kernel
+@kernel(inline="always")
 def ease(f, interpolation):
     if interpolation == 1:
         return 0.0
@@ -147,7 +147,7 @@ def ease(f, interpolation):
     return f
 
 
-@kernel
+@kernel(inline="always")
 def cubic_segment(key_time, key_value, first, last, k0, k1, f):
     """Cubic Hermite between keys k0 and k1 with Catmull-Rom tangents for uneven key times
     (``(p[k+1] - p[k-1]) / (t[k+1] - t[k-1])``, one-sided at the track ends)."""
@@ -191,7 +191,7 @@ def window_weight(t, start, end, fade):
     return min(w, 1.0)
 
 
-@kernel
+@kernel(inline="always")
 def orbit_radials(t, orbit_columns, orbit_radial):
     """The unit radial vector ``rotate(axis, 360 tau / period + phase) * u`` of every orbit
     driver at time t, one column per orbit (``Animation.orbit_columns`` rows: start, end,

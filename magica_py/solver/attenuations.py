@@ -25,7 +25,7 @@ from magica_py.solver.quality import (
 )
 
 
-@kernel
+@kernel(inline="always")
 def restoration_step_attenuation(attenuation, frequency_ratio, rate_mode):
     """D.6's velocity attenuation at the step size outside quality mode: the 90 Hz value in
     MagicaCloth2 mode and at 90 Hz (bit for bit), else ``1 - (1 - attn) 90/f``."""

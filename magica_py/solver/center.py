@@ -55,7 +55,7 @@ def world_point(l0, l1, l2, x):
             l2[0] * x[0] + l2[1] * x[1] + l2[2] * x[2] + l2[3] * x[3])
 
 
-@kernel
+@kernel(inline="always")
 def skin_bound_vertex(l0, l1, l2, bound_position, bound_normal, bound_tangent):
     """C.1 for one vertex from its ``bind_point`` 4-vectors (position w = 1, normal and tangent
     w = 0) and its bone's local-to-world rows l0..l2. Branch-free (a loop vectorises)."""
@@ -65,7 +65,7 @@ def skin_bound_vertex(l0, l1, l2, bound_position, bound_normal, bound_tangent):
     return pos, rot_from_normal_tangent_select(nor, tan)
 
 
-@kernel
+@kernel(inline="always")
 def skin_vertex(l0, l1, l2, b0, b1, b2, b3, local_position, local_normal, local_tangent):
     """C.1 for one vertex: world (position, rotation) from its bone's local-to-world rows
     l0..l2 and its bind pose rows b0..b3. Branch-free (a loop over vertices vectorises)."""
@@ -77,7 +77,7 @@ def skin_vertex(l0, l1, l2, b0, b1, b2, b3, local_position, local_normal, local_
 MATRIX_ROW = 4 * LANES   # columns from one row of a row-major 4x4 matrix field to the next
 
 
-@kernel
+@kernel(inline="always")
 def bind_rows(PM, g, l):
     """The four rows of lane l's bind pose (``blocks.SKIN_BIND_POSE``, row major)."""
     c = bk.SKIN_BIND_POSE
@@ -110,7 +110,7 @@ def skin_block(PS, PM, BI, PT, local_to_world, b, l0, l1):
             put4(PS, g, st.ROTATION, l, rot)
 
 
-@kernel
+@kernel(inline="always")
 def bone_rows(PS, g, l):
     """The three top rows of lane l's gathered bone matrix (``BONE_MATRIX``, row major)."""
     c = st.BONE_MATRIX
@@ -131,7 +131,7 @@ def smoothing_time_constant(s):
     return -1.0 / (SMOOTHING_REFERENCE_RATE * portable.log(1.0 - a))
 
 
-@kernel
+@kernel(inline="always")
 def time_based_smoothing(TS, b, l, delta, frame_delta_time, s, speed_limit):
     """Quality-mode C.4 smoothing: the smoothed component velocity is an exponential filter
     with the time constant of ``smoothing_time_constant(s)``, integrated exactly over the frame
@@ -165,7 +165,7 @@ def time_based_smoothing(TS, b, l, delta, frame_delta_time, s, speed_limit):
     return v_add(v_scale(v, h), v_scale(lag, tau * (1.0 - decay)))
 
 
-@kernel
+@kernel(inline="always")
 def mean_velocity_weight(w0, stabilization_time, span):
     """Quality mode: the stabilisation weight averaged over the frame's simulated time span
     (it ramps by dt/stab per step, C.3), so that the forced shift of C.4 removes the same
@@ -181,7 +181,7 @@ def mean_velocity_weight(w0, stabilization_time, span):
     return ((w0 + 1.0) * 0.5 * t1 + (span - t1)) / span
 
 
-@kernel
+@kernel(inline="always")
 def center_fixed_terms(position, rotation, bind_rotation):
     """C.2 terms of one center-fixed vertex: its position and the normal and tangent axes of
     ``rotation * bind_rotation`` (summed over the fixed list by ``center_pose_lane``). Branch-free."""
@@ -189,7 +189,7 @@ def center_fixed_terms(position, rotation, bind_rotation):
     return position, q_normal_axis(q), q_tangent_axis(q)
 
 
-@kernel
+@kernel(inline="always")
 def center_from_sums(position_sum, normal_sum, tangent_sum, count):
     """C.2 center pose from the sums of ``center_fixed_terms`` over ``count`` > 0 vertices."""
     return (v_scale(position_sum, 1.0 / count),

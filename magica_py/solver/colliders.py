@@ -105,7 +105,7 @@ def capsule_ends(pos, rot, direction, reverse, aligned, size, s):
     return (v_add(pos, q_rotate(rot, v_scale(axis, a))), v_sub(pos, q_rotate(rot, v_scale(axis, b))), rs, re)
 
 
-@kernel
+@kernel(inline="always")
 def collider_step_pose(old_frame_pos, frame_pos, old_frame_rot, frame_rot, old_pos, old_rot, t, mv, rv):
     """G.3 pose of one slot: (now_pos, now_rot, old_pos, old_rot, inverse old_rot) at frame
     interpolation t, the old pose pulled towards the new one by the team's local inertia ratios
@@ -117,7 +117,7 @@ def collider_step_pose(old_frame_pos, frame_pos, old_frame_rot, frame_rot, old_p
     return now_pos, now_rot, old_pos, old_rot, q_inverse(old_rot)
 
 
-@kernel
+@kernel(inline="always")
 def swept_bounds(so, sn, eo, en, rs, re):
     """(aabb_min, aabb_max) of a capsule (or sphere: start == end) swept from old to new."""
     lo = (min(min(so[0], sn[0]) - rs, min(eo[0], en[0]) - re), min(min(so[1], sn[1]) - rs, min(eo[1], en[1]) - re),
@@ -127,7 +127,7 @@ def swept_bounds(so, sn, eo, en, rs, re):
     return lo, hi
 
 
-@kernel
+@kernel(inline="always")
 def sphere_bounds(old_pos, now_pos, r):
     """(aabb_min, aabb_max) of a sphere of radius r swept from old_pos to now_pos."""
     lo = (min(old_pos[0], now_pos[0]) - r, min(old_pos[1], now_pos[1]) - r, min(old_pos[2], now_pos[2]) - r)

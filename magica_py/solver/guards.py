@@ -18,7 +18,7 @@ GUARD_SPEED = 2
 GUARD_SPEED_LIMIT = 100.0   # m/s (scaled by the team scale ratio): far above any cloth motion
 
 
-@kernel
+@kernel(inline="always")
 def speed_limit_sq(scale_ratio):
     """Squared speed bound (m/s)^2 of a team with scale ratio ``scale_ratio``."""
     return (GUARD_SPEED_LIMIT * max(scale_ratio, 1e-6)) ** 2
@@ -65,7 +65,7 @@ def lane_guard_code(TS, b, l):
     return guard_code(get1(TS, b, st.GUARD_NON_FINITE_SEEN, l) != 0.0, get1(TS, b, st.GUARD_TOO_FAST_SEEN, l) != 0.0)
 
 
-@kernel
+@kernel(inline="always")
 def guard_code(non_finite, too_fast):
     if non_finite:
         return GUARD_NON_FINITE

@@ -344,7 +344,7 @@ def packed_row(table, team: int) -> np.ndarray:
 SQRT3 = math.sqrt(3.0)   # |(1, 1, 1)|: the length of a unit lossy scale
 
 
-@kernel
+@kernel(inline="always")
 def length_unit(quality, init_scale):
     """The cloth's own length unit (m): 1.0 in faithful mode (MagicaCloth2's lengths are world
     metres at the build scale); in quality mode the component's build scale, |lossy scale| /

@@ -635,7 +635,7 @@ def start_depth(CS, k, l, shape, x, r):
     return radius + r - v_length(v_sub(x, v_lerp(so, eo, t)))
 
 
-@kernel
+@kernel(inline="always")
 def quality_distance_attenuation(P, b, faithful_attenuation):
     """D.4's velocity attenuation: 0 (full PBD velocity) when distance_full_velocity is on."""
     if P[b, PRM_DISTANCE_FULL_VELOCITY] != 0.0:
@@ -655,7 +655,7 @@ def quality_hard_attenuation(P, b, frequency_ratio, attenuation, converted):
     return portable.pow(attenuation, frequency_ratio)
 
 
-@kernel
+@kernel(inline="always")
 def quality_restoration_attenuation(P, b, frequency_ratio, converted):
     """D.6's velocity attenuation at the step size. Quality mode scales the share of the
     restoration correction that becomes velocity, ``1 - attn``, linearly with the step

@@ -28,7 +28,7 @@ INCLUDE_LINE = 0x01
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
 
-@kernel
+@kernel(inline="always")
 def q_from_matrix_select(m00, m01, m02, m10, m11, m12, m20, m21, m22):
     """``q_from_matrix`` with its four cases computed and selected."""
     t_plus = m11 + m22
@@ -55,7 +55,7 @@ def look_rotation_select(forward, up):
                                 x_axis[2], y_axis[2], forward[2])
 
 
-@kernel
+@kernel(inline="always")
 def rot_from_normal_tangent_select(normal, tangent):
     """``rot_from_normal_tangent`` (§0.2 rot_from) without branches."""
     return look_rotation_select(tangent, normal)
@@ -110,7 +110,7 @@ def line_child_pose(ibq, bp, rest_position, rest_rotation, base_pos_c, base_rot_
     return lp, lq
 
 
-@kernel
+@kernel(inline="always")
 def line_child_rotation(q, lq, tv, cur, zero):
     """E.2: rotation of a moving child: its rest rotation carried by x's rotation q, swung so
     the rest edge ``tv`` matches the simulated edge ``cur`` (not for a zero-distance child).
@@ -121,7 +121,7 @@ def line_child_rotation(q, lq, tv, cur, zero):
     return qc
 
 
-@kernel
+@kernel(inline="always")
 def line_turn(q, ctv, cv, t):
     """E.2: x's rotation q turned by fraction t from its children's rest directions ``ctv``
     towards their simulated ones ``cv`` (left as is when either sum is (near) zero).
@@ -130,7 +130,7 @@ def line_turn(q, ctv, cv, t):
     return turned if ((v_length(ctv) >= 1e-8) & (v_length(cv) >= 1e-8)) else q
 
 
-@kernel
+@kernel(inline="always")
 def line_blend(bq, q, bw):
     """E.2: the bone rotation blended from the animated one by ``blend_weight`` bw. Branch-free."""
     blended = q_slerp_select(bq, q, bw)

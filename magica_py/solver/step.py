@@ -39,7 +39,7 @@ STATIC_FRICTION_LOSS = 0.05
 CENTRIFUGAL_SCALE = 0.02
 
 
-@kernel
+@kernel(inline="always")
 def team_step_values(old_pos, old_rot, old_frame_pos, frame_pos, old_frame_rot, frame_rot, old_frame_scale,
                      frame_scale, t, dt, local_inertia, move_limit, rotation_limit, init_scale_length,
                      gravity_direction, init_local_gravity, gravity, gravity_falloff, stabilization_time,
@@ -271,14 +271,14 @@ def predict_move_lanes(PS, PM, PP, TS, b, g, w, depth_inertia, g_dir, g_mag, fre
         put3(PS, g, st.NEXT_POS, l, next_pos)
 
 
-@kernel
+@kernel(inline="always")
 def basic_pose_child(parent_pos, parent_rot, local_position, local_rotation, scale):
     """D.2: a baseline child's rest pose placed on its parent's (scale = build scale x scale ratio)."""
     pos = v_add(q_rotate(parent_rot, v_mul(local_position, scale)), parent_pos)
     return pos, q_mul(parent_rot, local_rotation)
 
 
-@kernel
+@kernel(inline="always")
 def basic_pose_blend(pos, rot, base_pos, base_rot, ratio):
     """D.2: the rest shape blended towards the animated pose by animation_pose_ratio."""
     return v_lerp(pos, base_pos, ratio), q_slerp(rot, base_rot, ratio)

@@ -20,12 +20,12 @@ FIXED = 0x01
 MOVE = 0x02
 
 
-@kernel
+@kernel(inline="always")
 def finite3(v):
     return math.isfinite(v[0]) & math.isfinite(v[1]) & math.isfinite(v[2])
 
 
-@kernel
+@kernel(inline="always")
 def finite4(q):
     return math.isfinite(q[0]) & math.isfinite(q[1]) & math.isfinite(q[2]) & math.isfinite(q[3])
 

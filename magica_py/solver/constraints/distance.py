@@ -31,7 +31,7 @@ FIX_MASS = 50.0              # inverse mass of a fixed partner is 1/50
 ZERO3 = (0.0, 0.0, 0.0)
 
 
-@kernel
+@kernel(inline="always")
 def distance_link(p_pos, q_pos, rest, w_p, w_q, stiffness):
     """One link's correction of p, ``(L - L0) k (v/L) w_p/(w_p + w_q)``, and whether it counts
     (False, with a zero correction, when the link is degenerate: L < 1e-8). Branch-free: the
@@ -44,7 +44,7 @@ def distance_link(p_pos, q_pos, rest, w_p, w_q, stiffness):
     return (corr if ok else ZERO3), ok
 
 
-@kernel
+@kernel(inline="always")
 def distance_rest_length(signed_rest, scale, p_base, q_base, animation_pose_ratio):
     """The link's rest length this step: the build rest length at the team's scale blended
     towards the animated pose's distance, ``lerp(|rest| scale, |p_base - q_base|, ratio)``.
@@ -57,7 +57,7 @@ def distance_rest_length(signed_rest, scale, p_base, q_base, animation_pose_rati
     return lerp(abs(signed_rest) * scale, pose, animation_pose_ratio)
 
 
-@kernel
+@kernel(inline="always")
 def distance_apply(position, velocity_pos, acc, n, attenuation):
     """(next_pos, velocity_pos) after the mean correction ``acc / n`` (unchanged when n == 0)."""
     delta = v_scale(acc, 1.0 / max(n, 1))   # no link: discarded below (and no 1/0 with the JIT off)
@@ -67,7 +67,7 @@ def distance_apply(position, velocity_pos, acc, n, attenuation):
     return (moved if some else position), (dragged if some else velocity_pos)
 
 
-@kernel
+@kernel(inline="always")
 def distance_stiffness(curve, frequency_ratio, power_y, mode, quality):
     """(vertical, horizontal) per-step stiffness of a particle whose stiffness curve value is
     ``curve``."""
@@ -76,7 +76,7 @@ def distance_stiffness(curve, frequency_ratio, power_y, mode, quality):
             saturate(constraint_stiffness(k * 0.5, frequency_ratio, power_y, mode, quality)))
 
 
-@kernel
+@kernel(inline="always")
 def distance_particle_terms(PS, PM, PP, P, BI, topology, b, frequency_ratio, power_y):
     """Every particle's inverse mass of this pass (1/50 when fixed) and its link stiffnesses,
     written to ``INVERSE_MASS``, ``K_VERTICAL``, ``K_HORIZONTAL``."""

@@ -22,7 +22,7 @@ VELOCITY_ATTENUATION = 0.7    # Tether{Compression,Stretch}VelocityAttenuation
 ZERO3 = (0.0, 0.0, 0.0)
 
 
-@kernel
+@kernel(inline="always")
 def solve_tether(position, root_position, rest_length, compression_limit, frequency_ratio=1.0):
     """Correction of ``position`` towards the allowed band around ``rest_length``: zero inside
     the band, when the particle sits on its root (< 1e-8) or when the rest length is zero.
