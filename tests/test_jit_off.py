@@ -144,8 +144,13 @@ before_frames = set(compiled)
 compiled.clear()
 with event.install_listener("numba:compile", Names()):
     result = magica_py.simulate("configs/tail_orbit.yaml", frames=4)
+from magica_py.solver.frame import simulate_frame
+# the size of each function's final LLVM module (its own code and every callee linked into it)
+ir = {fn.__name__: len(fn.inspect_llvm(fn.signatures[0]))
+      for fn in (compile_step_stages, compile_late_stages, compile_end_stages, simulate_frame)}
 print(json.dumps({"positions": result.cloths["tail"].positions.tolist(), "compiled": sorted(compiled | before_frames),
-                  "before_frames": sorted(before_frames), "in_frames": sorted(compiled), "signatures": signatures}))
+                  "before_frames": sorted(before_frames), "in_frames": sorted(compiled), "signatures": signatures,
+                  "ir": ir}))
 """
 # the optional stages tail_orbit (line mode, angle restoration, no collider, no motion
 # constraint, faithful mode, no wind: ``ClothSystem.stages`` has angle and lines only) does not
@@ -195,6 +200,18 @@ def test_tail_orbit_runs_bounds_checked_and_compiles_only_the_stages_it_uses(bou
         sorted(ahead)
     assert not ahead & set(checked["in_frames"]), sorted(ahead & set(checked["in_frames"]))
     assert np.array(checked["positions"]).tobytes() == np.array(_run(False)["positions"]).tobytes()
+
+
+def test_the_compile_wrappers_keep_none_of_the_stages_code(bounds_checked_tail):
+    """The ``frame.compile_*`` functions only type the stages (``frame.typed_only``): numba
+    compiles every stage they name into the cache, and LLVM drops the never-taken calls before
+    it optimises and emits the wrapper's module, so the wrapper does not carry every stage's
+    code once more. Each wrapper's module is a small fraction of the frame kernel's (with a
+    condition LLVM cannot fold, ``n == 123456789``, the step wrapper's was 44 % of it in this
+    bounds-checked build; with ``typed_only`` about 3 %)."""
+    ir = bounds_checked_tail["ir"]
+    for name in ("compile_step_stages", "compile_late_stages", "compile_end_stages"):
+        assert ir[name] < 0.1 * ir["simulate_frame"], ir
 
 
 def _repeated_signatures():
