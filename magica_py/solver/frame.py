@@ -176,7 +176,7 @@ def _warm_rows(a, i0, i1):
     return read_lines(a.reshape(-1), i0 * a.shape[1], i1 * a.shape[1])
 
 
-@kernel
+@kernel(inline="always")
 def warm_block(T, b, area):
     """Read every cache line of block b's particle state, model and depth curves, team and
     collider items in address order before its frame, when ``WARM_*`` says it pays. The stages
@@ -195,7 +195,7 @@ def warm_block(T, b, area):
     area[area.shape[0] - 1] = acc
 
 
-@kernel
+@kernel(inline="always")
 def frame_tuples(F):
     """The three namedtuples of the frame's arrays from ``F`` (``frame_call.FrameArrays``, the
     StructRef the system passes; with the JIT off its namedtuple twin): ``Tables``,
@@ -255,7 +255,7 @@ def restore_lane(PS, TS, CS, BI, b, l, area):
 
 
 # ----------------------------------------------------------------------------- team level
-@kernel(forceinline=False)
+@kernel(inline="always")
 def prepare_lanes(TS, TI, P, BI, blocks, tt, h):
     """Scale suspension (A.4) and distance culling (H.1) of every lane, before the team time."""
     for i in range(blocks.shape[0]):
@@ -552,7 +552,7 @@ def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles, colliders)
         restore_frozen(PS, TS, CS, TI, BI, b, w, area)
 
 
-@kernel(forceinline=False)
+@kernel(inline="always")
 def _time_frame_update(tt, fi):
     team_time_frame_update(
         tt.active, tt.suspended, tt.update_mode, tt.team_time_scale, tt.time, tt.old_time,
