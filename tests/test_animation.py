@@ -21,9 +21,14 @@ def ctx_at(t):
     return SimpleNamespace(time=SimpleNamespace(time=t, delta_time=1 / 60), events=[])
 
 
-def pose_at(entries, t, h=None):
+def pose_at(entries, t, h=None, every_kind=False):
+    """``h`` (default: a new ``rig()``) posed by ``entries`` at time t. ``every_kind``: the
+    drivers compiled with every driver kind switched on (``Animation.kinds_used``), one compile
+    whatever kinds the entries have."""
     h = h or rig()
     anim = Animation.from_specs(entries, h)
+    if every_kind:
+        anim.kinds_used = (1,) * len(anim.kinds_used)
     anim.apply(h, ctx_at(t))
     h.propagate()
     return h
@@ -495,11 +500,7 @@ def test_kernel_matches_the_numpy_twin_for_random_driver_stacks(order, windows, 
     compile instead of one per subset of kinds; the switches are pinned further down."""
     h = rig(root_rotation=tuple(euler(0, 30, 0)))
     h.rest_local_rotation[h.index("hips")] = euler(5, 10, 15)
-    anim = Animation.from_specs(entries, h)
-    anim.kinds_used = (1,) * len(anim.kinds_used)
-    anim.apply(h, ctx_at(t))
-    h.propagate()
-    p, q = local(h, "hips")
+    p, q = local(pose_at(entries, t, h, every_kind=True), "hips")
     tp, tq = twin_local_pose(entries, h, t)
     np.testing.assert_allclose(p, tp, atol=1e-9)
     assert_same_rotation(q, tq, atol=1e-9)
