@@ -45,8 +45,14 @@ def _no_helper(monkeypatch):
     monkeypatch.setenv("MAGICA_COMPILE_HELPER", "0")
 
 
+@pytest.fixture
+def used_stages(monkeypatch):
+    """The switches of the scene's own selection (tests/conftest.py compiles every stage)."""
+    monkeypatch.setenv("MAGICA_STAGES", "used")
+
+
 @pytest.mark.parametrize("path, overrides", SCENES, ids=lambda v: str(v).replace("/", "_"))
-def test_specs_announce_every_step_stage_the_built_cloths_use(path, overrides):
+def test_specs_announce_every_step_stage_the_built_cloths_use(path, overrides, used_stages):
     _scene, system = _system(path, overrides)
     expected = system.expected_stage_switches()
     used = system.stage_switches()
@@ -59,7 +65,7 @@ def test_specs_announce_every_step_stage_the_built_cloths_use(path, overrides):
         assert expected.bending is None and expected.point_collision is None and expected.edge_collision is None
 
 
-def test_announced_switches_follow_the_parameters():
+def test_announced_switches_follow_the_parameters(used_stages):
     """Bending is announced for a mesh cloth with triangle bending and not without it; quality
     mode only where a cloth asks for it; edge collision only for an edge-mode cloth with colliders."""
     _s, plain = _system("configs/character_walk.yaml", [])

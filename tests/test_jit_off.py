@@ -168,9 +168,10 @@ def bounds_checked_tail(tmp_path_factory):
     """The tail's first frames compiled from an empty cache with ``NUMBA_BOUNDSCHECK=1``, in a
     subprocess (``COMPILE_SNIPPET``): its positions and what numba compiled."""
     # no compile helper (solver/compile_helper.py): every kernel compiles in this process, where
-    # the compile events see it
+    # the compile events see it; the stages the tail uses, not every stage (tests/conftest.py)
     cache = tmp_path_factory.mktemp("numba-cache")
-    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", NUMBA_CACHE_DIR=str(cache), MAGICA_COMPILE_HELPER="0")
+    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", NUMBA_CACHE_DIR=str(cache), MAGICA_COMPILE_HELPER="0",
+               MAGICA_STAGES="used")
     env.pop("NUMBA_DISABLE_JIT", None)
     out = subprocess.run([sys.executable, "-c", COMPILE_SNIPPET], cwd=ROOT, env=env, capture_output=True,
                          text=True, timeout=3600)

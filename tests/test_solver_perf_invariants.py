@@ -226,8 +226,15 @@ STAGES = {
 }
 
 
+@pytest.fixture
+def used_stages(monkeypatch):
+    """The systems of a test compile the stages their scene uses (the default outside the
+    test suite; tests/conftest.py compiles every stage)."""
+    monkeypatch.setenv("MAGICA_STAGES", "used")
+
+
 @pytest.mark.parametrize("config", sorted(STAGES))
-def test_a_scene_switches_on_only_the_stages_its_cloths_use(config):
+def test_a_scene_switches_on_only_the_stages_its_cloths_use(config, used_stages):
     """``ClothSystem.stages`` (the frame kernel's ``StageSwitches``) names the stages a scene
     needs; the others are passed as None, so numba prunes their calls before typing them (the
     compile events of tests/test_jit_off.py show they are never compiled)."""
@@ -242,7 +249,51 @@ def test_a_scene_switches_on_only_the_stages_its_cloths_use(config):
         simulate_frame.signatures
 
 
-def test_a_runtime_change_switches_a_stage_on_and_off():
+def _run_state(config, frames, overrides=()):
+    """Every state table of ``config``'s cloth system after ``frames`` frames (a policy of
+    ``MAGICA_STAGES`` set by the caller), and the system's switches."""
+    scene = load_scene(ROOT / "configs" / f"{config}.yaml", overrides=list(overrides))
+    player = Player.for_scene(scene)
+    system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player)
+    player.run(frames)
+    tables = {name: getattr(system, name).copy() for name in ("PS", "TS", "CS", "TRS", "EDS")}
+    return tables, system.stages, scene.hierarchy.local_rotation.copy()
+
+
+# the showcases, each leaving some stages off, and the character with its skirt in quality mode
+# and its hair in edge collision (stages that one block runs and the other leaves idle)
+EVERY_STAGE_SCENES = [("tail_orbit", ()), ("character_walk", ()),
+                      ("character_walk", ("cloths.skirt.parameters.solver.mode=quality",
+                                          "cloths.hair.collision_mode=edge"))]
+
+
+@pytest.mark.parametrize("config, overrides", EVERY_STAGE_SCENES, ids=["tail_orbit", "character_walk", "mixed"])
+def test_every_stage_compiled_gives_the_bits_of_the_stages_the_scene_uses(config, overrides, monkeypatch):
+    """``MAGICA_STAGES=all`` compiles every optional stage; a stage no block asks for then runs
+    its checks and changes nothing: every state table and every written bone rotation has the
+    bits of the scene's own selection (``MAGICA_STAGES=used``), over frames with collisions
+    (the character) and a first-frame reset."""
+    monkeypatch.setenv("MAGICA_STAGES", "used")
+    used, used_switches, used_rotations = _run_state(config, 40, overrides)
+    monkeypatch.setenv("MAGICA_STAGES", "all")
+    every, every_switches, every_rotations = _run_state(config, 40, overrides)
+    assert None in used_switches and None not in every_switches
+    for name in used:
+        assert used[name].tobytes() == every[name].tobytes(), name
+    assert used_rotations.tobytes() == every_rotations.tobytes()
+    assert np.isfinite(used["PS"]).all()
+
+
+def test_a_bad_stage_policy_is_an_error_naming_the_variable(monkeypatch):
+    from magica_py.params import ParameterError
+
+    monkeypatch.setenv("MAGICA_STAGES", "some")
+    scene = load_scene(ROOT / "configs" / "tail_orbit.yaml")
+    with pytest.raises(ParameterError, match="MAGICA_STAGES.*'some'.*expected 'used'.*or 'all'"):
+        ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings)
+
+
+def test_a_runtime_change_switches_a_stage_on_and_off(used_stages):
     scene = load_scene(ROOT / "configs" / "character_walk.yaml")
     system = ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings)
     assert system.stages.edge_collision is None and system.stages.motion is None
