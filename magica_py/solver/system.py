@@ -92,7 +92,6 @@ def choose_threads(parallel, setting, teams: int, particles: int) -> int:
     return max(1, min(int(setting), available))
 
 
-
 # Which optional stages the frame kernel is compiled with (environment variable MAGICA_STAGES):
 # "used" (the default) the ones the live cloths use, so that a scene neither compiles nor runs
 # a stage it does not need; "all" every optional stage whatever the cloths, so that one
