@@ -3,8 +3,9 @@
 * Rerun strict mode: a bad logging argument raises instead of warning (docs/tech-notes.md §1).
 * ``MAGICA_STAGES=all`` (unless set otherwise): every system compiles its frame kernel with
   every optional stage, so the suite compiles the frame kernel once per form (serial,
-  parallel) instead of once per combination of stages its scenes use (about twenty: most of
-  a cold suite's time). An optional stage runs only where a block's parameters ask, so the
+  parallel) instead of once per combination of stages its scenes use (23 combinations, about
+  a quarter of a cold suite's CPU time: docs/BENCHMARKS.md, session 19). An optional stage
+  runs only where a block's parameters ask, so the
   bits are the same (tests/test_solver_perf_invariants.py pins it on the showcases and pins
   the scene's own selection, with ``MAGICA_STAGES=used``). Subprocesses inherit it.
   ``MAGICA_STAGES=used python -m pytest ...`` runs the suite on each scene's own selection.

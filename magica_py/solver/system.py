@@ -99,7 +99,8 @@ def choose_threads(parallel, setting, teams: int, particles: int) -> int:
 # parameters: for a process that runs many different scenes (the test suite, a batch of
 # varied characters) or a tuning session that switches stages on and off, at the price of
 # running the stages' cheap checks where no block asks. The bits are the same either way
-# (a stage runs only where a block's parameters ask: docs/architecture.md, *stage switches*).
+# (a stage runs only where a block's parameters ask: docs/architecture.md, *Only the stages a
+# scene uses are compiled*).
 STAGE_POLICIES = ("used", "all")
 
 
