@@ -33,8 +33,12 @@ def golden_configs(folder: pathlib.Path, scene: str) -> pathlib.Path:
     return folder
 
 
+@pytest.mark.parametrize("stages", ["used", "all"])
 @pytest.mark.parametrize("scene", ["tail_orbit", "character_walk", "hitches_and_events", "crowd"])
-def test_faithful_positions_are_bit_identical_to_the_golden_hashes(scene, capsys, tmp_path):
+def test_faithful_positions_are_bit_identical_to_the_golden_hashes(scene, stages, capsys, tmp_path, monkeypatch):
+    """With the stages each scene uses (what ``magica-py`` runs) and with every stage
+    compiled (``MAGICA_STAGES=all``, the rest of the suite: tests/conftest.py)."""
+    monkeypatch.setenv("MAGICA_STAGES", stages)
     golden = golden_module()
     folder = golden_configs(tmp_path, scene)
     assert golden.main(["--check", "--scenes", scene, "--config-dir", str(folder)]) == 0, capsys.readouterr().out
