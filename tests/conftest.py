@@ -28,6 +28,14 @@ def repo_root() -> pathlib.Path:
     return REPO_ROOT
 
 
+@pytest.fixture
+def used_stages(monkeypatch):
+    """A test's systems compile the optional stages their scene uses (``MAGICA_STAGES=used``,
+    what ``magica-py`` runs), not every stage as in the rest of the suite: for the tests that
+    pin the selection itself."""
+    monkeypatch.setenv("MAGICA_STAGES", "used")
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> pathlib.Path:
     if not SHARED_DATA.is_dir():

@@ -490,14 +490,14 @@ TWIN_DRIVERS = [
                         min_size=5, max_size=5),
        t=st.floats(0.0, 8.0))
 def test_kernel_matches_the_numpy_twin_for_random_driver_stacks(order, windows, t):
+    """The compiled drivers against the numpy twin above. Every driver kind is compiled in
+    (``kinds_used`` all on: a kind with no driver runs none), so the random stacks share one
+    compile instead of one per subset of kinds; the switches are pinned further down."""
     entries = []
     for n, k in enumerate(order):
         start, span, offset = windows[n]
         entries.append(dict(TWIN_DRIVERS[k], target="hips", start=start, end=start + span,
                             phase_offset=offset))
-    """The compiled drivers against the numpy twin above. Every driver kind is compiled in
-    (``kinds_used`` all on: a kind with no driver runs none), so the random stacks share one
-    compile instead of one per subset of kinds; the switches are pinned further down."""
     h = rig(root_rotation=tuple(euler(0, 30, 0)))
     h.rest_local_rotation[h.index("hips")] = euler(5, 10, 15)
     p, q = local(pose_at(entries, t, h, every_kind=True), "hips")

@@ -45,12 +45,6 @@ def _no_helper(monkeypatch):
     monkeypatch.setenv("MAGICA_COMPILE_HELPER", "0")
 
 
-@pytest.fixture
-def used_stages(monkeypatch):
-    """The switches of the scene's own selection (tests/conftest.py compiles every stage)."""
-    monkeypatch.setenv("MAGICA_STAGES", "used")
-
-
 @pytest.mark.parametrize("path, overrides", SCENES, ids=lambda v: str(v).replace("/", "_"))
 def test_specs_announce_every_step_stage_the_built_cloths_use(path, overrides, used_stages):
     _scene, system = _system(path, overrides)

@@ -226,13 +226,6 @@ STAGES = {
 }
 
 
-@pytest.fixture
-def used_stages(monkeypatch):
-    """The systems of a test compile the stages their scene uses (the default outside the
-    test suite; tests/conftest.py compiles every stage)."""
-    monkeypatch.setenv("MAGICA_STAGES", "used")
-
-
 @pytest.mark.parametrize("config", sorted(STAGES))
 def test_a_scene_switches_on_only_the_stages_its_cloths_use(config, used_stages):
     """``ClothSystem.stages`` (the frame kernel's ``StageSwitches``) names the stages a scene
