@@ -6,6 +6,8 @@
   kernel; the solver's guards catch non-finite values before they reach a transform.
 * ``nogil=True``: a kernel releases the GIL (the batch runner's threads, live viewers).
 * ``MAGICA_NO_CACHE=1`` disables the cache (read-only installs without NUMBA_CACHE_DIR).
+* ``MAGICA_STAGES`` (``stage_policy``): whether kernels with optional parts (the cloth frame's
+  stages, the animation's driver kinds) are compiled with the parts a scene uses or with all.
 
 Only numba's documented options are used: nothing here changes LLVM's settings for the
 process, so ``NUMBA_DISABLE_JIT=1`` and ``NUMBA_BOUNDSCHECK=1`` apply to every kernel.
@@ -27,3 +29,31 @@ def kernel(fn=None, **overrides):
     if fn is None:
         return lambda f: numba.njit(**options)(f)
     return numba.njit(**options)(fn)
+
+
+# Which optional parts the kernels that have them are compiled with (environment variable
+# MAGICA_STAGES): the cloth frame's optional stages (``ClothSystem.stage_switches``) and the
+# animation's driver kinds (``Animation.kinds_used``). "used" (the default): the parts the
+# scene uses, so that a scene neither compiles nor runs what it does not need. "all": every
+# part whatever the scene, so that one compiled kernel serves every scene and every run-time
+# change of parameters: for a process that runs many different scenes (the test suite, a
+# batch of varied characters) or a tuning session that switches stages on and off, at the
+# price of the parts' cheap checks where nothing asks. The bits are the same either way (a
+# stage runs only where a block's parameters ask, a driver kind only for its drivers:
+# docs/architecture.md, *Only the stages a scene uses are compiled*).
+STAGE_POLICIES = ("used", "all")
+
+
+def stage_policy() -> str:
+    """The ``MAGICA_STAGES`` policy (``STAGE_POLICIES``); read each time switches are computed
+    (a cloth system's stage switches, an animation's driver kinds), so a process can change it
+    between systems."""
+    value = os.environ.get("MAGICA_STAGES", "").strip().lower() or "used"
+    if value not in STAGE_POLICIES:
+        from magica_py.params import ParameterError   # params imports this module
+
+        raise ParameterError("environment variable MAGICA_STAGES",
+                             f"{os.environ['MAGICA_STAGES']!r}: expected 'used' (compile the optional stages and "
+                             "driver kinds the scene uses; the default) or 'all' (compile every one, whatever "
+                             "the scene)")
+    return value

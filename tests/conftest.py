@@ -7,7 +7,9 @@
   a quarter of a cold suite's CPU time: docs/BENCHMARKS.md, session 19). An optional stage
   runs only where a block's parameters ask, so the
   bits are the same (tests/test_solver_perf_invariants.py pins it on the showcases and pins
-  the scene's own selection, with ``MAGICA_STAGES=used``). Subprocesses inherit it.
+  the scene's own selection, with ``MAGICA_STAGES=used``). Likewise the animation's drivers
+  are compiled once with every driver kind (tests/test_animation.py pins the kinds a scene
+  uses and the same bits). Subprocesses inherit it.
   ``MAGICA_STAGES=used python -m pytest ...`` runs the suite on each scene's own selection.
 * ``shared_data``: the third-party test data in ../shared/data (see its NOTICE.md).
 """
@@ -30,9 +32,9 @@ def repo_root() -> pathlib.Path:
 
 @pytest.fixture
 def used_stages(monkeypatch):
-    """A test's systems compile the optional stages their scene uses (``MAGICA_STAGES=used``,
-    what ``magica-py`` runs), not every stage as in the rest of the suite: for the tests that
-    pin the selection itself."""
+    """A test's systems compile the optional stages their scene uses and its animations the
+    driver kinds they have (``MAGICA_STAGES=used``, what ``magica-py`` runs), not every one as
+    in the rest of the suite: for the tests that pin the selection itself."""
     monkeypatch.setenv("MAGICA_STAGES", "used")
 
 

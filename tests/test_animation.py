@@ -21,14 +21,11 @@ def ctx_at(t):
     return SimpleNamespace(time=SimpleNamespace(time=t, delta_time=1 / 60), events=[])
 
 
-def pose_at(entries, t, h=None, every_kind=False):
-    """``h`` (default: a new ``rig()``) posed by ``entries`` at time t. ``every_kind``: the
-    drivers compiled with every driver kind switched on (``Animation.kinds_used``), one compile
-    whatever kinds the entries have."""
+def pose_at(entries, t, h=None):
+    """``h`` (default: a new ``rig()``) posed by ``entries`` at time t. The drivers are compiled
+    with the driver kinds of ``MAGICA_STAGES`` (every kind in the suite: tests/conftest.py)."""
     h = h or rig()
     anim = Animation.from_specs(entries, h)
-    if every_kind:
-        anim.kinds_used = (1,) * len(anim.kinds_used)
     anim.apply(h, ctx_at(t))
     h.propagate()
     return h
@@ -491,8 +488,9 @@ TWIN_DRIVERS = [
        t=st.floats(0.0, 8.0))
 def test_kernel_matches_the_numpy_twin_for_random_driver_stacks(order, windows, t):
     """The compiled drivers against the numpy twin above. Every driver kind is compiled in
-    (``kinds_used`` all on: a kind with no driver runs none), so the random stacks share one
-    compile instead of one per subset of kinds; the switches are pinned further down."""
+    (``MAGICA_STAGES=all``, tests/conftest.py: a kind with no driver runs none), so the random
+    stacks share one compile instead of one per subset of kinds; the switches are pinned
+    further down."""
     entries = []
     for n, k in enumerate(order):
         start, span, offset = windows[n]
@@ -500,7 +498,7 @@ def test_kernel_matches_the_numpy_twin_for_random_driver_stacks(order, windows, 
                             phase_offset=offset))
     h = rig(root_rotation=tuple(euler(0, 30, 0)))
     h.rest_local_rotation[h.index("hips")] = euler(5, 10, 15)
-    p, q = local(pose_at(entries, t, h, every_kind=True), "hips")
+    p, q = local(pose_at(entries, t, h), "hips")
     tp, tq = twin_local_pose(entries, h, t)
     np.testing.assert_allclose(p, tp, atol=1e-9)
     assert_same_rotation(q, tq, atol=1e-9)
@@ -537,7 +535,7 @@ def test_orbits_evaluated_all_at_once_give_the_per_driver_formula_bit_for_bit():
             np.testing.assert_array_equal(h.local_position[anim.target[d]], expected)
 
 
-def test_drivers_compile_only_the_kinds_a_scene_uses():
+def test_drivers_compile_only_the_kinds_a_scene_uses(used_stages):
     """``Animation.kinds_used`` switches each driver kind's code on (1) or off (None, pruned by
     numba before typing): an orbit-only list is compiled without the keyframe, oscillate, spin
     and walk code, and still gives the orbit's closed form."""
@@ -555,3 +553,26 @@ def test_drivers_compile_only_the_kinds_a_scene_uses():
         none, one = numba.types.none, numba.typeof(1)
         assert any(tuple(sig[-5:]) == (none, one, none, none, none) for sig in apply_drivers.signatures), \
             apply_drivers.signatures
+
+
+def test_every_driver_kind_compiled_gives_the_bits_of_the_kinds_a_scene_uses(monkeypatch):
+    """``MAGICA_STAGES=all`` switches every driver kind on (one compile of the drivers for every
+    scene); a kind with no driver then runs none, so an orbit and a spin stacked on one bone
+    give the same bits as when only their two kinds are compiled, at times before, inside and
+    after their windows."""
+    entries = [dict(TWIN_DRIVERS[0], target="hips", start=0.5, end=3.0),
+               dict(TWIN_DRIVERS[4], target="hips", phase_offset=0.25)]
+    poses = {}
+    for policy in ("used", "all"):
+        monkeypatch.setenv("MAGICA_STAGES", policy)
+        h = rig()
+        anim = Animation.from_specs(entries, h)
+        assert anim.kinds_used == ((None, 1, None, 1, None) if policy == "used" else (1,) * 5)
+        poses[policy] = []
+        for t in (0.0, 0.7, 2.9, 4.2):
+            anim.apply(h, ctx_at(t))
+            poses[policy].append(local(h, "hips"))
+    for (p_used, q_used), (p_all, q_all) in zip(poses["used"], poses["all"]):
+        np.testing.assert_array_equal(p_all, p_used)
+        np.testing.assert_array_equal(q_all, q_used)
+    assert not np.array_equal(poses["all"][1][1], poses["all"][2][1])   # the drivers moved the bone

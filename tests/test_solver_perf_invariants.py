@@ -272,12 +272,17 @@ def test_every_stage_compiled_gives_the_bits_of_the_stages_the_scene_uses(config
 
 
 def test_a_bad_stage_policy_is_an_error_naming_the_variable(monkeypatch):
+    """Where the policy is read (a cloth system's stage switches, a scene's driver kinds) a bad
+    value is a ``ParameterError`` naming the variable, not an error of the scene's document."""
     from magica_py.params import ParameterError
 
-    monkeypatch.setenv("MAGICA_STAGES", "some")
     scene = load_scene(ROOT / "configs" / "tail_orbit.yaml")
-    with pytest.raises(ParameterError, match="MAGICA_STAGES.*'some'.*expected 'used'.*or 'all'"):
+    monkeypatch.setenv("MAGICA_STAGES", "some")
+    expected = "^environment variable MAGICA_STAGES: 'some': expected 'used'.*or 'all'"
+    with pytest.raises(ParameterError, match=expected):
         ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings)
+    with pytest.raises(ParameterError, match=expected):
+        load_scene(ROOT / "configs" / "tail_orbit.yaml")   # its animation's driver kinds
 
 
 def test_a_runtime_change_switches_a_stage_on_and_off(used_stages):

@@ -34,6 +34,7 @@ from magica_py.config.errors import ConfigError, Issue
 from magica_py.config.overrides import apply_overrides
 from magica_py.config.resolve import ResolvedScene, resolve_document
 from magica_py.config.schema import check_document
+from magica_py.jit import stage_policy
 
 __all__ = ["load_scene", "load_scene_text", "validate_file", "validate_document", "load_document", "build_scene",
            "ResolvedScene"]
@@ -131,6 +132,7 @@ def _build_animation(resolved: ResolvedScene, hierarchy, source):
             raise ConfigError(source, [_issue("animation", "this installation has no animation module "
                                                            "(magica_py.scene.animation)")]) from None
         return None
+    stage_policy()   # a bad MAGICA_STAGES is the environment's error, not the document's: raised as is
     try:
         return animation_module.Animation.from_specs(resolved.animation, hierarchy)
     except ValueError as exc:

@@ -77,7 +77,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from magica_py.jit import kernel
+from magica_py.jit import kernel, stage_policy
 from magica_py.kernels.math3d import (
     load3,
     load4,
@@ -222,7 +222,8 @@ def apply_drivers(t, kind, target, start, end, phase_offset, fade, params, key_f
 
     ``keyframes`` ... ``walk`` (``Animation.kinds_used``): 1 where a driver of that kind
     exists, None where none does; numba removes an ``if switch is not None`` branch whose
-    argument is None before typing it, so a scene compiles only the driver kinds it uses."""
+    argument is None before typing it, so a scene compiles only the driver kinds it uses
+    (every kind under ``MAGICA_STAGES=all``)."""
     if orbit is not None:
         orbit_radials(t, orbit_columns, orbit_radial)
     for m in range(driven.shape[0]):
@@ -461,8 +462,11 @@ class Animation:
             self.params[orbits, 8:11].T]).reshape(11, orbits.size))
         self.orbit_radial = np.zeros((3, orbits.size))
         # per driver kind (keyframes, orbit, oscillate, spin, walk): 1 where a driver of that
-        # kind exists, else None (``apply_drivers`` compiles only the kinds a scene uses)
-        self.kinds_used = tuple(1 if bool(np.any(self.kind == k)) else None
+        # kind exists, else None (``apply_drivers`` compiles only the kinds a scene uses); every
+        # kind under ``MAGICA_STAGES=all`` (``jit.stage_policy``: one compile for every scene, a
+        # kind with no driver runs none)
+        every = stage_policy() == "all"
+        self.kinds_used = tuple(1 if every or bool(np.any(self.kind == k)) else None
                                 for k in (KEYFRAMES, ORBIT, OSCILLATE, SPIN, WALK))
 
     def _add_keys(self, n, params, key_time, key_value, where) -> None:

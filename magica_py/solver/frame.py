@@ -28,7 +28,7 @@ branch whose argument is ``None`` before it types the callee, so a scene whose c
 angle constraint neither compiles nor calls ``angle_block``. Each combination is its own
 compiled (and disk-cached) signature. Within a compiled stage, the block's parameters still
 decide at run time (a switch is on when any block may need the stage), so every switch on
-(``MAGICA_STAGES=all``, ``system.stage_policy``) gives the same bits.
+(``MAGICA_STAGES=all``, ``jit.stage_policy``) gives the same bits.
 """
 from __future__ import annotations
 

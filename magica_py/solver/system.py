@@ -31,15 +31,15 @@ Guards: a team reset by ``solver/guards.py`` raises ``("cloth_reset", {"cloth", 
 """
 from __future__ import annotations
 
-import os
 import time as _time
 from functools import partial
 
 import numba
 import numpy as np
 
+from magica_py.jit import stage_policy
 from magica_py.kernels import portable
-from magica_py.params import ParameterError, default_parameters
+from magica_py.params import default_parameters
 from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, update_mode_code
 from magica_py.solver import compile_helper
 from magica_py.solver import state as st
@@ -90,30 +90,6 @@ def choose_threads(parallel, setting, teams: int, particles: int) -> int:
         many = teams >= AUTO_PARALLEL_TEAMS and particles >= AUTO_PARALLEL_PARTICLES
         return available if many else 1
     return max(1, min(int(setting), available))
-
-
-# Which optional stages the frame kernel is compiled with (environment variable MAGICA_STAGES):
-# "used" (the default) the ones the live cloths use, so that a scene neither compiles nor runs
-# a stage it does not need; "all" every optional stage whatever the cloths, so that one
-# compiled frame kernel (serial or parallel) serves every scene and every run-time change of
-# parameters: for a process that runs many different scenes (the test suite, a batch of
-# varied characters) or a tuning session that switches stages on and off, at the price of
-# running the stages' cheap checks where no block asks. The bits are the same either way
-# (a stage runs only where a block's parameters ask: docs/architecture.md, *Only the stages a
-# scene uses are compiled*).
-STAGE_POLICIES = ("used", "all")
-
-
-def stage_policy() -> str:
-    """The ``MAGICA_STAGES`` policy (``STAGE_POLICIES``); read at each computation of the
-    switches, so a process can change it between systems."""
-    value = os.environ.get("MAGICA_STAGES", "").strip().lower() or "used"
-    if value not in STAGE_POLICIES:
-        raise ParameterError("environment variable MAGICA_STAGES",
-                             f"{os.environ['MAGICA_STAGES']!r}: expected 'used' (compile the optional stages the "
-                             "scene's cloths use; the default) or 'all' (compile every optional stage, whatever "
-                             "the scene)")
-    return value
 
 
 class ClothSystem:
@@ -349,7 +325,7 @@ class ClothSystem:
     def stage_switches(self) -> StageSwitches:
         """Which optional stages the live teams may run (``frame.StageSwitches``: 1 compiled and
         called where a block asks, None neither): from the teams' models, parameters and
-        colliders, or every stage when ``MAGICA_STAGES=all`` (``stage_policy``). Recomputed
+        colliders, or every stage when ``MAGICA_STAGES=all`` (``jit.stage_policy``). Recomputed
         after any change of teams or parameters; a stage that becomes needed at run time
         compiles then (once per machine: the kernels are cached)."""
         m = self.model
