@@ -11,12 +11,13 @@ import pytest
 
 from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
-    angle_between_vectors, clamp_angle, lerp, orthogonal_axis, q_axis_angle, q_mul, q_rotate, v_add, v_cross,
+    lerp, orthogonal_axis, q_axis_angle, q_mul, q_rotate, v_add, v_cross,
     v_dot, v_length, v_normalize, v_scale, v_sub,
 )
 from magica_py.solver.constraints.angle import (
     LIMIT_PIVOT, angle_limit_entry, angle_restoration_entry, edge_of, restoration_offset,
 )
+from reference_solver.solver.maths import angle_between_vectors, clamp_angle
 
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 ZERO3 = (0.0, 0.0, 0.0)

@@ -225,12 +225,12 @@ def test_angle_between_vectors_and_quaternions():
     for _ in range(50):
         a, b = RNG.normal(size=3), RNG.normal(size=3)
         expected = math.acos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1, 1))
-        assert m.angle_between_vectors(tuple(a), tuple(b)) == pytest.approx(expected, abs=1e-12)
+        assert m.angle_between_vectors_select(tuple(a), tuple(b)) == pytest.approx(expected, abs=1e-12)
         qa, qb = random_quat(), random_quat()
         rel = matrix_of(qa).T @ matrix_of(qb)
         rel_angle = math.acos(np.clip((np.trace(rel) - 1) / 2, -1, 1))
         assert m.q_angle(qa, qb) == pytest.approx(rel_angle, abs=1e-7)
-    assert m.angle_between_vectors((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)) == 0.0
+    assert m.angle_between_vectors_select((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)) == 0.0
     assert m.q_angle(quat_of((0, 1, 0), 0.001), quat_of((0, 1, 0), 0.002)) == 0.0  # |d| >= 0.9999
 
 
@@ -247,17 +247,40 @@ def test_clamp_angle_limits_the_angle_and_keeps_the_length():
     for _ in range(50):
         d, b = RNG.normal(size=3) * 2, RNG.normal(size=3)
         limit = RNG.uniform(0.05, 1.5)
-        out = np.array(m.clamp_angle(tuple(d), tuple(b), limit))
+        out = np.array(m.clamp_angle_select(tuple(d), tuple(b), limit))
         before = math.acos(np.clip(d @ b / np.linalg.norm(d) / np.linalg.norm(b), -1, 1))
         after = math.acos(np.clip(out @ b / np.linalg.norm(out) / np.linalg.norm(b), -1, 1))
         assert np.linalg.norm(out) == pytest.approx(np.linalg.norm(d))
         assert after == pytest.approx(min(before, limit), abs=1e-9)
         # the clamped direction stays in the plane of d and b
         assert abs(np.cross(d, b) @ out) < 1e-9
-    opposite = m.clamp_angle((-1.0, 0.0, 0.0), (1.0, 0.0, 0.0), 0.5)
+    opposite = m.clamp_angle_select((-1.0, 0.0, 0.0), (1.0, 0.0, 0.0), 0.5)
     assert np.all(np.isfinite(opposite))
     assert math.acos(opposite[0]) == pytest.approx(0.5)
 
+
+
+def test_the_branch_free_angle_helpers_give_the_branching_forms_bits():
+    """The solver's branch-free ``angle_between_vectors_select``, ``clamp_angle_select`` and
+    ``rotations.swing_select`` against the branching forms the per-team reference solver keeps
+    (tests/reference_solver): the same bits on random inputs and on each degenerate path (a zero
+    vector, parallel and opposite vectors, an angle within the limit)."""
+    from magica_py.solver.rotations import swing_select
+    from reference_solver.solver.maths import angle_between_vectors, clamp_angle
+    from reference_solver.solver.rotations import full_swing
+
+    x = (1.0, 0.0, 0.0)
+    pairs = [(tuple(RNG.normal(size=3)), tuple(RNG.normal(size=3))) for _ in range(40)]
+    pairs += [(x, x), (x, (-1.0, 0.0, 0.0)), (x, (1.0, 1e-9, 0.0)), (x, (-1.0, 1e-9, 0.0)),
+              ((0.0, 2.0, 0.0), (0.0, 0.0, 3.0))]
+    for a, b in pairs:
+        assert m.angle_between_vectors_select(a, b) == angle_between_vectors(a, b)
+        for limit in (0.05, 0.7, 3.0):
+            assert np.array(m.clamp_angle_select(a, b, limit)).tobytes() == \
+                np.array(clamp_angle(a, b, limit)).tobytes()
+        ua, ub = m.v_normalize(a), m.v_normalize(b)
+        assert np.array(swing_select(ua, ub)).tobytes() == np.array(full_swing(ua, ub)).tobytes()
+    assert m.angle_between_vectors_select((0.0, 0.0, 0.0), x) == angle_between_vectors((0.0, 0.0, 0.0), x) == 0.0
 
 def test_clamp_length_and_project_on_plane_and_shift():
     np.testing.assert_allclose(m.clamp_length((3.0, 4.0, 0.0), 1.0), (0.6, 0.8, 0.0))

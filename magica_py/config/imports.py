@@ -92,12 +92,6 @@ def import_rig(c: Checker, m: dict, path: tuple) -> dict | None:
             "prefix": prefix or ""}
 
 
-def import_rig_bones(c: Checker, m: dict, path: tuple) -> list[dict] | None:
-    """The bones of ``import_rig`` (kept for callers that need only them)."""
-    rig = import_rig(c, m, path)
-    return None if rig is None else rig["bones"]
-
-
 def _trim(c: Checker, m: dict, path: tuple):
     """``trim: [start, end]`` in seconds of the source clip (end may be null: to the end)."""
     if m.get("trim") is None:

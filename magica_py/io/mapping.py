@@ -81,25 +81,6 @@ def restoration_fraction(value):
     return 1.0 - keep
 
 
-def vrm_matrix(k, drag):
-    """One VRM frame acting on (x, x - x_prev)."""
-    return np.array([[1.0 - k, 1.0 - drag], [-k, 1.0 - drag]])
-
-
-def magica_matrix(value, damping, attenuation):
-    """One MagicaCloth2 step acting on (x, velocity·dt), broadcast over the arguments."""
-    f = restoration_fraction(value)
-    d = 0.2 * np.asarray(damping, dtype=np.float64)
-    a = np.asarray(attenuation, dtype=np.float64)
-    f, d, a = np.broadcast_arrays(f, d, a)
-    m = np.empty(f.shape + (2, 2))
-    m[..., 0, 0] = 1.0 - f
-    m[..., 0, 1] = (1.0 - f) * (1.0 - d)
-    m[..., 1, 0] = -(1.0 - a) * f
-    m[..., 1, 1] = (1.0 - d) * (1.0 - (1.0 - a) * f)
-    return m
-
-
 MATCH_TIME = 1.5      # s of motion compared by the dynamics fit
 MATCH_RATE = 30.0     # Hz at which the two trajectories are compared
 

@@ -134,21 +134,6 @@ def clamp_length(v, max_length):
 
 
 @kernel
-def angle_between_vectors(a, b):
-    """``angle_v``: the unsigned angle in radians, 0 when either vector is zero."""
-    la = v_length(a)
-    lb = v_length(b)
-    if la < 1e-12 or lb < 1e-12:
-        return 0.0
-    c = v_dot(a, b) / (la * lb)
-    if c > 1.0:
-        c = 1.0
-    elif c < -1.0:
-        c = -1.0
-    return trig.acos(c)
-
-
-@kernel
 def project_on_plane(v, n):
     """Remove the component of v along the plane normal n (n need not be unit)."""
     nn = v_dot(n, n)
@@ -253,19 +238,11 @@ def q_slerp(q1, q2, t):
     return slerp_near(q1, q2, t)
 
 
-@kernel
-def slerp_is_near(q1, q2):
-    """True where ``q_slerp(q1, q2, t)`` takes its normalised-lerp path (the rotations within
-    about 3.6 degrees: no acos, no sines), for every t; NaN counts as near, as there."""
-    d = q_dot(q1, q2)
-    d = -d if d < 0.0 else d
-    return not d < 0.9995
-
-
 @kernel(inline="always")
 def slerp_near(q1, q2, t):
-    """``q_slerp(q1, q2, t)`` where ``slerp_is_near(q1, q2)``: its lerp path alone (the same
-    bits without the trigonometry)."""
+    """``q_slerp(q1, q2, t)`` where its normalised-lerp path applies (the rotations within about
+    3.6 degrees, ``|q1 . q2| >= 0.9995``): that path alone (the same bits without the
+    trigonometry)."""
     b = (-q2[0], -q2[1], -q2[2], -q2[3]) if q_dot(q1, q2) < 0.0 else q2
     return q_normalize((
         q1[0] + (b[0] - q1[0]) * t,
@@ -410,28 +387,6 @@ def q_to_angle_axis(q):
 
 
 @kernel
-def clamp_angle(direction, base, max_angle):
-    """``MathUtility.ClampAngle``: rotate ``direction`` towards ``base`` until their angle is max_angle."""
-    d = v_normalize(direction)
-    b = v_normalize(base)
-    c = v_dot(d, b)
-    if c > 1.0:
-        c = 1.0
-    elif c < -1.0:
-        c = -1.0
-    alpha = trig.acos(c)
-    if alpha <= max_angle:
-        return direction
-    if abs(1.0 + c) < 1e-6:
-        axis = orthogonal_axis(d)
-    elif abs(1.0 - c) < 1e-6:
-        return direction
-    else:
-        axis = v_normalize(v_cross(d, b))
-    return q_rotate(q_axis_angle(axis, alpha - max_angle), direction)
-
-
-@kernel
 def shift_position(p, pivot, delta, rotation):
     """``shift(p, pivot, dv, dq) = pivot + dq (p - pivot) + dv`` (MathUtility.ShiftPosition)."""
     return v_add(v_add(pivot, q_rotate(rotation, v_sub(p, pivot))), delta)
@@ -493,12 +448,6 @@ def inverse_mass_friction(friction):
 def inverse_mass_friction_depth(friction, depth):
     """``w_fd(f, depth) = 1 / (1 + 3 f + 5 (1 - depth)^2)``."""
     return 1.0 / (1.0 + FRICTION_MASS * friction + DEPTH_MASS * (1.0 - depth) * (1.0 - depth))
-
-
-@kernel
-def matrix_row(a, i, k):
-    """Row k of matrix i of a ``(n, 4, 4)`` array, as a tuple."""
-    return (a[i, k, 0], a[i, k, 1], a[i, k, 2], a[i, k, 3])
 
 
 # ----------------------------------------------------------------------------- select forms
@@ -594,7 +543,8 @@ def from_to_rotation_select(a, b, t):
 
 @kernel
 def angle_between_vectors_select(a, b):
-    """``angle_between_vectors`` without a branch."""
+    """``angle_v`` (§0.2): the unsigned angle in radians between a and b, 0 when either is zero,
+    without a branch (every path computed, the answer selected)."""
     la = v_length(a)
     lb = v_length(b)
     c = v_dot(a, b) / (la * lb)
@@ -606,7 +556,9 @@ def angle_between_vectors_select(a, b):
 
 @kernel
 def clamp_angle_select(direction, base, max_angle):
-    """``clamp_angle`` without a branch."""
+    """``clamp_angle`` (§0.2, MathUtility.ClampAngle) without a branch: ``direction`` rotated towards ``base``
+    until their angle is ``max_angle`` (kept when within it or parallel; opposite vectors turn
+    about ``orthogonal_axis``), its length kept."""
     d = v_normalize_select(direction)
     b = v_normalize_select(base)
     c = v_dot(d, b)

@@ -48,13 +48,6 @@ def shape_slots(colliders) -> tuple[np.ndarray, np.ndarray]:
     return shape.astype(np.int64), slot
 
 
-def capsule_pose(start: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(length (C,), quaternion (C,4)) turning rerun's capsule axis +Z onto start->end."""
-    d = end - start
-    length = np.linalg.norm(d, axis=1)
-    return length, from_z_rotation(d)
-
-
 def from_z_rotation(d: np.ndarray) -> np.ndarray:
     """Quaternions (k,4) rotating +Z onto the directions d (k,3); identity for zero vectors."""
     return from_to_rotation(np.array([0.0, 0.0, 1.0]), d)

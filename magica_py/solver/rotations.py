@@ -12,7 +12,7 @@ import math
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    from_to_rotation_select, from_to_rotation_unit, orthogonal_axis_select, q_axis_angle, q_inverse, q_mul,
+    from_to_rotation_select, orthogonal_axis_select, q_axis_angle, q_inverse, q_mul,
     q_normalize_select, q_rotate, q_slerp, q_slerp_select, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp,
     v_normalize_select, v_scale, v_sub,
 )
@@ -63,10 +63,12 @@ def rot_from_normal_tangent_select(normal, tangent):
 
 @kernel
 def swing_select(a, b):
-    """``full_swing(a, b)`` (unit a, b) without a branch, the same bits on every path: its
-    degenerate cases call ``from_to_rotation_unit``, whose general (acos, sincos) branch the
-    very tests that lead there exclude; the half-angle form, the flip and the identity are
-    selected. Used by E.2 and the angle limit (D.5)."""
+    """``fromto_v(a, b, 1)`` for unit a and b (docs/solver.md §0.2) without trigonometry or a
+    branch: the half-angle quaternion ``normalize(a x b, 1 + a.b)`` is the same rotation; a and
+    b opposite (``|1 + a.b| < 1e-6``): pi about ``orthogonal_axis(a)``; within 1e-6 of
+    parallel: the identity. Every path is computed and the answer selected; the reference
+    solver's branching ``full_swing`` (tests/reference_solver) gives the same bits. Used by E.2
+    and the angle limit (D.5)."""
     c = v_dot(a, b)
     c = 1.0 if c > 1.0 else c
     c = -1.0 if c < -1.0 else c
@@ -77,24 +79,6 @@ def swing_select(a, b):
     opposite = abs(1.0 + c) < 1e-6
     flip = q_axis_angle(orthogonal_axis_select(a), math.pi * 1.0)
     return flip if opposite else (IDENTITY if abs(1.0 - c) < 1e-6 else half_angle)
-
-
-@kernel
-def full_swing(a, b):
-    """``fromto_v(a, b, 1)`` for unit a, b without trigonometry: the half-angle quaternion
-    ``normalize(a x b, 1 + a.b)`` is the same rotation; the reference's degenerate cases
-    (opposite: pi about the fallback axis; within 1e-6 of parallel: identity) are kept."""
-    c = v_dot(a, b)
-    if c > 1.0:
-        c = 1.0
-    elif c < -1.0:
-        c = -1.0
-    if abs(1.0 + c) < 1e-6 or abs(1.0 - c) < 1e-6:
-        return from_to_rotation_unit(a, b, 1.0)
-    x = v_cross(a, b)
-    w = 1.0 + c
-    inv = 1.0 / math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + w * w)
-    return (x[0] * inv, x[1] * inv, x[2] * inv, w * inv)
 
 
 @kernel(inline="always")
@@ -114,7 +98,7 @@ def line_child_pose(ibq, bp, rest_position, rest_rotation, base_pos_c, base_rot_
 def line_child_rotation(q, lq, tv, cur, zero):
     """E.2: rotation of a moving child: its rest rotation carried by x's rotation q, swung so
     the rest edge ``tv`` matches the simulated edge ``cur`` (not for a zero-distance child).
-    Branch-free (``swing_select``: full_swing's bits)."""
+    Branch-free (``swing_select``)."""
     qc = q_mul(q, lq)
     if not zero:
         qc = q_mul(swing_select(v_normalize_select(tv), v_normalize_select(cur)), qc)

@@ -52,8 +52,8 @@ MIN_NORMAL = 2.2250738585072014e-308   # the smallest normal float64 (sys.float_
 
 @kernel
 def swing_rotation(a, b):
-    """``rotations.full_swing(a, b)`` (unit a, b) without a branch (``swing_select``), and
-    whether a and b are opposite. Returns (rotation, opposite)."""
+    """``rotations.swing_select(a, b)`` (unit a, b: the rotation swinging a onto b), and whether
+    a and b are opposite. Returns (rotation, opposite)."""
     c = v_dot(a, b)
     c = 1.0 if c > 1.0 else c
     c = -1.0 if c < -1.0 else c

@@ -12,11 +12,11 @@ import math
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    matrix_row,
     clamp_length, lerp, load3, load4, q_angle, q_from_to, q_inverse, q_mul, q_normal_axis,
     q_rotate, q_slerp, q_tangent_axis, rot_from_normal_tangent, saturate, shift_position,
     store3, store4, unlerp, v_add, v_length, v_lerp, v_normalize, v_scale, v_sub,
 )
+from reference_solver.solver.maths import matrix_row
 from reference_solver.solver.rotations import normalize_or_zero, rot_from_normal_tangent_select
 from magica_py.kernels import portable
 from reference_solver.solver.parameters import length_unit

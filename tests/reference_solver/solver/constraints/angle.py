@@ -23,10 +23,11 @@ import math
 from magica_py.jit import kernel
 from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
-    angle_between_vectors, clamp_angle, inverse_mass_friction, lerp, load3, load4, orthogonal_axis,
+    inverse_mass_friction, lerp, load3, load4, orthogonal_axis,
     q_axis_angle, q_inverse, q_mul, q_rotate, saturate, store3, store4, v_add, v_cross, v_dot, v_length,
     v_scale, v_sub,
 )
+from reference_solver.solver.maths import angle_between_vectors, clamp_angle
 from reference_solver.solver.parameters import curve_at, curve_at_clamp01, step_rate
 
 MOVE = 0x02
