@@ -451,10 +451,12 @@ def inverse_mass_friction_depth(friction, depth):
 
 
 # ----------------------------------------------------------------------------- select forms
-# The same functions as above with every path computed and the answer selected (no branch):
-# the same bits on every path, and a lane loop calling them vectorises. They cost every path's
-# work, so the lane-inner stages use them where the paths are cheap or the expensive one is the
-# common one; scalar code keeps the branching forms.
+# Functions of the kind above with every path computed and the answer selected (no branch): the
+# same bits on every path as the branching forms, and a lane loop calling them vectorises. They
+# cost every path's work, so the lane-inner stages use them where the paths are cheap or the
+# expensive one is the common one; scalar code keeps the branching forms. Where the solver uses
+# only the branch-free form (the angle between vectors, the angle clamp), the branching one lives
+# with the test-only reference solver (tests/reference_solver/solver/maths.py).
 
 @kernel
 def v_normalize_select(a):
@@ -556,9 +558,9 @@ def angle_between_vectors_select(a, b):
 
 @kernel
 def clamp_angle_select(direction, base, max_angle):
-    """``clamp_angle`` (§0.2, MathUtility.ClampAngle) without a branch: ``direction`` rotated towards ``base``
-    until their angle is ``max_angle`` (kept when within it or parallel; opposite vectors turn
-    about ``orthogonal_axis``), its length kept."""
+    """``clamp_angle`` (§0.2, MathUtility.ClampAngle) without a branch: ``direction`` rotated
+    towards ``base`` until their angle is ``max_angle`` (kept when within it or parallel;
+    opposite vectors turn about ``orthogonal_axis``), its length kept."""
     d = v_normalize_select(direction)
     b = v_normalize_select(base)
     c = v_dot(d, b)
