@@ -5,11 +5,11 @@
   every optional stage, so the suite compiles the frame kernel once per form (serial,
   parallel) instead of once per combination of stages its scenes use (23 combinations, about
   a quarter of a cold suite's CPU time: docs/BENCHMARKS.md, session 19). An optional stage
-  runs only where a block's parameters ask, so the
-  bits are the same (tests/test_solver_perf_invariants.py pins it on the showcases and pins
-  the scene's own selection, with ``MAGICA_STAGES=used``). Likewise the animation's drivers
-  are compiled once with every driver kind (tests/test_animation.py pins the kinds a scene
-  uses and the same bits). Subprocesses inherit it.
+  runs only where a block's parameters ask, so the bits are the same
+  (tests/test_solver_perf_invariants.py pins it on the showcases and pins the scene's own
+  selection, with ``MAGICA_STAGES=used``). Likewise the animation's drivers are compiled once
+  with every driver kind (tests/test_animation.py pins the kinds a scene uses and the same
+  bits). Subprocesses inherit it.
   ``MAGICA_STAGES=used python -m pytest ...`` runs the suite on each scene's own selection.
 * ``shared_data``: the third-party test data in ../shared/data (see its NOTICE.md).
 """
