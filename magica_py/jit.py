@@ -8,13 +8,18 @@
 * ``MAGICA_NO_CACHE=1`` disables the cache (read-only installs without NUMBA_CACHE_DIR).
 * ``MAGICA_STAGES`` (``stage_policy``): whether kernels with optional parts (the cloth frame's
   stages, the animation's driver kinds) are compiled with the parts a scene uses or with all.
+* ``fewer_collections``: Python's garbage collector runs less often while numba compiles (the
+  runner's compile watch and the first run's compile helper enter it).
 
 Only numba's documented options are used: nothing here changes LLVM's settings for the
 process, so ``NUMBA_DISABLE_JIT=1`` and ``NUMBA_BOUNDSCHECK=1`` apply to every kernel.
 """
 from __future__ import annotations
 
+import gc
 import os
+import threading
+from contextlib import contextmanager
 
 import numba
 
@@ -57,3 +62,37 @@ def stage_policy() -> str:
                              "driver kinds the scene uses; the default) or 'all' (compile every one, whatever "
                              "the scene)")
     return value
+
+
+# Python's cyclic garbage collector while numba compiles. numba's compiler makes millions of
+# objects that stay alive (types, typing results, IR, compiled libraries), and every full
+# collection goes through all of them: on a first run of the tail scene in one process
+# (``MAGICA_COMPILE_HELPER=0``), 27 full collections took 14 s of 89 s. With these thresholds
+# young objects are collected after 100,000 allocations instead of 700, and the full
+# collections, which come after every 10 young ones, did not come during that compile: 81 s,
+# peak memory 481 -> 510 MB (``gc.disable()`` instead: 75 s, but 853 MB of garbage kept;
+# docs/BENCHMARKS.md, session 21). Entered by the outermost compile only, restored after it.
+COMPILE_GC_THRESHOLDS = (100_000, 10, 10)
+_collections_lock = threading.Lock()
+_collections_depth = 0
+_collections_saved = None
+
+
+@contextmanager
+def fewer_collections():
+    """Inside the block, Python's garbage collector uses ``COMPILE_GC_THRESHOLDS``; the
+    thresholds in force before are restored when the last of the (possibly nested, possibly
+    concurrent) blocks ends. Collection stays on: only its frequency changes."""
+    global _collections_depth, _collections_saved
+    with _collections_lock:
+        if _collections_depth == 0:
+            _collections_saved = gc.get_threshold()
+            gc.set_threshold(*COMPILE_GC_THRESHOLDS)
+        _collections_depth += 1
+    try:
+        yield
+    finally:
+        with _collections_lock:
+            _collections_depth -= 1
+            if _collections_depth == 0:
+                gc.set_threshold(*_collections_saved)

@@ -37,7 +37,9 @@ class CompileWatch:
     """Context manager: announces and times numba compiles that happen inside it.
 
     ``on_first(message)`` is called once, when the first compile starts (default: print to
-    stderr); ``on_end()`` after every outermost compile (the progress bar's pause)."""
+    stderr); ``on_end()`` after every outermost compile (the progress bar's pause). During
+    each outermost compile Python's garbage collector runs less often
+    (``jit.fewer_collections``: a first run's compile about 10 % shorter)."""
 
     def __init__(self, announce=None, on_end=None):
         self.seconds = 0.0        # wall time of outermost compiles
@@ -47,6 +49,7 @@ class CompileWatch:
         self._depth = 0
         self._start = 0.0
         self._context = None
+        self._collections = None   # the outermost compile's ``fewer_collections`` block
 
     # numba.core.event.Listener protocol (duck-typed: notify(event))
     def notify(self, event) -> None:
@@ -55,10 +58,17 @@ class CompileWatch:
                 if self.count == 0 and self.announce is not None:
                     self.announce(COMPILE_MESSAGE)
                 self._start = time.perf_counter()
+                from magica_py.jit import fewer_collections
+
+                self._collections = fewer_collections()
+                self._collections.__enter__()
             self._depth += 1
         elif event.is_end:
             self._depth = max(0, self._depth - 1)
             if self._depth == 0:
+                collections, self._collections = self._collections, None
+                if collections is not None:
+                    collections.__exit__(None, None, None)
                 self.seconds += time.perf_counter() - self._start
                 self.count += 1
                 if self.on_end is not None:
@@ -73,6 +83,9 @@ class CompileWatch:
         return self
 
     def __exit__(self, *exc):
+        collections, self._collections = self._collections, None
+        if collections is not None:   # left inside a compile (an error): the thresholds back
+            collections.__exit__(None, None, None)
         context, self._context = self._context, None
         return context.__exit__(*exc) if context is not None else False
 

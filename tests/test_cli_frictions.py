@@ -176,6 +176,43 @@ def test_the_first_compile_is_announced_before_it_starts_and_timed_apart():
     assert warm.count == 0 and len(calls) == 1
 
 
+def test_the_garbage_collector_runs_less_often_only_while_compiling():
+    import gc
+
+    import numba
+    from numba.core import event
+
+    from magica_py.jit import COMPILE_GC_THRESHOLDS
+    from magica_py.runner import CompileWatch
+
+    @numba.njit(cache=False)
+    def inner(x):
+        return x * 2
+
+    @numba.njit(cache=False)
+    def outer(x):
+        return inner(x) + 1
+
+    seen = []
+
+    class Record(event.Listener):
+        def on_start(self, ev):
+            seen.append(gc.get_threshold())
+
+        def on_end(self, ev):
+            pass
+
+    before = gc.get_threshold()
+    assert before != COMPILE_GC_THRESHOLDS
+    with CompileWatch() as watch:
+        with event.install_listener("numba:compile", Record()):
+            assert outer(3) == 7
+        assert gc.get_threshold() == before          # restored after the outermost compile
+    assert watch.count == 1
+    assert len(seen) == 2 and all(t == COMPILE_GC_THRESHOLDS for t in seen)   # outer and nested inner
+    assert gc.isenabled()
+
+
 def test_the_progress_bar_shows_rate_and_an_eta_without_the_compile(monkeypatch):
     from magica_py.runner import FrameProgress
 

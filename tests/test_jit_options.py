@@ -46,3 +46,21 @@ def test_importing_the_package_sets_no_process_wide_llvm_option():
             if isinstance(node, ast.Attribute) and node.attr in ("set_option", "entry_point", "overloads"):
                 offenders.append(f"{path.relative_to(root)}:{node.lineno} .{node.attr}")
     assert not offenders, offenders
+
+
+def test_fewer_collections_restores_the_thresholds_when_the_last_block_ends():
+    import gc
+
+    before = gc.get_threshold()
+    with jit.fewer_collections():
+        assert gc.get_threshold() == jit.COMPILE_GC_THRESHOLDS
+        with jit.fewer_collections():            # nested (a compile inside a compile)
+            assert gc.get_threshold() == jit.COMPILE_GC_THRESHOLDS
+        assert gc.get_threshold() == jit.COMPILE_GC_THRESHOLDS   # the outer block still runs
+    assert gc.get_threshold() == before
+    try:
+        with jit.fewer_collections():
+            raise KeyError("inside")
+    except KeyError:
+        pass
+    assert gc.get_threshold() == before and gc.isenabled()
