@@ -210,3 +210,30 @@ def test_a_job_is_the_plain_run_of_its_scene_bit_for_bit(tmp_path, repo_root):
     for _ in range(FRAMES):
         player.step()
     assert row["status"] == "ok" and row["state_hash"] == state_hash(scene, system)
+
+
+def test_a_workers_first_job_of_a_scene_warms_up_with_fewer_collections(tmp_path, repo_root, monkeypatch):
+    """The warm-up, where a cold cache compiles, runs inside ``jit.fewer_collections`` (as a
+    ``magica-py run`` compile does); the job's own frames do not."""
+    from contextlib import contextmanager
+
+    from magica_py import jit
+    from magica_py.batch import run_job as run_job_module
+
+    real = jit.fewer_collections
+    entered = []
+
+    @contextmanager
+    def recording():
+        entered.append(run_job_module._WARMED.copy())
+        with real():
+            yield
+
+    monkeypatch.setattr(jit, "fewer_collections", recording)
+    monkeypatch.setattr(run_job_module, "_WARMED", set())
+    job = load_job_file(job_file(tmp_path, repo_root, "fps: [45]\n")).jobs[0]
+    row, _ = run_job_module.run_job(job.to_dict())
+    assert row["status"] == "ok", row["error"]
+    assert entered == [set()]                              # once, before the scene was warm
+    row, _ = run_job_module.run_job(job.to_dict())         # the scene is warm: no warm-up
+    assert row["status"] == "ok" and len(entered) == 1
