@@ -9,7 +9,7 @@
 * ``MAGICA_STAGES`` (``stage_policy``): whether kernels with optional parts (the cloth frame's
   stages, the animation's driver kinds) are compiled with the parts a scene uses or with all.
 * ``fewer_collections``: Python's garbage collector runs less often while numba compiles (the
-  runner's compile watch and the first run's compile helper enter it).
+  runner's compile watch, the first run's compile helper and a batch worker's warm-up enter it).
 
 Only numba's documented options are used: nothing here changes LLVM's settings for the
 process, so ``NUMBA_DISABLE_JIT=1`` and ``NUMBA_BOUNDSCHECK=1`` apply to every kernel.
@@ -67,11 +67,11 @@ def stage_policy() -> str:
 # Python's cyclic garbage collector while numba compiles. numba's compiler makes millions of
 # objects that stay alive (types, typing results, IR, compiled libraries), and every full
 # collection goes through all of them: on a first run of the tail scene in one process
-# (``MAGICA_COMPILE_HELPER=0``), 27 full collections took 14 s of 89 s. With these thresholds
-# young objects are collected after 100,000 allocations instead of 700, and the full
-# collections, which come after every 10 young ones, did not come during that compile: 81 s,
-# peak memory 481 -> 510 MB (``gc.disable()`` instead: 75 s, but 853 MB of garbage kept;
-# docs/BENCHMARKS.md, session 21). Entered by the outermost compile only, restored after it.
+# (``MAGICA_COMPILE_HELPER=0``), 27 full collections took 8.8 s and the young ones 2.2 s of a
+# 92.8 s run. With these thresholds young objects are collected after 100,000 allocations
+# instead of 700, and 3 full collections came instead of 27: 77.7 s (collections 4.2 s),
+# peak memory about 6 % higher (``gc.disable()`` instead kept 370 MB more garbage;
+# docs/BENCHMARKS.md, session 21). Entered around a compile only, restored after it.
 COMPILE_GC_THRESHOLDS = (100_000, 10, 10)
 _collections_lock = threading.Lock()
 _collections_depth = 0
