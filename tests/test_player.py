@@ -157,6 +157,26 @@ def test_fixed_update_count_and_counter_reset_follow_fixed_delta_accumulation():
     assert player.last_context.metrics["frame.fixed_updates"] == planned[-1]
 
 
+def test_fixed_update_counts_are_the_same_whether_or_not_a_system_listens():
+    # with no FIXED_UPDATE system the player only advances the count (no per-update loop):
+    # what LATE_UPDATE sees, frame by frame, must not depend on that
+    seen = {}
+    for listening in (False, True):
+        player = make_player(fps=60, time_manager=TimeManager(fixed_delta_time=0.02))
+        log = seen[listening] = []
+        player.schedule.add(Phase.LATE_UPDATE, System(
+            "read", lambda ctx, log=log: log.append((ctx.time.fixed_update_count, ctx.counters.fixed_update_count,
+                                                     ctx.fixed_update_index, ctx.fixed_time))))
+        if listening:
+            player.schedule.add(Phase.FIXED_UPDATE, System("listen", lambda ctx: None))
+        player.run(40)
+        assert player.last_context.metrics["time.fixed_update"] >= 0.0
+    assert seen[False] == seen[True]
+    assert [c for _, c, _, _ in seen[False]] == [n for n, _, _, _ in seen[False]]   # reset every frame
+    assert sorted({n for n, _, _, _ in seen[False]}) == [0, 1]   # 60 fps, 50 Hz: frames with 0 and 1
+    assert all(i is None and t is None for _, _, i, t in seen[False])   # outside FIXED_UPDATE
+
+
 def test_without_the_reset_system_fixed_updates_accumulate_across_frames():
     player = make_player(fps=50)
     player.schedule.remove("reset_frame_counters")

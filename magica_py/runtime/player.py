@@ -5,7 +5,8 @@
 1. ``time_manager.advance(time_source.next_delta())`` -> ``UnityTime`` (``runtime.clock``).
 2. RESTORE, FIXED_UPDATE x ``time.fixed_update_count`` (``ctx.fixed_update_index`` = 0..k-1,
    ``ctx.fixed_time`` = that step's fixed clock; ``ctx.counters.fixed_update_count`` += 1 after
-   each, as MagicaCloth2's TimeManager.AfterFixedUpdate does), UPDATE, LATE_UPDATE,
+   each, as MagicaCloth2's TimeManager.AfterFixedUpdate does; with no system in the phase only
+   the counter advances), UPDATE, LATE_UPDATE,
    RENDER_WRITE, AFTER_RENDERING. The wall time of each phase is recorded in
    ``ctx.metrics["time.<phase>"]`` (seconds; FIXED_UPDATE summed over its runs; inside UPDATE
    ``animation.drivers`` and ``animation.propagate`` split the animation system), and with
@@ -169,6 +170,10 @@ class Player:
         for phase, systems in self.schedule.order():
             start = clock()
             if phase is Phase.FIXED_UPDATE:
+                if not systems:   # nobody listens: only the count advances (the usual schedule)
+                    self.counters.fixed_update_count += t.fixed_update_count
+                    metrics[PHASE_METRIC[phase]] = clock() - start
+                    continue
                 first_fixed = t.fixed_time - t.fixed_update_count * t.fixed_delta_time
                 for k in range(t.fixed_update_count):
                     ctx.fixed_update_index = k
