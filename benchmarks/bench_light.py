@@ -23,6 +23,9 @@ caches go to a temporary folder (``PEERS_BUILD`` / ``PEERS_CACHE``), not into th
 folder. Ratios are peer time / our time: above 1 means faster than the peer. The 1-minute
 load average is printed after each part: the peers run minutes after our frames, so on a
 shared machine the ratios are only as good as the load was steady between the two.
+``--rounds N`` repeats the whole measurement (ours, then the peers) N times and prints each
+round's ratios and their median: a host whose speed drifts by minutes then shows it as the
+rounds' spread, and each ratio compares runs made within the same minute or two.
 """
 from __future__ import annotations
 
@@ -30,6 +33,7 @@ import argparse
 import os
 import pathlib
 import re
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -106,43 +110,74 @@ def load1() -> float:
         return -1.0
 
 
+def report_ours(r: dict) -> None:
+    threads = r["threads"]
+    print(f"== ours, {threads} thread{'s' if threads > 1 else ''} (load {load1():.2f} after): {r['particles']} particles, build "
+          f"{r['build_s']:.2f} s, warm-up {r['warmup_s']:.2f} s, median of {r['reps']} x {r['frames']} frames")
+    print(f"   whole frame {r['frame_us']:9.1f} us   (runs: "
+          + ", ".join(f"{x:.0f}" for x in r["all_frame_us"]) + ")")
+    for k, v in sorted(r["phases_us"].items()):
+        print(f"   {k:22s} {v:9.1f} us")
+    print(f"   particle-steps/s: kernel {r['kernel_pss']:.3g}, whole frame {r['frame_pss']:.3g}")
+
+
+def ratios(ours: list[dict], peers: list[dict]) -> dict:
+    """{(threads, peer, "whole frame" or "cloth kernel"): peer time / our time}."""
+    out = {}
+    for r in ours:
+        for p in peers:
+            peer_us = float(p["frame_ms"]) * 1e3
+            out[r["threads"], p["impl"], "whole frame"] = peer_us / r["frame_us"]
+            out[r["threads"], p["impl"], "cloth kernel"] = peer_us / r["kernel_us"]
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--rounds", type=int, default=1,
+                    help="repeat ours and the peers this many times; report each round's ratios and their median")
     ap.add_argument("--no-peers", action="store_true", help="our scene only")
     ap.add_argument("--peers-dir", type=pathlib.Path, default=PEERS)
     args = ap.parse_args(argv)
+    if args.rounds < 1:
+        ap.error(f"--rounds: expected 1 or more, got {args.rounds}")
     print(f"light scene {SCENE.relative_to(ROOT)}; load average {load1():.2f} (1 min) at the start")
-    ours = []
-    for threads in args.threads:
-        r = bench_scene(args.frames, args.reps, threads)
-        ours.append(r)
-        print(f"== ours, {threads} thread{'s' if threads > 1 else ''} (load {load1():.2f} after): {r['particles']} particles, build "
-              f"{r['build_s']:.2f} s, warm-up {r['warmup_s']:.2f} s, median of {r['reps']} x {r['frames']} frames")
-        print(f"   whole frame {r['frame_us']:9.1f} us   (runs: "
-              + ", ".join(f"{x:.0f}" for x in r["all_frame_us"]) + ")")
-        for k, v in sorted(r["phases_us"].items()):
-            print(f"   {k:22s} {v:9.1f} us")
-        print(f"   particle-steps/s: kernel {r['kernel_pss']:.3g}, whole frame {r['frame_pss']:.3g}")
-    if args.no_peers:
-        return 0
+    every_round = []
     with tempfile.TemporaryDirectory(prefix="peers-") as tmp:
         env = dict(os.environ, PEERS_BUILD=str(pathlib.Path(tmp) / "build"),
                    PEERS_CACHE=str(pathlib.Path(tmp) / "cache"))
         common = ["--K", "1000", "--iters", "2", "--no-errors", "--reps", str(args.reps)]
-        peers = run_peer(args.peers_dir, "impl_numpy.py", common, env)
-        peers += run_peer(args.peers_dir, "impl_c.py", [*common, "--variant", "soa2"], env)
-    print(f"== peers (same model, K = 1000, 90 Hz, 2 iterations, this interpreter; load {load1():.2f} after)")
-    for p in peers:
-        print(f"   {p['impl']:32s} frame {float(p['frame_ms']) * 1e3:9.1f} us   pss {p['pss']}")
-    print("== ratios (peer time / our time; above 1: we are faster)")
-    for r in ours:
-        for p in peers:
-            peer_us = float(p["frame_ms"]) * 1e3
-            print(f"   {r['threads']} thread{'s' if r['threads'] > 1 else ' '} vs {p['impl']:28s} "
-                  f"whole frame {peer_us / r['frame_us']:7.3f}x   cloth kernel {peer_us / r['kernel_us']:7.3f}x")
+        for round_ in range(args.rounds):
+            if args.rounds > 1:
+                print(f"=== round {round_ + 1} of {args.rounds} ({time.strftime('%H:%M:%S')})")
+            ours = []
+            for threads in args.threads:
+                ours.append(bench_scene(args.frames, args.reps, threads))
+                report_ours(ours[-1])
+            if args.no_peers:
+                continue
+            peers = run_peer(args.peers_dir, "impl_numpy.py", common, env)
+            peers += run_peer(args.peers_dir, "impl_c.py", [*common, "--variant", "soa2"], env)
+            print(f"== peers (same model, K = 1000, 90 Hz, 2 iterations, this interpreter; load {load1():.2f} after)")
+            for p in peers:
+                print(f"   {p['impl']:32s} frame {float(p['frame_ms']) * 1e3:9.1f} us   pss {p['pss']}")
+            print("== ratios (peer time / our time; above 1: we are faster)")
+            found = ratios(ours, peers)
+            for (threads, impl, what), x in found.items():
+                if what == "whole frame":
+                    print(f"   {threads} thread{'s' if threads > 1 else ' '} vs {impl:28s} "
+                          f"whole frame {x:7.3f}x   cloth kernel {found[threads, impl, 'cloth kernel']:7.3f}x")
+            every_round.append(found)
+    if len(every_round) > 1:
+        print(f"=== the ratios of the {len(every_round)} rounds, and their median")
+        for key in every_round[0]:
+            threads, impl, what = key
+            median = statistics.median(r[key] for r in every_round)
+            print(f"   {threads} thread{'s' if threads > 1 else ' '} vs {impl:28s} {what:12s} "
+                  + " ".join(f"{r[key]:6.3f}" for r in every_round) + f"   median {median:6.3f}x")
     print(f"load average {load1():.2f} (1 min) at the end")
     return 0
 
