@@ -105,11 +105,11 @@ def report(main_rows, helper, forks, end) -> None:
     in_helper = {}
     for s, e, depth, name in helper["rows"]:
         in_helper.setdefault(name, (s, e))
-    twice = [(name, e - s, in_helper[name]) for s, e, depth, name in main_rows
+    twice = [(name, (s, e), in_helper[name]) for s, e, depth, name in main_rows
              if s >= h0 and name in in_helper and e - s >= 0.05]
     print("compiled by both processes after the fork (0.05 s or more in the system's):")
-    for name, seconds, (s, e) in sorted(twice, key=lambda t: -t[1]):
-        print(f"  {seconds:5.1f} s here, {e - s:5.1f} s in the helper  {name}")
+    for name, (s, e), (hs, he) in sorted(twice, key=lambda t: t[1][0] - t[1][1]):
+        print(f"  here {s:6.1f} - {e:6.1f} ({e - s:4.1f} s), in the helper {hs:6.1f} - {he:6.1f} ({he - hs:4.1f} s)  {name}")
     if not twice:
         print("  none")
     print(f"balance: serial start {h0:.1f} s, both compiling {h1 - h0:.1f} s, serial end "
