@@ -169,11 +169,10 @@ class Player:
         run_phase = self._run_phase
         for phase, systems in self.schedule.order():
             start = clock()
-            if phase is Phase.FIXED_UPDATE:
-                if not systems:   # nobody listens: only the count advances (the usual schedule)
-                    self.counters.fixed_update_count += t.fixed_update_count
-                    metrics[PHASE_METRIC[phase]] = clock() - start
-                    continue
+            if phase is Phase.FIXED_UPDATE and not systems:
+                # nobody listens (the usual schedule): only the count advances
+                self.counters.fixed_update_count += t.fixed_update_count
+            elif phase is Phase.FIXED_UPDATE:
                 first_fixed = t.fixed_time - t.fixed_update_count * t.fixed_delta_time
                 for k in range(t.fixed_update_count):
                     ctx.fixed_update_index = k
