@@ -41,13 +41,29 @@ def _kernel_sources(root: pathlib.Path) -> list[pathlib.Path]:
         if path in seen:
             continue
         seen.add(path)
-        for module in re.findall(r"(?:from|import)\s+magica_py\.([\w.]+)", texts[path]):
-            base = root.joinpath(*module.split("."))
+        for module in _imported_modules(texts[path]):
+            base = root.joinpath(*module)
             for candidate in (base.with_suffix(".py"), base / "__init__.py"):
                 if candidate in texts and candidate not in seen and (
                         candidate.relative_to(root).parts[0] not in orchestration):
                     wanted.append(candidate)
     return sorted(seen)
+
+
+def _imported_modules(text: str) -> list[tuple[str, ...]]:
+    """The package modules a source imports, as paths below the package: ``import
+    magica_py.a.b`` and ``from magica_py.a.b import x`` give ``a/b``; the names of a ``from``
+    import may be modules too (``from magica_py.solver import state as st`` gives ``solver``
+    and ``solver/state``); a candidate that is not a file is skipped by the caller."""
+    found = [tuple(m.split(".")) for m in re.findall(r"^\s*import\s+magica_py\.([\w.]+)", text, re.M)]
+    for module, names in re.findall(r"^\s*from\s+magica_py((?:\.\w+)*)\s+import\s+(\([^)]*\)|[^\n]+)", text, re.M):
+        parts = tuple(p for p in module.split(".") if p)
+        if parts:
+            found.append(parts)
+        for name in re.split(r"[,\s()]+", re.sub(r"\bas\s+\w+", "", names.split("#")[0])):
+            if name.isidentifier():
+                found.append(parts + (name,))
+    return found
 
 
 def _configure_numba_cache() -> None:
