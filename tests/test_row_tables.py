@@ -1,4 +1,7 @@
 """The packed tables' row declarations (``solver/lanes.RowTable``): fields and shared scratch."""
+import pathlib
+import re
+
 import pytest
 
 from magica_py.solver import state as st
@@ -24,14 +27,28 @@ def test_a_shared_field_names_rows_of_another_field_and_adds_none():
         table.add("turn", 3, "", QUATERNION)
 
 
-def test_bending_scratch_lies_in_the_frame_stages_scratch_rows_only():
-    """D.7's gathered pair (``state.BEND_*``) may only use rows that hold values within one
-    stage of the frame (C.1's bone matrix, E.2's sums), never state carried between stages."""
+def test_every_shared_scratch_name_lies_in_the_stages_scratch_rows():
+    """The stages' scratch names (``state.PARTNER_*``, ``BONE_MATRIX``, E.2's ``PARENT_*`` /
+    ``CHILD_*``, E.4's ``LOCAL_OUT_*``, D.7's ``BEND_*`` ...) share the one pool of rows that
+    holds values only within a stage, never state carried between stages."""
+    assert {over for (_f, _n, over, _d) in st.PARTICLE.shared.values()} == {"stage_scratch"}
+    assert st.STAGE_SCRATCH == st.PARTICLE.column("stage_scratch")
+
+
+def test_the_scratch_names_one_module_uses_do_not_overlap():
+    """A stage uses its scratch names at once (gathered rows beside sums), so within the
+    source of each solver module the shared names it reads or writes must sit on distinct
+    rows; names of different modules may overlap (their stages run one after another)."""
+    root = pathlib.Path(st.__file__).resolve().parent
     shared = st.PARTICLE.shared
-    assert {name: over for name, (_f, _n, over, _d) in shared.items() if name.startswith("bend_")} == {
-        "bend_partner_pos": "bone_matrix", "bend_partner_w": "bone_matrix", "bend_rest": "child_rest_sum",
-        "bend_sign": "child_rest_sum", "bend_ok": "child_rest_sum"}
-    # and the five do not overlap one another
-    cells = [c for name, (first, n, _o, _d) in shared.items() if name.startswith("bend_")
-             for c in range(first, first + n)]
-    assert len(cells) == len(set(cells)) == 9 + 3 + 3
+    checked = 0
+    for path in sorted(root.rglob("*.py")):
+        names = sorted({n for n in re.findall(r"\bst\.([A-Z_0-9]+)", path.read_text()) if n.lower() in shared})
+        owner = {}
+        for name in names:
+            first, size, _over, _doc = shared[name.lower()]
+            for row in range(first, first + size):
+                assert row not in owner, f"{path.name}: {name} and {owner[row]} share row {row}"
+                owner[row] = name
+        checked += bool(names)
+    assert checked >= 10   # the stages' modules (angle, bending, collision, distance, rotations, writeback ...)

@@ -181,7 +181,7 @@ def _warm_rows(a, i0, i1):
 def warm_block(T, b, area):
     """Read every cache line of block b's particle state, model and depth curves, team and
     collider items in address order before its frame, when ``WARM_*`` says it pays. The stages
-    touch a particle's rows scattered over its 24 KB item, one particle after another, so each
+    touch a particle's rows scattered over its 19 KB item, one particle after another, so each
     first touch of a row would wait for memory on its own; read in sequence, the hardware
     prefetcher streams the block into the cache (the light scene's kernel 10-20 % faster, the
     crowd's likewise). The sum goes to the thread's save area (its last value, never read), so

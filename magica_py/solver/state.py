@@ -45,49 +45,65 @@ INVERSE_MASS = _p("inverse_mass", 1, "D.4's inverse mass of this pass: 1/(1 + 3 
                   "when fixed (each distance pass writes it first)")
 K_VERTICAL = _p("k_vertical", 1, "D.4's stiffness of vertical links at the particle's depth, this pass")
 K_HORIZONTAL = _p("k_horizontal", 1, "D.4's stiffness of horizontal and shear links, this pass")
-# scratch of the stages' gathers: a partner particle's values copied next to the particle
-# being solved (lanes.py: the solving loop then touches one item per table)
-PARTNER_POS = _p("partner_pos", 3, "m; scratch: a partner's position (gathered within a stage)")
-PARTNER_BASE = _p("partner_base", 3, "m; scratch: a partner's rest reference (gathered within a stage)")
-PARTNER_W = _p("partner_w", 1, "scratch: a partner's inverse mass (gathered within a stage)")
-PARTNER_VELOCITY_POS = _p("partner_velocity_pos", 3, "m; scratch: a partner's velocity_pos (gathered within a stage)")
-PARTNER_ROTATION = _p("partner_rotation", 4, "xyzw; scratch: a partner's rotation (gathered within a stage)",
-                      QUATERNION)
-ACCUM3 = _p("accum3", 3, "m; scratch: a correction summed over a particle's links within a stage")
-ACCUM_N = _p("accum_n", 1, "scratch: the number of links summed in accum3")
-CONTACT_NORMAL_SUM = _p("contact_normal_sum", 3, "scratch of D.8 point mode: normals of the colliders penetrated")
-CONTACT_NEAR_SUM = _p("contact_near_sum", 3, "scratch of D.8 point mode: normals of the colliders within range")
-BONE_MATRIX = _p("bone_matrix", 12, "scratch of C.1 (and of D.7, bend_partner_*): the first three rows of the "
-                 "bone's local-to-world matrix, row major (gathered from the hierarchy)")
-PARENT_ROTATION = _p("parent_rotation", 4, "scratch of E.2: the parent bone's rotation (gathered)", QUATERNION)
-PARENT_BASE_ROT = _p("parent_base_rot", 4, "scratch of E.2: the parent bone's animated rotation (gathered)", QUATERNION)
-PARENT_BASE_POS = _p("parent_base_pos", 3, "m; scratch of E.2: the parent bone's animated position (gathered)")
-PARENT_POSITION = _p("parent_position", 3, "m; scratch of E.2: the parent bone's display position (gathered)")
-CHILD_REST_EDGE = _p("child_rest_edge", 3, "m; scratch of E.2: this child's rest edge from its parent (tv)")
-CHILD_EDGE = _p("child_edge", 3, "m; scratch of E.2: this child's simulated edge (its rest edge when fixed)")
-LOCAL_OUT_POSITION = _p("local_out_position", 3, "m; scratch of E.4: the local position the bone is written with")
-LOCAL_OUT_ROTATION = _p("local_out_rotation", 4, "xyzw; scratch of E.4: the local rotation the bone is written with",
-                        QUATERNION)
-PARENT_HAS_NODE = _p("parent_has_node", 1, "scratch of E.4: 1 when a fixed bone has a parent node")
-CHILD_REST_SUM = _p("child_rest_sum", 3, "scratch of E.2 (and of D.7, bend_rest / sign / ok): the children's rest "
-                    "edges summed (ctv)")
-CHILD_EDGE_SUM = _p("child_edge_sum", 3, "scratch of E.2: the children's simulated edges summed (cv)")
-CONTACT_MIN_DIST = _p("contact_min_dist", 1, "m; scratch of D.8 point mode and of the contact speed limit: closest "
-                      "distance within range")
-CONTACT_BODY_VELOCITY = _p("contact_body_velocity", 3, "m/s; scratch of the contact speed limit (contact_speed.py): "
-                           "velocity of the nearest collider's body point at the particle")
+# the stages' scratch: values that live within one stage call (a partner's values gathered next
+# to the particle being solved, so that the solving loop touches one item per table, lanes.py;
+# sums over a particle's links). One pool of rows that every stage reuses under its own names
+# (``PARTICLE.share``): stages run one after another, so only the names one stage uses at
+# once must not overlap (tests/test_row_tables.py checks it per module). Shared, the 74 rows
+# of the separate fields became 32, and a particle slot 151 rows instead of 193 (less memory
+# to stream per block: docs/BENCHMARKS.md, session 23).
+STAGE_SCRATCH = _p("stage_scratch", 32, "scratch rows of the stages (the names shared over them below)")
+_s = PARTICLE.share
+# the steps' stages (D.3-D.9, quality mode) and E.1's display
+PARTNER_POS = _s("partner_pos", 3, "stage_scratch", "m; a partner's position (gathered within a stage)", offset=0)
+PARTNER_BASE = _s("partner_base", 3, "stage_scratch", "m; a partner's rest reference (gathered within a stage)", offset=3)
+PARTNER_W = _s("partner_w", 1, "stage_scratch", "a partner's inverse mass (gathered within a stage)", offset=6)
+PARTNER_VELOCITY_POS = _s("partner_velocity_pos", 3, "stage_scratch", "m; a partner's velocity_pos (D.5)", offset=7)
+PARTNER_ROTATION = _s("partner_rotation", 4, "stage_scratch", "xyzw; a partner's rotation (D.5)", offset=10)
+ACCUM3 = _s("accum3", 3, "stage_scratch", "m; a correction summed over a particle's links within a stage", offset=14)
+ACCUM_N = _s("accum_n", 1, "stage_scratch", "the number of links summed in accum3", offset=17)
+CONTACT_NORMAL_SUM = _s("contact_normal_sum", 3, "stage_scratch", "D.8 point mode: normals of the colliders penetrated",
+                        offset=18)
+CONTACT_NEAR_SUM = _s("contact_near_sum", 3, "stage_scratch", "D.8 point mode: normals of the colliders within range",
+                      offset=21)
+CONTACT_MIN_DIST = _s("contact_min_dist", 1, "stage_scratch", "m; D.8 point mode and the contact speed limit: closest "
+                      "distance within range", offset=24)
+CONTACT_BODY_VELOCITY = _s("contact_body_velocity", 3, "stage_scratch", "m/s; the contact speed limit: velocity of the "
+                           "nearest collider's body point at the particle", offset=25)
+# C.1 (D.7 shares these rows: bend_partner_*)
+BONE_MATRIX = _s("bone_matrix", 12, "stage_scratch", "C.1: the first three rows of the bone's local-to-world matrix, "
+                 "row major (gathered from the hierarchy)", offset=0)
+# E.2 (from row 6 on: E.4 uses parent_rotation beside partner_pos / partner_base; D.7 shares child_rest_sum)
+PARENT_ROTATION = _s("parent_rotation", 4, "stage_scratch", "xyzw; E.2 and E.4: the parent bone's rotation (gathered)",
+                     offset=6)
+PARENT_BASE_ROT = _s("parent_base_rot", 4, "stage_scratch", "xyzw; E.2: the parent bone's animated rotation", offset=10)
+PARENT_BASE_POS = _s("parent_base_pos", 3, "stage_scratch", "m; E.2: the parent bone's animated position", offset=14)
+PARENT_POSITION = _s("parent_position", 3, "stage_scratch", "m; E.2: the parent bone's display position", offset=17)
+CHILD_REST_EDGE = _s("child_rest_edge", 3, "stage_scratch", "m; E.2: this child's rest edge from its parent (tv)",
+                     offset=20)
+CHILD_EDGE = _s("child_edge", 3, "stage_scratch", "m; E.2: this child's simulated edge (its rest edge when fixed)",
+                offset=23)
+CHILD_REST_SUM = _s("child_rest_sum", 3, "stage_scratch", "m; E.2: the children's rest edges summed (ctv); D.7: "
+                    "bend_rest / sign / ok", offset=26)
+CHILD_EDGE_SUM = _s("child_edge_sum", 3, "stage_scratch", "m; E.2: the children's simulated edges summed (cv)",
+                    offset=29)
+# E.4 (beside partner_pos, partner_base, parent_rotation)
+LOCAL_OUT_POSITION = _s("local_out_position", 3, "stage_scratch", "m; E.4: the local position the bone is written "
+                        "with", offset=10)
+LOCAL_OUT_ROTATION = _s("local_out_rotation", 4, "stage_scratch", "xyzw; E.4: the local rotation the bone is written "
+                        "with", offset=13)
+PARENT_HAS_NODE = _s("parent_has_node", 1, "stage_scratch", "E.4: 1 when a fixed bone has a parent node", offset=17)
 # D.7's per-pair scratch (constraints/bending.py): a pair's vertices 1-3 and rest values
-# gathered into its vertex 0's slot, solved there, the corrections scattered back; in rows of
-# the frame's C.1 and E.2 scratch, which hold values only within their own stage
-BEND_PARTNER_POS = PARTICLE.share("bend_partner_pos", 9, "bone_matrix", "m; D.7: next_pos of the pair's vertices "
-                                  "1, 2, 3 (gathered), then their corrections (solved)")
-BEND_PARTNER_W = PARTICLE.share("bend_partner_w", 3, "bone_matrix", "D.7: inverse masses of the pair's vertices "
+# gathered into its vertex 0's slot, solved there, the corrections scattered back
+BEND_PARTNER_POS = PARTICLE.share("bend_partner_pos", 9, "stage_scratch", "m; D.7: next_pos of the pair's "
+                                  "vertices 1, 2, 3 (gathered), then their corrections (solved)", offset=0)
+BEND_PARTNER_W = PARTICLE.share("bend_partner_w", 3, "stage_scratch", "D.7: inverse masses of the pair's vertices "
                                 "1, 2, 3 (gathered)", offset=9)
-BEND_REST = PARTICLE.share("bend_rest", 1, "child_rest_sum", "rad or 1000 m^3; D.7: the pair's rest angle or rest "
-                           "volume x scale ratio (gathered)")
-BEND_SIGN = PARTICLE.share("bend_sign", 1, "child_rest_sum", "D.7: the dihedral pair's sign (gathered)", offset=1)
-BEND_OK = PARTICLE.share("bend_ok", 1, "child_rest_sum", "D.7: 1 where the pair's correction applies (solved)",
-                         offset=2)
+BEND_REST = PARTICLE.share("bend_rest", 1, "stage_scratch", "rad or 1000 m^3; D.7: the pair's rest angle or "
+                           "rest volume x scale ratio (gathered)", offset=26)
+BEND_SIGN = PARTICLE.share("bend_sign", 1, "stage_scratch", "D.7: the dihedral pair's sign (gathered)", offset=27)
+BEND_OK = PARTICLE.share("bend_ok", 1, "stage_scratch", "D.7: 1 where the pair's correction applies (solved)",
+                         offset=28)
 # display of quality mode (display.py): the last two step states in their display frame
 # (the particle's fixed root, or the team center), written at the end of each step (D.10)
 DISPLAY_LOCAL = _p("display_local", 3, "m; state of the last step in its display frame (D.10)")
