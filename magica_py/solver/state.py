@@ -50,8 +50,8 @@ K_HORIZONTAL = _p("k_horizontal", 1, "D.4's stiffness of horizontal and shear li
 # sums over a particle's links). One pool of rows that every stage reuses under its own names
 # (``PARTICLE.share``): stages run one after another, so only the names one stage uses at
 # once must not overlap (tests/test_row_tables.py checks it per module). Shared, the 74 rows
-# of the separate fields became 32, and a particle slot 151 rows instead of 193 (less memory
-# to stream per block: docs/BENCHMARKS.md, session 23).
+# of the separate fields became 32, and a particle slot 151 rows instead of 193 (22 % less
+# particle state; docs/BENCHMARKS.md, session 23).
 STAGE_SCRATCH = _p("stage_scratch", 32, "scratch rows of the stages (the names shared over them below)")
 _s = PARTICLE.share
 # the steps' stages (D.3-D.9, quality mode) and E.1's display
