@@ -60,7 +60,7 @@ def _imported_modules(text: str) -> list[tuple[str, ...]]:
         parts = tuple(p for p in module.split(".") if p)
         if parts:
             found.append(parts)
-        for name in re.split(r"[,\s()]+", re.sub(r"\bas\s+\w+", "", names.split("#")[0])):
+        for name in re.split(r"[,\s()]+", re.sub(r"\bas\s+\w+", "", re.sub(r"#[^\n]*", "", names))):
             if name.isidentifier():
                 found.append(parts + (name,))
     return found

@@ -11,7 +11,7 @@ from magica_py import _imported_modules, _kernel_sources
 
 def test_imported_modules_include_the_names_of_a_from_import():
     text = ("from magica_py.solver import state as st, blocks as bk\n"
-            "from magica_py.solver.lanes import (LANES,\n    get1)  # a comment\n"
+            "from magica_py.solver.lanes import (LANES,  # a comment\n    get1)  # another\n"
             "import magica_py.kernels.trig\n"
             "from magica_py import jit\n"
             "    from magica_py.params import ParameterError   # a late import\n"
