@@ -53,57 +53,53 @@ K_HORIZONTAL = _p("k_horizontal", 1, "D.4's stiffness of horizontal and shear li
 # of the separate fields became 32, and a particle slot 151 rows instead of 193 (22 % less
 # particle state; docs/BENCHMARKS.md, session 23).
 STAGE_SCRATCH = _p("stage_scratch", 32, "scratch rows of the stages (the names shared over them below)")
-_s = PARTICLE.share
+
+
+def _s(name: str, size: int, offset: int, doc: str) -> int:
+    """A scratch name over rows ``offset .. offset + size`` of the pool (its first column)."""
+    return PARTICLE.share(name, size, "stage_scratch", doc, offset=offset)
+
+
 # the steps' stages (D.3-D.9, quality mode) and E.1's display
-PARTNER_POS = _s("partner_pos", 3, "stage_scratch", "m; a partner's position (gathered within a stage)", offset=0)
-PARTNER_BASE = _s("partner_base", 3, "stage_scratch", "m; a partner's rest reference (gathered within a stage)", offset=3)
-PARTNER_W = _s("partner_w", 1, "stage_scratch", "a partner's inverse mass (gathered within a stage)", offset=6)
-PARTNER_VELOCITY_POS = _s("partner_velocity_pos", 3, "stage_scratch", "m; a partner's velocity_pos (D.5)", offset=7)
-PARTNER_ROTATION = _s("partner_rotation", 4, "stage_scratch", "xyzw; a partner's rotation (D.5)", offset=10)
-ACCUM3 = _s("accum3", 3, "stage_scratch", "m; a correction summed over a particle's links within a stage", offset=14)
-ACCUM_N = _s("accum_n", 1, "stage_scratch", "the number of links summed in accum3", offset=17)
-CONTACT_NORMAL_SUM = _s("contact_normal_sum", 3, "stage_scratch", "D.8 point mode: normals of the colliders penetrated",
-                        offset=18)
-CONTACT_NEAR_SUM = _s("contact_near_sum", 3, "stage_scratch", "D.8 point mode: normals of the colliders within range",
-                      offset=21)
-CONTACT_MIN_DIST = _s("contact_min_dist", 1, "stage_scratch", "m; D.8 point mode and the contact speed limit: closest "
-                      "distance within range", offset=24)
-CONTACT_BODY_VELOCITY = _s("contact_body_velocity", 3, "stage_scratch", "m/s; the contact speed limit: velocity of the "
-                           "nearest collider's body point at the particle", offset=25)
+PARTNER_POS = _s("partner_pos", 3, 0, "m; a partner's position (gathered within a stage)")
+PARTNER_BASE = _s("partner_base", 3, 3, "m; a partner's rest reference (gathered within a stage)")
+PARTNER_W = _s("partner_w", 1, 6, "a partner's inverse mass (gathered within a stage)")
+PARTNER_VELOCITY_POS = _s("partner_velocity_pos", 3, 7, "m; a partner's velocity_pos (D.5)")
+PARTNER_ROTATION = _s("partner_rotation", 4, 10, "xyzw; a partner's rotation (D.5)")
+ACCUM3 = _s("accum3", 3, 14, "m; a correction summed over a particle's links within a stage")
+ACCUM_N = _s("accum_n", 1, 17, "the number of links summed in accum3")
+CONTACT_NORMAL_SUM = _s("contact_normal_sum", 3, 18, "D.8 point mode: normals of the colliders penetrated")
+CONTACT_NEAR_SUM = _s("contact_near_sum", 3, 21, "D.8 point mode: normals of the colliders within range")
+CONTACT_MIN_DIST = _s("contact_min_dist", 1, 24, "m; D.8 point mode and the contact speed limit: closest distance "
+                      "within range")
+CONTACT_BODY_VELOCITY = _s("contact_body_velocity", 3, 25, "m/s; the contact speed limit: velocity of the nearest "
+                           "collider's body point at the particle")
 # C.1 (D.7 shares these rows: bend_partner_*)
-BONE_MATRIX = _s("bone_matrix", 12, "stage_scratch", "C.1: the first three rows of the bone's local-to-world matrix, "
-                 "row major (gathered from the hierarchy)", offset=0)
+BONE_MATRIX = _s("bone_matrix", 12, 0, "C.1: the first three rows of the bone's local-to-world matrix, row major "
+                 "(gathered from the hierarchy)")
 # E.2 (from row 6 on: E.4 uses parent_rotation beside partner_pos / partner_base; D.7 shares child_rest_sum)
-PARENT_ROTATION = _s("parent_rotation", 4, "stage_scratch", "xyzw; E.2 and E.4: the parent bone's rotation (gathered)",
-                     offset=6)
-PARENT_BASE_ROT = _s("parent_base_rot", 4, "stage_scratch", "xyzw; E.2: the parent bone's animated rotation", offset=10)
-PARENT_BASE_POS = _s("parent_base_pos", 3, "stage_scratch", "m; E.2: the parent bone's animated position", offset=14)
-PARENT_POSITION = _s("parent_position", 3, "stage_scratch", "m; E.2: the parent bone's display position", offset=17)
-CHILD_REST_EDGE = _s("child_rest_edge", 3, "stage_scratch", "m; E.2: this child's rest edge from its parent (tv)",
-                     offset=20)
-CHILD_EDGE = _s("child_edge", 3, "stage_scratch", "m; E.2: this child's simulated edge (its rest edge when fixed)",
-                offset=23)
-CHILD_REST_SUM = _s("child_rest_sum", 3, "stage_scratch", "m; E.2: the children's rest edges summed (ctv); D.7: "
-                    "bend_rest / sign / ok", offset=26)
-CHILD_EDGE_SUM = _s("child_edge_sum", 3, "stage_scratch", "m; E.2: the children's simulated edges summed (cv)",
-                    offset=29)
+PARENT_ROTATION = _s("parent_rotation", 4, 6, "xyzw; E.2 and E.4: the parent bone's rotation (gathered)")
+PARENT_BASE_ROT = _s("parent_base_rot", 4, 10, "xyzw; E.2: the parent bone's animated rotation")
+PARENT_BASE_POS = _s("parent_base_pos", 3, 14, "m; E.2: the parent bone's animated position")
+PARENT_POSITION = _s("parent_position", 3, 17, "m; E.2: the parent bone's display position")
+CHILD_REST_EDGE = _s("child_rest_edge", 3, 20, "m; E.2: this child's rest edge from its parent (tv)")
+CHILD_EDGE = _s("child_edge", 3, 23, "m; E.2: this child's simulated edge (its rest edge when fixed)")
+CHILD_REST_SUM = _s("child_rest_sum", 3, 26, "m; E.2: the children's rest edges summed (ctv); D.7: bend_rest / "
+                    "sign / ok")
+CHILD_EDGE_SUM = _s("child_edge_sum", 3, 29, "m; E.2: the children's simulated edges summed (cv)")
 # E.4 (beside partner_pos, partner_base, parent_rotation)
-LOCAL_OUT_POSITION = _s("local_out_position", 3, "stage_scratch", "m; E.4: the local position the bone is written "
-                        "with", offset=10)
-LOCAL_OUT_ROTATION = _s("local_out_rotation", 4, "stage_scratch", "xyzw; E.4: the local rotation the bone is written "
-                        "with", offset=13)
-PARENT_HAS_NODE = _s("parent_has_node", 1, "stage_scratch", "E.4: 1 when a fixed bone has a parent node", offset=17)
+LOCAL_OUT_POSITION = _s("local_out_position", 3, 10, "m; E.4: the local position the bone is written with")
+LOCAL_OUT_ROTATION = _s("local_out_rotation", 4, 13, "xyzw; E.4: the local rotation the bone is written with")
+PARENT_HAS_NODE = _s("parent_has_node", 1, 17, "E.4: 1 when a fixed bone has a parent node")
 # D.7's per-pair scratch (constraints/bending.py): a pair's vertices 1-3 and rest values
 # gathered into its vertex 0's slot, solved there, the corrections scattered back
-BEND_PARTNER_POS = PARTICLE.share("bend_partner_pos", 9, "stage_scratch", "m; D.7: next_pos of the pair's "
-                                  "vertices 1, 2, 3 (gathered), then their corrections (solved)", offset=0)
-BEND_PARTNER_W = PARTICLE.share("bend_partner_w", 3, "stage_scratch", "D.7: inverse masses of the pair's vertices "
-                                "1, 2, 3 (gathered)", offset=9)
-BEND_REST = PARTICLE.share("bend_rest", 1, "stage_scratch", "rad or 1000 m^3; D.7: the pair's rest angle or "
-                           "rest volume x scale ratio (gathered)", offset=26)
-BEND_SIGN = PARTICLE.share("bend_sign", 1, "stage_scratch", "D.7: the dihedral pair's sign (gathered)", offset=27)
-BEND_OK = PARTICLE.share("bend_ok", 1, "stage_scratch", "D.7: 1 where the pair's correction applies (solved)",
-                         offset=28)
+BEND_PARTNER_POS = _s("bend_partner_pos", 9, 0, "m; D.7: next_pos of the pair's vertices 1, 2, 3 (gathered), then "
+                      "their corrections (solved)")
+BEND_PARTNER_W = _s("bend_partner_w", 3, 9, "D.7: inverse masses of the pair's vertices 1, 2, 3 (gathered)")
+BEND_REST = _s("bend_rest", 1, 26, "rad or 1000 m^3; D.7: the pair's rest angle or rest volume x scale ratio "
+               "(gathered)")
+BEND_SIGN = _s("bend_sign", 1, 27, "D.7: the dihedral pair's sign (gathered)")
+BEND_OK = _s("bend_ok", 1, 28, "D.7: 1 where the pair's correction applies (solved)")
 # display of quality mode (display.py): the last two step states in their display frame
 # (the particle's fixed root, or the team center), written at the end of each step (D.10)
 DISPLAY_LOCAL = _p("display_local", 3, "m; state of the last step in its display frame (D.10)")
@@ -140,7 +136,7 @@ QUALITY_DRIFT = _p("quality_drift", 3, "m; the angle pass's share of this step's
                    "velocity (restoration drift)")
 DISPLAY_FRACTION = _p("display_fraction", 1, "[0,1]; scratch of the quality display: the particle's move "
                       "fraction in a move pass (quality_display.py, the frame)")
-del _p
+del _p, _s
 
 TRIANGLE_STATE = RowTable("triangle state", "triangle slot")
 TRIANGLE_NORMAL = TRIANGLE_STATE.add("triangle_normal", 3, "unit or 0; display normal of each triangle (E.3, per frame)")
