@@ -8,8 +8,10 @@
    each, as MagicaCloth2's TimeManager.AfterFixedUpdate does; with no system in the phase only
    the counter advances), UPDATE, LATE_UPDATE,
    RENDER_WRITE, AFTER_RENDERING. The wall time of each phase is recorded in
-   ``ctx.metrics["time.<phase>"]`` (seconds; FIXED_UPDATE summed over its runs; inside UPDATE
-   ``animation.drivers`` and ``animation.propagate`` split the animation system), and with
+   ``ctx.metrics["time.<phase>"]`` (seconds; FIXED_UPDATE summed over its runs; a phase with
+   no system records 0.0 untimed, its few instructions counted in the next phase's time;
+   inside UPDATE ``animation.drivers`` and ``animation.propagate`` split the animation
+   system), and with
    ``player.profile_systems = True`` each system's in ``ctx.metrics["time.system.<name>"]``.
    An exception escaping a system gets a note naming the system, phase and frame.
 3. Events raised this frame (``ctx.events``, ``(kind, payload)``) are dispatched to the
@@ -93,6 +95,7 @@ class Player:
             "time_scale": _apply_time_scale,
         }
         self.profile_systems = False  # True: also record ctx.metrics["time.system.<name>"]
+        self._plan: tuple | None = None   # (schedule order, its walk): ``_frame_plan``
 
     def reset(self) -> None:
         """Back to frame 0: time source, time manager, counters and metric totals.
@@ -159,42 +162,61 @@ class Player:
                 key = f"time.system.{system.name}"
                 ctx.metrics[key] = ctx.metrics.get(key, 0.0) + clock() - start
 
+    def _frame_plan(self, order) -> tuple:
+        """``order`` (``Schedule.order()``) as the walk ``step`` takes: ``(phase, metric name,
+        systems, is FIXED_UPDATE)`` per phase, made once per schedule change."""
+        plan = self._plan
+        if plan is None or plan[0] is not order:
+            walk = tuple((phase, PHASE_METRIC[phase], systems, phase is Phase.FIXED_UPDATE)
+                         for phase, systems in order)
+            plan = self._plan = (order, walk)
+        return plan[1]
+
     def step(self) -> FrameContext:
         """Run one frame; returns its context. The frame walks the schedule as it was when the
-        frame began: a system added or removed by a system takes effect from the next frame."""
+        frame began: a system added or removed by a system takes effect from the next frame.
+
+        A phase's time runs from the end of the previous phase with a system to the end of its
+        own; a phase without a system records 0.0 and is not timed."""
         t = self.time_manager.advance(self.time_source.next_delta())
-        ctx = FrameContext(frame=self.frame, time=t, scene=self.scene, counters=self.counters)
-        clock = _time.perf_counter
+        ctx = FrameContext(self.frame, t, self.scene, self.counters)
         metrics = ctx.metrics
-        run_phase = self._run_phase
-        for phase, systems in self.schedule.order():
-            start = clock()
-            if phase is Phase.FIXED_UPDATE and not systems:
-                # nobody listens (the usual schedule): only the count advances
-                self.counters.fixed_update_count += t.fixed_update_count
-            elif phase is Phase.FIXED_UPDATE:
+        walk = self._frame_plan(self.schedule.order())
+        clock = _time.perf_counter
+        mark = clock()
+        for phase, metric, systems, fixed in walk:
+            if not systems:
+                if fixed:   # nobody listens (the usual schedule): only the count advances
+                    self.counters.fixed_update_count += t.fixed_update_count
+                metrics[metric] = 0.0
+                continue
+            if fixed:
                 first_fixed = t.fixed_time - t.fixed_update_count * t.fixed_delta_time
                 for k in range(t.fixed_update_count):
                     ctx.fixed_update_index = k
                     ctx.fixed_time = first_fixed + (k + 1) * t.fixed_delta_time
-                    run_phase(ctx, phase, systems)
+                    self._run_phase(ctx, phase, systems)
                     self.counters.fixed_update_count += 1  # TimeManager.AfterFixedUpdate
                 ctx.fixed_update_index = None
                 ctx.fixed_time = None
-            elif systems:
-                run_phase(ctx, phase, systems)
-            metrics[PHASE_METRIC[phase]] = clock() - start
+            else:
+                self._run_phase(ctx, phase, systems)
+            now = clock()
+            metrics[metric] = now - mark
+            mark = now
         ctx.phase = None
-        for kind, payload in ctx.events:
-            handler = self.event_handlers.get(kind)
-            if handler is not None:
-                handler(self, payload)
+        if ctx.events:
+            for kind, payload in ctx.events:
+                handler = self.event_handlers.get(kind)
+                if handler is not None:
+                    handler(self, payload)
         totals = self.metric_totals
+        total = totals.get
         for name, value in metrics.items():
             if type(value) is float:   # the common case first: a dozen metrics a frame
-                totals[name] = totals.get(name, 0.0) + value
+                totals[name] = total(name, 0.0) + value
             elif isinstance(value, _NUMBERS):
-                totals[name] = totals.get(name, 0.0) + float(value)
+                totals[name] = total(name, 0.0) + float(value)
         self.frame += 1
         self.last_context = ctx
         return ctx
