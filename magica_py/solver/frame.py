@@ -22,6 +22,12 @@ columns are copied aside before the block's frame (or step) and written back aft
 (``save_lane`` / ``restore_lane``), and the stages that write outside the tables (the
 write-back, the guards' events) skip it. A free lane (no team) is computed and ignored.
 
+**The frame's arrays.** The kernels take them in one StructRef ``F`` (``frame_call.FrameArrays``:
+the ``Tables`` fields, the team clocks as ``tt_*``, the hierarchy as ``h_*``) and pass ``F`` down
+the recipe; each recipe function binds the arrays it uses to locals at its top. numba counts a
+reference per array each time a namedtuple of arrays is copied into a function, and one for the
+StructRef (docs/architecture.md, *Calling the frame kernel*).
+
 **Only the stages a scene uses are compiled.** The optional stages are switched by plain
 arguments (``StageSwitches``: ``None`` or ``1``); numba removes an ``if switch is not None``
 branch whose argument is ``None`` before it types the callee, so a scene whose cloths use no
@@ -178,39 +184,23 @@ def _warm_rows(a, i0, i1):
 
 
 @kernel(inline="always")
-def warm_block(T, b, area):
+def warm_block(F, b, area):
     """Read every cache line of block b's particle state, model and depth curves, team and
-    collider items in address order before its frame, when ``WARM_*`` says it pays. The stages
+    collider items (``F``: the frame's ``FrameArrays``, or ``Tables``: the same field names)
+    in address order before its frame, when ``WARM_*`` says it pays. The stages
     touch a particle's rows scattered over its 19 KB item, one particle after another, so each
     first touch of a row would wait for memory on its own; read in sequence, the hardware
     prefetcher streams the block into the cache (the light scene's kernel 10-20 % faster, the
     crowd's likewise). The sum goes to the thread's save area (its last value, never read), so
     that the reads are kept; nothing else is written."""
-    if T.BI[b, bk.BI_LANES_USED] < WARM_MIN_LANES or T.PS.shape[0] * T.PS.shape[1] < WARM_MIN_STATE_VALUES:
+    if F.BI[b, bk.BI_LANES_USED] < WARM_MIN_LANES or F.PS.shape[0] * F.PS.shape[1] < WARM_MIN_STATE_VALUES:
         return
-    g0 = np.int64(T.BI[b, bk.BI_G0])
-    g1 = g0 + T.BI[b, bk.BI_N]
-    c0 = np.int64(T.BI[b, bk.BI_COLLIDER0])
-    acc = _warm_rows(T.PS, g0, g1) + _warm_rows(T.PM, g0, g1) + _warm_rows(T.PP, g0, g1)
-    acc += _warm_rows(T.TS, b, b + 1) + _warm_rows(T.CS, c0, c0 + T.BI[b, bk.BI_COLLIDERS])
+    g0 = np.int64(F.BI[b, bk.BI_G0])
+    g1 = g0 + F.BI[b, bk.BI_N]
+    c0 = np.int64(F.BI[b, bk.BI_COLLIDER0])
+    acc = _warm_rows(F.PS, g0, g1) + _warm_rows(F.PM, g0, g1) + _warm_rows(F.PP, g0, g1)
+    acc += _warm_rows(F.TS, b, b + 1) + _warm_rows(F.CS, c0, c0 + F.BI[b, bk.BI_COLLIDERS])
     area[area.shape[0] - 1] = acc
-
-
-@kernel(inline="always")
-def frame_tuples(F):
-    """The three namedtuples of the frame's arrays from ``F`` (``frame_call.FrameArrays``, the
-    StructRef the system passes; with the JIT off its namedtuple twin): ``Tables``,
-    ``TimeArrays``, ``HierarchyArrays``."""
-    T = Tables(F.PS, F.TS, F.CS, F.TRS, F.EDS, F.PM, F.PP, F.TM, F.LM, F.TRM, F.BM, F.VM, F.P, F.BI, F.topology,
-               F.PT, F.TI, F.CT, F.blocks)
-    tt = TimeArrays(F.tt_active, F.tt_suspended, F.tt_update_mode, F.tt_team_time_scale, F.tt_time, F.tt_old_time,
-                    F.tt_now_update_time, F.tt_old_update_time, F.tt_frame_update_time, F.tt_frame_old_time,
-                    F.tt_update_count, F.tt_skip_count, F.tt_frame_delta_time, F.tt_now_time_scale,
-                    F.tt_frame_add, F.tt_frame_interpolation, F.tt_running, F.tt_step_running)
-    h = HierarchyArrays(F.h_parent, F.h_local_position, F.h_local_rotation, F.h_world_position, F.h_world_rotation,
-                        F.h_lossy_scale, F.h_local_to_world, F.h_build_world_position, F.h_build_world_rotation,
-                        F.h_build_lossy_scale, F.h_build_local_to_world, F.h_build_pose_pending)
-    return T, tt, h
 
 
 # ----------------------------------------------------------------------------- lanes that do not run
@@ -257,8 +247,11 @@ def restore_lane(PS, TS, CS, BI, b, l, area):
 
 # ----------------------------------------------------------------------------- team level
 @kernel(inline="always")
-def prepare_lanes(TS, TI, P, BI, blocks, tt, h):
+def prepare_lanes(F):
     """Scale suspension (A.4) and distance culling (H.1) of every lane, before the team time."""
+    tt_active, tt_suspended, h_lossy_scale = F.tt_active, F.tt_suspended, F.h_lossy_scale
+    h_world_position = F.h_world_position
+    TS, TI, P, BI, blocks = F.TS, F.TI, F.P, F.BI, F.blocks
     for i in range(blocks.shape[0]):
         b = blocks[i]
         for l in range(bk.lane_width(BI, b)):
@@ -266,59 +259,61 @@ def prepare_lanes(TS, TI, P, BI, blocks, tt, h):
             if t < 0:
                 continue
             if get1(TS, b, st.ENABLED, l) == 0.0:
-                tt.active[t] = False
+                tt_active[t] = False
                 put1(TS, b, st.ACTIVE, l, 0.0)
                 continue
-            tt.active[t] = True
+            tt_active[t] = True
             comp = TI[b, bk.TI_COMPONENT + l]
-            sx, sy, sz = h.lossy_scale[comp, 0], h.lossy_scale[comp, 1], h.lossy_scale[comp, 2]
+            sx, sy, sz = h_lossy_scale[comp, 0], h_lossy_scale[comp, 1], h_lossy_scale[comp, 2]
             smin = min(abs(sx), min(abs(sy), abs(sz)))
             negative = sx < 0.0 or sy < 0.0 or sz < 0.0
             # a tiny scale suspends the team (A.4); so does a negative one: the negative-scale
             # teleport of H.7 is not modelled (negative scale is rejected at build)
             put1(TS, b, st.SCALE_SUSPENDED, l, 1.0 if (smin < 1e-6 or negative) else 0.0)
-            culled = distance_culling_lane(TS, TI, P, b, l, h.world_position)
+            culled = distance_culling_lane(TS, TI, P, b, l, h_world_position)
             if (1.0 if culled else 0.0) != get1(TS, b, st.CULLED, l):
                 put1(TS, b, st.RESET, l, 1.0)  # any visibility change forces a reset (H.1)
             put1(TS, b, st.CULLED, l, 1.0 if culled else 0.0)
             suspended = get1(TS, b, st.SCALE_SUSPENDED, l) != 0.0 or culled
-            tt.suspended[t] = suspended
+            tt_suspended[t] = suspended
             put1(TS, b, st.ACTIVE, l, 0.0 if suspended else 1.0)
 
 
 @kernel
-def first_frame_continues_build_pose(TS, TM, TI, P, b, l, h):
+def first_frame_continues_build_pose(F, b, l):
     """True when lane l's component's first-frame pose is within the teleport thresholds of
     its build pose (whatever the teleport mode): the animation then starts from the build pose
     and the build can be the reset instant. A scene whose rest pose is not the animation's
     pose at t = 0 (a jump at the first frame) keeps MagicaCloth2's first-frame reset."""
-    comp = TI[b, bk.TI_COMPONENT + l]
-    init_len = v_length(get3(TM, b, bk.INIT_SCALE, l))
-    scale = (h.lossy_scale[comp, 0], h.lossy_scale[comp, 1], h.lossy_scale[comp, 2])
+    comp = F.TI[b, bk.TI_COMPONENT + l]
+    init_len = v_length(get3(F.TM, b, bk.INIT_SCALE, l))
+    scale = (F.h_lossy_scale[comp, 0], F.h_lossy_scale[comp, 1], F.h_lossy_scale[comp, 2])
     ratio = v_length(scale) / init_len if init_len > 0.0 else 1.0
-    jump = v_length(v_sub((h.world_position[comp, 0], h.world_position[comp, 1], h.world_position[comp, 2]),
-                          (h.build_world_position[comp, 0], h.build_world_position[comp, 1],
-                           h.build_world_position[comp, 2])))
+    jump = v_length(v_sub((F.h_world_position[comp, 0], F.h_world_position[comp, 1], F.h_world_position[comp, 2]),
+                          (F.h_build_world_position[comp, 0], F.h_build_world_position[comp, 1],
+                           F.h_build_world_position[comp, 2])))
     turn = math.degrees(q_angle(
-        (h.build_world_rotation[comp, 0], h.build_world_rotation[comp, 1], h.build_world_rotation[comp, 2],
-         h.build_world_rotation[comp, 3]),
-        (h.world_rotation[comp, 0], h.world_rotation[comp, 1], h.world_rotation[comp, 2], h.world_rotation[comp, 3])))
-    return jump < P[b, PRM_TELEPORT_DISTANCE] * ratio and turn < P[b, PRM_TELEPORT_ROTATION]
+        (F.h_build_world_rotation[comp, 0], F.h_build_world_rotation[comp, 1], F.h_build_world_rotation[comp, 2],
+         F.h_build_world_rotation[comp, 3]),
+        (F.h_world_rotation[comp, 0], F.h_world_rotation[comp, 1], F.h_world_rotation[comp, 2],
+         F.h_world_rotation[comp, 3])))
+    return jump < F.P[b, PRM_TELEPORT_DISTANCE] * ratio and turn < F.P[b, PRM_TELEPORT_ROTATION]
 
 
 @kernel(forceinline=False)
-def build_reset_lane(PS, PM, TS, TM, TI, P, BI, PT, topology, b, l, h):
+def build_reset_lane(F, b, l):
     """Quality mode: the Reset of a team built with the system happens at the build (t = 0),
     not at its first frame (docs/quality-mode.md, *start-up*). The particles snap to the
     build-time pose with zero velocity, and the center, frame and component histories take
     the build-time component pose; the first frame then integrates from there like any other
     frame. MagicaCloth2 resets on the first frame (C.5, H.2), i.e. at t = 1/fps: each frame
     rate would start from a different state, which a lightly damped chain carries for ~1 s."""
-    skin_block(PS, PM, BI, PT, h.build_local_to_world, b, l, l + 1)
-    center_and_inertia_lane(PS, PM, TS, TM, TI, P, BI, topology, b, l, h.build_world_position,
-                            h.build_world_rotation, h.build_lossy_scale, 0.0, 1.0, 0, False, 0.0, 0.0)
-    g0 = BI[b, bk.BI_G0]
-    for g in range(g0, g0 + BI[b, bk.BI_N]):
+    PS, TS = F.PS, F.TS
+    skin_block(PS, F.PM, F.BI, F.PT, F.h_build_local_to_world, b, l, l + 1)
+    center_and_inertia_lane(PS, F.PM, TS, F.TM, F.TI, F.P, F.BI, F.topology, b, l, F.h_build_world_position,
+                            F.h_build_world_rotation, F.h_build_lossy_scale, 0.0, 1.0, 0, False, 0.0, 0.0)
+    g0 = F.BI[b, bk.BI_G0]
+    for g in range(g0, g0 + F.BI[b, bk.BI_N]):
         snap_lane_to_base_pose(PS, g, l)
     for c in range(3):
         TS[b, st.OLD_COMPONENT_POS + c * LANES + l] = TS[b, st.COMPONENT_POS + c * LANES + l]
@@ -329,23 +324,24 @@ def build_reset_lane(PS, PM, TS, TM, TI, P, BI, PT, topology, b, l, h):
 
 
 @kernel(forceinline=False)
-def begin_frame_prelude_lane(PS, PM, TS, TM, TI, P, BI, PT, topology, tt, h, b, l, t, quality):
+def begin_frame_prelude_lane(F, b, l, t, quality):
     """The team-level start of lane l's frame (team t): running flag, quality mode's
     first-frame build reset. Returns the team time since the last step
     (``center_and_inertia_lane``)."""
-    put1(TS, b, st.RUNNING, l, 1.0 if tt.running[t] else 0.0)
+    TS = F.TS
+    put1(TS, b, st.RUNNING, l, 1.0 if F.tt_running[t] else 0.0)
     if get1(TS, b, st.RESET, l) != 0.0:
         put1(TS, b, st.RAMP_FROM_BUILD, l, 0.0)
-    if (quality is not None and P[b, PRM_QUALITY] != 0.0 and h.build_pose_pending[0] != 0
+    if (quality is not None and F.P[b, PRM_QUALITY] != 0.0 and F.h_build_pose_pending[0] != 0
             and get1(TS, b, st.RESET, l) != 0.0 and get1(TS, b, st.TIME_RESET, l) != 0.0
-            and first_frame_continues_build_pose(TS, TM, TI, P, b, l, h)):
-        build_reset_lane(PS, PM, TS, TM, TI, P, BI, PT, topology, b, l, h)
+            and first_frame_continues_build_pose(F, b, l)):
+        build_reset_lane(F, b, l)
         put1(TS, b, st.RAMP_FROM_BUILD, l, 1.0)
     # the stabilisation ramp in continuous time when it started at the build (t = 0, on the
     # step grid); after a first-frame reset the per-step ramp is kept (docs/quality-mode.md)
     since_last_step = 0.0
     if get1(TS, b, st.RAMP_FROM_BUILD, l) != 0.0:
-        since_last_step = tt.old_time[t] - tt.now_update_time[t]
+        since_last_step = F.tt_old_time[t] - F.tt_now_update_time[t]
     return since_last_step
 
 
@@ -355,22 +351,22 @@ def lane_team(TI, b, l):
 
 
 @kernel
-def busiest_lane_steps(TI, tt, b, w):
-    """The steps this frame of block b's busiest lane (its lanes' team clocks)."""
+def busiest_lane_steps(TI, update_count, b, w):
+    """The steps this frame of block b's busiest lane (``update_count``: the team clocks')."""
     steps = 0
     for l in range(w):
         t = lane_team(TI, b, l)
         if t >= 0:
-            steps = max(steps, tt.update_count[t])
+            steps = max(steps, update_count[t])
     return steps
 
 
 @kernel(forceinline=False, inline="always")
-def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones,
+def run_step(F, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones,
              colliders):
     """One simulation step of block b (§D.0 order): every lane at its own frame
     interpolation (``FRAME_INTERPOLATION``)."""
-    PS, TS, CS, PM, PP, TM, P, BI, topology = T.PS, T.TS, T.CS, T.PM, T.PP, T.TM, T.P, T.BI, T.topology
+    PS, TS, CS, PM, PP, TM, P, BI, topology = F.PS, F.TS, F.CS, F.PM, F.PP, F.TM, F.P, F.BI, F.topology
     dt = fi.dt
     ratio = fi.frequency_ratio
     tether_attenuation, distance_attenuation, limit_attenuation, restoration_attenuation, motion_attenuation = \
@@ -381,21 +377,23 @@ def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, moti
         collider_step_block(CS, TS, BI, topology, b)
     predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, ratio, fi.power_z)
     if wind is not None:
-        wind_block(PS, PM, TS, T.TI, P, BI, topology, b, dt, wind_zones)
+        wind_block(PS, PM, TS, F.TI, P, BI, topology, b, dt, wind_zones)
     step_basic_pose_block(PS, PM, TS, TM, P, BI, topology, b)
     tether_block(PS, P, BI, topology, b, tether_attenuation, ratio)
-    distance_block(PS, PM, PP, TS, TM, T.LM, P, BI, topology, b, ratio, fi.power_y, distance_attenuation)
+    distance_block(PS, PM, PP, TS, TM, F.LM, P, BI, topology, b, ratio, fi.power_y,
+                   distance_attenuation)
     drift = False
     if angle is not None:
         drift = quality is not None and drift_applies(P, b)
         if drift:   # quality mode: the angle pass's kept-out share, a drift the passes do not see
             drift_begin_block(PS, BI, b)
-        angle_block(PS, PP, TS, P, BI, topology, b, ratio, fi.power_w, limit_attenuation, restoration_attenuation)
+        angle_block(PS, PP, TS, P, BI, topology, b, ratio, fi.power_w, limit_attenuation,
+                    restoration_attenuation)
         if drift:
             drift_end_block(PS, BI, topology, b)
     if bending is not None:
         if BI[b, bk.BI_BENDS] > 0 or BI[b, bk.BI_VOLUMES] > 0:
-            bending_block(PS, PM, TS, T.BM, T.VM, P, BI, topology, b, ratio, fi.power_y)
+            bending_block(PS, PM, TS, F.BM, F.VM, P, BI, topology, b, ratio, fi.power_y)
     if BI[b, bk.BI_COLLIDERS] > 0:
         if point_collision is not None:
             if P[b, PRM_COLLISION_MODE] == 1.0:
@@ -403,16 +401,18 @@ def run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, moti
         if edge_collision is not None:
             if P[b, PRM_COLLISION_MODE] == 2.0:
                 edge_collision_block(PS, PP, TS, CS, BI, topology, b)
-    distance_block(PS, PM, PP, TS, TM, T.LM, P, BI, topology, b, ratio, fi.power_y, distance_attenuation)
+    distance_block(PS, PM, PP, TS, TM, F.LM, P, BI, topology, b, ratio, fi.power_y,
+                   distance_attenuation)
     if motion is not None:
         motion_block(PS, PP, TS, P, BI, topology, b, motion_attenuation)
     if quality is not None:
         if P[b, PRM_INEXTENSIBILITY] != 0.0 or P[b, PRM_COLLISION_LAST] != 0.0:  # quality mode (§D.0)
-            quality_end_of_step_block(PS, PM, PP, TS, TM, CS, T.LM, T.EDS, P, BI, topology, b, ratio, fi.power_y,
-                                      distance_attenuation, drift)
+            quality_end_of_step_block(PS, PM, PP, TS, TM, CS, F.LM, F.EDS, P, BI, topology, b,
+                                      ratio, fi.power_y, distance_attenuation, drift)
     end_step_block(PS, PM, TS, P, BI, topology, b, dt, ratio)
     if quality is not None:
-        if P[b, PRM_CONTACT_SPEED_LIMIT] >= 0.0 and BI[b, bk.BI_COLLIDERS] > 0 and P[b, PRM_COLLISION_MODE] != 0.0:
+        if (P[b, PRM_CONTACT_SPEED_LIMIT] >= 0.0 and BI[b, bk.BI_COLLIDERS] > 0
+                and P[b, PRM_COLLISION_MODE] != 0.0):
             contact_speed_block(PS, PP, TS, CS, P, BI, topology, b, dt)   # quality mode: after D.10
         if P[b, PRM_TIME_BASED_SMOOTHING] != 0.0:   # quality display: keep this step's state (display.py)
             record_display_state_block(PS, TS, BI, topology, b)
@@ -444,13 +444,18 @@ def restore_frozen(PS, TS, CS, TI, BI, b, w, area):
 
 
 @kernel(forceinline=False, inline="always")
-def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, edge_collision, motion, quality,
+def block_frame_steps(F, b, fi, area, angle, bending, point_collision, edge_collision, motion, quality,
                       wind, wind_zones, colliders):
     """Block b's frame up to the write-back: its lanes' begin of frame and the steps (each
     lane advancing its own clock, §A.6; the clock of a suspended but enabled team advances
     too). Lanes that do not run keep their state (module docstring)."""
-    PS, TS, CS, PM, TM, TI, P, BI, PT, topology = T.PS, T.TS, T.CS, T.PM, T.TM, T.TI, T.P, T.BI, T.PT, T.topology
-    warm_block(T, b, area)
+    tt_active, tt_frame_delta_time, tt_frame_interpolation = F.tt_active, F.tt_frame_delta_time, F.tt_frame_interpolation
+    tt_frame_old_time, tt_now_time_scale, tt_now_update_time = F.tt_frame_old_time, F.tt_now_time_scale, F.tt_now_update_time
+    tt_running, tt_skip_count, tt_step_running = F.tt_running, F.tt_skip_count, F.tt_step_running
+    tt_time, tt_update_count, h_local_to_world = F.tt_time, F.tt_update_count, F.h_local_to_world
+    h_lossy_scale, h_world_position, h_world_rotation = F.h_lossy_scale, F.h_world_position, F.h_world_rotation
+    PS, TS, CS, PM, TM, TI, P, BI, PT, topology = F.PS, F.TS, F.CS, F.PM, F.TM, F.TI, F.P, F.BI, F.PT, F.topology
+    warm_block(F, b, area)
     w = bk.lane_width(BI, b)
     frozen = frozen_lanes(TS, TI, b, w)
     if frozen:
@@ -458,34 +463,37 @@ def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, ed
     for l in range(w):
         t = lane_team(TI, b, l)
         if t >= 0 and get1(TS, b, st.ACTIVE, l) != 0.0:
-            since_last_step = begin_frame_prelude_lane(PS, PM, TS, TM, TI, P, BI, PT, topology, tt, h, b, l, t, quality)
+            since_last_step = begin_frame_prelude_lane(F, b, l, t, quality)
             put1(TS, b, st.DISPLAY_T, l, since_last_step)   # kept until the center is done
-    skin_block(PS, PM, BI, PT, h.local_to_world, b, 0, w)
+    skin_block(PS, PM, BI, PT, h_local_to_world, b, 0, w)
     for l in range(w):
         t = lane_team(TI, b, l)
         if t >= 0 and get1(TS, b, st.ACTIVE, l) != 0.0:
-            center_and_inertia_lane(PS, PM, TS, TM, TI, P, BI, topology, b, l, h.world_position, h.world_rotation,
-                                    h.lossy_scale, tt.frame_delta_time[t], tt.now_time_scale[t], tt.skip_count[t],
-                                    tt.running[t], fi.dt, get1(TS, b, st.DISPLAY_T, l))
+            center_and_inertia_lane(PS, PM, TS, TM, TI, P, BI, topology, b, l, h_world_position,
+                                    h_world_rotation, h_lossy_scale, tt_frame_delta_time[t],
+                                    tt_now_time_scale[t], tt_skip_count[t], tt_running[t], fi.dt,
+                                    get1(TS, b, st.DISPLAY_T, l))
     reset_or_shift_block(PS, TS, BI, b)
     if colliders is not None:
         for l in range(w):
             t = lane_team(TI, b, l)
             if t >= 0 and get1(TS, b, st.ACTIVE, l) != 0.0:
-                collider_frame_lane(CS, TS, BI, T.CT, b, l, h.world_position, h.world_rotation, h.lossy_scale)
+                collider_frame_lane(CS, TS, BI, F.CT, b, l, h_world_position, h_world_rotation,
+                                    h_lossy_scale)
     if frozen:
         restore_frozen(PS, TS, CS, TI, BI, b, w, area)
-    for step in range(busiest_lane_steps(TI, tt, b, w)):
+    for step in range(busiest_lane_steps(TI, tt_update_count, b, w)):
         runs = 0
         idle = 0
         for l in range(w):
             t = lane_team(TI, b, l)
             if t < 0:
                 continue
-            team_time_begin_step_team(step, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
-                                      tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
-            put1(TS, b, st.FRAME_INTERPOLATION, l, tt.frame_interpolation[t])
-            if get1(TS, b, st.ACTIVE, l) != 0.0 and tt.step_running[t]:
+            team_time_begin_step_team(step, t, tt_active, tt_update_count, tt_time, tt_now_update_time,
+                                      tt_frame_old_time, tt_frame_interpolation, tt_step_running, fi.dt,
+                                      fi.timing)
+            put1(TS, b, st.FRAME_INTERPOLATION, l, tt_frame_interpolation[t])
+            if get1(TS, b, st.ACTIVE, l) != 0.0 and tt_step_running[t]:
                 runs += 1
             else:
                 idle += 1
@@ -494,22 +502,25 @@ def block_frame_steps(T, tt, h, b, fi, area, angle, bending, point_collision, ed
         if idle > 0:
             for l in range(w):
                 t = lane_team(TI, b, l)
-                if t >= 0 and not (get1(TS, b, st.ACTIVE, l) != 0.0 and tt.step_running[t]):
+                if t >= 0 and not (get1(TS, b, st.ACTIVE, l) != 0.0 and tt_step_running[t]):
                     save_lane(PS, TS, CS, BI, b, l, area)
-        run_step(T, tt, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones,
+        run_step(F, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones,
                  colliders)
         if idle > 0:
             for l in range(w):
                 t = lane_team(TI, b, l)
-                if t >= 0 and not (get1(TS, b, st.ACTIVE, l) != 0.0 and tt.step_running[t]):
+                if t >= 0 and not (get1(TS, b, st.ACTIVE, l) != 0.0 and tt_step_running[t]):
                     restore_lane(PS, TS, CS, BI, b, l, area)
 
 
 @kernel(forceinline=False, inline="always")
-def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles, colliders):
+def block_frame_end(F, b, fi, area, quality, lines, triangles, colliders):
     """Block b's stages after the steps: guards, E.1-E.4 and A.7 of every active lane (the
     frame's team clocks read per lane); lanes that are not simulated keep their state."""
-    PS, TS, CS, PM, TI, P, BI, PT, topology = T.PS, T.TS, T.CS, T.PM, T.TI, T.P, T.BI, T.PT, T.topology
+    tt_now_update_time, tt_old_time, tt_running = F.tt_now_update_time, F.tt_old_time, F.tt_running
+    tt_time, h_local_position, h_local_rotation = F.tt_time, F.h_local_position, F.h_local_rotation
+    h_lossy_scale, h_parent, h_world_rotation = F.h_lossy_scale, F.h_parent, F.h_world_rotation
+    PS, TS, CS, PM, TI, P, BI, PT, topology = F.PS, F.TS, F.CS, F.PM, F.TI, F.P, F.BI, F.PT, F.topology
     w = bk.lane_width(BI, b)
     dt = fi.dt
     frozen = frozen_lanes(TS, TI, b, w)
@@ -525,70 +536,70 @@ def block_frame_end(T, tt, h, b, fi, area, quality, lines, triangles, colliders)
             reset_lane_to_base(PS, TS, BI, b, l)
             put1(TS, b, st.GUARD_CODE, l, float(code))
             put1(TS, b, st.RAMP_FROM_BUILD, l, 0.0)
-        put1(TS, b, st.DISPLAY_T, l, display_fraction(dt, tt.time[t], tt.old_time[t], tt.now_update_time[t]))
-        alpha = min(max(tt.time[t] - tt.now_update_time[t], 0.0), dt) / dt if dt > 0.0 else 0.0
+        put1(TS, b, st.DISPLAY_T, l, display_fraction(dt, tt_time[t], tt_old_time[t], tt_now_update_time[t]))
+        alpha = min(max(tt_time[t] - tt_now_update_time[t], 0.0), dt) / dt if dt > 0.0 else 0.0
         put1(TS, b, st.DISPLAY_ALPHA, l, alpha)
     display_block(PS, TS, P, BI, topology, b, dt, quality)
     if quality is not None:
         if P[b, PRM_TIME_BASED_SMOOTHING] != 0.0:
-            display_constraints_block(PS, T.PP, TS, CS, T.EDS, P, BI, topology, b, dt)  # quality mode (§E.1)
+            display_constraints_block(PS, F.PP, TS, CS, F.EDS, P, BI, topology, b, dt)  # quality (§E.1)
     if lines is not None:
         line_rotations_block(PS, PM, TS, P, BI, topology, b)
     if triangles is not None:
-        triangle_rotations_block(PS, T.TRS, T.TRM, BI, topology, b)
-    transform_block(PS, PM, TS, BI, PT, topology, b, h.parent, h.world_rotation, h.lossy_scale)
+        triangle_rotations_block(PS, F.TRS, F.TRM, BI, topology, b)
+    transform_block(PS, PM, TS, BI, PT, topology, b, h_parent, h_world_rotation, h_lossy_scale)
     for l in range(w):
         t = lane_team(TI, b, l)
         if t < 0 or get1(TS, b, st.ACTIVE, l) == 0.0:
             continue
         if get1(TS, b, st.TRANSFORM_OK, l) != 0.0:
-            write_transforms_lane(PS, BI, PT, topology, b, l, h.local_position, h.local_rotation)
+            write_transforms_lane(PS, BI, PT, topology, b, l, h_local_position, h_local_rotation)
         else:
             reset_lane_to_base(PS, TS, BI, b, l)
             put1(TS, b, st.GUARD_CODE, l, 1.0)
-        end_frame_lane(TS, b, l, tt.running[t])
-        if colliders is not None and tt.running[t]:
+        end_frame_lane(TS, b, l, tt_running[t])
+        if colliders is not None and tt_running[t]:
             collider_end_frame_lane(CS, BI, b, l)
     if frozen:
         restore_frozen(PS, TS, CS, TI, BI, b, w, area)
 
 
 @kernel(inline="always")
-def _time_frame_update(tt, fi):
+def _time_frame_update(F, fi):
     team_time_frame_update(
-        tt.active, tt.suspended, tt.update_mode, tt.team_time_scale, tt.time, tt.old_time,
-        tt.now_update_time, tt.old_update_time, tt.frame_update_time, tt.frame_old_time,
-        tt.update_count, tt.skip_count, tt.frame_delta_time, tt.now_time_scale, tt.frame_add,
-        tt.running, fi.delta_time, fi.unscaled_delta_time, fi.fixed_delta_time,
+        F.tt_active, F.tt_suspended, F.tt_update_mode, F.tt_team_time_scale, F.tt_time, F.tt_old_time,
+        F.tt_now_update_time, F.tt_old_update_time, F.tt_frame_update_time, F.tt_frame_old_time,
+        F.tt_update_count, F.tt_skip_count, F.tt_frame_delta_time, F.tt_now_time_scale, F.tt_frame_add,
+        F.tt_running, fi.delta_time, fi.unscaled_delta_time, fi.fixed_delta_time,
         fi.fixed_update_count, fi.global_time_scale, fi.dt, fi.max_steps, fi.timing)
 
 
 @kernel(forceinline=False)
-def _frame_close(tt, h, fi):
-    team_time_end_frame(tt.active, tt.running, tt.step_running, tt.skip_count, tt.time, tt.old_time,
-                        tt.now_update_time, tt.old_update_time, tt.frame_update_time,
-                        tt.frame_old_time, fi.timing)
-    h.build_pose_pending[0] = 0  # teams added or reset later reset at their first frame
+def _frame_close(F, fi):
+    team_time_end_frame(F.tt_active, F.tt_running, F.tt_step_running, F.tt_skip_count, F.tt_time, F.tt_old_time,
+                        F.tt_now_update_time, F.tt_old_update_time, F.tt_frame_update_time,
+                        F.tt_frame_old_time, fi.timing)
+    F.h_build_pose_pending[0] = 0  # teams added or reset later reset at their first frame
 
 
 @kernel(forceinline=False)
-def frame_counts(T, tt):
+def frame_counts(F):
     """What the frame did, for the caller's metrics and events: (most steps of a team,
     particle-steps, lanes with a guard code). Integers: the same on every CPU."""
     most_steps = np.int64(0)
     particle_steps = np.int64(0)
     guarded = 0
-    for i in range(T.blocks.shape[0]):
-        b = T.blocks[i]
-        n = np.int64(T.BI[b, bk.BI_N])
-        for l in range(bk.lane_width(T.BI, b)):
-            t = T.TI[b, bk.TI_TEAM + l]
+    for i in range(F.blocks.shape[0]):
+        b = F.blocks[i]
+        n = np.int64(F.BI[b, bk.BI_N])
+        for l in range(bk.lane_width(F.BI, b)):
+            t = F.TI[b, bk.TI_TEAM + l]
             if t < 0:
                 continue
-            c = np.int64(tt.update_count[t])
+            c = np.int64(F.tt_update_count[t])
             most_steps = max(most_steps, c)
             particle_steps += c * n
-            if get1(T.TS, b, st.GUARD_CODE, l) != 0.0:
+            if get1(F.TS, b, st.GUARD_CODE, l) != 0.0:
                 guarded += 1
     return most_steps, particle_steps, guarded
 
@@ -598,21 +609,20 @@ def simulate_frame(F, frame_values, area, wind_zones, angle, bending, point_coll
                    quality, lines, triangles, wind, colliders):
     """The whole cloth frame, one block after another (see the module docstring): each
     block's begin, steps and end. ``F``: the frame's arrays (``frame_call.FrameArrays``:
-    ``Tables``, ``TimeArrays``, ``HierarchyArrays`` in one StructRef, ``frame_tuples``);
+    ``Tables``, ``TimeArrays`` (``tt_*``), ``HierarchyArrays`` (``h_*``) in one StructRef);
     ``frame_values``: the frame inputs (``frame_input_values``); ``area``: ``lane_save_area``.
     Returns ``frame_counts``. The system calls it directly (one compiled function between
     Python and the stages: a wrapper kernel around it would optimise and emit every stage's
     code once more on the first run)."""
-    T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
-    prepare_lanes(T.TS, T.TI, T.P, T.BI, T.blocks, tt, h)
-    _time_frame_update(tt, fi)
-    for i in range(T.blocks.shape[0]):
-        block_frame_steps(T, tt, h, T.blocks[i], fi, area[0], angle, bending, point_collision, edge_collision,
+    prepare_lanes(F)
+    _time_frame_update(F, fi)
+    for i in range(F.blocks.shape[0]):
+        block_frame_steps(F, F.blocks[i], fi, area[0], angle, bending, point_collision, edge_collision,
                           motion, quality, wind, wind_zones, colliders)
-        block_frame_end(T, tt, h, T.blocks[i], fi, area[0], quality, lines, triangles, colliders)
-    _frame_close(tt, h, fi)
-    return frame_counts(T, tt)
+        block_frame_end(F, F.blocks[i], fi, area[0], quality, lines, triangles, colliders)
+    _frame_close(F, fi)
+    return frame_counts(F)
 
 
 @kernel(forceinline=False)
@@ -623,12 +633,11 @@ def begin_parallel_frame(F, frame_values, block_worker, worker_load):
     ``simulate_worker`` on each thread (Python threads: the kernels release the GIL) and
     ``end_parallel_frame``; blocks are independent and each runs in its own order, so the
     results are the serial kernel's bits."""
-    T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
-    prepare_lanes(T.TS, T.TI, T.P, T.BI, T.blocks, tt, h)
-    _time_frame_update(tt, fi)
+    prepare_lanes(F)
+    _time_frame_update(F, fi)
     workers = max(1, min(fi.threads, worker_load.shape[0]))
-    assign_workers(T, tt, WorkerTable(block_worker, worker_load), workers)
+    assign_workers(F, WorkerTable(block_worker, worker_load), workers)
     return workers
 
 
@@ -637,52 +646,50 @@ def simulate_worker(F, frame_values, area, wind_zones, block_worker, worker, ang
                     edge_collision, motion, quality, lines, triangles, wind, colliders):
     """Thread ``worker``'s share of a parallel frame: the begin, steps and end of each block
     ``assign_workers`` dealt to it (``block_worker``), with its own row of the save area."""
-    T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
-    for i in range(T.blocks.shape[0]):
-        b = T.blocks[i]
+    for i in range(F.blocks.shape[0]):
+        b = F.blocks[i]
         if block_worker[b] == worker:
-            block_frame_steps(T, tt, h, b, fi, area[worker], angle, bending, point_collision, edge_collision,
+            block_frame_steps(F, b, fi, area[worker], angle, bending, point_collision, edge_collision,
                               motion, quality, wind, wind_zones, colliders)
-            block_frame_end(T, tt, h, b, fi, area[worker], quality, lines, triangles, colliders)
+            block_frame_end(F, b, fi, area[worker], quality, lines, triangles, colliders)
 
 
 @kernel(forceinline=False)
 def end_parallel_frame(F, frame_values):
     """A frame on several threads, after the threads: ``simulate_frame``'s close of frame
     (§A.7) and its counts (``frame_counts``)."""
-    T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
-    _frame_close(tt, h, fi)
-    return frame_counts(T, tt)
+    _frame_close(F, fi)
+    return frame_counts(F)
 
 
 @kernel(forceinline=False)
-def assign_workers(T, tt, wt, workers):
+def assign_workers(F, wt, workers):
     """``wt.block_worker`` for this frame: the live blocks cut into ``workers`` runs of
     consecutive blocks of about equal load (a block's load: its particles times the lanes it
     uses times the steps of its busiest lane, plus one for the frame stages). Consecutive
     blocks on one thread keep each thread's writes (particle and team rows, team clocks, the
     bones written back) in one region of memory, away from the other threads'."""
     total = np.int64(0)
-    for i in range(T.blocks.shape[0]):
-        total += block_load(T, tt, T.blocks[i])
+    for i in range(F.blocks.shape[0]):
+        total += block_load(F, F.blocks[i])
     for w in range(workers):
         wt.worker_load[w] = 0
     done = np.int64(0)
-    for i in range(T.blocks.shape[0]):
-        b = T.blocks[i]
+    for i in range(F.blocks.shape[0]):
+        b = F.blocks[i]
         w = min(workers - 1, int((done * workers) // max(total, 1)))
-        load = block_load(T, tt, b)
+        load = block_load(F, b)
         wt.block_worker[b] = w
         wt.worker_load[w] += load
         done += load
 
 
 @kernel
-def block_load(T, tt, b):
-    steps = busiest_lane_steps(T.TI, tt, b, bk.lane_width(T.BI, b))
-    return np.int64(T.BI[b, bk.BI_N]) * np.int64(T.BI[b, bk.BI_LANES_USED]) * np.int64(steps + 1)
+def block_load(F, b):
+    steps = busiest_lane_steps(F.TI, F.tt_update_count, b, bk.lane_width(F.BI, b))
+    return np.int64(F.BI[b, bk.BI_N]) * np.int64(F.BI[b, bk.BI_LANES_USED]) * np.int64(steps + 1)
 
 
 @kernel(inline="always")
@@ -705,10 +712,9 @@ def compile_end_stages(F, frame_values, area, quality, lines, triangles, collide
     kernels' argument types, never run (see ``typed_only``): on a first run the system's process
     compiles them while a forked helper compiles the step's stages (``compile_step_stages``,
     ``solver/compile_helper.py``)."""
-    T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
-    if typed_only(T.blocks.shape[0]):
-        block_frame_end(T, tt, h, T.blocks[0], fi, area[0], quality, lines, triangles, colliders)
+    if typed_only(F.blocks.shape[0]):
+        block_frame_end(F, F.blocks[0], fi, area[0], quality, lines, triangles, colliders)
 
 
 @kernel(forceinline=False)
@@ -717,10 +723,9 @@ def compile_step_stages(F, frame_values, wind_zones, angle, bending, point_colli
     """The step's stages (``run_step``) typed and compiled with exactly the frame kernels'
     argument types, never run (see ``typed_only``): a first run's forked helper compiles them
     into numba's cache (``solver/compile_helper.py``)."""
-    T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
-    if typed_only(T.blocks.shape[0]):
-        run_step(T, tt, T.blocks[0], fi, angle, bending, point_collision, edge_collision, motion, quality, wind,
+    if typed_only(F.blocks.shape[0]):
+        run_step(F, F.blocks[0], fi, angle, bending, point_collision, edge_collision, motion, quality, wind,
                  wind_zones, colliders)
 
 
@@ -731,25 +736,26 @@ def compile_late_stages(F, frame_values, colliders):
     argument types, never run (see ``typed_only``): a first run's helper compiles them after
     the step's stages (``solver/compile_helper.py``), while the system's process is still
     working forward through the begin of frame, so that the two meet in between."""
-    T, tt, h = frame_tuples(F)
     fi = frame_inputs(frame_values)
-    if typed_only(T.blocks.shape[0]):
-        frame_counts(T, tt)
-        _frame_close(tt, h, fi)
-        b = T.blocks[0]
-        PS, TS, CS, PM, TM, TI, P, BI, topology = T.PS, T.TS, T.CS, T.PM, T.TM, T.TI, T.P, T.BI, T.topology
-        w = bk.lane_width(BI, b)
-        for step in range(busiest_lane_steps(TI, tt, b, w)):
+    if typed_only(F.blocks.shape[0]):
+        frame_counts(F)
+        _frame_close(F, fi)
+        b = F.blocks[0]
+        w = bk.lane_width(F.BI, b)
+        for step in range(busiest_lane_steps(F.TI, F.tt_update_count, b, w)):
             for l in range(w):
-                t = lane_team(TI, b, l)
-                team_time_begin_step_team(step, t, tt.active, tt.update_count, tt.time, tt.now_update_time,
-                                          tt.frame_old_time, tt.frame_interpolation, tt.step_running, fi.dt, fi.timing)
+                t = lane_team(F.TI, b, l)
+                team_time_begin_step_team(step, t, F.tt_active, F.tt_update_count, F.tt_time,
+                                          F.tt_now_update_time, F.tt_frame_old_time, F.tt_frame_interpolation,
+                                          F.tt_step_running, fi.dt, fi.timing)
         if colliders is not None:
             for l in range(w):
-                collider_frame_lane(CS, TS, BI, T.CT, b, l, h.world_position, h.world_rotation, h.lossy_scale)
-        reset_or_shift_block(PS, TS, BI, b)
+                collider_frame_lane(F.CS, F.TS, F.BI, F.CT, b, l, F.h_world_position, F.h_world_rotation,
+                                    F.h_lossy_scale)
+        reset_or_shift_block(F.PS, F.TS, F.BI, b)
         for l in range(w):
-            t = lane_team(TI, b, l)
-            center_and_inertia_lane(PS, PM, TS, TM, TI, P, BI, topology, b, l, h.world_position, h.world_rotation,
-                                    h.lossy_scale, tt.frame_delta_time[t], tt.now_time_scale[t], tt.skip_count[t],
-                                    tt.running[t], fi.dt, get1(TS, b, st.DISPLAY_T, l))
+            t = lane_team(F.TI, b, l)
+            center_and_inertia_lane(F.PS, F.PM, F.TS, F.TM, F.TI, F.P, F.BI, F.topology, b, l, F.h_world_position,
+                                    F.h_world_rotation, F.h_lossy_scale, F.tt_frame_delta_time[t],
+                                    F.tt_now_time_scale[t], F.tt_skip_count[t], F.tt_running[t], fi.dt,
+                                    get1(F.TS, b, st.DISPLAY_T, l))

@@ -10,7 +10,9 @@ tail (a frame of ~32 us) that is worth having. ``frame_arrays`` builds the Struc
 change of tables (``ClothSystem._frame_arrays``); it shares the numpy arrays, so the kernel
 sees every write made to them. The frame kernels (``frame.simulate_frame``, and a parallel
 frame's ``begin_parallel_frame``, ``simulate_worker``, ``end_parallel_frame``) take it and
-rebuild the namedtuples from its fields (``frame.frame_tuples``).
+pass it down the frame recipe (``frame.py``'s module docstring), each recipe function binding
+the arrays it uses to locals: a namedtuple of the arrays copied into each function instead
+costs numba one reference count per array and copy (docs/architecture.md).
 
 With ``NUMBA_DISABLE_JIT=1`` the StructRef is a plain namedtuple with the same field names
 (``FrameArraysTuple``), so the frame runs as Python.
