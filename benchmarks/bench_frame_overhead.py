@@ -57,7 +57,7 @@ def orchestration(scene_name: str) -> None:
 
     player, system = _player(scene_name, True)
     player.run(30)
-    T, tt, h = system.tables, system._time, system._hierarchy
+    T, tt, FA = system.tables, system._time, system._frame_arrays()
     area = system._save_area[0]
     values = F.frame_input_values()
     values[:13] = (1 / 60, 1 / 60, 0.02, 0, 1.0, 1 / 90, 3, 0, 1.0, 1.0, 1.0, 1.0, 1)
@@ -70,8 +70,8 @@ def orchestration(scene_name: str) -> None:
         return s
 
     @numba.njit
-    def prepare(T, tt, h):
-        F.prepare_lanes(T.TS, T.TI, T.P, T.BI, T.blocks, tt, h)
+    def prepare(FA):
+        F.prepare_lanes(FA)
 
     @numba.njit
     def begin_step(T, tt, values):
@@ -97,7 +97,9 @@ def orchestration(scene_name: str) -> None:
     @numba.njit
     def save(T, area):
         for i in range(T.blocks.shape[0]):
-            F.save_lanes(T.PS, T.TS, T.CS, T.BI, T.blocks[i], area)
+            b = T.blocks[i]
+            for l in range(bk.lane_width(T.BI, b)):
+                F.save_lane(T.PS, T.TS, T.CS, T.BI, b, l, area)
 
     @numba.njit
     def frame_end(T, tt):
@@ -111,29 +113,28 @@ def orchestration(scene_name: str) -> None:
                         collider_end_frame_lane(T.CS, T.BI, b, l)
 
     @numba.njit
-    def prelude(T, tt, h):
+    def prelude(FA):
         s = 0.0
-        for i in range(T.blocks.shape[0]):
-            b = T.blocks[i]
-            for l in range(bk.lane_width(T.BI, b)):
-                t = T.TI[b, bk.TI_TEAM + l]
+        for i in range(FA.blocks.shape[0]):
+            b = FA.blocks[i]
+            for l in range(bk.lane_width(FA.BI, b)):
+                t = FA.TI[b, bk.TI_TEAM + l]
                 if t >= 0:
-                    s += F.begin_frame_prelude_lane(T.PS, T.PM, T.TS, T.TM, T.TI, T.P, T.BI, T.PT, T.topology, tt, h,
-                                                    b, l, t, None)
+                    s += F.begin_frame_prelude_lane(FA, b, l, t, None)
         return s
 
     @numba.njit
-    def counts(T, tt):
-        return F.frame_counts(T, tt)
+    def counts(FA):
+        return F.frame_counts(FA)
 
-    cases = [("scale suspension and culling (per frame)", lambda: prepare(T, tt, h)),
+    cases = [("scale suspension and culling (per frame)", lambda: prepare(FA)),
              ("team time of one step", lambda: begin_step(T, tt, values)),
              ("attenuations of one step", lambda: attenuations(T)),
-             ("frame prelude (per frame)", lambda: prelude(T, tt, h)),
+             ("frame prelude (per frame)", lambda: prelude(FA)),
              ("lanes that do not run: check (per frame)", lambda: frozen(T)),
              ("lanes that do not run: save every block", lambda: save(T, area)),
              ("frame-end bookkeeping (per frame)", lambda: frame_end(T, tt)),
-             ("frame counts (per frame)", lambda: counts(T, tt))]
+             ("frame counts (per frame)", lambda: counts(FA))]
     for _name, fn in cases:
         fn()
     print(f"{scene_name}: {len(system.live_teams)} teams in {T.blocks.shape[0]} blocks, best of 20 calls")

@@ -95,13 +95,13 @@ def _offset(*args):
 A.restoration_offset = _offset
 
 
-def _step(T, tt, b, *rest):
-    """``run_step`` of block b, recorded for each of its teams that runs this step (the others'
-    lanes are put back by the caller afterwards)."""
+def _step(T, b, *rest):
+    """``run_step`` of block b (``T``: the frame's arrays), recorded for each of its teams that
+    runs this step (the others' lanes are put back by the caller afterwards)."""
     system = SYSTEM[0]
     _moves.clear()
     v_before = system.particles.velocity
-    _run_step(T, tt, b, *rest)
+    _run_step(T, b, *rest)
     zero = np.zeros_like(v_before)
     record = {key: _moves.get(key, zero) for key in PASSES}
     ps = system.particles
@@ -110,7 +110,7 @@ def _step(T, tt, b, *rest):
     record["colliders"]["shape"] = system.collider_slots()[2]
     for lane in range(B.lane_width(T.BI, b)):
         t = int(T.TI[b, B.TI_TEAM + lane])
-        if t >= 0 and get1(T.TS, b, ST.ACTIVE, lane) != 0.0 and tt.step_running[t]:
+        if t >= 0 and get1(T.TS, b, ST.ACTIVE, lane) != 0.0 and T.tt_step_running[t]:
             STEPS.setdefault(t, []).append(record)
 
 

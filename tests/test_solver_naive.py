@@ -69,7 +69,7 @@ def test_numba_step_matches_the_numpy_reference(frames, overrides):
     fi = FrameInputs(1 / 60, 1 / 60, 0.02, 0, 1.0, 1.0 / 90.0, 3, 0, 1.0, 1.0, 1.0, 1.0, 1)
     b, _lane = s.layout.place(0)
     stages = s.stages
-    run_step(s.tables, s._time, np.int32(b), fi, stages.angle, stages.bending, stages.point_collision,
+    run_step(s.tables, np.int32(b), fi, stages.angle, stages.bending, stages.point_collision,
              stages.edge_collision, stages.motion, stages.quality, stages.wind, None, stages.colliders)
     for name in ("next_pos", "old_pos", "velocity_pos", "velocity", "real_velocity", "base_pos",
                  "step_basic_pos", "friction", "static_friction", "collision_normal"):

@@ -365,7 +365,8 @@ def busiest_lane_steps(TI, update_count, b, w):
 def run_step(F, b, fi, angle, bending, point_collision, edge_collision, motion, quality, wind, wind_zones,
              colliders):
     """One simulation step of block b (§D.0 order): every lane at its own frame
-    interpolation (``FRAME_INTERPOLATION``)."""
+    interpolation (``FRAME_INTERPOLATION``). ``F``: the frame's ``FrameArrays``, or the
+    solver's ``Tables`` (a step reads table fields only)."""
     PS, TS, CS, PM, PP, TM, P, BI, topology = F.PS, F.TS, F.CS, F.PM, F.PP, F.TM, F.P, F.BI, F.topology
     dt = fi.dt
     ratio = fi.frequency_ratio
