@@ -226,6 +226,25 @@ def test_phase_wall_times_are_recorded_every_frame_and_summed_by_run():
         player.run(-1)
 
 
+def test_a_phase_without_a_system_records_zero_and_a_timed_phase_its_wall_time(monkeypatch):
+    import magica_py.runtime.player as player_module
+
+    player = make_player()   # RESTORE, UPDATE, AFTER_RENDERING have systems; the others none
+    clock = iter(float(k) for k in range(1000))   # every clock read one second later
+    monkeypatch.setattr(player_module._time, "perf_counter", lambda: next(clock))
+    metrics = player.step().metrics
+    assert metrics["time.fixed_update"] == 0.0
+    assert metrics["time.late_update"] == 0.0
+    assert metrics["time.render_write"] == 0.0
+    # one clock read per boundary of a timed phase: RESTORE 0 -> 1 s; UPDATE 1 -> 5 s (the
+    # animation system reads three clocks of its own: 2, 3, 4); AFTER_RENDERING 5 -> 6 s
+    assert (metrics["time.restore"], metrics["time.update"], metrics["time.after_rendering"]) == (1.0, 4.0, 1.0)
+    assert (metrics["animation.drivers"], metrics["animation.propagate"]) == (1.0, 1.0)
+    # a system added later gets its phase timed from the next frame on
+    player.schedule.add(Phase.LATE_UPDATE, System("late", lambda ctx: None))
+    assert player.step().metrics["time.late_update"] == 1.0
+
+
 def test_frame_time_list_drives_the_player_and_for_scene_reads_settings():
     settings = SimpleNamespace(frame_times=[1 / 60, 1.0], fixed_delta_time=0.02,
                                maximum_delta_time=0.25, time_scale=1.0)
