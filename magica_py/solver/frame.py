@@ -450,8 +450,9 @@ def block_frame_steps(F, b, fi, area, angle, bending, point_collision, edge_coll
     """Block b's frame up to the write-back: its lanes' begin of frame and the steps (each
     lane advancing its own clock, §A.6; the clock of a suspended but enabled team advances
     too). Lanes that do not run keep their state (module docstring)."""
-    tt_active, tt_frame_delta_time, tt_frame_interpolation = F.tt_active, F.tt_frame_delta_time, F.tt_frame_interpolation
-    tt_frame_old_time, tt_now_time_scale, tt_now_update_time = F.tt_frame_old_time, F.tt_now_time_scale, F.tt_now_update_time
+    tt_active, tt_frame_delta_time = F.tt_active, F.tt_frame_delta_time
+    tt_frame_interpolation, tt_frame_old_time = F.tt_frame_interpolation, F.tt_frame_old_time
+    tt_now_time_scale, tt_now_update_time = F.tt_now_time_scale, F.tt_now_update_time
     tt_running, tt_skip_count, tt_step_running = F.tt_running, F.tt_skip_count, F.tt_step_running
     tt_time, tt_update_count, h_local_to_world = F.tt_time, F.tt_update_count, F.h_local_to_world
     h_lossy_scale, h_world_position, h_world_rotation = F.h_lossy_scale, F.h_world_position, F.h_world_rotation
