@@ -129,7 +129,7 @@ def main() -> None:
     print(f"{args.scene}: {calls} reference-count calls in {args.frames} frames, {calls / n:.1f} a frame")
     print(f"{'a frame':>10}  called from")
     for name, c in per_function.most_common(args.top):
-        print(f"{c / n:10.1f}  {name}")
+        print(f"{c / n:10.1f}  {name if len(name) <= 100 else name[:97] + '...'}")
 
 
 if __name__ == "__main__":
