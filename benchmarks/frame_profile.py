@@ -90,6 +90,25 @@ def short_name(symbol: str) -> str:
     return ".".join(parts) or symbol
 
 
+def warm_player(scene_name: str, overrides=(), parallel: bool | None = None):
+    """``(path, player)``: the scene (``configs/NAME.yaml`` for a bare name) with its cloth
+    system (``parallel``: the system's own choice when None), after 30 warm-up frames (the
+    compiles, from the numba cache when there is one)."""
+    sys.path.insert(0, str(ROOT))
+    from magica_py.config import load_scene
+    from magica_py.runtime.player import Player
+    from magica_py.solver.system import ClothSystem
+
+    path = pathlib.Path(scene_name)
+    if not path.suffix:
+        path = ROOT / "configs" / f"{scene_name}.yaml"
+    scene = load_scene(path, overrides=tuple(overrides))
+    player = Player.for_scene(scene)
+    ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings, parallel=parallel).attach(player)
+    player.run(30)
+    return path, player
+
+
 def attach_perf(pid: int, rate: int, out: str) -> subprocess.Popen:
     proc = subprocess.Popen(["perf", "record", "-e", "cpu-clock", "-F", str(rate), "-p", str(pid), "-o", out],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -137,22 +156,12 @@ def main() -> None:
     sys.path.insert(0, str(ROOT))
     import numba
 
-    from magica_py.config import load_scene
-    from magica_py.runtime.player import Player
     from magica_py.scene import animation, propagation
     from magica_py.solver import frame
-    from magica_py.solver.system import ClothSystem
 
     if args.threads > 1:
         numba.set_num_threads(args.threads)
-    path = pathlib.Path(args.scene)
-    if not path.suffix:
-        path = ROOT / "configs" / f"{args.scene}.yaml"
-    scene = load_scene(path, overrides=tuple(args.set))
-    player = Player.for_scene(scene)
-    ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings,
-                parallel=args.threads > 1).attach(player)
-    player.run(30)
+    path, player = warm_player(args.scene, args.set, parallel=args.threads > 1)
 
     functions = []
     for dispatcher in (frame.simulate_frame, frame.simulate_worker, frame.begin_parallel_frame,

@@ -44,18 +44,9 @@ def child(scene_name: str, frames: int, overrides: tuple, table: str) -> None:
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from numba.core.registry import CPUDispatcher
 
-    from frame_profile import library_functions, short_name
-    from magica_py.config import load_scene
-    from magica_py.runtime.player import Player
-    from magica_py.solver.system import ClothSystem
+    from frame_profile import library_functions, short_name, warm_player
 
-    path = pathlib.Path(scene_name)
-    if not path.suffix:
-        path = ROOT / "configs" / f"{scene_name}.yaml"
-    scene = load_scene(path, overrides=overrides)
-    player = Player.for_scene(scene)
-    ClothSystem(scene.hierarchy, scene.cloths, scene.colliders, scene.settings).attach(player)
-    player.run(30)
+    _path, player = warm_player(scene_name, overrides)
     functions, seen = [], set()
     for name, module in list(sys.modules.items()):
         if not name.startswith("magica_py"):
