@@ -166,7 +166,7 @@ def main() -> None:
     functions = []
     for dispatcher in (frame.simulate_frame, frame.simulate_worker, frame.begin_parallel_frame,
                        frame.end_parallel_frame, animation.apply_drivers, propagation.propagate_listed,
-                       propagation.propagate_plan_serial, propagation.propagate_plan_parallel):
+                       propagation.propagate_chunks):
         functions += library_functions(dispatcher)
     # a function linked into two libraries appears twice at two addresses: both are kept
     functions = sorted(set(functions))

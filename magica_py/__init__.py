@@ -1,9 +1,10 @@
 """magica_py: MagicaCloth2-style BoneCloth secondary motion in Python + numba.
 
 Importing the package configures numba's on-disk cache before numba is imported (see
-``_configure_numba_cache``) and lets idle OpenMP threads sleep (``_configure_thread_waiting``);
-everything else is imported lazily so that ``magica-py --help``
-stays fast.
+``_configure_numba_cache``); everything else is imported lazily so that ``magica-py --help``
+stays fast. The package uses none of numba's parallel threading layers (its threads are
+Python threads running ``nogil`` kernels: ``magica_py/threads.py``), so it sets no OpenMP
+variable.
 
 The public API (docs/api.md), each name imported on first use (PEP 562):
 
@@ -89,23 +90,7 @@ def _configure_numba_cache() -> None:
         config.reload_config()
 
 
-def _configure_thread_waiting() -> None:
-    """Let idle OpenMP threads sleep instead of spin: ``OMP_WAIT_POLICY=PASSIVE`` unless set.
-
-    numba's default threading layer here is GNU OpenMP, whose worker threads busy-wait
-    between parallel regions. A frame alternates parallel kernels with serial Python, so the
-    workers spin at 100 % of a core through the serial parts, and on a machine with anything
-    else running they take the cores the main thread needs: the light scene on 2 threads took
-    24.9 ms a frame spinning and 5.4 ms sleeping while another process compiled
-    (docs/BENCHMARKS.md, *Idle OpenMP threads*). A user-set ``OMP_WAIT_POLICY`` is respected.
-    libgomp reads the variable once, when it is loaded (numba loads it at its first parallel
-    kernel), so a process that loaded OpenMP before importing magica_py keeps its policy.
-    """
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
-
 _configure_numba_cache()
-_configure_thread_waiting()
 
 
 # name -> (module, attribute): the public API, imported on first access (PEP 562)

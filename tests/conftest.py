@@ -11,6 +11,10 @@
   with every driver kind (tests/test_animation.py pins the kinds a scene uses and the same
   bits). Subprocesses inherit it.
   ``MAGICA_STAGES=used python -m pytest ...`` runs the suite on each scene's own selection.
+* ``OMP_WAIT_POLICY=PASSIVE`` (unless set otherwise): the test-only reference solver's parallel
+  frame (tests/reference_solver) uses numba's ``prange``, whose OpenMP threads would otherwise
+  spin between its regions and take the cores the rest of the suite needs. The package itself
+  uses no ``prange`` (magica_py/threads.py).
 * ``shared_data``: the third-party test data in ../shared/data (see its NOTICE.md).
 """
 import os
@@ -20,6 +24,7 @@ import pytest
 
 os.environ.setdefault("RERUN_STRICT", "1")
 os.environ.setdefault("MAGICA_STAGES", "all")
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO_ROOT.parent / "shared" / "data"

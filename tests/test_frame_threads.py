@@ -1,4 +1,4 @@
-"""The extra threads of a parallel frame (magica_py/solver/threads.py): one job per thread per
+"""The extra threads of a parallel frame (magica_py/threads.py): one job per thread per
 frame, errors raised in the calling thread, threads that leave when told or when unused."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from magica_py.solver.threads import FrameThreads
+from magica_py.threads import FrameThreads
 
 
 def test_each_job_runs_once_on_a_thread_of_its_own_per_frame():

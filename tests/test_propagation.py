@@ -454,6 +454,60 @@ def test_small_and_lane_paths_give_the_same_reference_bits(small_plan, monkeypat
     assert_same_bits(world_state(h), reference_propagate(h))
 
 
+@pytest.mark.parametrize("parallel_plan", [0, 10**9])
+@pytest.mark.parametrize("threads", [2, 3])
+def test_threaded_and_in_turn_passes_of_a_chunked_plan_give_the_reference_bits(parallel_plan, threads,
+                                                                              monkeypatch):
+    """A plan of several chunks runs them on its threads from ``PARALLEL_PLAN`` nodes on and
+    one after the other below: both give the reference bits (``parallel_plan`` 0 forces the
+    threads, 10**9 the calling thread), frame after frame on the same threads."""
+    from magica_py.scene import propagation
+
+    monkeypatch.setattr(propagation, "PARALLEL_PLAN", parallel_plan)
+    rng = np.random.default_rng(31)
+    h = random_forest(rng, 1200, 24)
+    h.threads = threads
+    plan = h.plan()
+    assert plan.chunks == threads
+    pools = []
+    for _frame in range(3):
+        perturb(rng, h, np.arange(1200))
+        h.propagate(plan)
+        assert_same_bits(world_state(h), reference_propagate(h))
+        pools.append(plan._pool)
+    if parallel_plan == 0:   # one pool of threads - 1 threads, made at the first pass and kept
+        assert pools[0] is not None and all(p is pools[0] for p in pools)
+        assert pools[0].count == threads - 1
+        assert all(t.is_alive() for t in pools[0]._threads)
+    else:
+        assert pools == [None, None, None]
+
+
+def test_an_error_in_a_chunks_thread_is_raised_in_the_calling_thread(monkeypatch):
+    """A chunk that fails on another thread fails the pass in the thread that asked for it,
+    after the other chunks are done (nothing is left running on the hierarchy's arrays)."""
+    from magica_py.scene import propagation
+
+    monkeypatch.setattr(propagation, "PARALLEL_PLAN", 0)
+    rng = np.random.default_rng(32)
+    h = random_forest(rng, 600, 12)
+    h.threads = 2
+    plan = h.plan()
+    calls = []
+    real = propagation.propagate_chunks
+
+    def failing_second_chunk(c0, c1, *rest):
+        calls.append(c0)
+        if c0 == 1:
+            raise RuntimeError("chunk 1 failed")
+        return real(c0, c1, *rest)
+
+    monkeypatch.setattr(propagation, "propagate_chunks", failing_second_chunk)
+    with pytest.raises(RuntimeError, match="chunk 1 failed"):
+        h.propagate(plan)
+    assert sorted(calls) == [0, 1]
+
+
 # ----------------------------------------------------------------------------- deferred propagation
 def _count_runs(monkeypatch, plan):
     """Record how often ``plan`` runs its pass (``plan.execute``)."""

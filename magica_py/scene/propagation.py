@@ -9,7 +9,9 @@ are the same bits; only the order of independent nodes changes:
 
 * the plan's nodes are split into **chunks** of whole top-level trees (the hierarchy's roots),
   balanced by node count; chunks share no node and no parent, so they run on separate
-  threads (``threads`` > 1, numba ``prange``);
+  threads (``threads`` > 1: the calling thread and the plan's ``magica_py.threads.FrameThreads``,
+  each running ``propagate_chunks``, a ``nogil`` kernel, over its chunk) when the plan has at
+  least ``PARALLEL_PLAN`` nodes, and one after the other in the calling thread otherwise;
 * a chunk's **plan trees** (a node whose parent is outside the plan, with its descendants in
   the plan) are grouped, in index order, into **tiles** of at most ``TILE_NODES`` nodes (a
   larger tree is a tile of its own). A tile starts with a **warm-up**: every cache line of its
@@ -59,15 +61,16 @@ scratch               (c, R * S + 1)       per chunk, rows of S = ``LANE_STRIDE`
 from __future__ import annotations
 
 import weakref
+from functools import partial
 
 import numpy as np
-from numba import prange
 
 from magica_py.jit import kernel
 from magica_py.kernels.cache_lines import read_lines
 from magica_py.kernels.math3d import (
     load3, load4, q_inverse, q_mul, q_normalize, q_rotate, q_to_matrix, store4,
 )
+from magica_py.threads import FrameThreads
 
 # lanes per segment: wide enough that the per-segment work is small beside the lanes' (128: 10 %
 # slower on the light scene, 64: twice as slow), small enough for the scratch to stay in L2
@@ -76,6 +79,11 @@ SEGMENT_WIDTH = 512
 # dozen bones the call with the plan's lane arrays costs more than the nodes themselves
 # (a single 8-bone tail: two calls a frame, ~2 us each)
 SMALL_PLAN = 256
+# a plan of fewer nodes runs its chunks one after the other in the calling thread: handing a
+# chunk to another thread and waiting for it costs ~30-40 us (the median on a 2-core VM), the
+# work of ~600 nodes; two threads drew level with one at ~1,100 nodes and were ahead at ~2,200
+# (docs/BENCHMARKS.md, session 25)
+PARALLEL_PLAN = 2048
 # lanes computed together by the vectorised loop (8 doubles: AVX-512; two vectors with AVX2):
 # a segment's lane count is rounded up to a multiple of it
 LANE_BLOCK = 8
@@ -339,26 +347,14 @@ def propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_tiles
 
 
 @kernel
-def propagate_plan_serial(roots, chunk_roots, order, segment_start, chunk_tiles, tile_segments,
-                          tile_warm, warm_start, warm_stop, segment_slot, parent_slot, scratch,
-                          parent, local_position, local_rotation, local_scale, world_position,
-                          world_rotation, lossy_scale, local_to_world):
-    """Every chunk of a plan in turn (one thread)."""
-    for chunk in range(chunk_roots.shape[0] - 1):
+def propagate_chunks(c0, c1, roots, chunk_roots, order, segment_start, chunk_tiles, tile_segments,
+                     tile_warm, warm_start, warm_stop, segment_slot, parent_slot, scratch, parent,
+                     local_position, local_rotation, local_scale, world_position, world_rotation,
+                     lossy_scale, local_to_world):
+    """Chunks ``c0 .. c1 - 1`` of a plan, one after the other: a whole plan in one thread, or
+    one thread's chunk of a parallel pass (chunks share no node: the same bits either way)."""
+    for chunk in range(c0, c1):
         propagate_chunk(chunk, roots, chunk_roots, order, segment_start, chunk_tiles,
-                        tile_segments, tile_warm, warm_start, warm_stop, segment_slot,
-                        parent_slot, scratch, parent, local_position, local_rotation,
-                        local_scale, world_position, world_rotation, lossy_scale, local_to_world)
-
-
-@kernel(parallel=True)
-def propagate_plan_parallel(roots, chunk_roots, order, segment_start, chunk_tiles, tile_segments,
-                            tile_warm, warm_start, warm_stop, segment_slot, parent_slot, scratch,
-                            parent, local_position, local_rotation, local_scale, world_position,
-                            world_rotation, lossy_scale, local_to_world):
-    """The chunks of a plan on numba's threads (chunks share no node: same bits as serial)."""
-    for chunk in prange(chunk_roots.shape[0] - 1):
-        propagate_chunk(np.int64(chunk), roots, chunk_roots, order, segment_start, chunk_tiles,
                         tile_segments, tile_warm, warm_start, warm_stop, segment_slot,
                         parent_slot, scratch, parent, local_position, local_rotation,
                         local_scale, world_position, world_rotation, lossy_scale, local_to_world)
@@ -402,6 +398,7 @@ class PropagationPlan:
         rows = OUTPUT_ROW + LANE_OUTPUT * max(slots, 1)
         self.scratch = np.zeros((chunks, rows * LANE_STRIDE + 1))
         self._covers = weakref.WeakKeyDictionary()   # other plan -> self.covers(other)
+        self._pool = None   # FrameThreads for chunks 1 .. c - 1, made at the first threaded pass
 
     @property
     def chunks(self) -> int:
@@ -430,19 +427,30 @@ class PropagationPlan:
 
     def execute(self, parent, local_position, local_rotation, local_scale, world_position,
                 world_rotation, lossy_scale, local_to_world) -> None:
-        """The plan's pass over these hierarchy arrays (one numba call); ``TransformHierarchy``
-        calls it with its own arrays."""
+        """The plan's pass over these hierarchy arrays (one numba call, or one per chunk on the
+        plan's threads: module docstring); ``TransformHierarchy`` calls it with its own arrays."""
         if self.size == 0:
             return
         if self.size <= SMALL_PLAN:
             propagate_listed(self.nodes, parent, local_position, local_rotation, local_scale,
                              world_position, world_rotation, lossy_scale, local_to_world)
             return
-        fn = propagate_plan_parallel if self.chunks > 1 else propagate_plan_serial
-        fn(self.roots, self.chunk_roots, self.order, self.segment_start, self.chunk_tiles,
-           self.tile_segments, self.tile_warm, self.warm_start, self.warm_stop, self.segment_slot,
-           self.parent_slot, self.scratch, parent, local_position, local_rotation, local_scale,
-           world_position, world_rotation, lossy_scale, local_to_world)
+        head = (self.roots, self.chunk_roots, self.order, self.segment_start, self.chunk_tiles,
+                self.tile_segments, self.tile_warm, self.warm_start, self.warm_stop, self.segment_slot,
+                self.parent_slot, self.scratch, parent, local_position, local_rotation, local_scale,
+                world_position, world_rotation, lossy_scale, local_to_world)
+        chunks = self.chunks
+        if chunks == 1 or self.size < PARALLEL_PLAN:
+            propagate_chunks(0, chunks, *head)
+            return
+        pool = self._pool
+        if pool is None:
+            pool = self._pool = FrameThreads(chunks - 1, name="magica-propagation")
+        pool.run([partial(propagate_chunks, c, c + 1, *head) for c in range(1, chunks)])
+        try:
+            propagate_chunks(0, 1, *head)
+        finally:
+            pool.join()   # raises the first error a chunk's thread raised
 
 
 def subtree_closure(parent: np.ndarray, nodes) -> np.ndarray:

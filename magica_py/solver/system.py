@@ -57,7 +57,7 @@ from magica_py.solver.parameters import (
     PARAMETER_COUNT, allocate_parameters, packed_row, particle_parameters_block, write_row,
 )
 from magica_py.solver.fields import grow
-from magica_py.solver.threads import FrameThreads
+from magica_py.threads import FrameThreads
 from magica_py.solver.views import TableView, team_model
 
 FORCE_MODES = {"velocity_add": 1, "velocity_add_without_depth": 2, "velocity_change": 3,

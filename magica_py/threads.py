@@ -1,11 +1,14 @@
-"""The extra threads of a parallel frame (``ClothSystem`` with ``threads`` > 1).
+"""The extra threads of a parallel frame and of a parallel hierarchy propagation.
 
-A parallel frame runs thread 0's share of the blocks in the calling thread and the others'
-here, one job per thread per frame (``frame.simulate_worker``: a ``nogil`` kernel, so the
-threads run side by side). Each thread waits on a lock of its own for its job and releases
-another when the job is done: a frame's hand-off is a lock release and a lock acquire per
-thread, the cheapest wake-up Python offers (an executor's queue, futures and conditions
-cost more per frame, and a frame of the light scene is ~4 ms). Idle threads sleep.
+A parallel cloth frame (``ClothSystem`` with ``threads`` > 1) runs thread 0's share of the
+blocks in the calling thread and the others' here, one job per thread per frame
+(``solver.frame.simulate_worker``); a propagation plan of several chunks runs its first chunk in
+the calling thread and the others here (``scene.propagation.PropagationPlan.execute``). The
+jobs call ``nogil`` kernels, so the threads run side by side; the package uses no ``prange``
+and so none of numba's parallel threading layers. Each thread waits on a lock of its own for
+its job and releases another when the job is done: a hand-off is a lock release and a lock
+acquire per thread, the cheapest wake-up Python offers (an executor's queue, futures and
+conditions cost more per frame, and a frame of the light scene is ~4 ms). Idle threads sleep.
 """
 from __future__ import annotations
 
