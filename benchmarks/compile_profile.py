@@ -11,7 +11,9 @@ the list as a tree: ``simulate_frame`` holds everything below it.
 ``--passes``: exclusive seconds per numba compiler pass and per function (a pass's time minus
 the passes of the callees it compiled meanwhile, from the ``numba:run_pass`` events), and the
 seconds spent inside LLVM (the ``numba:llvm_lock`` events: every call into llvmlite's
-binding, i.e. LLVM's optimisation passes, machine-code emission, module parsing and linking).
+binding, i.e. LLVM's optimisation passes, machine-code emission, module parsing and linking),
+in all and per function (the function whose pass was running: a kernel's own module includes
+the callees numba linked into it, which LLVM optimises and emits again there).
 
     NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/compile_profile.py tail_orbit 3 --signatures
 
@@ -78,6 +80,7 @@ def main(argv=None) -> int:
     pass_seconds: dict[str, float] = collections.defaultdict(float)
     function_seconds: dict[str, float] = collections.defaultdict(float)
     llvm = [0.0, 0, None]   # seconds, calls, start of the current call
+    llvm_seconds: dict[str, float] = collections.defaultdict(float)   # per function
 
     class Passes(event.Listener):
         """Exclusive pass times: a stack of (pass, function, start, seconds of nested passes)."""
@@ -102,11 +105,15 @@ def main(argv=None) -> int:
             llvm[2] = time.perf_counter()
 
         def on_end(self, ev):
-            llvm[0] += time.perf_counter() - llvm[2]
+            spent = time.perf_counter() - llvm[2]
+            llvm[0] += spent
             llvm[1] += 1
+            if pass_stack.stack:   # the function whose compiler pass called into LLVM
+                llvm_seconds[pass_stack.stack[-1][0].partition(" [")[2].rstrip("]")] += spent
 
+    pass_stack = Passes()
     if passes:
-        event.register("numba:run_pass", Passes())
+        event.register("numba:run_pass", pass_stack)
         event.register("numba:llvm_lock", Llvm())
     wall, cpu = time.perf_counter(), time.process_time()
     from magica_py.config import load_scene
@@ -127,7 +134,9 @@ def main(argv=None) -> int:
                 print(f"        {', '.join(sig[i] for i in differ)}")
         return 0
     if passes:
-        print(f"inside LLVM: {llvm[0]:.1f} s over {llvm[1]} calls into llvmlite's binding")
+        print(f"inside LLVM: {llvm[0]:.1f} s over {llvm[1]} calls into llvmlite's binding; by function:")
+        for name, s in sorted(llvm_seconds.items(), key=lambda kv: -kv[1])[:10]:
+            print(f"{s:8.2f} s  {name}")
         print("exclusive seconds per compiler pass:")
         for name, s in sorted(pass_seconds.items(), key=lambda kv: -kv[1])[:8]:
             print(f"{s:8.2f} s  {name}")

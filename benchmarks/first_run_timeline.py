@@ -2,13 +2,15 @@
 helper's (``magica_py/solver/compile_helper.py``), from numba's documented event API
 (``numba:compile``).
 
-    NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/first_run_timeline.py tail_orbit [--frames N]
+    NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/first_run_timeline.py tail_orbit [--frames N] [--depth N]
 
 Runs ``magica-py run configs/NAME.yaml --no-rrd --frames N`` in this process (the command line's
 own code, with its compile helper when ``compile_helper.wanted`` allows one) and prints, in
 seconds since the start:
 
-* the system process's outermost compiles of 0.3 s or more;
+* the system process's outermost compiles of 0.3 s or more, and with ``--depth N`` the
+  compiles nested up to N levels under them (0.2 s or more, indented): which of the frame
+  kernel's callees this process compiled itself and when;
 * the helper's share (fork to end) and its compiles one level under it (the stages);
 * the functions both processes compiled after the fork (work done twice);
 * the balance: the serial start before the fork, the window where both compile, the serial
@@ -88,11 +90,12 @@ def wrap_helper(recorder: Recorder, path: str, forks: list) -> None:
     compile_helper._compile_helper_share = recorded_share
 
 
-def report(main_rows, helper, forks, end) -> None:
-    print("system process, outermost compiles of 0.3 s or more:")
-    for s, e, depth, name in main_rows:
-        if depth == 0 and e - s >= 0.3:
-            print(f"  {s:6.1f} - {e:6.1f}  {e - s:5.1f} s  {name}")
+def report(main_rows, helper, forks, end, depth_shown: int = 0) -> None:
+    print("system process, outermost compiles of 0.3 s or more" +
+          (f" (and those nested up to {depth_shown} levels under them, 0.2 s or more):" if depth_shown else ":"))
+    for s, e, depth, name in sorted(main_rows, key=lambda row: (row[0], row[2])):   # a caller before its callees
+        if (depth == 0 and e - s >= 0.3) or (0 < depth <= depth_shown and e - s >= 0.2):
+            print(f"  {s:6.1f} - {e:6.1f}  {e - s:5.1f} s  {'  ' * depth}{name}")
     if helper is None:
         print("no compile helper ran (compile_helper.wanted refused one, or the cache was warm)")
         return
@@ -120,6 +123,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scene", help="a config of configs/ (name without .yaml)")
     ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--depth", type=int, default=0,
+                    help="also list the system process's compiles nested up to this many levels")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT))
     from numba.core import event
@@ -140,7 +145,7 @@ def main(argv=None) -> int:
         with open(path) as f:
             helper = json.load(f)
         os.unlink(path)
-    report(recorder.rows, helper, forks, end)
+    report(recorder.rows, helper, forks, end, args.depth)
     return code
 
 
