@@ -15,6 +15,11 @@
   frame (tests/reference_solver) uses numba's ``prange``, whose OpenMP threads would otherwise
   spin between its regions and take the cores the rest of the suite needs. The package itself
   uses no ``prange`` (magica_py/threads.py).
+* ``MAGICA_COMPILE_HELPER=0`` (unless set otherwise): no first-run compile helper is forked
+  (solver/compile_helper.py). Its test (tests/test_compile_helper.py) turns it on where it
+  needs it. Elsewhere, under pytest-xdist every CPU already runs a test process, so a helper
+  would only take CPU from them; and at the start of a run the 1-minute load average still
+  reads the idle machine, so each worker forked one for its first system.
 * ``shared_data``: the third-party test data in ../shared/data (see its NOTICE.md).
 """
 import os
@@ -25,6 +30,7 @@ import pytest
 os.environ.setdefault("RERUN_STRICT", "1")
 os.environ.setdefault("MAGICA_STAGES", "all")
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+os.environ.setdefault("MAGICA_COMPILE_HELPER", "0")
 
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
