@@ -2,9 +2,9 @@
 
 Importing the package configures numba's on-disk cache before numba is imported (see
 ``_configure_numba_cache``); everything else is imported lazily so that ``magica-py --help``
-stays fast. The package uses none of numba's parallel threading layers (its threads are
-Python threads running ``nogil`` kernels: ``magica_py/threads.py``), so it sets no OpenMP
-variable.
+stays fast. The package runs nothing on numba's parallel threading layers (its threads are
+Python threads running ``nogil`` kernels: ``magica_py/threads.py``; it only reads their thread
+count), so it sets no OpenMP variable.
 
 The public API (docs/api.md), each name imported on first use (PEP 562):
 

@@ -4,14 +4,15 @@ A parallel cloth frame (``ClothSystem`` with ``threads`` > 1) runs thread 0's sh
 blocks in the calling thread and the others' here, one job per thread per frame
 (``solver.frame.simulate_worker``); a propagation plan of several chunks runs its first chunk in
 the calling thread and the others here (``scene.propagation.PropagationPlan.execute``). The
-jobs call ``nogil`` kernels, so the threads run side by side; the package uses no ``prange``
-and so none of numba's parallel threading layers. Each thread waits on a lock of its own for
+jobs call ``nogil`` kernels, so the threads run side by side; the package has no ``prange`` and
+runs nothing on numba's parallel threading layers. Each thread waits on a lock of its own for
 its job and releases another when the job is done: a hand-off is a lock release and a lock
 acquire per thread, the cheapest wake-up Python offers (an executor's queue, futures and
 conditions cost more per frame, and a frame of the light scene is ~4 ms). Idle threads sleep.
 """
 from __future__ import annotations
 
+import os
 import threading
 import weakref
 
@@ -21,22 +22,31 @@ class FrameThreads:
 
     def __init__(self, count: int, name: str = "magica-cloth"):
         self.count = count
+        self.name = name
+        self._closed = False
+        self._running = 0
+        self._spawn()
+
+    def _spawn(self) -> None:
+        """The jobs' slots, the locks and the threads, in this process. ``run`` spawns them again
+        in a forked child (a batch worker, a compile helper), where the parent's threads do not
+        exist: a job handed to them would never run and ``join`` would wait for ever."""
+        count = self.count
+        self._pid = os.getpid()
         self._jobs: list = [None] * count
         self._errors: list = [None] * count
         self._start = [threading.Lock() for _ in range(count)]
         self._done = [threading.Lock() for _ in range(count)]
         for lock in self._start + self._done:
             lock.acquire()
-        self._closed = False
-        self._running = 0
         self._threads = [threading.Thread(target=_serve, args=(self._jobs, self._errors, self._start[i],
                                                                self._done[i], i),
-                                          name=f"{name}-{i + 1}", daemon=True) for i in range(count)]
+                                          name=f"{self.name}-{i + 1}", daemon=True) for i in range(count)]
         for thread in self._threads:
             thread.start()
         # the threads hold no reference to self, so an unused pool is collected and its
         # threads told to leave
-        weakref.finalize(self, _stop, self._jobs, self._start)
+        self._finalizer = weakref.finalize(self, _stop, self._jobs, self._start)
 
     def run(self, jobs) -> None:
         """Start ``jobs`` (at most ``count`` callables without arguments), one per thread."""
@@ -44,6 +54,9 @@ class FrameThreads:
             raise RuntimeError("FrameThreads: closed")
         if len(jobs) > self.count:
             raise ValueError(f"FrameThreads: {len(jobs)} jobs for {self.count} threads")
+        if self._pid != os.getpid():   # a forked child: the threads are the parent's
+            self._finalizer.detach()
+            self._spawn()
         self._running = len(jobs)
         for i, job in enumerate(jobs):
             self._jobs[i] = job

@@ -1,9 +1,12 @@
 """The extra threads of a parallel frame (magica_py/threads.py): one job per thread per
-frame, errors raised in the calling thread, threads that leave when told or when unused."""
+frame, errors raised in the calling thread, threads that leave when told or when unused, new
+threads in a forked child."""
 from __future__ import annotations
 
 import gc
+import os
 import threading
+import time
 
 import pytest
 
@@ -54,3 +57,40 @@ def test_threads_leave_when_closed_or_when_the_pool_is_collected():
     assert not [t.name for t in threading.enumerate() if t.name.startswith(("closed-pool", "unused-pool"))]
     with pytest.raises(RuntimeError, match="closed"):
         pool.run([])
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="POSIX fork")
+def test_a_forked_child_runs_its_jobs_on_threads_of_its_own():
+    """After a fork the parent's threads do not exist in the child: a pool used there starts
+    its own instead of handing jobs to no one (and waiting for ever in ``join``)."""
+    pool = FrameThreads(2, name="forked-pool")
+    pool.run([lambda: None, lambda: None])
+    pool.join()
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:   # the child: run a frame's jobs, report, leave without the parent's exit work
+        code = 1
+        try:
+            seen = []
+            pool.run([lambda: seen.append(threading.get_ident()), lambda: seen.append(threading.get_ident())])
+            pool.join()
+            os.write(write, b"ok" if len(set(seen)) == 2 and threading.get_ident() not in seen else b"bad")
+            code = 0
+        finally:
+            os._exit(code)
+    os.close(write)
+    deadline = time.monotonic() + 20.0
+    while time.monotonic() < deadline:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        time.sleep(0.05)
+    else:
+        os.kill(pid, 9)
+        os.waitpid(pid, 0)
+        pytest.fail("the forked child's jobs never ran")
+    assert os.read(read, 16) == b"ok" and os.WEXITSTATUS(status) == 0
+    os.close(read)
+    pool.run([lambda: None])   # the parent's threads serve on
+    pool.join()
+    pool.close()
