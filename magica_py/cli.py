@@ -10,7 +10,8 @@ Commands (``magica-py COMMAND --help`` for each):
   as ``magica-py record-all`` does) and
   the sink (``magica_py.sinks.attach(player, scene, options)``), run with the loop of
   ``magica_py.runner`` (progress bar, compile announced and timed apart, warnings as events),
-  print a summary;
+  print a summary. A short first run (no compiled cloth frame cached) goes interpreted in a
+  child process while the solver compiles in the background (``magica_py.first_run``);
 * ``validate SCENE.yaml [SCENE.yaml ...] [--set ...]``: check everything (and build the cloths when
   ``magica_py.build`` is present), print ``OK`` or every problem;
 * ``info SCENE.yaml [--set ...] [--bones]``: settings, rigs, bones, colliders, cloths and,
@@ -169,6 +170,7 @@ def main(argv=None) -> int:
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
         return int(exc.code or 0)
     handler = {"run": cmd_run, "validate": cmd_validate, "info": cmd_info}[args.command]
+    args.argv = argv[1:]   # the command's own arguments (``run``'s interpreted tier passes them on)
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _show_warning
@@ -272,13 +274,33 @@ def cmd_info(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from magica_py.runtime.player import Player
-    from magica_py.runner import CompileWatch, WarningEvents, play, summary_line
+    from magica_py import first_run
 
     if args.no_rrd and args.rrd:
         raise InputError("--rrd and --no-rrd contradict each other; give one")
+    try:
+        interpreted_first = first_run.wanted(args)
+    except first_run.FirstRunError as exc:
+        raise InputError(str(exc)) from None
+    if interpreted_first:   # a first run: a short one goes interpreted (magica_py/first_run.py)
+        code = first_run.run_interpreted(args.argv)
+        if code == EXIT_FAILURE and not args.quiet:   # a failure of the interpreted tier itself
+            print("magica-py: the interpreted first run failed (above); compiling the solver instead",
+                  file=sys.stderr, flush=True)
+        elif code != first_run.DECLINED:
+            return code
+
+    from magica_py.runtime.player import Player
+    from magica_py.runner import CompileWatch, WarningEvents, play, summary_line
+
     scene = load_run_scene(args)
     frames = args.frames if args.frames is not None else scene.settings.frame_count()
+    background = None
+    if first_run.in_interpreted_tier():
+        if not first_run.interpret(scene, frames):
+            return first_run.DECLINED   # nothing written: the parent compiles
+        first_run.quiet_floating_point()
+        background = first_run.start_background_compile(args.argv)
     player = Player.for_scene(scene)  # default_schedule(scene) + the scene's time source
     created_dir = _ensure_output_folder(scene, args)
     recorder = None
@@ -296,6 +318,8 @@ def cmd_run(args) -> int:
             recorder = _attach_sink(player, scene, args, notes)
             if recorder is None and not args.no_rrd:
                 notes.append(NO_RECORDING_NOTE.format(name=scene.name))
+            if background is not None:
+                notes.append(first_run.interpreted_note(*background))
             for note in notes:
                 messages.note(note)
             messages.start_progress(frames)
@@ -312,7 +336,7 @@ def cmd_run(args) -> int:
     if not args.quiet:
         out = getattr(recorder, "output_path", None) if recorder is not None else None
         print(summary_line(scene, summary, solver_attached, out, compile_seconds=compile_watch.seconds,
-                           threads=getattr(system, "threads", None)))
+                           threads=getattr(system, "threads", None), interpreted=background is not None))
         if summary.warnings:
             print(f"magica-py: {summary.warnings}", file=sys.stderr)
     return EXIT_OK

@@ -288,11 +288,12 @@ def play(player, scene, frames: int | None, *, system=None, progress: FrameProgr
 
 
 def summary_line(scene, stats: RunStats, solver_attached: bool, output, compile_seconds: float | None = None,
-                 threads: int | None = None) -> str:
+                 threads: int | None = None, interpreted: bool = False) -> str:
     """``name: N frames, S simulation steps (P particle-steps), x ms/frame[ on T threads] (wall w
-    s[; compile c s, first run only]) -> output``. ``compile_seconds``: the whole run's compile
-    time (attach included), default the frames'. ``threads``: the cloth frame's threads (named
-    when more than one)."""
+    s[; compile c s, first run only][; interpreted, first run only]) -> output``.
+    ``compile_seconds``: the whole run's compile time (attach included), default the frames'.
+    ``threads``: the cloth frame's threads (named when more than one). ``interpreted``: the run
+    went interpreted (``magica_py/first_run.py``), so its ms/frame is not the compiled speed."""
     import os
 
     per_frame = 1000.0 * stats.wall_time / max(stats.frames, 1)
@@ -312,6 +313,8 @@ def summary_line(scene, stats: RunStats, solver_attached: bool, output, compile_
         steps = "simulation steps not reported"
     compiled = stats.compile_seconds if compile_seconds is None else compile_seconds
     compile_text = f"; compile {compiled:.1f} s, first run only" if compiled >= 0.05 else ""
+    if interpreted:
+        compile_text += "; interpreted, first run only"
     where = ""
     if output:
         text = os.path.relpath(output)

@@ -20,6 +20,10 @@
   needs it. Elsewhere, under pytest-xdist every CPU already runs a test process, so a helper
   would only take CPU from them; and at the start of a run the 1-minute load average still
   reads the idle machine, so each worker forked one for its first system.
+* ``MAGICA_FIRST_RUN=compile`` (unless set otherwise): ``magica-py run`` never takes the
+  interpreted first-run tier (magica_py/first_run.py), which would start a background compile
+  beside the test processes whenever a test's cache has no compiled cloth frame yet.
+  tests/test_first_run.py turns it on where it tests it.
 * ``shared_data``: the third-party test data in ../shared/data (see its NOTICE.md).
 """
 import os
@@ -31,6 +35,7 @@ os.environ.setdefault("RERUN_STRICT", "1")
 os.environ.setdefault("MAGICA_STAGES", "all")
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 os.environ.setdefault("MAGICA_COMPILE_HELPER", "0")
+os.environ.setdefault("MAGICA_FIRST_RUN", "compile")
 
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO_ROOT.parent / "shared" / "data"

@@ -1,0 +1,327 @@
+"""A first run that does not wait for the compile: a short run goes interpreted while the
+solver compiles in the background for the next runs.
+
+With an empty numba cache, ``magica-py run`` compiles every kernel the scene uses before its
+first frame: 40-80 s of compile work on a 2-core machine (docs/BENCHMARKS.md, *First run*).
+The same kernels run as plain Python with numba's documented ``NUMBA_DISABLE_JIT=1`` and give
+the compiled run's bits (``tests/test_jit_off.py``), at about 2 ms a particle-step: a few
+hundred frames of a tail or a few dozen of a character take seconds, far less than their
+compile. So ``run`` has two tiers:
+
+* **interpreted** (the first run of a short scene): ``run`` starts itself again as a child
+  process with ``NUMBA_DISABLE_JIT=1`` (numba reads it once, at import, so the choice is made
+  before the child imports numba). The child loads the scene and estimates the run's
+  particle-steps (``estimate_particle_steps``: frames x steps a frame x particles). Within
+  the budget (``MAGICA_INTERPRET_BUDGET``, default ``INTERPRET_BUDGET``), it starts the
+  background compile and runs the scene interpreted: the same recording, summary and exit
+  code as a compiled run, its summary saying it ran interpreted.
+* **compiled**: any other run. Where the child finds the run too long to interpret, it exits
+  with ``DECLINED`` before it has written anything, and ``run`` compiles in its own process
+  as it always did (the compile announced, timed apart from the frames, shared with the
+  compile helper: ``solver/compile_helper.py``).
+
+**The background compile** (``python -m magica_py.first_run RUN-ARGUMENTS``) is a compiled
+run of the same scene and arguments: it loads the scene, attaches the solver and a recording
+sink writing to a scratch file, runs ``COMPILE_FRAMES`` frames, and exits. Everything the run
+needs (the scene's kernels, the build, the drivers, the propagation, the cloth frame, the
+sink's) is then in numba's on-disk cache, so the next run of the scene starts compiled. It
+runs in a session of its own, after the interpreted run has ended if need be; its pid is in
+``first-run-compile.pid`` and its output in ``first-run-compile.log`` in the numba cache
+folder. While one runs, no other is started; a run that finds no compiled frame kernel then
+still goes interpreted when it is short, and compiles itself when it is long.
+
+**When.** Only for ``run`` with the JIT and the cache on, a cloth to simulate, and no compiled
+cloth frame in the cache folder (``frame_kernel_cached``: a scene of another kind of cloth on
+a warm cache compiles in the compiled tier). ``MAGICA_FIRST_RUN``: ``auto`` (the default: as
+above), ``compile`` (never interpreted: the behaviour before this module; the test suite's
+default), ``interpret`` (interpreted whenever the run is within the budget, compiled frame
+kernel in the cache or not).
+
+In the interpreted tier numpy's floating-point warnings are off (``numpy.seterr``): the
+kernels' branch-free selects compute, and then discard, values that divide by zero, which
+compiled (``error_model="numpy"``) warns about nowhere; without this the recording would
+carry warning events that a compiled run of the same scene does not.
+
+This module imports nothing heavy at import time: ``run`` consults it before numba is loaded.
+"""
+from __future__ import annotations
+
+import math
+import os
+import pathlib
+import subprocess
+import sys
+import time
+
+MODE_ENV = "MAGICA_FIRST_RUN"           # auto | compile | interpret
+MODES = ("auto", "compile", "interpret")
+BUDGET_ENV = "MAGICA_INTERPRET_BUDGET"  # particle-steps a run may have to go interpreted
+TIER_ENV = "MAGICA_RUN_TIER"            # "interpreted" in the interpreted child
+INTERPRETED = "interpreted"
+# About 12 s of interpreted frames on the 2-core machine of docs/BENCHMARKS.md (1.7-2.4 ms a
+# particle-step, measured on the tail, the character and the crowd), against 40-80 s of
+# compile there: a run within it ends well before its compile would have.
+INTERPRET_BUDGET = 6000
+DECLINED = 75            # the child's exit code: too long to interpret, nothing written
+COMPILE_FRAMES = 3       # frames the background compile runs (the first frame's reset, then steady frames)
+LOCK_NAME = "first-run-compile.pid"
+LOG_NAME = "first-run-compile.log"
+FRAME_KERNEL_INDEX = "frame.simulate_*.nbi"   # numba's cache index of a compiled cloth frame
+
+
+class FirstRunError(Exception):
+    """A bad ``MAGICA_FIRST_RUN`` / ``MAGICA_INTERPRET_BUDGET`` value."""
+
+
+def mode() -> str:
+    value = os.environ.get(MODE_ENV, "").strip().lower() or "auto"
+    if value not in MODES:
+        raise FirstRunError(f"environment variable {MODE_ENV}={os.environ[MODE_ENV]!r}: expected 'auto' (a short "
+                            "first run goes interpreted; the default), 'compile' (always compile) or 'interpret' "
+                            "(a short run goes interpreted even with compiled kernels cached)")
+    return value
+
+
+def budget() -> int:
+    text = os.environ.get(BUDGET_ENV, "").strip()
+    if not text:
+        return INTERPRET_BUDGET
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise FirstRunError(f"environment variable {BUDGET_ENV}={text!r}: expected a whole number of "
+                            "particle-steps, 0 or more")
+    return value
+
+
+def in_interpreted_tier() -> bool:
+    """Is this process the interpreted child of a ``run``?"""
+    return os.environ.get(TIER_ENV) == INTERPRETED
+
+
+def cache_folder() -> pathlib.Path | None:
+    """numba's cache folder for this package's sources (``magica_py._configure_numba_cache``)."""
+    folder = os.environ.get("NUMBA_CACHE_DIR")
+    return pathlib.Path(folder) if folder else None
+
+
+def frame_kernel_cached(folder: pathlib.Path | None = None) -> bool:
+    """Does the cache folder hold a compiled cloth frame (any scene's)?"""
+    folder = cache_folder() if folder is None else folder
+    return folder is not None and folder.is_dir() and any(folder.glob("*/" + FRAME_KERNEL_INDEX))
+
+
+def _flag(name: str) -> bool:
+    return os.environ.get(name, "0").strip() not in ("", "0")
+
+
+def wanted(args) -> bool:
+    """Should ``run`` (its parsed ``args``) try the interpreted tier? (Made before numba is
+    imported; the particle-step budget is checked by the child, once the scene is loaded.)"""
+    chosen = mode()
+    budget()   # a bad value is reported before anything runs
+    if chosen == "compile" or in_interpreted_tier() or getattr(args, "no_simulation", False):
+        return False
+    if _flag("NUMBA_DISABLE_JIT") or _flag("MAGICA_NO_CACHE") or cache_folder() is None:
+        return False   # already interpreted, or no cache for a background compile to fill
+    return chosen == "interpret" or not frame_kernel_cached()
+
+
+def run_interpreted(argv: list[str]) -> int:
+    """Run ``magica-py run ARGV`` in the interpreted child; its exit code (``DECLINED`` when it
+    found the run too long and wrote nothing; ``magica_py.cli`` then compiles, as it does when
+    the child failed unexpectedly). Its output goes to this process's terminal."""
+    env = dict(os.environ)
+    env["NUMBA_DISABLE_JIT"] = "1"
+    env[TIER_ENV] = INTERPRETED
+    child = subprocess.Popen([sys.executable, "-m", "magica_py.cli", "run", *argv], env=env)
+    while True:
+        try:
+            return child.wait()
+        except KeyboardInterrupt:   # the child has the same ^C and reports it itself
+            continue
+
+
+# ----------------------------------------------------------------------------- estimate
+def cloth_particles(scene) -> int:
+    """Particles of the scene's cloths: every bone in the subtrees of each cloth's root bones
+    (BoneCloth makes one particle per transform; a bone under two roots of a cloth once)."""
+    h = scene.hierarchy
+    total = 0
+    for spec in scene.cloths:
+        nodes: set[int] = set()
+        for root in spec.root_bones:
+            index = h.index_of(root) if isinstance(root, str) else int(root)
+            nodes.update(h.descendants(index))
+        total += len(nodes)
+    return total
+
+
+def estimate_particle_steps(scene, frames: int | None) -> float:
+    """The run's particle-steps: frames x simulation steps a frame x particles. ``frames``
+    None (a realtime clock) counts the scene's duration at its frame rate."""
+    settings = scene.settings
+    fps = settings.fps or 60.0
+    if frames is None:
+        frames = math.ceil((settings.duration or 0.0) * fps)
+    steps = min(float(settings.max_steps_per_frame), max(1.0, settings.simulation_frequency / fps))
+    return float(frames) * steps * cloth_particles(scene)
+
+
+def interpret(scene, frames: int | None) -> bool:
+    """In the interpreted child: is the run within the budget (else the child declines)?"""
+    return estimate_particle_steps(scene, frames) <= budget()
+
+
+def quiet_floating_point() -> None:
+    """numpy's floating-point warnings off for the interpreted tier (module docstring)."""
+    import numpy as np
+
+    np.seterr(all="ignore")
+
+
+# ----------------------------------------------------------------------------- background compile
+def _lock_path(folder: pathlib.Path) -> pathlib.Path:
+    return folder / LOCK_NAME
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def background_compile_pid(folder: pathlib.Path | None = None) -> int | None:
+    """The pid of a background compile running for this cache folder, or None."""
+    folder = cache_folder() if folder is None else folder
+    if folder is None:
+        return None
+    try:
+        pid = int(_lock_path(folder).read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return None
+    return pid if _alive(pid) else None
+
+
+def start_background_compile(argv: list[str]) -> tuple[int | None, pathlib.Path | None]:
+    """Start the background compile of ``run ARGV`` (unless one runs already for this cache);
+    returns (pid, log path), (None, None) where it could not start."""
+    folder = cache_folder()
+    if folder is None:
+        return None, None
+    log = folder / LOG_NAME
+    env = dict(os.environ)
+    env.pop("NUMBA_DISABLE_JIT", None)
+    env.pop(TIER_ENV, None)
+    env[MODE_ENV] = "compile"
+    lock = _lock_path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for _attempt in range(2):
+            try:   # the lock is taken atomically: two first runs at once start one compile
+                fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+                break
+            except FileExistsError:
+                running = background_compile_pid(folder)
+                if running is not None:
+                    return running, log
+                if time.time() - lock.stat().st_mtime < 5.0:   # being written by a run starting now
+                    return None, log
+                lock.unlink(missing_ok=True)   # left by a compile that did not finish
+        else:
+            return None, None
+        with os.fdopen(fd, "w") as lock_file, open(log, "w", encoding="utf-8") as out:
+            process = subprocess.Popen([sys.executable, "-m", "magica_py.first_run", *argv], env=env,
+                                       stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
+                                       start_new_session=True)
+            lock_file.write(f"{process.pid}\n")
+    except OSError:
+        return None, None
+    return process.pid, log
+
+
+def interpreted_note(pid: int | None, log: pathlib.Path | None) -> str:
+    """The line ``run`` prints when it goes interpreted."""
+    if pid is None and log is not None:
+        return ("first run: no compiled solver in the cache yet; this short run goes interpreted (the same "
+                "results, slower frames) while another run's background compile fills the cache")
+    if pid is None:
+        return ("first run: no compiled solver in the cache yet; this short run goes interpreted (the same "
+                "results, slower frames); the background compile could not start, so the next run compiles")
+    return (f"first run: no compiled solver in the cache yet; this short run goes interpreted (the same results, "
+            f"slower frames) while the solver compiles in the background for the next runs (pid {pid}, "
+            f"about a minute; log: {log})")
+
+
+def _peak_memory() -> str:
+    """``, peak memory N MB`` of this process or its largest waited-for child (the compile
+    helper), where the platform reports it."""
+    try:
+        import resource
+    except ImportError:
+        return ""
+    kb = max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
+    return f", peak memory {kb / 1024:.0f} MB"
+
+
+def background_compile(argv: list[str]) -> int:
+    """The background compile's own work (``python -m magica_py.first_run RUN-ARGUMENTS``):
+    the run's scene, solver and sink (recording to a scratch file, never to a viewer),
+    ``COMPILE_FRAMES`` frames, compiled and cached. Returns 0, or 1 with the reason in the
+    log."""
+    import tempfile
+
+    from magica_py import cli
+
+    folder = cache_folder()
+    started = time.perf_counter()
+    try:
+        args = cli.build_parser().parse_args(["run", *argv])
+        if args.save_scene:
+            args.save_scene = None   # the run wrote it; the compile only reads the scene
+        from magica_py.runner import CompileWatch
+        from magica_py.runtime.player import Player
+
+        watch = CompileWatch()   # Python's collector runs less often while numba compiles
+        watch.__enter__()
+        scene = cli.load_run_scene(args)
+        player = Player.for_scene(scene)
+        cli._attach_solver(player, scene, [])
+        with tempfile.TemporaryDirectory(prefix="magica-first-run-") as scratch:
+            args.rrd = os.path.join(scratch, "compile.rrd")
+            args.no_rrd, args.spawn, args.connect = False, False, None
+            recorder = cli._attach_sink(player, scene, args, [])
+            try:
+                for _ in range(COMPILE_FRAMES):
+                    player.step()
+            finally:
+                if recorder is not None:
+                    recorder.close(False)
+        watch.__exit__(None, None, None)
+        print(f"compiled {scene.name!r} in {time.perf_counter() - started:.1f} s ({watch.seconds:.1f} s compiling"
+              f"{_peak_memory()})", flush=True)
+        return 0
+    except BaseException as exc:   # noqa: BLE001 - the log is the only place to say it
+        import traceback
+
+        traceback.print_exc()
+        print(f"background compile failed: {exc}", flush=True)
+        return 1
+    finally:
+        if folder is not None:
+            try:
+                lock = _lock_path(folder)
+                if lock.read_text().split()[0] == str(os.getpid()):
+                    lock.unlink()
+            except (OSError, IndexError):
+                pass
+
+
+if __name__ == "__main__":
+    sys.exit(background_compile(sys.argv[1:]))
