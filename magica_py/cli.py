@@ -319,7 +319,7 @@ def cmd_run(args) -> int:
             if recorder is None and not args.no_rrd:
                 notes.append(NO_RECORDING_NOTE.format(name=scene.name))
             if background is not None:
-                notes.append(first_run.interpreted_note(*background))
+                notes.append(first_run.interpreted_note(background))
             for note in notes:
                 messages.note(note)
             messages.start_progress(frames)

@@ -46,12 +46,14 @@ This module imports nothing heavy at import time: ``run`` consults it before num
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 import pathlib
 import subprocess
 import sys
 import time
+from typing import NamedTuple
 
 MODE_ENV = "MAGICA_FIRST_RUN"           # auto | compile | interpret
 MODES = ("auto", "compile", "interpret")
@@ -197,24 +199,50 @@ def _alive(pid: int) -> bool:
     return True
 
 
+class Background(NamedTuple):
+    """The background compile a run goes interpreted beside: ``pid`` (None where none runs),
+    ``log`` (its output), ``state``: ``started`` (by this run), ``running`` (started by an
+    earlier run of the same command), ``other`` (an earlier run of another command: this one
+    may still compile at its next run), ``failed`` (could not start)."""
+
+    pid: int | None
+    log: pathlib.Path | None
+    state: str
+
+
+def _lock_text(pid: int, argv: list[str]) -> str:
+    return f"{pid}\n{json.dumps({'argv': list(argv), 'cwd': os.getcwd()})}\n"
+
+
+def _read_lock(folder: pathlib.Path) -> tuple[int | None, dict]:
+    """(pid, {"argv", "cwd"}) of the lock, (None, {}) where there is none or it is unreadable."""
+    try:
+        lines = _lock_path(folder).read_text().splitlines()
+        pid = int(lines[0])
+    except (OSError, ValueError, IndexError):
+        return None, {}
+    try:
+        run = json.loads(lines[1]) if len(lines) > 1 else {}
+    except ValueError:
+        run = {}
+    return pid, run if isinstance(run, dict) else {}
+
+
 def background_compile_pid(folder: pathlib.Path | None = None) -> int | None:
     """The pid of a background compile running for this cache folder, or None."""
     folder = cache_folder() if folder is None else folder
     if folder is None:
         return None
-    try:
-        pid = int(_lock_path(folder).read_text().split()[0])
-    except (OSError, ValueError, IndexError):
-        return None
-    return pid if _alive(pid) else None
+    pid, _run = _read_lock(folder)
+    return pid if pid is not None and _alive(pid) else None
 
 
-def start_background_compile(argv: list[str]) -> tuple[int | None, pathlib.Path | None]:
-    """Start the background compile of ``run ARGV`` (unless one runs already for this cache);
-    returns (pid, log path), (None, None) where it could not start."""
+def start_background_compile(argv: list[str]) -> Background:
+    """Start the background compile of ``run ARGV``, unless one runs already for this cache
+    folder (at most one at a time: each uses the CPUs the next runs want)."""
     folder = cache_folder()
     if folder is None:
-        return None, None
+        return Background(None, None, "failed")
     log = folder / LOG_NAME
     env = dict(os.environ)
     env.pop("NUMBA_DISABLE_JIT", None)
@@ -228,35 +256,40 @@ def start_background_compile(argv: list[str]) -> tuple[int | None, pathlib.Path 
                 fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
                 break
             except FileExistsError:
-                running = background_compile_pid(folder)
-                if running is not None:
-                    return running, log
-                if time.time() - lock.stat().st_mtime < 5.0:   # being written by a run starting now
-                    return None, log
+                pid, run = _read_lock(folder)
+                if pid is not None and _alive(pid):
+                    same = run.get("argv") == list(argv) and run.get("cwd") == os.getcwd()
+                    return Background(pid, log, "running" if same else "other")
+                if pid is None and time.time() - lock.stat().st_mtime < 5.0:   # a run starting one now
+                    return Background(None, log, "other")
                 lock.unlink(missing_ok=True)   # left by a compile that did not finish
         else:
-            return None, None
+            return Background(None, None, "failed")
         with os.fdopen(fd, "w") as lock_file, open(log, "w", encoding="utf-8") as out:
             process = subprocess.Popen([sys.executable, "-m", "magica_py.first_run", *argv], env=env,
                                        stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
                                        start_new_session=True)
-            lock_file.write(f"{process.pid}\n")
+            lock_file.write(_lock_text(process.pid, argv))
     except OSError:
-        return None, None
-    return process.pid, log
+        return Background(None, None, "failed")
+    return Background(process.pid, log, "started")
 
 
-def interpreted_note(pid: int | None, log: pathlib.Path | None) -> str:
+def interpreted_note(background: Background) -> str:
     """The line ``run`` prints when it goes interpreted."""
-    if pid is None and log is not None:
-        return ("first run: no compiled solver in the cache yet; this short run goes interpreted (the same "
-                "results, slower frames) while another run's background compile fills the cache")
-    if pid is None:
-        return ("first run: no compiled solver in the cache yet; this short run goes interpreted (the same "
-                "results, slower frames); the background compile could not start, so the next run compiles")
-    return (f"first run: no compiled solver in the cache yet; this short run goes interpreted (the same results, "
-            f"slower frames) while the solver compiles in the background for the next runs (pid {pid}, "
-            f"about a minute; log: {log})")
+    head = ("first run: no compiled solver in the cache yet; this short run goes interpreted (the same results, "
+            "slower frames)")
+    pid, log, state = background
+    if state == "started":
+        return (f"{head} while the solver compiles in the background for the next runs (pid {pid}, about a "
+                f"minute; log: {log})")
+    if state == "running":
+        return f"{head} while an earlier run's background compile of this scene finishes (pid {pid}; log: {log})"
+    if state == "other":
+        where = f" (pid {pid}; log: {log})" if pid is not None else ""
+        return (f"{head}; another run's background compile is filling the cache{where}, so a later run of this "
+                "scene may still compile what it alone uses")
+    return f"{head}; the background compile could not start, so the next run compiles"
 
 
 def _peak_memory() -> str:
@@ -316,10 +349,9 @@ def background_compile(argv: list[str]) -> int:
     finally:
         if folder is not None:
             try:
-                lock = _lock_path(folder)
-                if lock.read_text().split()[0] == str(os.getpid()):
-                    lock.unlink()
-            except (OSError, IndexError):
+                if _read_lock(folder)[0] == os.getpid():
+                    _lock_path(folder).unlink()
+            except OSError:
                 pass
 
 

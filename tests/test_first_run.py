@@ -127,7 +127,7 @@ def test_a_short_first_run_goes_interpreted_and_the_background_compile_serves_th
         assert "interpreted, first run only" in first.stdout
         assert "warning" not in first.stderr.lower()   # the discarded selects' warnings stay quiet
         assert (tmp_path / "first.rrd").is_file()
-        pid = int((cache / first_run.LOCK_NAME).read_text())
+        pid = first_run._read_lock(cache)[0]
         assert _wait_for_exit(pid, 600), "the background compile did not finish in 10 minutes"
         log = (cache / first_run.LOG_NAME).read_text()
         assert "compiled 'tail_orbit'" in log, log
@@ -174,13 +174,19 @@ def test_one_background_compile_at_a_time_and_a_dead_one_s_lock_is_taken_over(mo
     monkeypatch.setattr(first_run.subprocess, "Popen", _FakePopen)
     _FakePopen.started.clear()
     lock = tmp_path / first_run.LOCK_NAME
-    lock.write_text(f"{os.getpid()}\n")   # a live compile (this process stands in for it)
-    assert first_run.start_background_compile(["x.yaml"]) == (os.getpid(), tmp_path / first_run.LOG_NAME)
+    log = tmp_path / first_run.LOG_NAME
+    # a live compile of the same command (this process stands in for it), then of another one
+    lock.write_text(first_run._lock_text(os.getpid(), ["x.yaml"]))
+    assert first_run.start_background_compile(["x.yaml"]) == (os.getpid(), log, "running")
+    assert first_run.start_background_compile(["y.yaml"]) == (os.getpid(), log, "other")
     assert _FakePopen.started == []
-    lock.write_text("4999999\n")           # its process is gone
-    old = time.time() - 60
-    os.utime(lock, (old, old))
-    pid, log = first_run.start_background_compile(["x.yaml", "--frames", "3"])
-    assert pid == 4_000_000 and log == tmp_path / first_run.LOG_NAME
+    lock.write_text(first_run._lock_text(4_999_999, ["x.yaml"]))   # its process is gone
+    started = first_run.start_background_compile(["x.yaml", "--frames", "3"])
+    assert started == (4_000_000, log, "started")
     assert _FakePopen.started[0][-4:] == ["magica_py.first_run", "x.yaml", "--frames", "3"]
-    assert lock.read_text().strip() == str(pid)
+    assert first_run._read_lock(tmp_path) == (4_000_000, {"argv": ["x.yaml", "--frames", "3"], "cwd": os.getcwd()})
+    for background in (started, first_run.Background(os.getpid(), log, "running"),
+                       first_run.Background(os.getpid(), log, "other"), first_run.Background(None, None, "failed")):
+        note = first_run.interpreted_note(background)
+        assert note.startswith("first run: no compiled solver in the cache yet; this short run goes interpreted")
+        assert (str(background.pid) in note) == (background.pid is not None)
