@@ -21,7 +21,8 @@ Commands (``magica-py COMMAND --help`` for each):
   takes the remaining argv and returns an exit code. It is imported only when used.
 
 Exit codes: 0 success, 1 unexpected failure (with a traceback: a bug), 2 bad input (scene
-file, ``--set``, output path, build error: printed without a traceback), 130 interrupted.
+file, ``--set``, output path, build error: printed without a traceback), 130 interrupted (^C),
+143 terminated (SIGTERM).
 No partial output: the recording is written to a temporary name and renamed at the end by the
 sink; a failed or interrupted run deletes it.
 
@@ -32,11 +33,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 import traceback
 import warnings
 
-EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
 
 # name -> (module, function, one-line help). The function is called with the argv after the
 # command name and returns an int exit code. Other packages add their commands here (or call
@@ -171,13 +173,18 @@ def main(argv=None) -> int:
         return int(exc.code or 0)
     handler = {"run": cmd_run, "validate": cmd_validate, "info": cmd_info}[args.command]
     args.argv = argv[1:]   # the command's own arguments (``run``'s interpreted tier passes them on)
+    previous = _terminate_like_interrupt()
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _show_warning
-            return handler(args)
+            code = handler(args)
+            return EXIT_TERMINATED if code == -signal.SIGTERM else code   # a child ended by SIGTERM
     except KeyboardInterrupt:
         print("magica-py: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except Terminated:
+        print("magica-py: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
     except BrokenPipeError:  # `magica-py info ... | head`: the reader went away
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
@@ -189,6 +196,27 @@ def main(argv=None) -> int:
         traceback.print_exc()
         print(f"magica-py: internal error: {exc}", file=sys.stderr)
         return EXIT_FAILURE
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+class Terminated(BaseException):
+    """SIGTERM during a command: raised like ``KeyboardInterrupt`` so that the command's
+    ``finally`` blocks run (the recording's temporary file is removed) before it exits 143."""
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated()
+
+
+def _terminate_like_interrupt():
+    """Install ``_raise_terminated`` for SIGTERM (main thread only); the previous handler, or None."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "SIGTERM"):
+        return None
+    return signal.signal(signal.SIGTERM, _raise_terminated)
 
 
 def _run_registered(name: str, argv: list[str]) -> int:

@@ -135,15 +135,25 @@ def run_interpreted(argv: list[str]) -> int:
     """Run ``magica-py run ARGV`` in the interpreted child; its exit code (``DECLINED`` when it
     found the run too long and wrote nothing; ``magica_py.cli`` then compiles, as it does when
     the child failed unexpectedly). Its output goes to this process's terminal."""
+    import signal
+    import threading
+
     env = dict(os.environ)
     env["NUMBA_DISABLE_JIT"] = "1"
     env[TIER_ENV] = INTERPRETED
     child = subprocess.Popen([sys.executable, "-m", "magica_py.cli", "run", *argv], env=env)
-    while True:
-        try:
-            return child.wait()
-        except KeyboardInterrupt:   # the child has the same ^C and reports it itself
-            continue
+    forwarding = threading.current_thread() is threading.main_thread() and hasattr(signal, "SIGTERM")
+    if forwarding:   # a run ended from outside (a job scheduler's SIGTERM) ends its child as well
+        previous = signal.signal(signal.SIGTERM, lambda signum, frame: child.send_signal(signum))
+    try:
+        while True:
+            try:
+                return child.wait()
+            except KeyboardInterrupt:   # the child has the same ^C and reports it itself
+                continue
+    finally:
+        if forwarding:
+            signal.signal(signal.SIGTERM, previous)
 
 
 # ----------------------------------------------------------------------------- estimate

@@ -190,3 +190,35 @@ def test_one_background_compile_at_a_time_and_a_dead_one_s_lock_is_taken_over(mo
         note = first_run.interpreted_note(background)
         assert note.startswith("first run: no compiled solver in the cache yet; this short run goes interpreted")
         assert (str(background.pid) in note) == (background.pid is not None)
+
+
+def test_a_terminated_interpreted_run_ends_its_child_and_leaves_no_recording(tmp_path):
+    """SIGTERM to ``run`` (a job scheduler ending it) reaches the interpreted child, which
+    removes its unfinished recording and exits 143 like the parent."""
+    cache = tmp_path / "cache"
+    env = dict(os.environ)
+    env.pop("NUMBA_DISABLE_JIT", None)
+    env.update({"NUMBA_CACHE_DIR": str(cache), "MAGICA_FIRST_RUN": "auto", "MAGICA_STAGES": "used"})
+    out = tmp_path / "out"
+    out.mkdir()
+    run = subprocess.Popen([sys.executable, "-m", "magica_py.cli", "run", CHARACTER, "--frames", "25",
+                            "--rrd", str(out / "walk.rrd")], cwd=ROOT, env=env, stderr=subprocess.PIPE,
+                           stdout=subprocess.PIPE, text=True)
+    pid = None
+    try:
+        line = run.stderr.readline()
+        assert "this short run goes interpreted" in line, line
+        pid = first_run._read_lock(cache)[0]
+        time.sleep(1.0)   # frames are running (about 0.2 s each)
+        run.send_signal(signal.SIGTERM)
+        assert run.wait(timeout=60) == 143
+        assert "magica-py: terminated" in run.stderr.read()
+        assert list(out.iterdir()) == []   # neither the recording nor its temporary file
+    finally:
+        if run.poll() is None:
+            run.kill()
+        if pid is not None:
+            try:
+                os.killpg(pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                pass
