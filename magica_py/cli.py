@@ -312,9 +312,10 @@ def cmd_run(args) -> int:
         raise InputError(str(exc)) from None
     if interpreted_first:   # a first run: a short one goes interpreted (magica_py/first_run.py)
         code = first_run.run_interpreted(args.argv)
-        if code == EXIT_FAILURE and not args.quiet:   # a failure of the interpreted tier itself
-            print("magica-py: the interpreted first run failed (above); compiling the solver instead",
-                  file=sys.stderr, flush=True)
+        if code == EXIT_FAILURE:   # a failure of the interpreted tier itself: the compiled run may succeed
+            if not args.quiet:
+                print("magica-py: the interpreted first run failed (above); compiling the solver instead",
+                      file=sys.stderr, flush=True)
         elif code != first_run.DECLINED:
             return code
 
