@@ -322,6 +322,8 @@ def cmd_run(args) -> int:
     from magica_py.runtime.player import Player
     from magica_py.runner import CompileWatch, WarningEvents, play, summary_line
 
+    if not first_run.in_interpreted_tier() and not args.no_simulation:
+        first_run.wait_for_background_compile(_Messages(quiet=args.quiet).note)
     scene = load_run_scene(args)
     frames = args.frames if args.frames is not None else scene.settings.frame_count()
     background = None

@@ -22,9 +22,12 @@ compile. So ``run`` has two tiers:
 
 **The background compile** (``python -m magica_py.first_run RUN-ARGUMENTS``) is a compiled
 run of the same scene and arguments: it loads the scene, attaches the solver and a recording
-sink writing to a scratch file, runs ``COMPILE_FRAMES`` frames, and exits. Everything the run
-needs (the scene's kernels, the build, the drivers, the propagation, the cloth frame, the
-sink's) is then in numba's on-disk cache, so the next run of the scene starts compiled. It
+sink writing to a scratch file, runs the scene's frames (its whole length or the run's
+``--frames``, whichever is longer, for at most ``BACKGROUND_SECONDS`` after the first
+``COMPILE_FRAMES``), and exits. Everything the run needs (the scene's kernels, the build, the
+drivers, the propagation, the cloth frame, the sink's, and what the scene's events reach
+later: a teleport's propagation, a parameter change that switches a stage on) is then in
+numba's on-disk cache, so the next run of the scene starts compiled. It
 runs in a session of its own, after the interpreted run has ended if need be; its pid is in
 ``first-run-compile.pid`` and its output in ``first-run-compile.log`` in the numba cache
 folder. While one runs, no other is started; a run that finds no compiled frame kernel then
@@ -65,7 +68,8 @@ INTERPRETED = "interpreted"
 # compile there: a run within it ends well before its compile would have.
 INTERPRET_BUDGET = 6000
 DECLINED = 75            # the child's exit code: too long to interpret, nothing written
-COMPILE_FRAMES = 3       # frames the background compile runs (the first frame's reset, then steady frames)
+COMPILE_FRAMES = 3       # frames the background compile always runs (the first frame's reset, then steady frames)
+BACKGROUND_SECONDS = 20.0   # then it runs on through the scene while it takes no longer than this
 LOCK_NAME = "first-run-compile.pid"
 LOG_NAME = "first-run-compile.log"
 FRAME_KERNEL_INDEX = "frame.simulate_*.nbi"   # numba's cache index of a compiled cloth frame
@@ -200,13 +204,19 @@ def _lock_path(folder: pathlib.Path) -> pathlib.Path:
 
 
 def _alive(pid: int) -> bool:
+    """Does process ``pid`` run? A zombie (ended, not yet reaped: an orphan under a PID 1 that
+    does not reap) counts as ended."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return True
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            return f.read().rsplit(b")", 1)[1].split()[0] != b"Z"
+    except (OSError, IndexError):
+        return True
 
 
 class Background(NamedTuple):
@@ -285,6 +295,25 @@ def start_background_compile(argv: list[str]) -> Background:
     return Background(process.pid, log, "started")
 
 
+WAIT_SECONDS = 600.0   # the longest a compiled run waits for a background compile to end
+
+
+def wait_for_background_compile(note, poll: float = 0.5, limit: float = WAIT_SECONDS) -> float:
+    """In a run about to compile: while a background compile (an earlier short run's) fills
+    this cache folder, wait for it, saying so with ``note(text)``: the two would compile the
+    same kernels side by side, each on the CPU the other needs. Returns the seconds waited
+    (at most ``limit``; after that the run compiles whatever is still missing itself)."""
+    pid = background_compile_pid()
+    if pid is None:
+        return 0.0
+    note(f"waiting for the background compile an earlier first run started (pid {pid}; log: "
+         f"{cache_folder() / LOG_NAME}); this run then starts from its cache ...")
+    started = time.perf_counter()
+    while _alive(pid) and background_compile_pid() == pid and time.perf_counter() - started < limit:
+        time.sleep(poll)
+    return time.perf_counter() - started
+
+
 def interpreted_note(background: Background) -> str:
     """The line ``run`` prints when it goes interpreted."""
     head = ("first run: no compiled solver in the cache yet; this short run goes interpreted (the same results, "
@@ -316,8 +345,8 @@ def _peak_memory() -> str:
 def background_compile(argv: list[str]) -> int:
     """The background compile's own work (``python -m magica_py.first_run RUN-ARGUMENTS``):
     the run's scene, solver and sink (recording to a scratch file, never to a viewer),
-    ``COMPILE_FRAMES`` frames, compiled and cached. Returns 0, or 1 with the reason in the
-    log."""
+    the scene's frames (module docstring), compiled and cached. Returns 0, or 1 with the reason
+    in the log."""
     import tempfile
 
     from magica_py import cli
@@ -341,8 +370,14 @@ def background_compile(argv: list[str]) -> int:
             args.no_rrd, args.spawn, args.connect = False, False, None
             recorder = cli._attach_sink(player, scene, args, [])
             try:
-                for _ in range(COMPILE_FRAMES):
+                frames = max(scene.settings.frame_count() or COMPILE_FRAMES, args.frames or 0)
+                deadline = None
+                for n in range(frames):
                     player.step()
+                    if n + 1 == COMPILE_FRAMES:
+                        deadline = time.perf_counter() + BACKGROUND_SECONDS
+                    elif deadline is not None and time.perf_counter() > deadline:
+                        break
             finally:
                 if recorder is not None:
                     recorder.close(False)

@@ -105,9 +105,7 @@ def _positions(path):
 def _wait_for_exit(pid, timeout):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
+        if not first_run._alive(pid):
             return True
         time.sleep(0.5)
     return False
@@ -222,3 +220,22 @@ def test_a_terminated_interpreted_run_ends_its_child_and_leaves_no_recording(tmp
                 os.killpg(pid, signal.SIGKILL)
             except (ProcessLookupError, PermissionError):
                 pass
+
+
+def test_a_compiling_run_waits_for_a_running_background_compile_and_says_so(monkeypatch, tmp_path):
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    notes = []
+    assert first_run.wait_for_background_compile(notes.append) == 0.0 and notes == []   # none runs
+    stand_in = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(1.5)"])
+    try:
+        (tmp_path / first_run.LOCK_NAME).write_text(first_run._lock_text(stand_in.pid, ["x.yaml"]))
+        waited = first_run.wait_for_background_compile(notes.append, poll=0.05)
+        assert stand_in.poll() is not None or not first_run._alive(stand_in.pid)
+        assert 0.5 < waited < 30.0
+        assert len(notes) == 1 and f"pid {stand_in.pid}" in notes[0]
+        # a compile that does not end is waited for up to the limit only
+        (tmp_path / first_run.LOCK_NAME).write_text(first_run._lock_text(os.getpid(), ["x.yaml"]))
+        assert 0.2 <= first_run.wait_for_background_compile(notes.append, poll=0.05, limit=0.2) < 5.0
+    finally:
+        stand_in.kill()
+        stand_in.wait()
