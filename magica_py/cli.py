@@ -177,8 +177,7 @@ def main(argv=None) -> int:
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _show_warning
-            code = handler(args)
-            return EXIT_TERMINATED if code == -signal.SIGTERM else code   # a child ended by SIGTERM
+            return handler(args)
     except KeyboardInterrupt:
         print("magica-py: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -136,8 +136,8 @@ def wanted(args) -> bool:
 
 
 def run_interpreted(argv: list[str]) -> int:
-    """Run ``magica-py run ARGV`` in the interpreted child; its exit code (``DECLINED`` when it
-    found the run too long and wrote nothing; ``magica_py.cli`` then compiles, as it does when
+    """Run ``magica-py run ARGV`` in the interpreted child; its exit code (128 + N when a signal
+    N ended it; ``DECLINED`` when it found the run too long and wrote nothing; ``magica_py.cli`` then compiles, as it does when
     the child failed unexpectedly). Its output goes to this process's terminal."""
     import signal
     import threading
@@ -152,9 +152,11 @@ def run_interpreted(argv: list[str]) -> int:
     try:
         while True:
             try:
-                return child.wait()
+                code = child.wait()
+                break
             except KeyboardInterrupt:   # the child has the same ^C and reports it itself
                 continue
+        return 128 - code if code < 0 else code   # a child ended by signal N: the shell's 128 + N
     finally:
         if forwarding:
             signal.signal(signal.SIGTERM, previous)
@@ -360,12 +362,11 @@ def background_compile(argv: list[str]) -> int:
         from magica_py.runner import CompileWatch
         from magica_py.runtime.player import Player
 
-        watch = CompileWatch()   # Python's collector runs less often while numba compiles
-        watch.__enter__()
-        scene = cli.load_run_scene(args)
-        player = Player.for_scene(scene)
-        cli._attach_solver(player, scene, [])
-        with tempfile.TemporaryDirectory(prefix="magica-first-run-") as scratch:
+        # CompileWatch: Python's collector runs less often while numba compiles
+        with CompileWatch() as watch, tempfile.TemporaryDirectory(prefix="magica-first-run-") as scratch:
+            scene = cli.load_run_scene(args)
+            player = Player.for_scene(scene)
+            cli._attach_solver(player, scene, [])
             args.rrd = os.path.join(scratch, "compile.rrd")
             args.no_rrd, args.spawn, args.connect = False, False, None
             recorder = cli._attach_sink(player, scene, args, [])
@@ -381,7 +382,6 @@ def background_compile(argv: list[str]) -> int:
             finally:
                 if recorder is not None:
                     recorder.close(False)
-        watch.__exit__(None, None, None)
         print(f"compiled {scene.name!r} in {time.perf_counter() - started:.1f} s ({watch.seconds:.1f} s compiling"
               f"{_peak_memory()})", flush=True)
         return 0

@@ -239,3 +239,19 @@ def test_a_compiling_run_waits_for_a_running_background_compile_and_says_so(monk
     finally:
         stand_in.kill()
         stand_in.wait()
+
+
+class _KilledChild:
+    def __init__(self, args, env=None, **kwargs):
+        self.env = env
+
+    def wait(self):
+        return -signal.SIGKILL   # subprocess's code for a child ended by a signal
+
+    def send_signal(self, signum):
+        pass
+
+
+def test_a_child_ended_by_a_signal_gives_the_shell_s_exit_code(monkeypatch):
+    monkeypatch.setattr(first_run.subprocess, "Popen", _KilledChild)
+    assert first_run.run_interpreted(["x.yaml"]) == 128 + signal.SIGKILL
