@@ -90,6 +90,37 @@ class CompileWatch:
         return context.__exit__(*exc) if context is not None else False
 
 
+class Stopwatch:
+    """Context manager: the wall time of a block less the compiles ``watch`` (a ``CompileWatch``,
+    or None) saw inside it, so that a command's load, simulate or write time is the same on a
+    first run as on the next ones. After the block: ``seconds`` (without the compiles) and
+    ``compiled`` (the compiles' wall time)."""
+
+    def __init__(self, watch: CompileWatch | None = None):
+        self.watch = watch
+        self.seconds = 0.0
+        self.compiled = 0.0
+        self._start = 0.0
+        self._compiled_before = 0.0
+
+    def __enter__(self):
+        self._compiled_before = self.watch.seconds if self.watch is not None else 0.0
+        self._start = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc):
+        elapsed = time.perf_counter() - self._start
+        self.compiled = (self.watch.seconds - self._compiled_before) if self.watch is not None else 0.0
+        self.seconds = max(0.0, elapsed - self.compiled)
+        return False
+
+
+def compile_text(seconds: float) -> str:
+    """The summaries' report of a run's compile: ``"; compile 42.1 s, first run only"``, or
+    nothing when nothing compiled."""
+    return f"; compile {seconds:.1f} s, first run only" if seconds >= 0.05 else ""
+
+
 def _as_listener(watch: CompileWatch, event):
     class _Listener(event.Listener):
         def on_start(self, ev):
@@ -312,13 +343,13 @@ def summary_line(scene, stats: RunStats, solver_attached: bool, output, compile_
     else:
         steps = "simulation steps not reported"
     compiled = stats.compile_seconds if compile_seconds is None else compile_seconds
-    compile_text = f"; compile {compiled:.1f} s, first run only" if compiled >= 0.05 else ""
+    compiled_text = compile_text(compiled)
     if interpreted:
-        compile_text += "; interpreted, first run only"
+        compiled_text += "; interpreted, first run only"
     where = ""
     if output:
         text = os.path.relpath(output)
         where = f" -> {text if not text.startswith('..') else os.path.abspath(output)}"
     on = f" on {threads} threads" if threads is not None and threads > 1 else ""
     return (f"{scene.name}: {stats.frames} frames, {steps}, {per_frame:.2f} ms/frame{on} "
-            f"(wall {stats.wall_time:.2f} s{first}{compile_text}){where}")
+            f"(wall {stats.wall_time:.2f} s{first}{compiled_text}){where}")

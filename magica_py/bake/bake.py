@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 import os
-import time as _time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,6 +49,7 @@ class BakeResult:
     simulate_seconds: float            # s, the frame loop (solver and capture)
     write_seconds: float
     notes: list[str] = field(default_factory=list)
+    compile_seconds: float = 0.0       # s, numba compiles (first run only), left out of the three above
 
 
 def file_rigs(scene) -> dict[str, FileRig]:
@@ -208,27 +208,30 @@ def bake_capture(scene, motion: CapturedMotion, out, source: FileRig | None = No
 
 
 def bake_scene(scene_path, out, overrides=(), bones=None, frames: int | None = None, rig: str | None = None,
-               units=None, animation_name: str | None = None, progress=None) -> BakeResult:
-    """Load, simulate and bake ``scene_path`` to ``out`` (see the package docstring)."""
+               units=None, animation_name: str | None = None, progress=None, compile_watch=None) -> BakeResult:
+    """Load, simulate and bake ``scene_path`` to ``out`` (see the package docstring). With
+    ``compile_watch`` (a ``runner.CompileWatch`` around the call) the result's load, simulate
+    and write times leave out the compiles, reported apart as ``compile_seconds``."""
     from magica_py.config import load_scene
+    from magica_py.runner import Stopwatch
 
     out = check_output(out)
     if units is not None and out.suffix.lower() != ".bvh":
         raise BakeError("--units applies to a .bvh output; a glTF copy keeps its file's unit scale")
-    start = _time.perf_counter()
-    scene = load_scene(scene_path, overrides)
-    count = frames if frames is not None else scene.settings.frame_count()
-    if count is None:
-        raise BakeError("the scene runs on the wall clock for a duration: give --frames N to bake it")
-    rigs = file_rigs(scene)
-    chosen, source = plan_bones(scene, out, bones, rig, rigs)
-    loaded = _time.perf_counter() - start
-    motion = simulate_and_capture(scene, chosen, count, progress)
-    start = _time.perf_counter()
-    notes = bake_capture(scene, motion, out, source, rigs, units, animation_name)
-    written = _time.perf_counter() - start
+    compiled_before = compile_watch.seconds if compile_watch is not None else 0.0
+    with Stopwatch(compile_watch) as loading:
+        scene = load_scene(scene_path, overrides)
+        count = frames if frames is not None else scene.settings.frame_count()
+        if count is None:
+            raise BakeError("the scene runs on the wall clock for a duration: give --frames N to bake it")
+        rigs = file_rigs(scene)
+        chosen, source = plan_bones(scene, out, bones, rig, rigs)
+    motion = simulate_and_capture(scene, chosen, count, progress, compile_watch)
+    with Stopwatch(compile_watch) as writing:
+        notes = bake_capture(scene, motion, out, source, rigs, units, animation_name)
     size = out.stat().st_size + (out.with_suffix(".bin").stat().st_size if out.suffix.lower() == ".gltf" else 0)
-    return BakeResult(out, motion, size, loaded, motion.wall_time, written, notes)
+    compiled = (compile_watch.seconds - compiled_before) if compile_watch is not None else 0.0
+    return BakeResult(out, motion, size, loading.seconds, motion.wall_time, writing.seconds, notes, compiled)
 
 
 def pose_error(motion: CapturedMotion, position: np.ndarray, rotation: np.ndarray) -> tuple[float, float]:

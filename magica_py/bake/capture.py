@@ -18,7 +18,6 @@ local_scale         (F, B, 3)   local scale
 from __future__ import annotations
 
 import fnmatch
-import time as _time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -135,9 +134,12 @@ def continuous_quaternions(q: np.ndarray) -> np.ndarray:
     return out
 
 
-def simulate_and_capture(scene, bones, frames: int, progress=None) -> CapturedMotion:
+def simulate_and_capture(scene, bones, frames: int, progress=None, compile_watch=None) -> CapturedMotion:
     """Run ``scene`` for ``frames`` frames (player, cloth solver as ``magica-py run``, no
-    recording) and capture ``bones``; ``progress(done, frames)`` after each frame."""
+    recording) and capture ``bones``; ``progress(done, frames)`` after each frame. The
+    motion's ``wall_time`` leaves out the compiles ``compile_watch`` (a ``runner.CompileWatch``
+    around the call) saw during the frames."""
+    from magica_py.runner import Stopwatch
     from magica_py.runtime.player import Player
 
     player = Player.for_scene(scene)
@@ -146,9 +148,9 @@ def simulate_and_capture(scene, bones, frames: int, progress=None) -> CapturedMo
 
         attach(player, scene)
     capture = PoseCapture(scene.hierarchy, bones, frames).attach(player)
-    start = _time.perf_counter()
-    for k in range(frames):
-        player.step()
-        if progress is not None:
-            progress(k + 1, frames)
-    return capture.result(_time.perf_counter() - start)
+    with Stopwatch(compile_watch) as frames_time:
+        for k in range(frames):
+            player.step()
+            if progress is not None:
+                progress(k + 1, frames)
+    return capture.result(frames_time.seconds)

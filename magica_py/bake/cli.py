@@ -47,7 +47,7 @@ def main_bake(argv) -> int:
     from magica_py.bake.bake import BakeError, bake_scene
     from magica_py.io.errors import AssetError
 
-    from magica_py.runner import FrameProgress
+    from magica_py.runner import CompileWatch, FrameProgress, compile_text
 
     bar = None if args.quiet else FrameProgress(args.frames)
 
@@ -56,12 +56,19 @@ def main_bake(argv) -> int:
             bar.bar.total = total
         bar.update(done)
 
+    def note(text):
+        if bar is not None:
+            bar.write(f"magica-py bake: {text}")
+
     progress = None if bar is None else progress
+    # a first run compiles the solver: said before it starts, left out of the bar's ETA and of
+    # the times below, and reported apart
+    compile_watch = CompileWatch(announce=note, on_end=None if bar is None else bar.pause_ended)
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), compile_watch:
             warnings.showwarning = _show_warning
             result = bake_scene(args.scene, args.out, args.overrides, args.bones or None, args.frames, args.rig,
-                                args.units, args.name, progress)
+                                args.units, args.name, progress, compile_watch)
     except KeyboardInterrupt:
         print("magica-py bake: interrupted (nothing written)", file=sys.stderr)
         return EXIT_INTERRUPTED
@@ -82,5 +89,5 @@ def main_bake(argv) -> int:
         m = result.motion
         print(f"{os.path.relpath(result.out)}: {len(m.names)} bones x {m.frames} frames, {result.bytes / 1e6:.2f} MB; "
               f"loaded in {result.load_seconds:.2f} s, simulated in {result.simulate_seconds:.2f} s, "
-              f"written in {result.write_seconds:.2f} s")
+              f"written in {result.write_seconds:.2f} s{compile_text(result.compile_seconds)}")
     return EXIT_OK

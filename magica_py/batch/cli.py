@@ -16,6 +16,7 @@ and OUT/pareto.png.
 
 
 def main_batch(argv) -> int:
+    from magica_py import first_run
     from magica_py.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK
 
     p = argparse.ArgumentParser(prog="magica-py batch", description=DESCRIPTION,
@@ -63,6 +64,12 @@ def main_batch(argv) -> int:
     executor = Executor(workers=args.workers, scheduler=args.scheduler)
     if not args.quiet:
         print(f"magica-py batch: {len(job_file.jobs)} jobs from {args.jobs} -> {out}", file=sys.stderr)
+        if args.scheduler is None and not first_run.frame_kernel_cached():
+            # local workers share this machine's kernel cache: an empty one means their first
+            # jobs compile the solver before the bar moves (the jobs' timings leave it out)
+            print("magica-py batch: no compiled solver in the kernel cache yet: each worker compiles it before its "
+                  "first job (first run only; compiled kernels are cached for the next runs; this can take a minute "
+                  "or more, and the jobs' timings leave it out)", file=sys.stderr)
     interrupted = False
     try:
         report = run_batch(job_file.jobs, out, executor, retry_failed=args.retry_failed,

@@ -72,6 +72,15 @@ class Progress:
         if self.bar is not None:
             self.bar.close()
 
+    def compile_watch(self, command: str):
+        """A ``runner.CompileWatch`` that says, above the bar, when a first run starts compiling
+        the solver, and takes the compile out of the bar's rate and ETA (quiet: says nothing)."""
+        from magica_py.runner import CompileWatch
+
+        if self.bar is None:
+            return CompileWatch()
+        return CompileWatch(announce=lambda text: self.bar.write(f"{command}: {text}"), on_end=self.bar.pause_ended)
+
 
 # ----------------------------------------------------------------------------- bench
 def main_bench(argv) -> int:
@@ -410,11 +419,12 @@ def main_stability(argv) -> int:
     _, params = parse_family("params:" + ",".join(args.param))
     rows, failed = [], 0
     bar = Progress(len(cases), args.quiet)
-    for c in cases:
-        result, _ = run_case(c, c.short_duration if args.short else None, params)
-        rows.append(stability_row(result))
-        failed += bool(result.failures())
-        bar.add(1)
+    with bar.compile_watch("magica-py stability"):
+        for c in cases:
+            result, _ = run_case(c, c.short_duration if args.short else None, params)
+            rows.append(stability_row(result))
+            failed += bool(result.failures())
+            bar.add(1)
     bar.close()
     out = R.default_report_dir() if args.out is None else __import__("pathlib").Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -458,9 +468,10 @@ def main_mocap(args) -> int:
               f"= {len(runs)} runs, {total} frames", file=sys.stderr)
     bar = Progress(total, args.quiet)
     rows = []
-    for c, m, f in runs:
-        run = S.run_case(c, m, f, duration, progress=bar.run_callback(), parameters=params)
-        rows.extend(S.run_rows(run))
+    with bar.compile_watch("magica-py stability"):
+        for c, m, f in runs:
+            run = S.run_case(c, m, f, duration, progress=bar.run_callback(), parameters=params)
+            rows.extend(S.run_rows(run))
     bar.close()
     elapsed = time.perf_counter() - started
     out = R.default_report_dir() if args.out is None else __import__("pathlib").Path(args.out)

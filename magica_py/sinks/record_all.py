@@ -12,7 +12,6 @@ import os
 import pathlib
 import sys
 import tempfile
-import time
 from dataclasses import dataclass
 
 DEFAULT_CONFIGS = "configs"
@@ -24,11 +23,12 @@ class RecordResult:
     name: str
     path: pathlib.Path | None
     frames: int
-    wall_seconds: float        # whole run including the sink and the file close
+    wall_seconds: float        # whole run including the sink and the file close, less the compiles
     sink_seconds: float        # time inside the sink (copying, sending, closing the file)
     import_seconds: float      # one-time import of rerun (not in sink_seconds)
     particles: int
     bytes: int
+    compile_seconds: float = 0.0   # numba compiles during the run (first run only; not in wall_seconds)
 
     @property
     def sim_seconds(self) -> float:
@@ -70,8 +70,11 @@ def attach_solver(player, scene):
 
 
 def record_scene(scene, rrd, *, frames=None, batch_frames=None, spawn=False, connect=None, progress=None,
-                 recording_id=None, open_at_end=False) -> RecordResult:
-    """Run ``scene`` with solver and sink; the file appears at ``rrd`` only if the run succeeds."""
+                 recording_id=None, open_at_end=False, compile_watch=None) -> RecordResult:
+    """Run ``scene`` with solver and sink; the file appears at ``rrd`` only if the run succeeds.
+    With ``compile_watch`` (a ``runner.CompileWatch`` around the call) the frames' compiles are
+    left out of the result's times and reported apart."""
+    from magica_py.runner import Stopwatch
     from magica_py.runtime.player import Player
     from magica_py.sinks.recorder import SinkOptions, attach
 
@@ -82,18 +85,18 @@ def record_scene(scene, rrd, *, frames=None, batch_frames=None, spawn=False, con
                                                  open_at_end=open_at_end))
     n = scene_frames(scene) if frames is None else int(frames)
     ok = False
-    start = time.perf_counter()
-    try:
-        player.run(n, progress=progress)
-        ok = True
-    finally:
-        recorder.close(success=ok)
-    wall = time.perf_counter() - start
+    with Stopwatch(compile_watch) as run:
+        try:
+            player.run(n, progress=progress)
+            ok = True
+        finally:
+            recorder.close(success=ok)
     out = recorder.output_path
     particles = sum(t.particle_count for t in recorder.provider.cloth_topologies())
-    return RecordResult(name=scene.name, path=out, frames=n, wall_seconds=wall, sink_seconds=recorder.seconds,
+    return RecordResult(name=scene.name, path=out, frames=n, wall_seconds=run.seconds, sink_seconds=recorder.seconds,
                         import_seconds=recorder.import_seconds,
-                        particles=particles, bytes=os.path.getsize(out) if out is not None and out.exists() else 0)
+                        particles=particles, bytes=os.path.getsize(out) if out is not None and out.exists() else 0,
+                        compile_seconds=run.compiled)
 
 
 def showcase_configs(folder) -> list[pathlib.Path]:
@@ -131,15 +134,22 @@ def main_record_all(argv=None) -> int:
     except (ValueError, OSError) as exc:
         print(f"magica-py record-all: error: {exc}", file=sys.stderr)
         return 2
+    from magica_py.runner import CompileWatch, compile_text
+
     results, failures = [], 0
     for path in configs:
+        # a scene whose stages are not compiled yet says so before its compile starts; the
+        # times below leave the compile out and the line reports it apart
+        compile_watch = CompileWatch(announce=lambda text, name=path.stem: print(
+            f"magica-py record-all: {name}: {text}", file=sys.stderr, flush=True))
         try:
-            if args.warmup > 0:   # JIT and rerun's lazy start-up, recorded to a scratch file
-                with tempfile.TemporaryDirectory() as scratch:
-                    record_scene(load_scene(path), pathlib.Path(scratch) / "warmup.rrd", frames=args.warmup)
-            scene = load_scene(path)
-            result = record_scene(scene, out / f"{path.stem}.rrd", frames=args.frames,
-                                  batch_frames=args.batch_frames)
+            with compile_watch:
+                if args.warmup > 0:   # JIT and rerun's lazy start-up, recorded to a scratch file
+                    with tempfile.TemporaryDirectory() as scratch:
+                        record_scene(load_scene(path), pathlib.Path(scratch) / "warmup.rrd", frames=args.warmup)
+                scene = load_scene(path)
+                result = record_scene(scene, out / f"{path.stem}.rrd", frames=args.frames,
+                                      batch_frames=args.batch_frames, compile_watch=compile_watch)
         except (ConfigError, ValueError, OSError) as exc:
             failures += 1
             print(f"magica-py record-all: {path}: {exc}", file=sys.stderr)
@@ -148,7 +158,7 @@ def main_record_all(argv=None) -> int:
         print(f"{path.stem:<20} {result.frames:>6} frames {result.particles:>7} particles  "
               f"sim {result.sim_seconds:7.2f} s  sink {result.sink_seconds:6.2f} s "
               f"({100 * result.sink_ratio:5.1f} % of sim, {1000 * result.sink_seconds / max(result.frames, 1):.2f} ms/frame)"
-              f"  {result.bytes / 1e6:7.1f} MB -> {result.path}",
+              f"  {result.bytes / 1e6:7.1f} MB -> {result.path}{compile_text(compile_watch.seconds)}",
               flush=True)
     return 1 if failures else 0
 

@@ -21,7 +21,6 @@ import argparse
 import json
 import pathlib
 import sys
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -181,22 +180,25 @@ def load_scene_for(replay: ReplayData, scene_path=None, overrides=()):
 
 
 def resimulate(recording, scene, output=None, *, spawn=False, connect=None, snapshots=None, batch_frames=None,
-               progress=None):
-    """Run ``scene`` on the recorded pose; returns (player, recorder, wall seconds)."""
+               progress=None, compile_watch=None):
+    """Run ``scene`` on the recorded pose; returns (player, recorder, wall seconds). With
+    ``compile_watch`` (a ``runner.CompileWatch`` around the call) the wall seconds leave out
+    the frames' compiles."""
+    from magica_py.runner import Stopwatch
     from magica_py.sinks.recorder import SinkOptions, attach
 
     replay = recording if isinstance(recording, ReplayData) else load_replay(recording)
     player = build_player(replay, scene)
     recorder = attach(player, scene, SinkOptions(rrd=output, no_rrd=output is None, spawn=spawn, connect=connect,
                                                  snapshots=snapshots, batch_frames=batch_frames))
-    start = time.perf_counter()
     ok = False
-    try:
-        player.run(replay.frame_count, progress=progress)
-        ok = True
-    finally:
-        recorder.close(success=ok)
-    return player, recorder, time.perf_counter() - start
+    with Stopwatch(compile_watch) as run:
+        try:
+            player.run(replay.frame_count, progress=progress)
+            ok = True
+        finally:
+            recorder.close(success=ok)
+    return player, recorder, run.seconds
 
 
 def default_output(path) -> pathlib.Path:
@@ -217,16 +219,23 @@ def main_resim(argv=None) -> int:
     parser.add_argument("--spawn", action="store_true", help="also stream to a new Rerun viewer")
     parser.add_argument("--connect", metavar="ADDR", help="also stream to a running viewer (host:port)")
     args = parser.parse_args(argv)
+    from magica_py.runner import CompileWatch, compile_text
+
+    # a first run compiles the solver: said before it starts, left out of the times, reported apart
+    compile_watch = CompileWatch(announce=lambda text: print(f"magica-py resim: {text}", file=sys.stderr, flush=True))
     try:
-        replay = load_replay(args.recording)
-        scene = load_scene_for(replay, args.scene, tuple(args.overrides))
-        out = args.rrd or default_output(args.recording)
-        player, recorder, seconds = resimulate(replay, scene, out, spawn=args.spawn, connect=args.connect)
+        with compile_watch:
+            replay = load_replay(args.recording)
+            scene = load_scene_for(replay, args.scene, tuple(args.overrides))
+            out = args.rrd or default_output(args.recording)
+            player, recorder, seconds = resimulate(replay, scene, out, spawn=args.spawn, connect=args.connect,
+                                                   compile_watch=compile_watch)
     except (RecordingError, ValueError, OSError) as exc:
         print(f"magica-py resim: error: {exc}", file=sys.stderr)
         return 2
     print(f"resim: {replay.frame_count} frames of {args.recording} on scene {scene.name!r} -> {out} "
-          f"({seconds:.2f} s, {1000 * seconds / max(replay.frame_count, 1):.2f} ms/frame)")
+          f"({seconds:.2f} s, {1000 * seconds / max(replay.frame_count, 1):.2f} ms/frame"
+          f"{compile_text(compile_watch.seconds)})")
     return 0
 
 
