@@ -192,8 +192,16 @@ def main(argv=None) -> int:
         if _is_input_error(exc):
             print(_format_input_error(exc), file=sys.stderr)
             return EXIT_BAD_INPUT
-        traceback.print_exc()
-        print(f"magica-py: internal error: {exc}", file=sys.stderr)
+        from magica_py import first_run
+
+        # the interpreted first run's own failure: one line (the run then compiles, and the
+        # compiled run reports its own errors), the traceback kept for a bug report
+        kept = first_run.record_failure(traceback.format_exc()) if first_run.in_interpreted_tier() else None
+        if kept is None:
+            traceback.print_exc()
+        print(f"magica-py: internal error: {exc}" if kept is None else
+              f"magica-py: internal error in the interpreted first run: {type(exc).__name__}: {exc} "
+              f"(traceback in {kept})", file=sys.stderr)
         return EXIT_FAILURE
     finally:
         if previous is not None:
@@ -313,7 +321,7 @@ def cmd_run(args) -> int:
         code = first_run.run_interpreted(args.argv)
         if code == EXIT_FAILURE:   # a failure of the interpreted tier itself: the compiled run may succeed
             if not args.quiet:
-                print("magica-py: the interpreted first run failed (above); compiling the solver instead",
+                print("magica-py: the interpreted first run failed; compiling the solver instead",
                       file=sys.stderr, flush=True)
         elif code != first_run.DECLINED:
             return code

@@ -40,6 +40,10 @@ above), ``compile`` (never interpreted: the behaviour before this module; the te
 default), ``interpret`` (interpreted whenever the run is within the budget, compiled frame
 kernel in the cache or not).
 
+An internal error of the interpreted run (a bug: a difference between the kernels run as
+Python and compiled) ends the child with one line, its traceback kept in
+``first-run-interpreted-error.log`` in the cache folder, and ``run`` then compiles.
+
 In the interpreted tier numpy's floating-point warnings are off (``numpy.seterr``): the
 kernels' branch-free selects compute, and then discard, values that divide by zero, which
 compiled (``error_model="numpy"``) warns about nowhere; without this the recording would
@@ -72,6 +76,7 @@ COMPILE_FRAMES = 3       # frames the background compile always runs (the first 
 BACKGROUND_SECONDS = 20.0   # then it runs on through the scene while it takes no longer than this
 LOCK_NAME = "first-run-compile.pid"
 LOG_NAME = "first-run-compile.log"
+FAILURE_LOG_NAME = "first-run-interpreted-error.log"   # the traceback of a failed interpreted run
 FRAME_KERNEL_INDEX = "frame.simulate_*.nbi"   # numba's cache index of a compiled cloth frame
 
 
@@ -191,6 +196,21 @@ def estimate_particle_steps(scene, frames: int | None) -> float:
 def interpret(scene, frames: int | None) -> bool:
     """In the interpreted child: is the run within the budget (else the child declines)?"""
     return estimate_particle_steps(scene, frames) <= budget()
+
+
+def record_failure(text: str) -> pathlib.Path | None:
+    """Keep the traceback of an interpreted run's internal error in the cache folder (the run
+    then compiles: ``magica_py.cli``); returns the file, or None when it cannot be written."""
+    folder = cache_folder()
+    if folder is None:
+        return None
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / FAILURE_LOG_NAME
+        path.write_text(text)
+        return path
+    except OSError:
+        return None
 
 
 def quiet_floating_point() -> None:

@@ -255,3 +255,38 @@ class _KilledChild:
 def test_a_child_ended_by_a_signal_gives_the_shell_s_exit_code(monkeypatch):
     monkeypatch.setattr(first_run.subprocess, "Popen", _KilledChild)
     assert first_run.run_interpreted(["x.yaml"]) == 128 + signal.SIGKILL
+
+
+def test_an_internal_error_of_the_interpreted_run_is_one_line_and_its_traceback_is_kept(monkeypatch, tmp_path,
+                                                                                        capsys):
+    """A bug that only the interpreted kernels hit must not greet a new user with a traceback:
+    the child says one line and keeps the traceback; the parent then compiles (exit 1 is the
+    code that makes ``run`` fall back)."""
+    from magica_py import cli, runner
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv(first_run.TIER_ENV, first_run.INTERPRETED)
+    monkeypatch.setattr(first_run, "start_background_compile", lambda argv: first_run.Background(None, None, "failed"))
+
+    def broken_play(*args, **kwargs):
+        raise ZeroDivisionError("float division by zero")
+
+    monkeypatch.setattr(runner, "play", broken_play)
+    errors = np.geterr()   # the interpreted tier turns numpy's warnings off (quiet_floating_point)
+    try:
+        assert cli.main(["run", str(ROOT / "configs" / "tail_orbit.yaml"), "--no-rrd", "--frames", "2"]) == \
+            cli.EXIT_FAILURE
+    finally:
+        np.seterr(**errors)
+    err = capsys.readouterr().err
+    kept = tmp_path / first_run.FAILURE_LOG_NAME
+    assert ("magica-py: internal error in the interpreted first run: ZeroDivisionError: float division by zero "
+            f"(traceback in {kept})") in err
+    assert "Traceback" not in err
+    assert "Traceback" in kept.read_text() and "broken_play" in kept.read_text()
+    # outside the interpreted tier an internal error still shows its traceback
+    monkeypatch.delenv(first_run.TIER_ENV)
+    monkeypatch.setenv("MAGICA_FIRST_RUN", "compile")
+    assert cli.main(["run", str(ROOT / "configs" / "tail_orbit.yaml"), "--no-rrd", "--frames", "2"]) == cli.EXIT_FAILURE
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "magica-py: internal error: float division by zero" in err

@@ -174,7 +174,7 @@ def _aligned_sum(vectors, vt_data, s, c, flip, flip_bit):
         sx += vectors[t, 0]
         sy += vectors[t, 1]
         sz += vectors[t, 2]
-    if math.sqrt(sx * sx + sy * sy + sz * sz) >= 0.5:
+    if np.sqrt(sx * sx + sy * sy + sz * sz) >= 0.5:
         return sx, sy, sz
     best = -1.0
     best_k = 0
@@ -190,7 +190,7 @@ def _aligned_sum(vectors, vt_data, s, c, flip, flip_bit):
             ax += g * vectors[t, 0]
             ay += g * vectors[t, 1]
             az += g * vectors[t, 2]
-        length = math.sqrt(ax * ax + ay * ay + az * az)
+        length = np.sqrt(ax * ax + ay * ay + az * az)
         if length > best:
             best = length
             best_k = ref

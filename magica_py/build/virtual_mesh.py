@@ -191,8 +191,8 @@ def horizontal_links(pos, members, level_start, level_count, level, root_line, r
                     continue
                 if sequential and abs(ri - rj) > 1 and not (loop and first_last):
                     continue
-                d = math.sqrt((pos[i, 0] - pos[j, 0]) ** 2 + (pos[i, 1] - pos[j, 1]) ** 2
-                              + (pos[i, 2] - pos[j, 2]) ** 2)
+                dx, dy, dz = pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1], pos[i, 2] - pos[j, 2]
+                d = np.sqrt(dx * dx + dy * dy + dz * dz)   # products: Python's pow may round ``** 2`` otherwise
                 if pass_ == 0:
                     if d < best_d:
                         best_d = d

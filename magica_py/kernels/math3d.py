@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from magica_py.jit import kernel
 from magica_py.kernels import trig
 
@@ -78,7 +80,7 @@ def v_cross(a, b):
 
 @kernel
 def v_length(a):
-    return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    return np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
 
 
 @kernel
@@ -89,7 +91,7 @@ def v_length_sq(a):
 @kernel
 def v_normalize(a):
     """Unit vector, or the zero vector when ``|a|`` is below 1e-12 (normalizesafe)."""
-    n = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    n = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
     if n < 1e-12:
         return (0.0, 0.0, 0.0)
     inv = 1.0 / n
@@ -194,7 +196,7 @@ def q_dot(a, b):
 @kernel
 def q_normalize(q):
     """Unit quaternion, or identity when |q| is (near) zero (normalizesafe)."""
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    n = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     if n < 1e-12:
         return (0.0, 0.0, 0.0, 1.0)
     inv = 1.0 / n
@@ -461,7 +463,7 @@ def inverse_mass_friction_depth(friction, depth):
 @kernel
 def v_normalize_select(a):
     """``v_normalize`` without a branch."""
-    n = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    n = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
     inv = 1.0 / max(n, 1e-300)   # a zero vector: discarded below (and no 1/0 with the JIT off)
     small = n < 1e-12
     return (0.0 if small else a[0] * inv, 0.0 if small else a[1] * inv, 0.0 if small else a[2] * inv)
@@ -470,7 +472,7 @@ def v_normalize_select(a):
 @kernel
 def q_normalize_select(q):
     """``q_normalize`` without a branch."""
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    n = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     inv = 1.0 / max(n, 1e-300)   # a zero quaternion: discarded below
     small = n < 1e-12
     return (0.0 if small else q[0] * inv, 0.0 if small else q[1] * inv,

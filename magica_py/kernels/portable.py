@@ -78,7 +78,7 @@ def asin(x):
     ax = abs(x)
     if ax <= 0.5:
         return trig._asin_small(x)
-    r = HALF_PI - 2.0 * trig._asin_small(math.sqrt((1.0 - ax) * 0.5))
+    r = HALF_PI - 2.0 * trig._asin_small(np.sqrt((1.0 - ax) * 0.5))
     return r if x > 0.0 else -r
 
 
@@ -104,7 +104,7 @@ def atan2(y, x):
         scale = ax if ax > ay else ay        # no overflow or underflow in the squares
         sx = ax / scale
         sy = ay / scale
-        r = math.sqrt(sx * sx + sy * sy)
+        r = np.sqrt(sx * sx + sy * sy)
         if sy <= sx:
             base = asin(sy / r)
         else:

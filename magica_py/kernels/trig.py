@@ -78,7 +78,7 @@ def acos(x):
     big = ax > 0.5
     # |x| > 1/2: asin of sqrt((1 - |x|) / 2), exact argument (1 - |x| is exact there); the
     # root is taken either way and selected (a conditional root is a call, not an instruction)
-    root = math.sqrt((1.0 - ax) * 0.5)
+    root = np.sqrt((1.0 - ax) * 0.5)
     z = root if big else x
     a = _asin_small(z)
     r = 2.0 * a
@@ -196,7 +196,7 @@ def acos_fma(x):
     x = -1.0 if x < -1.0 else x
     ax = abs(x)
     big = ax > 0.5
-    root = math.sqrt((1.0 - ax) * 0.5)   # taken either way and selected (as in ``acos``)
+    root = np.sqrt((1.0 - ax) * 0.5)   # taken either way and selected (as in ``acos``)
     z = root if big else x
     a = _asin_small_fma(z)
     r = 2.0 * a

@@ -120,12 +120,23 @@ def bone_rows(PS, g, l):
 SMOOTHING_REFERENCE_RATE = 90.0   # 1/s: the frame rate at which the C.4 ratio is taken as is
 
 
+@kernel(inline="always")
+def smoothing_ratio(s):
+    """C.4's per-frame ratio of movement smoothing ``s``: ``a = (1-s)^3 0.99 + 0.01``. The cube
+    is written as two products: numba compiles ``x ** 3`` so, where Python and numpy take
+    ``pow``, whose bits differ in about a quarter of the inputs (``0.6 ** 3``: 0.21599999999999997
+    against 0.216), so that the interpreted first run (``magica_py/first_run.py``) gives the
+    compiled bits."""
+    r = 1.0 - s
+    return saturate(r * r * r * 0.99 + 0.01)
+
+
 @kernel
 def smoothing_time_constant(s):
-    """Time constant (s) of movement smoothing ``s``: C.4's per-frame ratio
-    ``a = (1-s)^3 0.99 + 0.01`` read as the ratio of one 1/90 s frame, ``1 - a = exp(-h/tau)``.
-    0 when there is no smoothing (a = 1)."""
-    a = saturate((1.0 - s) ** 3 * 0.99 + 0.01)
+    """Time constant (s) of movement smoothing ``s``: C.4's per-frame ratio ``smoothing_ratio``
+    read as the ratio of one 1/90 s frame, ``1 - a = exp(-h/tau)``. 0 when there is no
+    smoothing (a = 1)."""
+    a = smoothing_ratio(s)
     if a >= 1.0:
         return 0.0
     return -1.0 / (SMOOTHING_REFERENCE_RATE * portable.log(1.0 - a))
@@ -321,7 +332,7 @@ def inertia_lane(TS, TI, P, b, l, cpos, crot, cscl, ratio, center_pos, center_ro
                     v = v_scale(v_sub(cpos, old_pos), 1.0 / frame_delta_time)
                 if limit >= 0.0:
                     v = clamp_length(v, limit * ratio)
-                a = saturate((1.0 - s) ** 3 * 0.99 + 0.01)
+                a = smoothing_ratio(s)
                 put3(TS, b, st.SMOOTHING_VELOCITY, l, v_lerp(get3(TS, b, st.SMOOTHING_VELOCITY, l), v, a))
             smooth_pos = v_sub(cpos, v_scale(get3(TS, b, st.SMOOTHING_VELOCITY, l), frame_delta_time))
         smooth_delta = v_sub(smooth_pos, old_pos)

@@ -21,7 +21,8 @@ GUARD_SPEED_LIMIT = 100.0   # m/s (scaled by the team scale ratio): far above an
 @kernel(inline="always")
 def speed_limit_sq(scale_ratio):
     """Squared speed bound (m/s)^2 of a team with scale ratio ``scale_ratio``."""
-    return (GUARD_SPEED_LIMIT * max(scale_ratio, 1e-6)) ** 2
+    limit = GUARD_SPEED_LIMIT * max(scale_ratio, 1e-6)
+    return limit * limit   # a product, not ``** 2``: Python's pow may round otherwise (jit off)
 
 
 @kernel(inline="always")

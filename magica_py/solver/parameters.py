@@ -355,7 +355,7 @@ def length_unit(quality, init_scale):
     lane's build scale (``blocks.INIT_SCALE``)."""
     if quality == 0.0:
         return 1.0
-    return math.sqrt(init_scale[0] * init_scale[0] + init_scale[1] * init_scale[1]
+    return np.sqrt(init_scale[0] * init_scale[0] + init_scale[1] * init_scale[1]
                      + init_scale[2] * init_scale[2]) / SQRT3
 
 

@@ -6,7 +6,7 @@ pose, never showing an edge longer than the step states it interpolates allow
 """
 from __future__ import annotations
 
-import math
+import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import q_rotate, v_add, v_dot, v_length, v_length_sq, v_lerp, v_scale, v_sub
@@ -115,7 +115,7 @@ def display_collider_push_bounded(CS, k, l, shape, x, r, parent, bound):
     wl = v_length(w)
     if wl < 1e-12:
         return y
-    return v_add(v_add(c, v_scale(n, along)), v_scale(w, math.sqrt(h2) / wl))
+    return v_add(v_add(c, v_scale(n, along)), v_scale(w, np.sqrt(h2) / wl))
 
 
 @kernel
@@ -146,7 +146,7 @@ def safe_fraction(e0, de, bound):
     disc = half_b * half_b - a * c
     if a <= 0.0 or disc <= 0.0:
         return 0.0
-    return min(max((-half_b + math.sqrt(disc)) / a, 0.0), 1.0)
+    return min(max((-half_b + np.sqrt(disc)) / a, 0.0), 1.0)
 
 
 # DISPLAY_LANE: a lane's progress through the display (lanes leave it at different points)

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     from_to_rotation_select, orthogonal_axis_select, q_axis_angle, q_inverse, q_mul,
@@ -74,7 +76,7 @@ def swing_select(a, b):
     c = -1.0 if c < -1.0 else c
     x = v_cross(a, b)
     w = 1.0 + c
-    inv = 1.0 / math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + w * w)
+    inv = 1.0 / np.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + w * w)
     half_angle = (x[0] * inv, x[1] * inv, x[2] * inv, w * inv)
     opposite = abs(1.0 + c) < 1e-6
     flip = q_axis_angle(orthogonal_axis_select(a), math.pi * 1.0)

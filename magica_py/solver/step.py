@@ -343,7 +343,7 @@ def end_step_velocity(next_pos, velocity_pos, dt):
     vel = v_scale(v_sub(next_pos, velocity_pos), 1.0 / dt)
     speed_sq = v_length_sq(vel)
     moving = speed_sq >= 1e-8
-    unit = v_scale(vel, 1.0 / math.sqrt(max(speed_sq, 1e-300)))   # at rest: discarded by the select
+    unit = v_scale(vel, 1.0 / np.sqrt(max(speed_sq, 1e-300)))   # at rest: discarded by the select
     return vel, (unit if moving else (0.0, 0.0, 0.0)), moving
 
 

@@ -32,7 +32,7 @@ m/s^2 per m/s of wind (no drag law: MagicaCloth2 adds the speed to the force sum
 """
 from __future__ import annotations
 
-import math
+import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels import portable
@@ -72,7 +72,7 @@ def direction_angles(direction):
     (cos x, sin x, cos y, sin y)."""
     dx, dy, dz = direction
     ay = portable.atan2(dx, dz)
-    ax = portable.atan2(-dy, math.sqrt(dx * dx + dz * dz))
+    ax = portable.atan2(-dy, np.sqrt(dx * dx + dz * dz))
     sx, cx = portable.sincos(ax)
     sy, cy = portable.sincos(ay)
     return cx, sx, cy, sy

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 
 from magica_py.jit import kernel
 from magica_py.kernels import trig
@@ -75,8 +77,8 @@ def solve_dihedral(p0, p1, p2, p3, w0, w1, w2, w3, rest_angle, sign, stiffness):
     n2 = v_cross(v_sub(p3, p1), v_sub(p2, p1))
     l1 = v_length_sq(n1)
     l2 = v_length_sq(n2)
-    r1 = 1.0 / math.sqrt(l1)   # 1 / |n1|
-    r2 = 1.0 / math.sqrt(l2)
+    r1 = 1.0 / np.sqrt(l1)   # 1 / |n1|
+    r2 = 1.0 / np.sqrt(l2)
     s1 = r1 * r1               # 1 / |n1|^2
     s2 = r2 * r2
     d0 = v_scale(n1, el * s1)

@@ -9,8 +9,6 @@ stiffness of this pass (``distance_particle_terms``), then the particles in orde
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from magica_py.jit import kernel
@@ -53,7 +51,7 @@ def distance_rest_length(signed_rest, scale, p_base, q_base, animation_pose_rati
     and the squared distance is finite exactly when the distance is, so it stands in for the
     distance with the same bits and without the square root."""
     d2 = v_length_sq(v_sub(p_base, q_base))
-    pose = math.sqrt(d2) if animation_pose_ratio != 0.0 else d2
+    pose = np.sqrt(d2) if animation_pose_ratio != 0.0 else d2
     return lerp(abs(signed_rest) * scale, pose, animation_pose_ratio)
 
 
