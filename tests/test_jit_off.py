@@ -153,6 +153,38 @@ def test_every_frame_of_hard_scenes_has_the_compiled_bits_with_the_jit_off():
         assert first is None, f"{path}: the jit-off run differs from frame {first} on"
 
 
+# host-side lines (plain Python on arrays' summaries, never in a kernel) allowed a math.sqrt
+# (build.virtual_mesh's link statistics, solver.parameters' constant, team_time's SimulationPower)
+HOST_SQRT = ("float(math.sqrt(", "SQRT3 = math.sqrt(", "math.sqrt(r) if r > 1.0 else r")
+
+
+def test_kernel_sources_take_no_integer_power_and_no_math_sqrt():
+    """What made the interpreted run differ from the compiled one, kept out of the kernel
+    modules: ``x ** n`` with an integer n (Python's pow rounds otherwise than numba's products)
+    and ``math.sqrt`` (a Python float, whose division by zero raises where compiled code gives
+    inf; ``np.sqrt`` compiles to the same instruction). Comments and strings are skipped."""
+    import io
+    import re
+    import tokenize
+
+    found = []
+    for folder in ("kernels", "solver", "build", "scene", "wind", "runtime"):
+        for path in sorted((ROOT / "magica_py" / folder).rglob("*.py")):
+            text = path.read_text()
+            if "@kernel" not in text:
+                continue
+            tokens = [t for t in tokenize.generate_tokens(io.StringIO(text).readline)
+                      if t.type not in (tokenize.COMMENT, tokenize.STRING)]
+            for a, b in zip(tokens, tokens[1:]):
+                if a.string == "**" and b.type == tokenize.NUMBER and re.fullmatch(r"\d+", b.string):
+                    found.append(f"{path.relative_to(ROOT)}:{a.start[0]}: ** {b.string}")
+            for number, line in enumerate(text.splitlines(), 1):
+                code = line.split("#", 1)[0]
+                if "math.sqrt(" in code and not any(h in code for h in HOST_SQRT):
+                    found.append(f"{path.relative_to(ROOT)}:{number}: math.sqrt")
+    assert not found, found
+
+
 COMPILE_SNIPPET = """
 import json
 from numba.core import event

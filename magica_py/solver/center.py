@@ -123,10 +123,10 @@ SMOOTHING_REFERENCE_RATE = 90.0   # 1/s: the frame rate at which the C.4 ratio i
 @kernel(inline="always")
 def smoothing_ratio(s):
     """C.4's per-frame ratio of movement smoothing ``s``: ``a = (1-s)^3 0.99 + 0.01``. The cube
-    is written as two products: numba compiles ``x ** 3`` so, where Python and numpy take
-    ``pow``, whose bits differ in about a quarter of the inputs (``0.6 ** 3``: 0.21599999999999997
-    against 0.216), so that the interpreted first run (``magica_py/first_run.py``) gives the
-    compiled bits."""
+    is written as two products, which is what numba compiles ``x ** 3`` to, while Python and
+    numpy call ``pow``, whose bits differ for about a quarter of the inputs (``0.6 ** 3``:
+    0.21599999999999997 against 0.216): so the interpreted first run (``magica_py/first_run.py``)
+    gives the compiled bits."""
     r = 1.0 - s
     return saturate(r * r * r * 0.99 + 0.01)
 
