@@ -125,6 +125,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-simulation", action="store_true",
                      help="animate only: do not attach the cloth solver (a quick preview of the motion)")
     run.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no notes, no summary")
+    # how `watch` names and streams a run it hands to `run` (its interpreted first run, watch.py)
+    run.add_argument("--recording-name", help=argparse.SUPPRESS)
+    run.add_argument("--recording-id", help=argparse.SUPPRESS)
+    run.add_argument("--batch-frames", type=_positive_int, help=argparse.SUPPRESS)
 
     validate = sub.add_parser("validate", help="check scene files and report every problem",
                               description="Check scene files completely (and build their cloths when the build "
@@ -513,6 +517,9 @@ def _attach_sink(player, scene, args, notes: list[str]):
             raise InputError(f"cannot record: the sinks package is unavailable ({exc}); use --no-rrd") from None
         return None
     options = {"rrd": args.rrd, "no_rrd": bool(args.no_rrd), "spawn": bool(args.spawn), "connect": args.connect}
+    for name in ("recording_name", "recording_id", "batch_frames"):   # watch.py's runs only
+        if getattr(args, name, None) is not None:
+            options[name] = getattr(args, name)
     options_type = getattr(sinks, "SinkOptions", None)
     return attach(player, scene, options_type(**options) if options_type else options)
 

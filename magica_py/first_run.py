@@ -33,12 +33,12 @@ runs in a session of its own, after the interpreted run has ended if need be; it
 folder. While one runs, no other is started; a run that finds no compiled frame kernel then
 still goes interpreted when it is short, and compiles itself when it is long.
 
-**When.** Only for ``run`` with the JIT and the cache on, a cloth to simulate, and no compiled
-cloth frame in the cache folder (``frame_kernel_cached``: a scene of another kind of cloth on
-a warm cache compiles in the compiled tier). ``MAGICA_FIRST_RUN``: ``auto`` (the default: as
-above), ``compile`` (never interpreted: the behaviour before this module; the test suite's
-default), ``interpret`` (interpreted whenever the run is within the budget, compiled frame
-kernel in the cache or not).
+**When.** Only for ``run`` (and ``watch``, which hands such a run to ``run``: ``watch.py``)
+with the JIT and the cache on, a cloth to simulate, and no compiled cloth frame in the cache
+folder (``frame_kernel_cached``: a scene of another kind of cloth on a warm cache compiles in
+the compiled tier). ``MAGICA_FIRST_RUN``: ``auto`` (the default: as above), ``compile`` (never
+interpreted: the behaviour before this module; the test suite's default), ``interpret``
+(interpreted whenever the run is within the budget, compiled frame kernel in the cache or not).
 
 An internal error of the interpreted run (a bug: a difference between the kernels run as
 Python and compiled) ends the child with one line, its traceback kept in
@@ -140,6 +140,15 @@ def wanted(args) -> bool:
     return chosen == "interpret" or not frame_kernel_cached()
 
 
+def interpreted_child(argv: list[str], **popen_options) -> subprocess.Popen:
+    """Start ``magica-py run ARGV`` as the interpreted child: the JIT off and this tier's
+    variable set (``popen_options``: ``subprocess.Popen``'s, e.g. ``stdout``)."""
+    env = dict(os.environ)
+    env["NUMBA_DISABLE_JIT"] = "1"
+    env[TIER_ENV] = INTERPRETED
+    return subprocess.Popen([sys.executable, "-m", "magica_py.cli", "run", *argv], env=env, **popen_options)
+
+
 def run_interpreted(argv: list[str]) -> int:
     """Run ``magica-py run ARGV`` in the interpreted child; its exit code (128 + N when a signal
     N ended it; ``DECLINED`` when it found the run too long and wrote nothing; ``magica_py.cli`` then compiles, as it does when
@@ -147,10 +156,7 @@ def run_interpreted(argv: list[str]) -> int:
     import signal
     import threading
 
-    env = dict(os.environ)
-    env["NUMBA_DISABLE_JIT"] = "1"
-    env[TIER_ENV] = INTERPRETED
-    child = subprocess.Popen([sys.executable, "-m", "magica_py.cli", "run", *argv], env=env)
+    child = interpreted_child(argv)
     forwarding = threading.current_thread() is threading.main_thread() and hasattr(signal, "SIGTERM")
     if forwarding:   # a run ended from outside (a job scheduler's SIGTERM) ends its child as well
         previous = signal.signal(signal.SIGTERM, lambda signum, frame: child.send_signal(signum))

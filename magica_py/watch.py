@@ -19,6 +19,12 @@ collider radius), save, and the new run appears next to the previous ones.
   (its recording keeps the frames it had streamed; a file of it is discarded) and starts the
   new one.
 * **Ctrl-C** ends the current run, closes its recording and exits with code 0.
+* **The first run on an empty kernel cache** does not wait for the solver's compile: while no
+  compiled cloth frame is in the cache, a run short enough to interpret is handed to
+  ``magica-py run`` in its interpreted tier (``magica_py/first_run.py``), which streams and
+  records it under the same name and file and compiles the solver in the background; the
+  runs after that compile are this process's own again. A run too long to interpret compiles
+  here, as always.
 
 Each run prints one line: frames, ms/frame, and how long after the save its first frame was
 sent (``first frame 0.38 s after the save``): the tuning loop's latency.
@@ -29,6 +35,8 @@ import argparse
 import os
 import pathlib
 import re
+import signal
+import subprocess
 import sys
 import time
 import uuid
@@ -134,6 +142,19 @@ def describe_change(old, new, changed_assets=(), limit: int = 3) -> str:
         return "saved unchanged"
     more = f" and {len(parts) - limit} more" if len(parts) > limit else ""
     return ", ".join(parts[:limit]) + more
+
+
+def scene_name(data, scene_path, overrides=()) -> str:
+    """The name a scene document gives its scene, as ``config.load_scene`` resolves it without
+    loading the scene: ``scene.name`` (a ``--set scene.name=...`` override first), else the
+    file's stem."""
+    for override in reversed(list(overrides)):
+        key, _, value = str(override).partition("=")
+        if key.strip() == "scene.name" and value.strip():
+            return value.strip().strip("'\"")
+    scene = data.get("scene") if isinstance(data, dict) else None
+    name = scene.get("name") if isinstance(scene, dict) else None
+    return name if isinstance(name, str) and name else pathlib.Path(scene_path).stem
 
 
 def _slug(text: str) -> str:
@@ -265,7 +286,85 @@ class Watch:
         self.reports.append(report)
         return report
 
+    def _first_run_interpreted(self) -> bool:
+        """Is this run a first run to hand to ``run``'s interpreted tier (no compiled cloth frame
+        in the kernel cache yet; ``magica_py/first_run.py``)?"""
+        from magica_py import first_run
+
+        try:
+            return first_run.wanted(argparse.Namespace(no_simulation=False))
+        except first_run.FirstRunError:   # reported when the watch started (main_watch)
+            return False
+
+    def _run_interpreted(self, report: RunReport, data) -> bool:
+        """A first run, handed to ``magica-py run`` in the interpreted tier: it streams and
+        records the run as this process would (same recording name, id and file) after a second
+        or two instead of after the solver's compile, and starts that compile in the
+        background, so that the runs after it are compiled here. Returns False when the child
+        declined (the run is too long to interpret) or failed: the run then compiles here."""
+        from magica_py import first_run
+        from magica_py.cli import EXIT_BAD_INPUT, EXIT_OK
+
+        name = scene_name(data, self.scene_path, self.overrides)
+        report.recording_name = f"{name} · {report.description}"
+        argv = [str(self.scene_path)]
+        for override in self.overrides:
+            argv += ["--set", override]
+        if self.frames is not None:
+            argv += ["--frames", str(self.frames)]
+        rrd = None
+        if self.rrd_dir is not None:
+            self.rrd_dir.mkdir(parents=True, exist_ok=True)
+            rrd = self.rrd_dir / self._rrd_name(name, report)
+            argv += ["--rrd", str(rrd)]
+        else:
+            argv.append("--no-rrd")
+        if self.connect:
+            argv += ["--connect", self.connect, "--batch-frames", "1"]
+        argv += ["--recording-name", report.recording_name, "--recording-id", str(uuid.uuid4())]
+        # its notes and progress bar go to the terminal; its summary line is read for the frames
+        child = first_run.interpreted_child(argv, stdout=subprocess.PIPE, text=True)
+        try:
+            while child.poll() is None:
+                time.sleep(SUPERSEDE_CHECK_SECONDS)
+                if self.stamps.changed():
+                    child.terminate()   # it ends like ^C: a recording file it had begun is removed
+                    child.communicate()
+                    raise _Superseded()
+        except KeyboardInterrupt:
+            if child.poll() is None:   # a terminal's ^C reached it too; anything else passes it on
+                child.send_signal(signal.SIGINT)
+            child.communicate()
+            raise
+        out = child.communicate()[0] or ""
+        if out:
+            print(out, end="", flush=True)
+        code = child.returncode
+        if code == EXIT_OK:
+            frames = re.search(r": (\d+) frames", out)
+            report.frames = int(frames.group(1)) if frames else 0
+            report.ok = True
+            report.recording = str(rrd) if rrd is not None and rrd.exists() else None
+            self.last_data = data
+            self.say(f"run {report.index} ({report.description}): {report.frames} frames, interpreted (first run "
+                     "only: the solver compiles in the background, and the runs after it are compiled)"
+                     + (f" -> {report.recording}" if report.recording else ""))
+            return True
+        if code == EXIT_BAD_INPUT:
+            report.error = "the scene has problems (printed above)"
+            self.say(f"run {report.index}: the scene has problems; fix them and save again")
+            return True
+        if code != first_run.DECLINED:
+            self.say(f"run {report.index}: the interpreted first run failed (exit {code}); compiling the solver "
+                     "instead")
+        return False
+
+    def _rrd_name(self, scene: str, report: RunReport) -> str:
+        return f"{_slug(scene)}-{report.index:03d}-{_slug(report.description)}.rrd"
+
     def _run_scene(self, report: RunReport, save_time: float, data) -> None:
+        if data is not None and self._first_run_interpreted() and self._run_interpreted(report, data):
+            return
         from magica_py.cli import _attach_solver
         from magica_py.config import load_scene
         from magica_py.runner import CompileWatch, WarningEvents, play
@@ -288,7 +387,7 @@ class Watch:
             rrd = None
             if self.rrd_dir is not None:
                 self.rrd_dir.mkdir(parents=True, exist_ok=True)
-                rrd = self.rrd_dir / f"{_slug(scene.name)}-{report.index:03d}-{_slug(report.description)}.rrd"
+                rrd = self.rrd_dir / self._rrd_name(scene.name, report)
             recorder = attach(player, scene, SinkOptions(rrd=rrd, no_rrd=rrd is None, connect=self.connect,
                                                          batch_frames=1 if self.connect else None,
                                                          recording_id=str(uuid.uuid4()),
@@ -383,6 +482,14 @@ def main_watch(argv=None) -> int:
         return 2
     if not pathlib.Path(args.scene).is_file():
         print(f"magica-py watch: error: {args.scene}: file not found", file=sys.stderr)
+        return 2
+    from magica_py import first_run
+
+    try:   # a bad MAGICA_FIRST_RUN / MAGICA_INTERPRET_BUDGET, said once, before the first run
+        first_run.mode()
+        first_run.budget()
+    except first_run.FirstRunError as exc:
+        print(f"magica-py watch: error: {exc}", file=sys.stderr)
         return 2
     if args.no_viewer and args.rrd_dir is None:
         print("magica-py watch: error: --no-viewer without --rrd-dir would run without any output", file=sys.stderr)

@@ -186,3 +186,82 @@ def test_a_save_during_a_run_stops_it_and_starts_the_new_one(tmp_path):
     assert first.superseded and not first.ok and 0 < first.frames < 10_000_000
     assert second.ok and second.frames == 3 and second.description == "tail.parameters.damping 0.05→0.3"
     assert [p.name for p in (tmp_path / "runs").glob("*.rrd")] == [pathlib.Path(second.recording).name]
+
+
+def test_scene_names_resolve_as_the_loader_does():
+    assert W.scene_name({"scene": {"name": "wt"}}, "a/b.yaml") == "wt"
+    assert W.scene_name({"scene": {"fps": 60}}, "a/b.yaml") == "b"
+    assert W.scene_name(None, "a/b.yaml") == "b"
+    assert W.scene_name({"scene": {"name": "wt"}}, "a/b.yaml", ["scene.name='other'"]) == "other"
+
+
+def test_a_first_run_on_an_empty_cache_runs_interpreted_and_the_runs_after_the_compile_here(tmp_path,
+                                                                                              monkeypatch):
+    """With no compiled cloth frame in the kernel cache the watch hands its run to ``run``'s
+    interpreted tier (magica_py/first_run.py): the same recording (name, file) at once instead
+    of after the compile; a bad edit is reported as usual; once the cache holds a compiled
+    frame the runs are this process's again. (A live pid holds the background compile's lock,
+    so that the child starts no compile of its own here.)"""
+    import os
+
+    from magica_py import first_run
+
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    (cache / first_run.LOCK_NAME).write_text(first_run._lock_text(os.getpid(), ["wt.yaml"]))
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))   # the children's cache; this process keeps its own
+    monkeypatch.setenv("MAGICA_FIRST_RUN", "auto")
+    scene = tmp_path / "wt.yaml"
+    scene.write_text(SCENE)
+    out = io.StringIO()
+    watch = W.Watch(scene, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02, stream=out)
+    thread = _start(watch, 3)
+    _wait(watch, 1)
+    _save(scene, SCENE.replace("damping: 0.05", "damping: 7"))          # out of range: the child says so
+    _wait(watch, 2)
+    (cache / "kernels").mkdir()
+    (cache / "kernels" / "frame.simulate_frame-1.py311.nbi").write_bytes(b"")   # "the compile is done"
+    _save(scene, SCENE.replace("damping: 0.05", "damping: 0.2"))
+    thread.join(600)
+    first, bad, compiled = watch.reports
+    assert first.ok and first.frames == 6 and first.latency is None   # the child's: no latency known here
+    assert not bad.ok and "problems" in bad.error
+    assert compiled.ok and compiled.frames == 6 and compiled.latency is not None
+    assert compiled.description == "tail.parameters.damping 0.05→0.2"    # against the last good run
+    for report in (first, compiled):
+        rec = Recording(report.recording)
+        assert rec.static_value("/__properties", "RecordingInfo:name") == [report.recording_name]
+    assert first.recording_name == "wt · first run"
+    assert sorted(p.name for p in (tmp_path / "runs").glob("*.rrd")) == \
+        sorted(pathlib.Path(r.recording).name for r in (first, compiled))
+    text = out.getvalue()
+    assert "run 1 (first run): 6 frames, interpreted (first run only" in text
+    assert "run 2: the scene has problems" in text and "Traceback" not in text
+    assert not (cache / first_run.FAILURE_LOG_NAME).exists()
+
+
+def test_a_save_during_an_interpreted_first_run_stops_its_child_and_keeps_no_file(tmp_path, monkeypatch):
+    import os
+
+    from magica_py import first_run
+
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    (cache / first_run.LOCK_NAME).write_text(first_run._lock_text(os.getpid(), ["wt.yaml"]))
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
+    monkeypatch.setenv("MAGICA_FIRST_RUN", "auto")
+    scene = tmp_path / "wt.yaml"
+    scene.write_text(SCENE)
+    # 900 frames of 4 particles: within the interpreted budget, some seconds long
+    watch = W.Watch(scene, frames=900, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02, stream=io.StringIO())
+    thread = _start(watch, 2)
+    while watch.run_index == 0:
+        time.sleep(0.02)
+    time.sleep(2.0)                              # the child has started its frames
+    watch.frames = 3
+    _save(scene, SCENE.replace("damping: 0.05", "damping: 0.3"))
+    thread.join(600)
+    first, second = watch.reports
+    assert first.superseded and not first.ok
+    assert second.ok and second.frames == 3
+    assert [p.name for p in (tmp_path / "runs").glob("*")] == [pathlib.Path(second.recording).name]
