@@ -271,7 +271,8 @@ class Watch:
             self._run_scene(report, save_time, data)
         except _Superseded:
             report.superseded = True
-            self.say(f"run {report.index} ({description}): stopped after {report.frames} frames by a new save")
+            done = f" after {report.frames} frames" if report.frames else ""   # an interpreted child's: not known
+            self.say(f"run {report.index} ({description}): stopped{done} by a new save")
         except KeyboardInterrupt:
             raise
         except Exception as exc:  # noqa: BLE001 - a watch reports and keeps going
@@ -332,7 +333,9 @@ class Watch:
                     child.communicate()
                     raise _Superseded()
         except KeyboardInterrupt:
-            if child.poll() is None:   # a terminal's ^C reached it too; anything else passes it on
+            try:   # a terminal's ^C reached the child as well: it ends itself (its file removed)
+                child.wait(timeout=5.0)
+            except subprocess.TimeoutExpired:   # only the watch was interrupted: pass it on
                 child.send_signal(signal.SIGINT)
             child.communicate()
             raise

@@ -265,3 +265,34 @@ def test_a_save_during_an_interpreted_first_run_stops_its_child_and_keeps_no_fil
     assert first.superseded and not first.ok
     assert second.ok and second.frames == 3
     assert [p.name for p in (tmp_path / "runs").glob("*")] == [pathlib.Path(second.recording).name]
+
+
+def test_ctrl_c_during_an_interpreted_first_run_ends_its_child_and_the_watch(tmp_path, monkeypatch):
+    """A ^C that reaches only the watch (not its child, as a terminal's would) is passed on to
+    the child, which ends like ^C (no recording file kept); the watch then stops as usual."""
+    import os
+
+    from magica_py import first_run
+
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    (cache / first_run.LOCK_NAME).write_text(first_run._lock_text(os.getpid(), ["wt.yaml"]))
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
+    monkeypatch.setenv("MAGICA_FIRST_RUN", "auto")
+    scene = tmp_path / "wt.yaml"
+    scene.write_text(SCENE)
+    polls = []
+    changed = W.FileStamps.changed
+
+    def interrupted_while_the_child_runs(self):
+        polls.append(1)
+        if len(polls) == 10:     # about 2 s into the child's run
+            raise KeyboardInterrupt
+        return changed(self)
+
+    monkeypatch.setattr(W.FileStamps, "changed", interrupted_while_the_child_runs)
+    out = io.StringIO()
+    watch = W.Watch(scene, frames=900, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02, stream=out)
+    assert watch.run_forever() == 0
+    assert out.getvalue().rstrip().endswith("watch: stopped")
+    assert list((tmp_path / "runs").glob("*")) == []
