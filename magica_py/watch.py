@@ -333,8 +333,8 @@ class Watch:
                     child.communicate()
                     raise _Superseded()
         except KeyboardInterrupt:
-            try:   # a terminal's ^C reached the child as well: it ends itself (its file removed)
-                child.wait(timeout=5.0)
+            try:   # a terminal's ^C reached the child as well: it ends itself (its file removed;
+                child.wait(timeout=5.0)   # a run that completes meanwhile keeps its whole recording)
             except subprocess.TimeoutExpired:   # only the watch was interrupted: pass it on
                 child.send_signal(signal.SIGINT)
             child.communicate()

@@ -252,8 +252,10 @@ def test_a_save_during_an_interpreted_first_run_stops_its_child_and_keeps_no_fil
     monkeypatch.setenv("MAGICA_FIRST_RUN", "auto")
     scene = tmp_path / "wt.yaml"
     scene.write_text(SCENE)
-    # 900 frames of 4 particles: within the interpreted budget, some seconds long
-    watch = W.Watch(scene, frames=900, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02, stream=io.StringIO())
+    # a run that does not end by itself: the budget raised so that it is still interpreted
+    monkeypatch.setenv(first_run.BUDGET_ENV, "1000000000")
+    watch = W.Watch(scene, frames=10_000_000, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02,
+                    stream=io.StringIO())
     thread = _start(watch, 2)
     while watch.run_index == 0:
         time.sleep(0.02)
@@ -292,7 +294,8 @@ def test_ctrl_c_during_an_interpreted_first_run_ends_its_child_and_the_watch(tmp
 
     monkeypatch.setattr(W.FileStamps, "changed", interrupted_while_the_child_runs)
     out = io.StringIO()
-    watch = W.Watch(scene, frames=900, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02, stream=out)
+    monkeypatch.setenv(first_run.BUDGET_ENV, "1000000000")   # a long run, still interpreted
+    watch = W.Watch(scene, frames=10_000_000, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02, stream=out)
     assert watch.run_forever() == 0
     assert out.getvalue().rstrip().endswith("watch: stopped")
     assert list((tmp_path / "runs").glob("*")) == []
