@@ -35,7 +35,6 @@ import argparse
 import os
 import pathlib
 import re
-import signal
 import subprocess
 import sys
 import time
@@ -329,14 +328,13 @@ class Watch:
             while child.poll() is None:
                 time.sleep(SUPERSEDE_CHECK_SECONDS)
                 if self.stamps.changed():
-                    child.terminate()   # it ends like ^C: a recording file it had begun is removed
-                    child.communicate()
+                    _stop_child(child)
                     raise _Superseded()
         except KeyboardInterrupt:
             try:   # a terminal's ^C reached the child as well: it ends itself (its file removed;
-                child.wait(timeout=5.0)   # a run that completes meanwhile keeps its whole recording)
-            except subprocess.TimeoutExpired:   # only the watch was interrupted: pass it on
-                child.send_signal(signal.SIGINT)
+                child.wait(timeout=CHILD_GRACE_SECONDS)   # a run that completes meanwhile keeps it)
+            except subprocess.TimeoutExpired:   # only the watch was interrupted
+                _stop_child(child)
             child.communicate()
             raise
         out = child.communicate()[0] or ""
@@ -425,6 +423,22 @@ class Watch:
                  f"{compiled}{latency}" + (f" -> {report.recording}" if report.recording else ""))
         if stats.warnings:
             self.say(stats.warnings)
+
+
+CHILD_GRACE_SECONDS = 5.0   # a child's own ^C clean-up; then it is stopped, then killed
+
+
+def _stop_child(child) -> None:
+    """End an interpreted child run: SIGTERM, which ``run`` handles like ^C (the recording file it
+    had begun is removed; SIGINT would not do: a process started with SIGINT ignored, as under
+    a job runner, passes that on to its children), then SIGKILL if it has not ended after
+    ``CHILD_GRACE_SECONDS``."""
+    child.terminate()
+    try:
+        child.communicate(timeout=CHILD_GRACE_SECONDS)
+    except subprocess.TimeoutExpired:
+        child.kill()
+        child.communicate()
 
 
 # ----------------------------------------------------------------------------- command
