@@ -108,9 +108,16 @@ class Stopwatch:
         self._start = time.perf_counter()
         return self
 
+    def _compiled_so_far(self) -> float:
+        return (self.watch.seconds - self._compiled_before) if self.watch is not None else 0.0
+
+    def elapsed(self) -> float:
+        """Inside the block: the wall time so far, less the compiles so far."""
+        return max(0.0, time.perf_counter() - self._start - self._compiled_so_far())
+
     def __exit__(self, *exc):
         elapsed = time.perf_counter() - self._start
-        self.compiled = (self.watch.seconds - self._compiled_before) if self.watch is not None else 0.0
+        self.compiled = self._compiled_so_far()
         self.seconds = max(0.0, elapsed - self.compiled)
         return False
 
@@ -287,34 +294,31 @@ def play(player, scene, frames: int | None, *, system=None, progress: FrameProgr
     much unscaled time has passed). ``on_frame(ctx)`` is called after each frame."""
     stats = RunStats()
     duration = scene.settings.duration if frames is None else None
-    compile_before = compile_watch.seconds if compile_watch is not None else 0.0
-    start = time.perf_counter()
-    try:
-        while True:
-            if frames is not None and stats.frames >= frames:
-                break
-            ctx = player.step()
-            stats.frames += 1
-            if stats.frames == 1:
-                compiled = (compile_watch.seconds - compile_before) if compile_watch is not None else 0.0
-                stats.first_frame_seconds = max(0.0, time.perf_counter() - start - compiled)
-            steps = frame_steps(ctx, system)
-            if steps is not None:
-                stats.steps += steps
-                stats.steps_known = True
-            stats.particle_steps += float(ctx.metrics.get(PARTICLE_STEP_METRIC, 0.0))
-            if on_frame is not None:
-                on_frame(ctx)
-            if progress is not None:
-                progress.update(stats.frames)
-            if duration is not None and ctx.time.unscaled_time >= duration:
-                break
-    finally:
-        elapsed = time.perf_counter() - start
-        stats.compile_seconds = (compile_watch.seconds - compile_before) if compile_watch is not None else 0.0
-        stats.wall_time = max(0.0, elapsed - stats.compile_seconds)
-        if warning_events is not None:
-            stats.warnings = warning_events.summary()
+    with Stopwatch(compile_watch) as clock:
+        try:
+            while True:
+                if frames is not None and stats.frames >= frames:
+                    break
+                ctx = player.step()
+                stats.frames += 1
+                if stats.frames == 1:
+                    stats.first_frame_seconds = clock.elapsed()
+                steps = frame_steps(ctx, system)
+                if steps is not None:
+                    stats.steps += steps
+                    stats.steps_known = True
+                stats.particle_steps += float(ctx.metrics.get(PARTICLE_STEP_METRIC, 0.0))
+                if on_frame is not None:
+                    on_frame(ctx)
+                if progress is not None:
+                    progress.update(stats.frames)
+                if duration is not None and ctx.time.unscaled_time >= duration:
+                    break
+        finally:
+            if warning_events is not None:
+                stats.warnings = warning_events.summary()
+    stats.compile_seconds = clock.compiled
+    stats.wall_time = clock.seconds
     return stats
 
 

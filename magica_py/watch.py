@@ -368,7 +368,7 @@ class Watch:
             return
         from magica_py.cli import _attach_solver
         from magica_py.config import load_scene
-        from magica_py.runner import CompileWatch, WarningEvents, play
+        from magica_py.runner import CompileWatch, WarningEvents, compile_text, play
         from magica_py.runtime.player import Player
         from magica_py.sinks import SinkOptions, attach
 
@@ -418,7 +418,7 @@ class Watch:
         report.recording = str(recorder.output_path) if recorder.output_path is not None else None
         per_frame = 1000.0 * stats.wall_time / max(stats.frames, 1)
         latency = f"; first frame {report.latency:.2f} s after the save" if report.latency is not None else ""
-        compiled = f"; compile {compile_watch.seconds:.1f} s" if compile_watch.seconds >= 0.05 else ""
+        compiled = compile_text(compile_watch.seconds)
         self.say(f"run {report.index} ({report.description}): {stats.frames} frames, {per_frame:.2f} ms/frame"
                  f"{compiled}{latency}" + (f" -> {report.recording}" if report.recording else ""))
         if stats.warnings:

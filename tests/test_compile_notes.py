@@ -58,6 +58,10 @@ def test_a_stopwatch_leaves_out_the_compiles_inside_its_block():
     with Stopwatch(watch) as block:
         time.sleep(0.05)
         watch.seconds += 0.03            # a 0.03 s compile inside the block
+        assert 0.015 <= block.elapsed() < 0.5   # so far, less the compile so far
+        watch.seconds += 10.0
+        assert block.elapsed() == 0.0    # never negative
+        watch.seconds -= 10.0
     assert block.compiled == pytest.approx(0.03)
     assert 0.015 <= block.seconds < 0.5
     with Stopwatch(watch) as bigger:

@@ -1,9 +1,11 @@
 """magica-py watch, headless: each run is written to --rrd-dir (the viewer is not needed)."""
 import io
+import os
 import pathlib
 import threading
 import time
 
+import pytest
 
 from magica_py import watch as W
 from magica_py.sinks.readback import Recording
@@ -188,6 +190,21 @@ def test_a_save_during_a_run_stops_it_and_starts_the_new_one(tmp_path):
     assert [p.name for p in (tmp_path / "runs").glob("*.rrd")] == [pathlib.Path(second.recording).name]
 
 
+@pytest.fixture
+def empty_cache(tmp_path, monkeypatch):
+    """A kernel cache folder with no compiled cloth frame, for the watch's children (this
+    process keeps its own), whose background-compile lock a live pid holds, so that the
+    interpreted children start no compile of their own here; returns the folder."""
+    from magica_py import first_run
+
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    (cache / first_run.LOCK_NAME).write_text(first_run._lock_text(os.getpid(), ["wt.yaml"]))
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
+    monkeypatch.setenv("MAGICA_FIRST_RUN", "auto")
+    return cache
+
+
 def test_scene_names_resolve_as_the_loader_does():
     assert W.scene_name({"scene": {"name": "wt"}}, "a/b.yaml") == "wt"
     assert W.scene_name({"scene": {"fps": 60}}, "a/b.yaml") == "b"
@@ -196,21 +213,14 @@ def test_scene_names_resolve_as_the_loader_does():
 
 
 def test_a_first_run_on_an_empty_cache_runs_interpreted_and_the_runs_after_the_compile_here(tmp_path,
-                                                                                              monkeypatch):
+                                                                                              empty_cache):
     """With no compiled cloth frame in the kernel cache the watch hands its run to ``run``'s
     interpreted tier (magica_py/first_run.py): the same recording (name, file) at once instead
     of after the compile; a bad edit is reported as usual; once the cache holds a compiled
     frame the runs are this process's again. (A live pid holds the background compile's lock,
     so that the child starts no compile of its own here.)"""
-    import os
-
     from magica_py import first_run
 
-    cache = tmp_path / "cache"
-    cache.mkdir()
-    (cache / first_run.LOCK_NAME).write_text(first_run._lock_text(os.getpid(), ["wt.yaml"]))
-    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))   # the children's cache; this process keeps its own
-    monkeypatch.setenv("MAGICA_FIRST_RUN", "auto")
     scene = tmp_path / "wt.yaml"
     scene.write_text(SCENE)
     out = io.StringIO()
@@ -219,8 +229,8 @@ def test_a_first_run_on_an_empty_cache_runs_interpreted_and_the_runs_after_the_c
     _wait(watch, 1)
     _save(scene, SCENE.replace("damping: 0.05", "damping: 7"))          # out of range: the child says so
     _wait(watch, 2)
-    (cache / "kernels").mkdir()
-    (cache / "kernels" / "frame.simulate_frame-1.py311.nbi").write_bytes(b"")   # "the compile is done"
+    (empty_cache / "kernels").mkdir()
+    (empty_cache / "kernels" / "frame.simulate_frame-1.py311.nbi").write_bytes(b"")   # "the compile is done"
     _save(scene, SCENE.replace("damping: 0.05", "damping: 0.2"))
     thread.join(600)
     first, bad, compiled = watch.reports
@@ -237,19 +247,13 @@ def test_a_first_run_on_an_empty_cache_runs_interpreted_and_the_runs_after_the_c
     text = out.getvalue()
     assert "run 1 (first run): 6 frames, interpreted (first run only" in text
     assert "run 2: the scene has problems" in text and "Traceback" not in text
-    assert not (cache / first_run.FAILURE_LOG_NAME).exists()
+    assert not (empty_cache / first_run.FAILURE_LOG_NAME).exists()
 
 
-def test_a_save_during_an_interpreted_first_run_stops_its_child_and_keeps_no_file(tmp_path, monkeypatch):
-    import os
-
+def test_a_save_during_an_interpreted_first_run_stops_its_child_and_keeps_no_file(tmp_path, monkeypatch,
+                                                                                   empty_cache):
     from magica_py import first_run
 
-    cache = tmp_path / "cache"
-    cache.mkdir()
-    (cache / first_run.LOCK_NAME).write_text(first_run._lock_text(os.getpid(), ["wt.yaml"]))
-    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
-    monkeypatch.setenv("MAGICA_FIRST_RUN", "auto")
     scene = tmp_path / "wt.yaml"
     scene.write_text(SCENE)
     # a run that does not end by itself: the budget raised so that it is still interpreted
@@ -269,21 +273,15 @@ def test_a_save_during_an_interpreted_first_run_stops_its_child_and_keeps_no_fil
     assert [p.name for p in (tmp_path / "runs").glob("*")] == [pathlib.Path(second.recording).name]
 
 
-def test_ctrl_c_during_an_interpreted_first_run_ends_its_child_and_the_watch(tmp_path, monkeypatch):
+def test_ctrl_c_during_an_interpreted_first_run_ends_its_child_and_the_watch(tmp_path, monkeypatch, empty_cache):
     """A ^C that reaches only the watch (not its child, as a terminal's would) ends the child
     after a grace period, like ^C (no recording file kept); the watch then stops as usual. The
     child is started with SIGINT ignored, as under a job runner (pytest-xdist's workers, where a
     SIGINT never reached it and the watch waited for ever): it is stopped with SIGTERM."""
-    import os
     import signal
 
     from magica_py import first_run
 
-    cache = tmp_path / "cache"
-    cache.mkdir()
-    (cache / first_run.LOCK_NAME).write_text(first_run._lock_text(os.getpid(), ["wt.yaml"]))
-    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
-    monkeypatch.setenv("MAGICA_FIRST_RUN", "auto")
     scene = tmp_path / "wt.yaml"
     scene.write_text(SCENE)
     polls = []

@@ -218,20 +218,19 @@ def bake_scene(scene_path, out, overrides=(), bones=None, frames: int | None = N
     out = check_output(out)
     if units is not None and out.suffix.lower() != ".bvh":
         raise BakeError("--units applies to a .bvh output; a glTF copy keeps its file's unit scale")
-    compiled_before = compile_watch.seconds if compile_watch is not None else 0.0
-    with Stopwatch(compile_watch) as loading:
-        scene = load_scene(scene_path, overrides)
-        count = frames if frames is not None else scene.settings.frame_count()
-        if count is None:
-            raise BakeError("the scene runs on the wall clock for a duration: give --frames N to bake it")
-        rigs = file_rigs(scene)
-        chosen, source = plan_bones(scene, out, bones, rig, rigs)
-    motion = simulate_and_capture(scene, chosen, count, progress, compile_watch)
-    with Stopwatch(compile_watch) as writing:
-        notes = bake_capture(scene, motion, out, source, rigs, units, animation_name)
+    with Stopwatch(compile_watch) as whole:
+        with Stopwatch(compile_watch) as loading:
+            scene = load_scene(scene_path, overrides)
+            count = frames if frames is not None else scene.settings.frame_count()
+            if count is None:
+                raise BakeError("the scene runs on the wall clock for a duration: give --frames N to bake it")
+            rigs = file_rigs(scene)
+            chosen, source = plan_bones(scene, out, bones, rig, rigs)
+        motion = simulate_and_capture(scene, chosen, count, progress, compile_watch)
+        with Stopwatch(compile_watch) as writing:
+            notes = bake_capture(scene, motion, out, source, rigs, units, animation_name)
     size = out.stat().st_size + (out.with_suffix(".bin").stat().st_size if out.suffix.lower() == ".gltf" else 0)
-    compiled = (compile_watch.seconds - compiled_before) if compile_watch is not None else 0.0
-    return BakeResult(out, motion, size, loading.seconds, motion.wall_time, writing.seconds, notes, compiled)
+    return BakeResult(out, motion, size, loading.seconds, motion.wall_time, writing.seconds, notes, whole.compiled)
 
 
 def pose_error(motion: CapturedMotion, position: np.ndarray, rotation: np.ndarray) -> tuple[float, float]:
