@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import pathlib
 
 import numpy as np
 import pytest
@@ -281,16 +282,25 @@ def test_bad_path_gives_a_clear_error_before_anything_is_written(tmp_path, name,
     assert sorted(p.name for p in tmp_path.iterdir()) == ["folder.rrd"]
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root can write into read-only folders")
 def test_unwritable_folder_gives_a_clear_error(tmp_path):
-    locked = tmp_path / "locked"
-    locked.mkdir()
-    locked.chmod(0o500)
+    """A folder this process may not write into: a read-only (0o500) folder, or for root, whom
+    the mode bits do not stop, Linux's ``/proc/self`` (no process can create a file there)."""
+    if os.geteuid() != 0:
+        locked = tmp_path / "locked"
+        locked.mkdir()
+        locked.chmod(0o500)
+    else:
+        locked = pathlib.Path("/proc/self")
+        if not locked.is_dir() or os.access(locked, os.W_OK | os.X_OK):
+            pytest.skip("running as root without Linux's /proc: no folder here that root cannot write into")
     try:
-        with pytest.raises(OutputError, match="is not writable"):
+        with pytest.raises(OutputError, match=f"folder '{locked}' is not writable"):
             check_output_path(locked / "x.rrd")
+        with pytest.raises(OSError):   # and the folder really refuses a new file
+            (locked / "x.rrd").open("wb").close()
     finally:
-        locked.chmod(0o700)
+        if locked.parent == tmp_path:
+            locked.chmod(0o700)
 
 
 def test_unwritable_folder_check_uses_access_rights(tmp_path, monkeypatch):
