@@ -147,10 +147,15 @@ def scene_name(data, scene_path, overrides=()) -> str:
     """The name a scene document gives its scene, as ``config.load_scene`` resolves it without
     loading the scene: ``scene.name`` (a ``--set scene.name=...`` override first), else the
     file's stem."""
+    from magica_py.config.overrides import parse_override
+
     for override in reversed(list(overrides)):
-        key, _, value = str(override).partition("=")
-        if key.strip() == "scene.name" and value.strip():
-            return value.strip().strip("'\"")
+        try:
+            path, value = parse_override(str(override))
+        except ValueError:   # reported by the run that loads the scene
+            continue
+        if path == ["scene", "name"] and isinstance(value, str) and value:
+            return value
     scene = data.get("scene") if isinstance(data, dict) else None
     name = scene.get("name") if isinstance(scene, dict) else None
     return name if isinstance(name, str) and name else pathlib.Path(scene_path).stem

@@ -47,6 +47,16 @@ def test_scene_assets_are_resolved_beside_the_scene(tmp_path):
     assert W.scene_assets(None, scene) == []
 
 
+def _quick_watch(tmp_path, stream=None, **options):
+    """A watch of ``SCENE`` (written to tmp_path/wt.yaml) that notices a save within 50 ms and
+    records into tmp_path/runs; returns (scene path, watch)."""
+    scene = tmp_path / "wt.yaml"
+    scene.write_text(SCENE)
+    watch = W.Watch(scene, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02,
+                    stream=io.StringIO() if stream is None else stream, **options)
+    return scene, watch
+
+
 def _start(watch, runs):
     thread = threading.Thread(target=watch.run_forever, kwargs={"max_runs": runs}, daemon=True)
     thread.start()
@@ -69,10 +79,8 @@ def _save(path, content):
 
 
 def test_watch_reruns_on_save_names_each_recording_and_survives_a_bad_edit(tmp_path):
-    scene = tmp_path / "wt.yaml"
-    scene.write_text(SCENE)
     out = io.StringIO()
-    watch = W.Watch(scene, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02, stream=out)
+    scene, watch = _quick_watch(tmp_path, out)
     thread = _start(watch, 4)
     _wait(watch, 1)
     _save(scene, SCENE.replace("damping: 0.05", "damping: 0.2"))
@@ -172,10 +180,7 @@ def test_watch_refuses_to_stream_to_a_viewer_that_is_not_there(tmp_path, capsys)
 
 
 def test_a_save_during_a_run_stops_it_and_starts_the_new_one(tmp_path):
-    scene = tmp_path / "wt.yaml"
-    scene.write_text(SCENE)
-    watch = W.Watch(scene, frames=10_000_000, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02,
-                    stream=io.StringIO())
+    scene, watch = _quick_watch(tmp_path, frames=10_000_000)
     thread = threading.Thread(target=watch.run_forever, kwargs={"max_runs": 2}, daemon=True)
     thread.start()
     while not watch.reports and watch.run_index == 0:
@@ -221,10 +226,8 @@ def test_a_first_run_on_an_empty_cache_runs_interpreted_and_the_runs_after_the_c
     so that the child starts no compile of its own here.)"""
     from magica_py import first_run
 
-    scene = tmp_path / "wt.yaml"
-    scene.write_text(SCENE)
     out = io.StringIO()
-    watch = W.Watch(scene, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02, stream=out)
+    scene, watch = _quick_watch(tmp_path, out)
     thread = _start(watch, 3)
     _wait(watch, 1)
     _save(scene, SCENE.replace("damping: 0.05", "damping: 7"))          # out of range: the child says so
@@ -254,12 +257,9 @@ def test_a_save_during_an_interpreted_first_run_stops_its_child_and_keeps_no_fil
                                                                                    empty_cache):
     from magica_py import first_run
 
-    scene = tmp_path / "wt.yaml"
-    scene.write_text(SCENE)
     # a run that does not end by itself: the budget raised so that it is still interpreted
     monkeypatch.setenv(first_run.BUDGET_ENV, "1000000000")
-    watch = W.Watch(scene, frames=10_000_000, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02,
-                    stream=io.StringIO())
+    scene, watch = _quick_watch(tmp_path, frames=10_000_000)
     thread = _start(watch, 2)
     while watch.run_index == 0:
         time.sleep(0.02)
@@ -282,8 +282,6 @@ def test_ctrl_c_during_an_interpreted_first_run_ends_its_child_and_the_watch(tmp
 
     from magica_py import first_run
 
-    scene = tmp_path / "wt.yaml"
-    scene.write_text(SCENE)
     polls = []
     changed = W.FileStamps.changed
 
@@ -296,7 +294,7 @@ def test_ctrl_c_during_an_interpreted_first_run_ends_its_child_and_the_watch(tmp
     monkeypatch.setattr(W.FileStamps, "changed", interrupted_while_the_child_runs)
     out = io.StringIO()
     monkeypatch.setenv(first_run.BUDGET_ENV, "1000000000")   # a long run, still interpreted
-    watch = W.Watch(scene, frames=10_000_000, rrd_dir=tmp_path / "runs", debounce=0.05, poll=0.02, stream=out)
+    _scene, watch = _quick_watch(tmp_path, out, frames=10_000_000)
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)   # inherited by the child
     try:
         start = time.monotonic()
