@@ -583,12 +583,6 @@ def _remove_if_empty(folder) -> None:
         pass
 
 
-def _summary_line(scene, stats, solver_attached: bool, output) -> str:
-    from magica_py.runner import summary_line
-
-    return summary_line(scene, stats, solver_attached, output)
-
-
 # ----------------------------------------------------------------------------- info helpers
 def describe_scene(scene, list_bones: bool = False) -> list[str]:
     """Human-readable lines for ``info``."""

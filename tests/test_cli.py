@@ -180,18 +180,18 @@ def test_unavailable_registered_command(monkeypatch, capsys):
 
 
 def test_summary_counts_simulation_steps():
-    from magica_py.runner import RunStats
+    from magica_py.runner import RunStats, summary_line
 
     stats = RunStats()
     stats.frames, stats.steps, stats.steps_known, stats.wall_time = 60, 90.0, True, 0.5
     scene = types.SimpleNamespace(name="s", cloths=[1])
-    line = cli._summary_line(scene, stats, True, None)
+    line = summary_line(scene, stats, True, None)
     assert line == "s: 60 frames, 90 simulation steps, 8.33 ms/frame (wall 0.50 s)"
     stats.particle_steps = 720.0
-    assert "90 simulation steps (720 particle-steps)" in cli._summary_line(scene, stats, True, None)
+    assert "90 simulation steps (720 particle-steps)" in summary_line(scene, stats, True, None)
     stats.steps_known = False
-    assert "no simulation steps (cloth solver not attached)" in cli._summary_line(scene, stats, False, None)
-    assert "no cloths" in cli._summary_line(types.SimpleNamespace(name="s", cloths=[]), stats, False, None)
+    assert "no simulation steps (cloth solver not attached)" in summary_line(scene, stats, False, None)
+    assert "no cloths" in summary_line(types.SimpleNamespace(name="s", cloths=[]), stats, False, None)
 
 
 def test_frame_steps_come_from_a_metric_or_the_solver_time_state():
