@@ -13,6 +13,9 @@ the machine's load falls on all of them alike; min and median per call are print
   what UPDATE and LATE_UPDATE each ran before the plans;
 * ``UPDATE plan``: the player's plan (subtrees of the driven and the restored bones);
 * ``LATE_UPDATE plan``: the cloth system's plan (subtrees of the cloth bones);
+* ``UPDATE plan without the cloth bones``: the driven bones' subtrees with the cloth bones
+  (and what hangs below them) cut off: what UPDATE would still propagate if the cloth kernel
+  computed its bones' animated poses itself (docs/BENCHMARKS.md, session 29);
 
 the plans once per ``--threads`` value. Before each call the local poses are those of a frame
 in the middle of the run (drivers evaluated at t = 1 s), so every variant does the same work.
@@ -54,12 +57,21 @@ def bench(name: str, calls: int, threads: list[int]) -> list[tuple[str, float, f
     }
     import numpy as np
 
+    from magica_py.scene.propagation import build_plan
+
+    # the cloth bones made roots: a plan of the driven bones over this parent array stops at them
+    cut = h.parent.copy()
+    cut[written] = -1
+    driven_only = np.setdiff1d(np.asarray(anim.driven, dtype=np.int64), written)
     for t in threads:   # a plan of t chunks runs them on t threads (scene/propagation.py)
         h.threads = t
         update = h.plan(np.concatenate([written, anim.driven]).astype(np.int64))
         late = h.plan(written)
+        uncut = build_plan(cut, driven_only, t)
         variants[f"UPDATE plan, {t} thread(s), {update.size} nodes"] = (lambda p=update: h.propagate(p))
         variants[f"LATE_UPDATE plan, {t} thread(s), {late.size} nodes"] = (lambda p=late: h.propagate(p))
+        variants[f"UPDATE plan without the cloth bones, {t} thread(s), {uncut.size} nodes"] = (
+            lambda p=uncut: h.propagate(p))
     for fn in variants.values():  # compile / warm
         fn()
     warm = []   # the drivers called back to back: their rows stay in cache
