@@ -246,6 +246,19 @@ class ClothSystem:
         self.layout.remove(team)
         self._place(team, self.specs[team], self.models[team], state)
 
+    def _move_teams(self, teams) -> bool:
+        """``_move_if_needed`` for each of ``teams``, then their block's parameter rows written
+        again; True when any of them changed block kind (the kernels' tables must follow)."""
+        moved = False
+        for t in teams:
+            b, _lane = self.layout.place(t)
+            before = self.layout.blocks[b].key
+            self._move_if_needed(t)
+            b, _lane = self.layout.place(t)
+            moved = moved or self.layout.blocks[b].key != before
+            self._write_block_parameters(t)
+        return moved
+
     def _collider_shapes_of(self, team: int):
         indices = self._collider_indices(self.specs[team])
         return collider_shapes(self.colliders, indices) if indices else []
@@ -556,15 +569,7 @@ class ClothSystem:
             if key == "collider_collision.mode":
                 self.collision_modes[t] = str(value)
             self._write_parameters(t)
-        moved = False
-        for t in teams:
-            b, lane = self.layout.place(t)
-            before = self.layout.blocks[b].key
-            self._move_if_needed(t)
-            b, lane = self.layout.place(t)
-            moved = moved or self.layout.blocks[b].key != before
-            self._write_block_parameters(t)
-        if moved:
+        if self._move_teams(teams):
             self._tables_changed()
         self.stages = self.stage_switches()  # a changed parameter may need another stage
 
@@ -633,14 +638,7 @@ class ClothSystem:
         self.frame_count = state["frame_count"]
         self.team_parameters = list(state["team_parameters"])
         self.collision_modes = list(state["collision_modes"])
-        moved = False
-        for t in self.live_teams:
-            b, _lane = self.layout.place(t)
-            before = self.layout.blocks[b].key
-            self._move_if_needed(t)
-            b, lane = self.layout.place(t)
-            moved = moved or self.layout.blocks[b].key != before
-            self._write_block_parameters(t)
+        moved = self._move_teams(self.live_teams)
         for t, lane_state in state["lanes"].items():
             self._write_lane_state(t, lane_state)
         if self.wind is not None and state.get("wind") is not None:
