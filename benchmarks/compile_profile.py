@@ -14,6 +14,8 @@ seconds spent inside LLVM (the ``numba:llvm_lock`` events: every call into llvml
 binding, i.e. LLVM's optimisation passes, machine-code emission, module parsing and linking),
 in all and per function (the function whose pass was running: a kernel's own module includes
 the callees numba linked into it, which LLVM optimises and emits again there).
+With ``--all`` every function is listed, not the 25 slowest (the long tail: on the crowd, 247
+of 287 functions take under 0.3 s each and 21 s together, docs/BENCHMARKS.md, session 29).
 
     NUMBA_CACHE_DIR=$(mktemp -d) python benchmarks/compile_profile.py tail_orbit 3 --signatures
 
@@ -48,7 +50,8 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     passes = "--passes" in argv
     signatures = "--signatures" in argv
-    argv = [a for a in argv if a not in ("--passes", "--signatures")]
+    every = "--all" in argv
+    argv = [a for a in argv if a not in ("--passes", "--signatures", "--all")]
     if not argv:
         print(__doc__)
         return 2
@@ -141,7 +144,7 @@ def main(argv=None) -> int:
         for name, s in sorted(pass_seconds.items(), key=lambda kv: -kv[1])[:8]:
             print(f"{s:8.2f} s  {name}")
         print(f"exclusive seconds per function ({len(function_seconds)} functions):")
-        for name, s in sorted(function_seconds.items(), key=lambda kv: -kv[1])[:25]:
+        for name, s in sorted(function_seconds.items(), key=lambda kv: -kv[1])[:None if every else 25]:
             print(f"{s:8.2f} s  {name}")
         return 0
     for name, s in sorted(seconds.items(), key=lambda kv: -kv[1])[:40]:
