@@ -337,10 +337,10 @@ class Watch:
                     raise _Superseded()
         except KeyboardInterrupt:
             try:   # a terminal's ^C reached the child as well: it ends itself (its file removed;
-                child.wait(timeout=CHILD_GRACE_SECONDS)   # a run that completes meanwhile keeps it)
+                # a run that completes meanwhile keeps it); its output pipe is drained meanwhile
+                child.communicate(timeout=CHILD_GRACE_SECONDS)
             except subprocess.TimeoutExpired:   # only the watch was interrupted
                 _stop_child(child)
-            child.communicate()
             raise
         out = child.communicate()[0] or ""
         if out:
