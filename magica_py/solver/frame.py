@@ -184,21 +184,44 @@ def _warm_rows(a, i0, i1):
 
 
 @kernel(inline="always")
-def warm_block(F, b, area):
+def _warm_particle_rows(PS, g0, g1, first, end):
+    """``read_lines`` over rows ``first:end`` of each particle slot ``g0:g1`` of ``PS``."""
+    flat = PS.reshape(-1)
+    width = PS.shape[1]
+    acc = 0.0
+    for g in range(g0, g1):
+        acc += read_lines(flat, g * width + first * LANES, g * width + end * LANES)
+    return acc
+
+
+@kernel(inline="always")
+def warm_block(F, b, area, angle, bending, edge_collision, quality):
     """Read every cache line of block b's particle state, model and depth curves, team and
     collider items (``F``: the frame's ``FrameArrays``, or ``Tables``: the same field names)
     in address order before its frame, when ``WARM_*`` says it pays. The stages
     touch a particle's rows scattered over its 19 KB item, one particle after another, so each
     first touch of a row would wait for memory on its own; read in sequence, the hardware
     prefetcher streams the block into the cache (the light scene's kernel 10-20 % faster, the
-    crowd's likewise). The sum goes to the thread's save area (its last value, never read), so
-    that the reads are kept; nothing else is written."""
+    crowd's likewise). Of the particle state only the rows the frame's stages read are
+    fetched: the rows every scene carries (``st.CARRIED_ROWS``) and those of the optional
+    stages compiled (``angle``, ``bending``, ``edge_collision``, ``quality``: the frame's
+    stage switches, None where no team uses it); the stages' scratch rows are written before
+    they are read, so they are not fetched (the light scene's kernel 3-5 % faster than reading
+    all 151 rows: docs/BENCHMARKS.md, session 30). The sum goes to the thread's save area
+    (its last value, never read), so that the reads are kept; nothing else is written."""
     if F.BI[b, bk.BI_LANES_USED] < WARM_MIN_LANES or F.PS.shape[0] * F.PS.shape[1] < WARM_MIN_STATE_VALUES:
         return
     g0 = np.int64(F.BI[b, bk.BI_G0])
     g1 = g0 + F.BI[b, bk.BI_N]
     c0 = np.int64(F.BI[b, bk.BI_COLLIDER0])
-    acc = _warm_rows(F.PS, g0, g1) + _warm_rows(F.PM, g0, g1) + _warm_rows(F.PP, g0, g1)
+    acc = _warm_particle_rows(F.PS, g0, g1, 0, st.CARRIED_ROWS)
+    if bending is not None or edge_collision is not None:
+        acc += _warm_particle_rows(F.PS, g0, g1, st.BENDING_EDGE_ROWS[0], st.BENDING_EDGE_ROWS[1])
+    if angle is not None:
+        acc += _warm_particle_rows(F.PS, g0, g1, st.ANGLE_ROWS[0], st.ANGLE_ROWS[1])
+    if quality is not None:
+        acc += _warm_particle_rows(F.PS, g0, g1, st.QUALITY_ROWS[0], st.QUALITY_ROWS[1])
+    acc += _warm_rows(F.PM, g0, g1) + _warm_rows(F.PP, g0, g1)
     acc += _warm_rows(F.TS, b, b + 1) + _warm_rows(F.CS, c0, c0 + F.BI[b, bk.BI_COLLIDERS])
     area[area.shape[0] - 1] = acc
 
@@ -457,7 +480,7 @@ def block_frame_steps(F, b, fi, area, angle, bending, point_collision, edge_coll
     tt_time, tt_update_count, h_local_to_world = F.tt_time, F.tt_update_count, F.h_local_to_world
     h_lossy_scale, h_world_position, h_world_rotation = F.h_lossy_scale, F.h_world_position, F.h_world_rotation
     PS, TS, CS, PM, TM, TI, P, BI, PT, topology = F.PS, F.TS, F.CS, F.PM, F.TM, F.TI, F.P, F.BI, F.PT, F.topology
-    warm_block(F, b, area)
+    warm_block(F, b, area, angle, bending, edge_collision, quality)
     w = bk.lane_width(BI, b)
     frozen = frozen_lanes(TS, TI, b, w)
     if frozen:

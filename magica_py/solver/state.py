@@ -16,7 +16,7 @@ A step never allocates: every buffer a kernel needs is a field here.
 """
 from __future__ import annotations
 
-from magica_py.solver.lanes import INTEGER, QUATERNION, RowTable
+from magica_py.solver.lanes import INTEGER, LANES, QUATERNION, RowTable
 
 PARTICLE = RowTable("particle state", "particle slot")
 _p = PARTICLE.add
@@ -45,6 +45,13 @@ INVERSE_MASS = _p("inverse_mass", 1, "D.4's inverse mass of this pass: 1/(1 + 3 
                   "when fixed (each distance pass writes it first)")
 K_VERTICAL = _p("k_vertical", 1, "D.4's stiffness of vertical links at the particle's depth, this pass")
 K_HORIZONTAL = _p("k_horizontal", 1, "D.4's stiffness of horizontal and shear links, this pass")
+# transform data (E.4)
+TRANSFORM_POSITION = _p("transform_position", 3, "m; world position written to the bone (E.4)")
+TRANSFORM_ROTATION = _p("transform_rotation", 4, "xyzw; world rotation written to the bone (E.4)", QUATERNION)
+# the end of the rows every scene's stages carry from one stage to the next (the read-ahead,
+# frame.warm_block, fetches them for every block; the scratch and the optional stages' rows
+# below only where the frame compiles a stage that reads them)
+CARRIED_ROWS = PARTICLE.rows
 # the stages' scratch: values that live within one stage call (a partner's values gathered next
 # to the particle being solved, so that the solving loop touches one item per table, lanes.py;
 # sums over a particle's links). One pool of rows that every stage reuses under its own names
@@ -100,11 +107,15 @@ BEND_REST = _s("bend_rest", 1, 26, "rad or 1000 m^3; D.7: the pair's rest angle 
                "(gathered)")
 BEND_SIGN = _s("bend_sign", 1, 27, "D.7: the dihedral pair's sign (gathered)")
 BEND_OK = _s("bend_ok", 1, 28, "D.7: 1 where the pair's correction applies (solved)")
-# display of quality mode (display.py): the last two step states in their display frame
-# (the particle's fixed root, or the team center), written at the end of each step (D.10)
-DISPLAY_LOCAL = _p("display_local", 3, "m; state of the last step in its display frame (D.10)")
-DISPLAY_PREV_LOCAL = _p("display_prev_local", 3, "m; state of the step before it, same frame (D.10)")
-DISPLAY_HISTORY = _p("display_history", 1, "0-2: step states recorded since the last reset (C.5 sets 0)", INTEGER)
+# the optional stages' rows, a span each (``*_ROWS``: first row, end), so that a scene's
+# read-ahead can leave out the spans of the stages it does not compile
+# fixed-point accumulators of bending and edge collision (§0.2; 1 unit = 1e-6 m)
+ACCUM_VECTOR = _p("accum_vector", 3, "1e-6 m integer units summed as float64 (exact below 2^53)")
+ACCUM_COUNT = _p("accum_count", 1, "number of contributions", INTEGER)
+BEND_INVERSE_MASS = _p("bend_inverse_mass", 1, "inverse mass of this bending pass (D.7, per step)")
+ACCUM_FRICTION = _p("accum_friction", 1, "edge collision recorded friction (fixed-point max)")
+ACCUM_NORMAL = _p("accum_normal", 3, "edge collision normal sum")
+BENDING_EDGE_ROWS = (ACCUM_VECTOR // LANES, PARTICLE.rows)   # bending or edge collision
 # angle constraint buffers (D.5/D.6), zeroed after the routine
 ANGLE_LENGTH = _p("angle_length", 1, "m; segment length when the angle routine starts")
 ANGLE_LOCAL_POS = _p("angle_local_pos", 3, "unit; rest edge direction in the parent's frame")
@@ -119,15 +130,12 @@ ANGLE_LIMIT_COS = _p("angle_limit_cos", 1, "cos of angle_limit: the no-violation
 ANGLE_RESTORATION_K = _p("angle_restoration_k", 1, "restoration stiffness of this step (curve, rate, gravity factor)")
 ANGLE_RARE = _p("angle_rare", 1, "scratch of D.5: 1 where this iteration's limit pass met a violation or an opposite "
                 "swing (the lane is solved again on the full path)")
-# fixed-point accumulators of bending and edge collision (§0.2; 1 unit = 1e-6 m)
-ACCUM_VECTOR = _p("accum_vector", 3, "1e-6 m integer units summed as float64 (exact below 2^53)")
-ACCUM_COUNT = _p("accum_count", 1, "number of contributions", INTEGER)
-BEND_INVERSE_MASS = _p("bend_inverse_mass", 1, "inverse mass of this bending pass (D.7, per step)")
-ACCUM_FRICTION = _p("accum_friction", 1, "edge collision recorded friction (fixed-point max)")
-ACCUM_NORMAL = _p("accum_normal", 3, "edge collision normal sum")
-# transform data (E.4)
-TRANSFORM_POSITION = _p("transform_position", 3, "m; world position written to the bone (E.4)")
-TRANSFORM_ROTATION = _p("transform_rotation", 4, "xyzw; world rotation written to the bone (E.4)", QUATERNION)
+ANGLE_ROWS = (ANGLE_LENGTH // LANES, PARTICLE.rows)
+# display of quality mode (display.py): the last two step states in their display frame
+# (the particle's fixed root, or the team center), written at the end of each step (D.10)
+DISPLAY_LOCAL = _p("display_local", 3, "m; state of the last step in its display frame (D.10)")
+DISPLAY_PREV_LOCAL = _p("display_prev_local", 3, "m; state of the step before it, same frame (D.10)")
+DISPLAY_HISTORY = _p("display_history", 1, "0-2: step states recorded since the last reset (C.5 sets 0)", INTEGER)
 # quality mode's edge projection (quality.edge_projection_block, per step)
 PROJECTION_INVERSE_MASS = _p("projection_inverse_mass", 1, "inverse mass of the edge projection (0: fixed)")
 PROJECTION_GATHER = _p("projection_gather", 3, "W J^T p of the projection's conjugate gradients")
@@ -136,6 +144,7 @@ QUALITY_DRIFT = _p("quality_drift", 3, "m; the angle pass's share of this step's
                    "velocity (restoration drift)")
 DISPLAY_FRACTION = _p("display_fraction", 1, "[0,1]; scratch of the quality display: the particle's move "
                       "fraction in a move pass (quality_display.py, the frame)")
+QUALITY_ROWS = (DISPLAY_LOCAL // LANES, PARTICLE.rows)
 del _p, _s
 
 TRIANGLE_STATE = RowTable("triangle state", "triangle slot")
