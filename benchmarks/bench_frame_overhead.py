@@ -51,8 +51,8 @@ def orchestration(scene_name: str) -> None:
     from magica_py.solver import frame as F
     from magica_py.solver import state as st
     from magica_py.solver.attenuations import step_attenuations
-    from magica_py.solver.center import end_frame_lane
-    from magica_py.solver.colliders import collider_end_frame_lane
+    from magica_py.solver.center import end_frame_block
+    from magica_py.solver.colliders import collider_end_frame_block
     from magica_py.solver.lanes import put1
 
     player, system = _player(scene_name, True)
@@ -105,23 +105,15 @@ def orchestration(scene_name: str) -> None:
     def frame_end(T, tt):
         for i in range(T.blocks.shape[0]):
             b = T.blocks[i]
-            for l in range(bk.lane_width(T.BI, b)):
-                t = T.TI[b, bk.TI_TEAM + l]
-                if t >= 0:
-                    end_frame_lane(T.TS, b, l, tt.running[t])
-                    if tt.running[t]:
-                        collider_end_frame_lane(T.CS, T.BI, b, l)
+            w = bk.lane_width(T.BI, b)
+            end_frame_block(T.TS, T.TI, b, w, tt.running)
+            collider_end_frame_block(T.CS, T.TS, T.TI, T.BI, b, w, tt.running)
 
     @numba.njit
     def prelude(FA):
-        s = 0.0
         for i in range(FA.blocks.shape[0]):
             b = FA.blocks[i]
-            for l in range(bk.lane_width(FA.BI, b)):
-                t = FA.TI[b, bk.TI_TEAM + l]
-                if t >= 0:
-                    s += F.begin_frame_prelude_lane(FA, b, l, t, None)
-        return s
+            F.begin_frame_prelude_block(FA, b, bk.lane_width(FA.BI, b), None)
 
     @numba.njit
     def counts(FA):

@@ -24,10 +24,9 @@ import time
 import numba
 
 from magica_py.solver import blocks as bk
-from magica_py.solver import state as st
 from magica_py.solver.attenuations import step_attenuations
-from magica_py.solver.center import center_and_inertia_lane, reset_or_shift_block, skin_block
-from magica_py.solver.colliders import collider_end_step_block, collider_frame_lane, collider_step_block
+from magica_py.solver.center import center_and_inertia_lane, reset_or_shift_block, skin_block, team_world_poses
+from magica_py.solver.colliders import collider_end_step_block, collider_frame_block, collider_step_block
 from magica_py.solver.constraints.angle import angle_block
 from magica_py.solver.constraints.bending import bending_block
 from magica_py.solver.constraints.collision import edge_collision_block, point_collision_block
@@ -36,7 +35,6 @@ from magica_py.solver.constraints.motion import motion_block
 from magica_py.solver.constraints.tether import tether_block
 from magica_py.solver.display import display_block
 from magica_py.solver.guards import check_block
-from magica_py.solver.lanes import get1
 from magica_py.solver.parameters import (PRM_COLLISION_LAST, PRM_COLLISION_MODE, PRM_CONTACT_SPEED_LIMIT,
                                          PRM_FTL_DAMPING, PRM_INEXTENSIBILITY, PRM_QUALITY,
                                          PRM_TIME_BASED_SMOOTHING)
@@ -47,8 +45,8 @@ from magica_py.solver.quality import (INEXT_FTL_EDGES, drift_applies, drift_begi
                                       quality_end_of_step_block)
 from magica_py.solver.quality_display import display_constraints_block
 from magica_py.solver.rotations import line_rotations_block, triangle_rotations_block
-from magica_py.solver.step import end_step_block, predict_block, step_basic_pose_block, team_step_lane
-from magica_py.solver.writeback import transform_block, write_transforms_lane
+from magica_py.solver.step import end_step_block, predict_block, step_basic_pose_block, team_step_block
+from magica_py.solver.writeback import transform_block, write_transforms_block
 from magica_py.wind.force import wind_block
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -63,8 +61,7 @@ def _team_update(T, h, q, zones, calls):
     for _call in range(calls):
         for i in range(T.blocks.shape[0]):
             b = T.blocks[i]
-            for l in range(bk.lane_width(T.BI, b)):
-                team_step_lane(T.TS, T.TM, T.P, b, l, DT)
+            team_step_block(T.TS, T.TM, T.P, b, bk.lane_width(T.BI, b), DT)
 
 
 @numba.njit(**JIT)
@@ -245,12 +242,10 @@ def _center(T, h, q, zones, calls):
             w = bk.lane_width(T.BI, b)
             for l in range(w):
                 if T.TI[b, bk.TI_TEAM + l] >= 0:
-                    center_and_inertia_lane(T.PS, T.PM, T.TS, T.TM, T.TI, T.P, T.BI, T.topology, b, l, h.world_position,
-                                            h.world_rotation, h.lossy_scale, 1.0 / 60.0, 1.0, 0, True, DT, 0.0)
+                    component, anchor = team_world_poses(T.TI, b, l, h.world_position, h.world_rotation, h.lossy_scale)
+                    center_and_inertia_lane(T, b, l, component, anchor, 1.0 / 60.0, 1.0, 0, True, DT, 0.0)
             reset_or_shift_block(T.PS, T.TS, T.BI, b)
-            for l in range(w):
-                if T.TI[b, bk.TI_TEAM + l] >= 0:
-                    collider_frame_lane(T.CS, T.TS, T.BI, T.CT, b, l, h.world_position, h.world_rotation, h.lossy_scale)
+            collider_frame_block(T.CS, T.TS, T.TI, T.BI, T.CT, b, w, h.world_position, h.world_rotation, h.lossy_scale)
 
 
 @numba.njit(**JIT)
@@ -282,9 +277,8 @@ def _write_back(T, h, q, zones, calls):
         for i in range(T.blocks.shape[0]):
             b = T.blocks[i]
             transform_block(T.PS, T.PM, T.TS, T.BI, T.PT, T.topology, b, h.parent, h.world_rotation, h.lossy_scale)
-            for l in range(bk.lane_width(T.BI, b)):
-                if T.TI[b, bk.TI_TEAM + l] >= 0 and get1(T.TS, b, st.TRANSFORM_OK, l) != 0.0:
-                    write_transforms_lane(T.PS, T.BI, T.PT, T.topology, b, l, h.local_position, h.local_rotation)
+            write_transforms_block(T.PS, T.TS, T.TI, T.BI, T.PT, T.topology, b, bk.lane_width(T.BI, b),
+                                   h.local_position, h.local_rotation)
 
 
 # (label, driver wrapper, the StageSwitches entry that compiles it in the frame or None: always)
@@ -319,7 +313,9 @@ def _used(system, switch) -> bool:
 def stage_profile(system, repeats: int = 7, calls: int = 10) -> list[tuple[str, str, float]]:
     """``[(kind, stage, seconds per call over all blocks)]`` (kind: "step" or "frame"); nan for a
     stage the scene does not use, inf for one whose driver no longer types."""
-    T, h = system.tables, system._hierarchy
+    # the frame's arrays (``frame_call.FrameArrays``: every table under its ``Tables`` name), as
+    # the frame passes them: C.2/C.4 (``center_and_inertia_lane``) takes them as one object
+    T, h = system._frame_arrays(), system._hierarchy
     q, zones = system.stages.quality, system._wind_zones()
     stages = [("step", n, f, s) for n, f, s in STEP_STAGES] + [("frame", n, f, s) for n, f, s in FRAME_STAGES]
     best = {}

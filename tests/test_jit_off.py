@@ -240,7 +240,7 @@ UNUSED_BY_TAIL_ORBIT = ("bending_block", "apply_accumulated_block", "point_colli
                         "ftl_collision_lane", "edge_projection_lane", "collision_last_lane", "build_reset_lane",
                         "display_constraints_block", "record_display_state_block", "display_interpolated",
                         "triangle_rotations_block", "wind_block", "collider_step_block", "collider_end_step_block",
-                        "collider_frame_lane", "collider_end_frame_lane")
+                        "collider_frame_block", "collider_end_frame_block")
 
 
 @pytest.fixture(scope="module")

@@ -268,19 +268,31 @@ def team_time_begin_step(step, active, update_count, time, now_update_time, fram
 def team_time_begin_step_team(step, t, active, update_count, time, now_update_time, frame_old_time,
                               frame_interpolation, step_running, dt, timing):
     """``team_time_begin_step`` for team t alone (teams are independent: the parallel frame
-    kernel runs each team's steps on the thread that owns it)."""
-    single = timing == TIMING_FAITHFUL32
-    if not active[t] or step >= update_count[t]:
-        step_running[t] = False
-        return
-    step_running[t] = True
-    now = _r(now_update_time[t] + dt, single)
+    kernel runs each team's steps on the thread that owns it). Straight-line: the decisions are
+    in ``begin_step_values``, which takes no array, so that numba's reference-count pruning
+    removes this function's counts of its arrays (a branch between them keeps them: the frame
+    calls this for every lane at every step)."""
+    running, now, interpolation = begin_step_values(step, active[t], update_count[t], time[t], now_update_time[t],
+                                                    frame_old_time[t], frame_interpolation[t], dt, timing)
+    step_running[t] = running
     now_update_time[t] = now
-    span = _r(time[t] - frame_old_time[t], single)
+    frame_interpolation[t] = interpolation
+
+
+@kernel
+def begin_step_values(step, active, update_count, time, now_update_time, frame_old_time, frame_interpolation, dt,
+                      timing):
+    """§A.6 of one team at the start of step ``step``: (step running, now_update_time, frame
+    interpolation) from the team's clock values; a team that does not run this step keeps its
+    clock and interpolation."""
+    single = timing == TIMING_FAITHFUL32
+    if not active or step >= update_count:
+        return False, now_update_time, frame_interpolation
+    now = _r(now_update_time + dt, single)
+    span = _r(time - frame_old_time, single)
     if span > 0.0:
-        frame_interpolation[t] = saturate(_r(_r(now - frame_old_time[t], single) / span, single))
-    else:
-        frame_interpolation[t] = 1.0
+        return True, now, saturate(_r(_r(now - frame_old_time, single) / span, single))
+    return True, now, 1.0
 
 
 @kernel

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from magica_py.jit import kernel
 from magica_py.kernels import portable
 from magica_py.kernels.math3d import (
@@ -207,39 +209,59 @@ def center_from_sums(position_sum, normal_sum, tangent_sum, count):
             rot_from_normal_tangent(v_normalize(normal_sum), v_normalize(tangent_sum)))
 
 
+@kernel
+def world_pose_rows(world_position, world_rotation, lossy_scale, node):
+    """((position, rotation, lossy scale) of hierarchy node ``node``: the rows C.2 and C.4 read
+    of a team's component and anchor. Straight-line (no count of the arrays is kept)."""
+    return ((world_position[node, 0], world_position[node, 1], world_position[node, 2]),
+            (world_rotation[node, 0], world_rotation[node, 1], world_rotation[node, 2], world_rotation[node, 3]),
+            (lossy_scale[node, 0], lossy_scale[node, 1], lossy_scale[node, 2]))
+
+
+@kernel
+def team_world_poses(TI, b, l, world_position, world_rotation, lossy_scale):
+    """The world poses ``center_and_inertia_lane`` takes for lane l's team: its component's
+    (position, rotation, lossy scale) and its anchor's (position, rotation); the anchor's are
+    the first node's when the team has none (then not used)."""
+    component = world_pose_rows(world_position, world_rotation, lossy_scale, np.int64(TI[b, bk.TI_COMPONENT + l]))
+    anchor = world_pose_rows(world_position, world_rotation, lossy_scale, max(np.int64(TI[b, bk.TI_ANCHOR + l]), 0))
+    return component, (anchor[0], anchor[1])
+
+
+@kernel
+def scale_ratio_of(scale, init_length):
+    """|scale| / |build scale| (1 when the build scale is zero)."""
+    return v_length(scale) / init_length if init_length > 0.0 else 1.0
+
+
 @kernel(forceinline=False)
-def component_pose_lane(TS, TM, TI, b, l, world_position, world_rotation, lossy_scale):
-    """C.2 component pose of lane l's team (stored in ``TS``): (position, rotation, scale,
-    scale ratio)."""
-    comp = TI[b, bk.TI_COMPONENT + l]
-    cpos = (world_position[comp, 0], world_position[comp, 1], world_position[comp, 2])
-    crot = (world_rotation[comp, 0], world_rotation[comp, 1], world_rotation[comp, 2], world_rotation[comp, 3])
-    cscl = (lossy_scale[comp, 0], lossy_scale[comp, 1], lossy_scale[comp, 2])
+def component_pose_lane(F, b, l, cpos, crot, cscl):
+    """C.2 component pose of lane l's team (stored in ``TS``); returns its scale ratio."""
+    TS = F.TS
     put3(TS, b, st.COMPONENT_POS, l, cpos)
     put4(TS, b, st.COMPONENT_ROT, l, crot)
     put3(TS, b, st.COMPONENT_SCALE, l, cscl)
-    init_len = v_length(get3(TM, b, bk.INIT_SCALE, l))
-    ratio = v_length(cscl) / init_len if init_len > 0.0 else 1.0
+    ratio = scale_ratio_of(cscl, v_length(get3(F.TM, b, bk.INIT_SCALE, l)))
     put1(TS, b, st.COMPONENT_SCALE_RATIO, l, ratio)
-    return cpos, crot, cscl, ratio
+    return ratio
 
 
 @kernel(forceinline=False)
-def center_pose_lane(PS, PM, BI, topology, b, l, cpos, crot):
+def center_pose_lane(F, b, l, cpos, crot):
     """C.2 center of lane l's team from its skinned pose (the component pose when the team
     has no center-fixed vertex)."""
-    cn = BI[b, bk.BI_CENTERS]
+    cn = F.BI[b, bk.BI_CENTERS]
     if cn == 0:
         return cpos, crot
-    g0 = BI[b, bk.BI_G0]
-    at = BI[b, bk.BI_CENTER_FIXED]
+    g0 = F.BI[b, bk.BI_G0]
+    at = F.BI[b, bk.BI_CENTER_FIXED]
     sp = ZERO3
     sn = ZERO3
     st_ = ZERO3
     for k in range(cn):
-        g = g0 + topology[at + k]
-        pos, nor, tan = center_fixed_terms(get3(PS, g, st.POSITION, l), get4(PS, g, st.ROTATION, l),
-                                           get4(PM, g, bk.BIND_ROTATION, l))
+        g = g0 + F.topology[at + k]
+        pos, nor, tan = center_fixed_terms(get3(F.PS, g, st.POSITION, l), get4(F.PS, g, st.ROTATION, l),
+                                           get4(F.PM, g, bk.BIND_ROTATION, l))
         sp = v_add(sp, pos)
         sn = v_add(sn, nor)
         st_ = v_add(st_, tan)
@@ -247,27 +269,33 @@ def center_pose_lane(PS, PM, BI, topology, b, l, cpos, crot):
 
 
 @kernel(forceinline=False)
-def center_and_inertia_lane(PS, PM, TS, TM, TI, P, BI, topology, b, l, world_position, world_rotation,
-                            lossy_scale, frame_delta_time, now_time_scale, skip_count, running, dt,
+def center_and_inertia_lane(F, b, l, component, anchor, frame_delta_time, now_time_scale, skip_count, running, dt,
                             since_last_step):
     """C.2 and C.4 for lane l's team: center, anchor, teleport, smoothing, world inertia, shift.
 
-    ``since_last_step``: team time (s) from the last step to the start of this frame; quality
-    mode uses it to read the stabilisation ramp, which C.3 advances per step, in continuous
-    time (the ramp at the frame's start, not at the last step before it)."""
-    cpos, crot, cscl, ratio = component_pose_lane(TS, TM, TI, b, l, world_position, world_rotation, lossy_scale)
-    center_pos, center_rot = center_pose_lane(PS, PM, BI, topology, b, l, cpos, crot)
-    put1(TS, b, st.LENGTH_UNIT, l, length_unit(P[b, PRM_QUALITY], get3(TM, b, bk.INIT_SCALE, l)))
-    inertia_lane(TS, TI, P, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, world_position, world_rotation,
-                 frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step)
+    ``F``: the frame's arrays (``frame_call.FrameArrays``); ``component``, ``anchor``: the
+    world poses of the team's component and anchor (``team_world_poses``: this frame's, or
+    the build's for quality mode's build reset). The functions of this chain take the frame's
+    arrays as one object and the poses as values: called for every lane of every frame, each
+    array argument would cost numba a reference count it cannot prune (docs/BENCHMARKS.md,
+    session 30). ``since_last_step``: team time (s) from the last step to the start of this
+    frame; quality mode uses it to read the stabilisation ramp, which C.3 advances per step,
+    in continuous time (the ramp at the frame's start, not at the last step before it)."""
+    cpos, crot, cscl = component
+    ratio = component_pose_lane(F, b, l, cpos, crot, cscl)
+    center_pos, center_rot = center_pose_lane(F, b, l, cpos, crot)
+    put1(F.TS, b, st.LENGTH_UNIT, l, length_unit(F.P[b, PRM_QUALITY], get3(F.TM, b, bk.INIT_SCALE, l)))
+    inertia_lane(F, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, anchor[0], anchor[1], frame_delta_time,
+                 now_time_scale, skip_count, running, dt, since_last_step)
 
 
 @kernel(forceinline=False)
-def inertia_lane(TS, TI, P, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, world_position,
-                 world_rotation, frame_delta_time, now_time_scale, skip_count, running, dt, since_last_step):
-    """C.4 for lane l's team once its component pose and center (C.2) are known: anchor,
-    teleport, smoothing, world inertia, speed limits, the frame shift (see
-    ``center_and_inertia_lane``)."""
+def inertia_lane(F, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, apos, arot, frame_delta_time,
+                 now_time_scale, skip_count, running, dt, since_last_step):
+    """C.4 for lane l's team once its component pose and center (C.2) are known: anchor
+    (``apos``, ``arot``: its world pose, when the team has one), teleport, smoothing, world
+    inertia, speed limits, the frame shift (see ``center_and_inertia_lane``)."""
+    TS, TI, P = F.TS, F.TI, F.P
     time_based = P[b, PRM_TIME_BASED_SMOOTHING] != 0.0
     unit = get1(TS, b, st.LENGTH_UNIT, l)
     put3(TS, b, st.FRAME_WORLD_POS, l, center_pos)
@@ -284,9 +312,6 @@ def inertia_lane(TS, TI, P, b, l, cpos, crot, cscl, ratio, center_pos, center_ro
     anchor_rot = IDENTITY
     anchor = TI[b, bk.TI_ANCHOR + l]
     if anchor >= 0:
-        apos = (world_position[anchor, 0], world_position[anchor, 1], world_position[anchor, 2])
-        arot = (world_rotation[anchor, 0], world_rotation[anchor, 1], world_rotation[anchor, 2],
-                world_rotation[anchor, 3])
         if reset or get1(TS, b, st.ANCHOR_VALID, l) == 0.0:
             put3(TS, b, st.ANCHOR_COMPONENT_LOCAL_POS, l, q_rotate(q_inverse(arot), v_sub(cpos, apos)))
             put4(TS, b, st.OLD_ANCHOR_ROT, l, arot)
@@ -513,37 +538,51 @@ def lane_shifts(TS, b, l):
 @kernel(forceinline=False)
 def distance_culling_lane(TS, TI, P, b, l, world_position):
     """H.1 distance culling of lane l's team: returns True when the team is beyond the culling
-    length, and updates the fade weight ``DISTANCE_WEIGHT`` (1 inside, 0 at the limit)."""
-    length = P[b, PRM_CULLING_LENGTH]
+    length, and updates the fade weight ``DISTANCE_WEIGHT`` (1 inside, 0 at the limit).
+    Straight-line (the decisions are ``culling_values``'), so that numba's reference-count
+    pruning removes the counts of its arrays: it runs for every lane of every frame."""
     ref = TI[b, bk.TI_CULLING_REFERENCE + l]
-    if length < 0.0 or ref < 0:
-        put1(TS, b, st.DISTANCE_WEIGHT, l, 1.0)
-        return False
     comp = TI[b, bk.TI_COMPONENT + l]
-    d = v_length((world_position[comp, 0] - world_position[ref, 0], world_position[comp, 1] - world_position[ref, 1],
-                  world_position[comp, 2] - world_position[ref, 2]))
+    at = max(ref, 0)   # no reference (-1): a row read and not used
+    d = v_length((world_position[comp, 0] - world_position[at, 0], world_position[comp, 1] - world_position[at, 1],
+                  world_position[comp, 2] - world_position[at, 2]))
+    weight, culled = culling_values(P[b, PRM_CULLING_LENGTH], ref, d, P[b, PRM_CULLING_FADE_RATIO])
+    put1(TS, b, st.DISTANCE_WEIGHT, l, weight)
+    return culled
+
+
+@kernel
+def culling_values(length, ref, d, fade_ratio):
+    """H.1 of one team: (fade weight, culled) at distance ``d`` (m) from its reference
+    (``ref`` < 0: none) for a culling ``length`` (< 0: off) and fade ratio."""
+    if length < 0.0 or ref < 0:
+        return 1.0, False
     if d >= length:
-        put1(TS, b, st.DISTANCE_WEIGHT, l, 0.0)
-        return True
-    fade = saturate(P[b, PRM_CULLING_FADE_RATIO]) * length
-    put1(TS, b, st.DISTANCE_WEIGHT, l, 1.0 - saturate(unlerp(length - fade, length, d)))
-    return False
+        return 0.0, True
+    fade = saturate(fade_ratio) * length
+    return 1.0 - saturate(unlerp(length - fade, length, d)), False
 
 
 @kernel(forceinline=False)
-def end_frame_lane(TS, b, l, running):
-    """A.7: remember this frame's component and center, clear the per-frame flags."""
-    put3(TS, b, st.OLD_COMPONENT_POS, l, get3(TS, b, st.COMPONENT_POS, l))
-    put3(TS, b, st.OLD_COMPONENT_SCALE, l, get3(TS, b, st.COMPONENT_SCALE, l))
-    put4(TS, b, st.OLD_COMPONENT_ROT, l, get4(TS, b, st.COMPONENT_ROT, l))
-    if running:
-        put3(TS, b, st.OLD_FRAME_WORLD_POS, l, get3(TS, b, st.FRAME_WORLD_POS, l))
-        put3(TS, b, st.OLD_FRAME_WORLD_SCALE, l, get3(TS, b, st.FRAME_WORLD_SCALE, l))
-        put4(TS, b, st.OLD_FRAME_WORLD_ROT, l, get4(TS, b, st.FRAME_WORLD_ROT, l))
-        put3(TS, b, st.EXTERNAL_FORCE, l, ZERO3)
-        put1(TS, b, st.EXTERNAL_FORCE_MODE, l, 0.0)
-    put1(TS, b, st.RESET, l, 0.0)
-    put1(TS, b, st.TIME_RESET, l, 0.0)
-    put1(TS, b, st.KEEP_TELEPORT, l, 0.0)
-    put1(TS, b, st.INERTIA_SHIFT, l, 0.0)
-    put1(TS, b, st.RUNNING, l, 0.0)
+def end_frame_block(TS, TI, b, w, running):
+    """A.7 for every active lane of block b: remember this frame's component and center (the
+    center only where the team ran steps: ``running``, the team clocks' flags), clear the
+    per-frame flags."""
+    for l in range(w):
+        t = TI[b, bk.TI_TEAM + l]
+        if t < 0 or get1(TS, b, st.ACTIVE, l) == 0.0:
+            continue
+        put3(TS, b, st.OLD_COMPONENT_POS, l, get3(TS, b, st.COMPONENT_POS, l))
+        put3(TS, b, st.OLD_COMPONENT_SCALE, l, get3(TS, b, st.COMPONENT_SCALE, l))
+        put4(TS, b, st.OLD_COMPONENT_ROT, l, get4(TS, b, st.COMPONENT_ROT, l))
+        if running[t]:
+            put3(TS, b, st.OLD_FRAME_WORLD_POS, l, get3(TS, b, st.FRAME_WORLD_POS, l))
+            put3(TS, b, st.OLD_FRAME_WORLD_SCALE, l, get3(TS, b, st.FRAME_WORLD_SCALE, l))
+            put4(TS, b, st.OLD_FRAME_WORLD_ROT, l, get4(TS, b, st.FRAME_WORLD_ROT, l))
+            put3(TS, b, st.EXTERNAL_FORCE, l, ZERO3)
+            put1(TS, b, st.EXTERNAL_FORCE_MODE, l, 0.0)
+        put1(TS, b, st.RESET, l, 0.0)
+        put1(TS, b, st.TIME_RESET, l, 0.0)
+        put1(TS, b, st.KEEP_TELEPORT, l, 0.0)
+        put1(TS, b, st.INERTIA_SHIFT, l, 0.0)
+        put1(TS, b, st.RUNNING, l, 0.0)

@@ -31,54 +31,59 @@ def _sign(x):
 
 
 @kernel(forceinline=False)
-def collider_frame_lane(CS, TS, BI, CT, b, l, world_position, world_rotation, lossy_scale):
-    """G.2 for the collider slots of lane l's team: this frame's pose and the history update."""
-    reset = get1(TS, b, st.RESET, l) != 0.0
-    shift = get1(TS, b, st.INERTIA_SHIFT, l) != 0.0
-    pivot = get3(TS, b, st.OLD_COMPONENT_POS, l)
-    vec = get3(TS, b, st.FRAME_SHIFT_VECTOR, l)
-    srot = get4(TS, b, st.FRAME_SHIFT_ROTATION, l)
-    c0 = BI[b, bk.BI_COLLIDER0]
-    for k in range(c0, c0 + BI[b, bk.BI_COLLIDERS]):
-        i = CT[k, l]
-        pos = (world_position[i, 0], world_position[i, 1], world_position[i, 2])
-        rot = (world_rotation[i, 0], world_rotation[i, 1], world_rotation[i, 2], world_rotation[i, 3])
-        sx = lossy_scale[i, 0]
-        sy = lossy_scale[i, 1]
-        sz = lossy_scale[i, 2]
-        suspend = False
-        if abs(sx) < 1e-6:
-            sx = 1e-6
-            suspend = True
-        if abs(sy) < 1e-6:
-            sy = 1e-6
-            suspend = True
-        if abs(sz) < 1e-6:
-            sz = 1e-6
-            suspend = True
-        put1(CS, k, st.SCALE_SUSPEND, l, 1.0 if suspend else 0.0)
-        lc = get3(CS, k, st.LOCAL_CENTER, l)
-        center = (lc[0] * _sign(sx), lc[1] * _sign(sy), lc[2] * _sign(sz))
-        rc = q_rotate(rot, center)
-        fpos = (pos[0] + rc[0] * abs(sx), pos[1] + rc[1] * abs(sy), pos[2] + rc[2] * abs(sz))
-        put3(CS, k, st.FRAME_POS, l, fpos)
-        put4(CS, k, st.FRAME_ROT, l, rot)
-        put3(CS, k, st.FRAME_SCALE, l, (sx, sy, sz))
-        if reset or get1(CS, k, st.FIRST_FRAME, l) != 0.0 or suspend:
-            put3(CS, k, st.OLD_FRAME_POS, l, fpos)
-            put3(CS, k, st.NOW_POS, l, fpos)
-            put3(CS, k, st.C_OLD_POS, l, fpos)
-            put4(CS, k, st.OLD_FRAME_ROT, l, rot)
-            put4(CS, k, st.NOW_ROT, l, rot)
-            put4(CS, k, st.C_OLD_ROT, l, rot)
-            put1(CS, k, st.FIRST_FRAME, l, 0.0)
-        elif shift:
-            put3(CS, k, st.OLD_FRAME_POS, l, shift_position(get3(CS, k, st.OLD_FRAME_POS, l), pivot, vec, srot))
-            put3(CS, k, st.NOW_POS, l, shift_position(get3(CS, k, st.NOW_POS, l), pivot, vec, srot))
-            put3(CS, k, st.C_OLD_POS, l, shift_position(get3(CS, k, st.C_OLD_POS, l), pivot, vec, srot))
-            put4(CS, k, st.OLD_FRAME_ROT, l, q_mul(srot, get4(CS, k, st.OLD_FRAME_ROT, l)))
-            put4(CS, k, st.NOW_ROT, l, q_mul(srot, get4(CS, k, st.NOW_ROT, l)))
-            put4(CS, k, st.C_OLD_ROT, l, q_mul(srot, get4(CS, k, st.C_OLD_ROT, l)))
+def collider_frame_block(CS, TS, TI, BI, CT, b, w, world_position, world_rotation, lossy_scale):
+    """G.2 for the collider slots of every active lane of block b (its first ``w`` lanes): this
+    frame's pose and the history update. The lane loop is here, not in the caller, so that
+    numba counts this function's array arguments once a block, not once a lane."""
+    for l in range(w):
+        if TI[b, bk.TI_TEAM + l] < 0 or get1(TS, b, st.ACTIVE, l) == 0.0:
+            continue
+        reset = get1(TS, b, st.RESET, l) != 0.0
+        shift = get1(TS, b, st.INERTIA_SHIFT, l) != 0.0
+        pivot = get3(TS, b, st.OLD_COMPONENT_POS, l)
+        vec = get3(TS, b, st.FRAME_SHIFT_VECTOR, l)
+        srot = get4(TS, b, st.FRAME_SHIFT_ROTATION, l)
+        c0 = BI[b, bk.BI_COLLIDER0]
+        for k in range(c0, c0 + BI[b, bk.BI_COLLIDERS]):
+            i = CT[k, l]
+            pos = (world_position[i, 0], world_position[i, 1], world_position[i, 2])
+            rot = (world_rotation[i, 0], world_rotation[i, 1], world_rotation[i, 2], world_rotation[i, 3])
+            sx = lossy_scale[i, 0]
+            sy = lossy_scale[i, 1]
+            sz = lossy_scale[i, 2]
+            suspend = False
+            if abs(sx) < 1e-6:
+                sx = 1e-6
+                suspend = True
+            if abs(sy) < 1e-6:
+                sy = 1e-6
+                suspend = True
+            if abs(sz) < 1e-6:
+                sz = 1e-6
+                suspend = True
+            put1(CS, k, st.SCALE_SUSPEND, l, 1.0 if suspend else 0.0)
+            lc = get3(CS, k, st.LOCAL_CENTER, l)
+            center = (lc[0] * _sign(sx), lc[1] * _sign(sy), lc[2] * _sign(sz))
+            rc = q_rotate(rot, center)
+            fpos = (pos[0] + rc[0] * abs(sx), pos[1] + rc[1] * abs(sy), pos[2] + rc[2] * abs(sz))
+            put3(CS, k, st.FRAME_POS, l, fpos)
+            put4(CS, k, st.FRAME_ROT, l, rot)
+            put3(CS, k, st.FRAME_SCALE, l, (sx, sy, sz))
+            if reset or get1(CS, k, st.FIRST_FRAME, l) != 0.0 or suspend:
+                put3(CS, k, st.OLD_FRAME_POS, l, fpos)
+                put3(CS, k, st.NOW_POS, l, fpos)
+                put3(CS, k, st.C_OLD_POS, l, fpos)
+                put4(CS, k, st.OLD_FRAME_ROT, l, rot)
+                put4(CS, k, st.NOW_ROT, l, rot)
+                put4(CS, k, st.C_OLD_ROT, l, rot)
+                put1(CS, k, st.FIRST_FRAME, l, 0.0)
+            elif shift:
+                put3(CS, k, st.OLD_FRAME_POS, l, shift_position(get3(CS, k, st.OLD_FRAME_POS, l), pivot, vec, srot))
+                put3(CS, k, st.NOW_POS, l, shift_position(get3(CS, k, st.NOW_POS, l), pivot, vec, srot))
+                put3(CS, k, st.C_OLD_POS, l, shift_position(get3(CS, k, st.C_OLD_POS, l), pivot, vec, srot))
+                put4(CS, k, st.OLD_FRAME_ROT, l, q_mul(srot, get4(CS, k, st.OLD_FRAME_ROT, l)))
+                put4(CS, k, st.NOW_ROT, l, q_mul(srot, get4(CS, k, st.NOW_ROT, l)))
+                put4(CS, k, st.C_OLD_ROT, l, q_mul(srot, get4(CS, k, st.C_OLD_ROT, l)))
 
 
 @kernel
@@ -205,12 +210,17 @@ def collider_end_step_block(CS, BI, b):
 
 
 @kernel(forceinline=False)
-def collider_end_frame_lane(CS, BI, b, l):
-    """End of frame of a lane that ran steps: the frame pose becomes the old frame pose."""
+def collider_end_frame_block(CS, TS, TI, BI, b, w, running):
+    """End of frame of every active lane of block b whose team ran steps (``running``: the team
+    clocks' flags): the frame pose becomes the old frame pose."""
     c0 = BI[b, bk.BI_COLLIDER0]
-    for k in range(c0, c0 + BI[b, bk.BI_COLLIDERS]):
-        put3(CS, k, st.OLD_FRAME_POS, l, get3(CS, k, st.FRAME_POS, l))
-        put4(CS, k, st.OLD_FRAME_ROT, l, get4(CS, k, st.FRAME_ROT, l))
+    for l in range(w):
+        t = TI[b, bk.TI_TEAM + l]
+        if t < 0 or get1(TS, b, st.ACTIVE, l) == 0.0 or not running[t]:
+            continue
+        for k in range(c0, c0 + BI[b, bk.BI_COLLIDERS]):
+            put3(CS, k, st.OLD_FRAME_POS, l, get3(CS, k, st.FRAME_POS, l))
+            put4(CS, k, st.OLD_FRAME_ROT, l, get4(CS, k, st.FRAME_ROT, l))
 
 
 def collider_shapes(collider_set, indices) -> list[tuple[int, int, int, int]]:

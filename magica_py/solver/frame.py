@@ -53,11 +53,11 @@ from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
 from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.center import (
-    center_and_inertia_lane, distance_culling_lane, end_frame_lane, reset_or_shift_block, skin_block,
-    snap_lane_to_base_pose,
+    center_and_inertia_lane, distance_culling_lane, end_frame_block, reset_or_shift_block, skin_block,
+    snap_lane_to_base_pose, team_world_poses,
 )
 from magica_py.solver.colliders import (
-    collider_end_frame_lane, collider_end_step_block, collider_frame_lane, collider_step_block,
+    collider_end_frame_block, collider_end_step_block, collider_frame_block, collider_step_block,
 )
 from magica_py.solver.contact_speed import contact_speed_block
 from magica_py.solver.constraints.angle import angle_block
@@ -76,8 +76,8 @@ from magica_py.solver.parameters import (
 from magica_py.solver.quality import drift_applies, drift_begin_block, drift_end_block, quality_end_of_step_block
 from magica_py.solver.quality_display import display_constraints_block
 from magica_py.solver.rotations import line_rotations_block, triangle_rotations_block
-from magica_py.solver.step import end_step_block, predict_block, step_basic_pose_block, team_step_lane
-from magica_py.solver.writeback import transform_block, write_transforms_lane
+from magica_py.solver.step import end_step_block, predict_block, step_basic_pose_block, team_step_block
+from magica_py.solver.writeback import transform_block, write_transforms_block
 from magica_py.wind.force import wind_block
 
 TimeArrays = namedtuple("TimeArrays", TeamTimeState.FIELDS)
@@ -333,8 +333,9 @@ def build_reset_lane(F, b, l):
     rate would start from a different state, which a lightly damped chain carries for ~1 s."""
     PS, TS = F.PS, F.TS
     skin_block(PS, F.PM, F.BI, F.PT, F.h_build_local_to_world, b, l, l + 1)
-    center_and_inertia_lane(PS, F.PM, TS, F.TM, F.TI, F.P, F.BI, F.topology, b, l, F.h_build_world_position,
-                            F.h_build_world_rotation, F.h_build_lossy_scale, 0.0, 1.0, 0, False, 0.0, 0.0)
+    component, anchor = team_world_poses(F.TI, b, l, F.h_build_world_position, F.h_build_world_rotation,
+                                         F.h_build_lossy_scale)
+    center_and_inertia_lane(F, b, l, component, anchor, 0.0, 1.0, 0, False, 0.0, 0.0)
     g0 = F.BI[b, bk.BI_G0]
     for g in range(g0, g0 + F.BI[b, bk.BI_N]):
         snap_lane_to_base_pose(PS, g, l)
@@ -347,25 +348,29 @@ def build_reset_lane(F, b, l):
 
 
 @kernel(forceinline=False)
-def begin_frame_prelude_lane(F, b, l, t, quality):
-    """The team-level start of lane l's frame (team t): running flag, quality mode's
-    first-frame build reset. Returns the team time since the last step
-    (``center_and_inertia_lane``)."""
+def begin_frame_prelude_block(F, b, w, quality):
+    """The team-level start of the frame of every active lane of block b (its first ``w``
+    lanes): running flag, quality mode's first-frame build reset, and the team time since the
+    last step (``DISPLAY_T``, kept until ``center_and_inertia_lane`` reads it)."""
     TS = F.TS
-    put1(TS, b, st.RUNNING, l, 1.0 if F.tt_running[t] else 0.0)
-    if get1(TS, b, st.RESET, l) != 0.0:
-        put1(TS, b, st.RAMP_FROM_BUILD, l, 0.0)
-    if (quality is not None and F.P[b, PRM_QUALITY] != 0.0 and F.h_build_pose_pending[0] != 0
-            and get1(TS, b, st.RESET, l) != 0.0 and get1(TS, b, st.TIME_RESET, l) != 0.0
-            and first_frame_continues_build_pose(F, b, l)):
-        build_reset_lane(F, b, l)
-        put1(TS, b, st.RAMP_FROM_BUILD, l, 1.0)
-    # the stabilisation ramp in continuous time when it started at the build (t = 0, on the
-    # step grid); after a first-frame reset the per-step ramp is kept (docs/quality-mode.md)
-    since_last_step = 0.0
-    if get1(TS, b, st.RAMP_FROM_BUILD, l) != 0.0:
-        since_last_step = F.tt_old_time[t] - F.tt_now_update_time[t]
-    return since_last_step
+    for l in range(w):
+        t = lane_team(F.TI, b, l)
+        if t < 0 or get1(TS, b, st.ACTIVE, l) == 0.0:
+            continue
+        put1(TS, b, st.RUNNING, l, 1.0 if F.tt_running[t] else 0.0)
+        if get1(TS, b, st.RESET, l) != 0.0:
+            put1(TS, b, st.RAMP_FROM_BUILD, l, 0.0)
+        if (quality is not None and F.P[b, PRM_QUALITY] != 0.0 and F.h_build_pose_pending[0] != 0
+                and get1(TS, b, st.RESET, l) != 0.0 and get1(TS, b, st.TIME_RESET, l) != 0.0
+                and first_frame_continues_build_pose(F, b, l)):
+            build_reset_lane(F, b, l)
+            put1(TS, b, st.RAMP_FROM_BUILD, l, 1.0)
+        # the stabilisation ramp in continuous time when it started at the build (t = 0, on the
+        # step grid); after a first-frame reset the per-step ramp is kept (docs/quality-mode.md)
+        since_last_step = 0.0
+        if get1(TS, b, st.RAMP_FROM_BUILD, l) != 0.0:
+            since_last_step = F.tt_old_time[t] - F.tt_now_update_time[t]
+        put1(TS, b, st.DISPLAY_T, l, since_last_step)
 
 
 @kernel
@@ -395,8 +400,7 @@ def run_step(F, b, fi, angle, bending, point_collision, edge_collision, motion, 
     ratio = fi.frequency_ratio
     tether_attenuation, distance_attenuation, limit_attenuation, restoration_attenuation, motion_attenuation = \
         step_attenuations(P, b, ratio)
-    for l in range(bk.lane_width(BI, b)):
-        team_step_lane(TS, TM, P, b, l, dt)
+    team_step_block(TS, TM, P, b, bk.lane_width(BI, b), dt)
     if colliders is not None:
         collider_step_block(CS, TS, BI, topology, b)
     predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, ratio, fi.power_z)
@@ -479,32 +483,23 @@ def block_frame_steps(F, b, fi, area, angle, bending, point_collision, edge_coll
     tt_running, tt_skip_count, tt_step_running = F.tt_running, F.tt_skip_count, F.tt_step_running
     tt_time, tt_update_count, h_local_to_world = F.tt_time, F.tt_update_count, F.h_local_to_world
     h_lossy_scale, h_world_position, h_world_rotation = F.h_lossy_scale, F.h_world_position, F.h_world_rotation
-    PS, TS, CS, PM, TM, TI, P, BI, PT, topology = F.PS, F.TS, F.CS, F.PM, F.TM, F.TI, F.P, F.BI, F.PT, F.topology
+    PS, TS, CS, PM, TI, BI, PT = F.PS, F.TS, F.CS, F.PM, F.TI, F.BI, F.PT
     warm_block(F, b, area, angle, bending, edge_collision, quality)
     w = bk.lane_width(BI, b)
     frozen = frozen_lanes(TS, TI, b, w)
     if frozen:
         save_frozen(PS, TS, CS, TI, BI, b, w, area)
-    for l in range(w):
-        t = lane_team(TI, b, l)
-        if t >= 0 and get1(TS, b, st.ACTIVE, l) != 0.0:
-            since_last_step = begin_frame_prelude_lane(F, b, l, t, quality)
-            put1(TS, b, st.DISPLAY_T, l, since_last_step)   # kept until the center is done
+    begin_frame_prelude_block(F, b, w, quality)
     skin_block(PS, PM, BI, PT, h_local_to_world, b, 0, w)
     for l in range(w):
         t = lane_team(TI, b, l)
         if t >= 0 and get1(TS, b, st.ACTIVE, l) != 0.0:
-            center_and_inertia_lane(PS, PM, TS, TM, TI, P, BI, topology, b, l, h_world_position,
-                                    h_world_rotation, h_lossy_scale, tt_frame_delta_time[t],
-                                    tt_now_time_scale[t], tt_skip_count[t], tt_running[t], fi.dt,
-                                    get1(TS, b, st.DISPLAY_T, l))
+            component, anchor = team_world_poses(TI, b, l, h_world_position, h_world_rotation, h_lossy_scale)
+            center_and_inertia_lane(F, b, l, component, anchor, tt_frame_delta_time[t], tt_now_time_scale[t],
+                                    tt_skip_count[t], tt_running[t], fi.dt, get1(TS, b, st.DISPLAY_T, l))
     reset_or_shift_block(PS, TS, BI, b)
     if colliders is not None:
-        for l in range(w):
-            t = lane_team(TI, b, l)
-            if t >= 0 and get1(TS, b, st.ACTIVE, l) != 0.0:
-                collider_frame_lane(CS, TS, BI, F.CT, b, l, h_world_position, h_world_rotation,
-                                    h_lossy_scale)
+        collider_frame_block(CS, TS, TI, BI, F.CT, b, w, h_world_position, h_world_rotation, h_lossy_scale)
     if frozen:
         restore_frozen(PS, TS, CS, TI, BI, b, w, area)
     for step in range(busiest_lane_steps(TI, tt_update_count, b, w)):
@@ -573,18 +568,15 @@ def block_frame_end(F, b, fi, area, quality, lines, triangles, colliders):
     if triangles is not None:
         triangle_rotations_block(PS, F.TRS, F.TRM, BI, topology, b)
     transform_block(PS, PM, TS, BI, PT, topology, b, h_parent, h_world_rotation, h_lossy_scale)
-    for l in range(w):
+    write_transforms_block(PS, TS, TI, BI, PT, topology, b, w, h_local_position, h_local_rotation)
+    for l in range(w):   # a lane whose transform data is not finite is reset and reported
         t = lane_team(TI, b, l)
-        if t < 0 or get1(TS, b, st.ACTIVE, l) == 0.0:
-            continue
-        if get1(TS, b, st.TRANSFORM_OK, l) != 0.0:
-            write_transforms_lane(PS, BI, PT, topology, b, l, h_local_position, h_local_rotation)
-        else:
+        if t >= 0 and get1(TS, b, st.ACTIVE, l) != 0.0 and get1(TS, b, st.TRANSFORM_OK, l) == 0.0:
             reset_lane_to_base(PS, TS, BI, b, l)
             put1(TS, b, st.GUARD_CODE, l, 1.0)
-        end_frame_lane(TS, b, l, tt_running[t])
-        if colliders is not None and tt_running[t]:
-            collider_end_frame_lane(CS, BI, b, l)
+    end_frame_block(TS, TI, b, w, tt_running)
+    if colliders is not None:
+        collider_end_frame_block(CS, TS, TI, BI, b, w, tt_running)
     if frozen:
         restore_frozen(PS, TS, CS, TI, BI, b, w, area)
 
@@ -774,13 +766,11 @@ def compile_late_stages(F, frame_values, colliders):
                                           F.tt_now_update_time, F.tt_frame_old_time, F.tt_frame_interpolation,
                                           F.tt_step_running, fi.dt, fi.timing)
         if colliders is not None:
-            for l in range(w):
-                collider_frame_lane(F.CS, F.TS, F.BI, F.CT, b, l, F.h_world_position, F.h_world_rotation,
-                                    F.h_lossy_scale)
+            collider_frame_block(F.CS, F.TS, F.TI, F.BI, F.CT, b, w, F.h_world_position, F.h_world_rotation,
+                                 F.h_lossy_scale)
         reset_or_shift_block(F.PS, F.TS, F.BI, b)
         for l in range(w):
             t = lane_team(F.TI, b, l)
-            center_and_inertia_lane(F.PS, F.PM, F.TS, F.TM, F.TI, F.P, F.BI, F.topology, b, l, F.h_world_position,
-                                    F.h_world_rotation, F.h_lossy_scale, F.tt_frame_delta_time[t],
-                                    F.tt_now_time_scale[t], F.tt_skip_count[t], F.tt_running[t], fi.dt,
-                                    get1(F.TS, b, st.DISPLAY_T, l))
+            component, anchor = team_world_poses(F.TI, b, l, F.h_world_position, F.h_world_rotation, F.h_lossy_scale)
+            center_and_inertia_lane(F, b, l, component, anchor, F.tt_frame_delta_time[t], F.tt_now_time_scale[t],
+                                    F.tt_skip_count[t], F.tt_running[t], fi.dt, get1(F.TS, b, st.DISPLAY_T, l))

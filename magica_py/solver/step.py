@@ -1,6 +1,6 @@
 """One simulation step's team update and particle stages (docs/solver.md §A.6/§C.3, §D.1, §D.2, §D.10).
 
-``team_step_lane`` runs after the runtime's ``team_time_begin_step`` (A.6: now_update_time,
+``team_step_block`` runs after the runtime's ``team_time_begin_step`` (A.6: now_update_time,
 frame_interpolation) and interpolates the center, derives local inertia, gravity falloff and
 the stabilisation weights (C.3) of one lane's team. ``predict_block`` is D.1,
 ``step_basic_pose_block`` D.2 and ``end_step_block`` D.10, over one block (particles, then
@@ -92,47 +92,50 @@ def team_step_values(old_pos, old_rot, old_frame_pos, frame_pos, old_frame_rot, 
 
 
 @kernel(forceinline=False)
-def team_step_lane(TS, TM, P, b, l, dt):
-    """C.3 for lane l's team at the start of a step (the maths: ``team_step_values``), at its
-    frame interpolation of this step (``FRAME_INTERPOLATION``, written by the step's A.6)."""
-    old_pos = get3(TS, b, st.NOW_WORLD_POS, l)
-    old_rot = get4(TS, b, st.NOW_WORLD_ROT, l)
-    put3(TS, b, st.OLD_WORLD_POS, l, old_pos)
-    put4(TS, b, st.OLD_WORLD_ROT, l, old_rot)
-    unit = get1(TS, b, st.LENGTH_UNIT, l)
-    (now_pos, now_rot, step_vector, step_rotation, mv, rv, inertia_vector, inertia_rotation, w, axis,
-     scale_ratio, gravity_dot, gravity_ratio, velocity_weight, blend_weight) = team_step_values(
-        old_pos, old_rot, get3(TS, b, st.OLD_FRAME_WORLD_POS, l), get3(TS, b, st.FRAME_WORLD_POS, l),
-        get4(TS, b, st.OLD_FRAME_WORLD_ROT, l), get4(TS, b, st.FRAME_WORLD_ROT, l),
-        get3(TS, b, st.OLD_FRAME_WORLD_SCALE, l), get3(TS, b, st.FRAME_WORLD_SCALE, l),
-        get1(TS, b, st.FRAME_INTERPOLATION, l), dt,
-        P[b, PRM_LOCAL_INERTIA], P[b, PRM_LOCAL_MOVEMENT_SPEED_LIMIT] * unit, P[b, PRM_LOCAL_ROTATION_SPEED_LIMIT],
-        v_length(get3(TM, b, bk.INIT_SCALE, l)),
-        (P[b, PRM_GRAVITY_DIRECTION], P[b, PRM_GRAVITY_DIRECTION + 1], P[b, PRM_GRAVITY_DIRECTION + 2]),
-        get3(TM, b, bk.INIT_LOCAL_GRAVITY, l), P[b, PRM_GRAVITY], P[b, PRM_GRAVITY_FALLOFF],
-        P[b, PRM_STABILIZATION_TIME], get1(TS, b, st.VELOCITY_WEIGHT, l), P[b, PRM_BLEND_WEIGHT],
-        get1(TS, b, st.DISTANCE_WEIGHT, l))
-    put3(TS, b, st.NOW_WORLD_POS, l, now_pos)
-    put4(TS, b, st.NOW_WORLD_ROT, l, now_rot)
-    put3(TS, b, st.STEP_VECTOR, l, step_vector)
-    put4(TS, b, st.STEP_ROTATION, l, step_rotation)
-    put1(TS, b, st.STEP_MOVE_INERTIA_RATIO, l, mv)
-    put1(TS, b, st.STEP_ROTATION_INERTIA_RATIO, l, rv)
-    put3(TS, b, st.INERTIA_VECTOR, l, inertia_vector)
-    put4(TS, b, st.INERTIA_ROTATION, l, inertia_rotation)
-    if P[b, PRM_DEPTH_INERTIA] != 0.0:   # what D.1's depth-inertia slerp needs of the lane, once a step
-        slerp_to, slerp_angle, slerp_inv_sin, slerp_far = q_slerp_path(inertia_rotation, step_rotation)
-        put4(TS, b, st.INERTIA_SLERP_TO, l, slerp_to)
-        put1(TS, b, st.INERTIA_SLERP_ANGLE, l, slerp_angle)
-        put1(TS, b, st.INERTIA_SLERP_INV_SIN, l, slerp_inv_sin)
-        put1(TS, b, st.INERTIA_SLERP_FAR, l, slerp_far)
-    put1(TS, b, st.ANGULAR_VELOCITY, l, w)
-    put3(TS, b, st.ROTATION_AXIS, l, axis)
-    put1(TS, b, st.SCALE_RATIO, l, scale_ratio)
-    put1(TS, b, st.GRAVITY_DOT, l, gravity_dot)
-    put1(TS, b, st.GRAVITY_RATIO, l, gravity_ratio)
-    put1(TS, b, st.VELOCITY_WEIGHT, l, velocity_weight)
-    put1(TS, b, st.BLEND_WEIGHT, l, blend_weight)
+def team_step_block(TS, TM, P, b, w, dt):
+    """C.3 for the team of each of block b's first ``w`` lanes at the start of a step (the
+    maths: ``team_step_values``), at its frame interpolation of this step
+    (``FRAME_INTERPOLATION``, written by the step's A.6). The lane loop is here so that numba
+    counts the array arguments once a block, not once a lane."""
+    for l in range(w):
+        old_pos = get3(TS, b, st.NOW_WORLD_POS, l)
+        old_rot = get4(TS, b, st.NOW_WORLD_ROT, l)
+        put3(TS, b, st.OLD_WORLD_POS, l, old_pos)
+        put4(TS, b, st.OLD_WORLD_ROT, l, old_rot)
+        unit = get1(TS, b, st.LENGTH_UNIT, l)
+        (now_pos, now_rot, step_vector, step_rotation, mv, rv, inertia_vector, inertia_rotation, angular_velocity, axis,
+         scale_ratio, gravity_dot, gravity_ratio, velocity_weight, blend_weight) = team_step_values(
+            old_pos, old_rot, get3(TS, b, st.OLD_FRAME_WORLD_POS, l), get3(TS, b, st.FRAME_WORLD_POS, l),
+            get4(TS, b, st.OLD_FRAME_WORLD_ROT, l), get4(TS, b, st.FRAME_WORLD_ROT, l),
+            get3(TS, b, st.OLD_FRAME_WORLD_SCALE, l), get3(TS, b, st.FRAME_WORLD_SCALE, l),
+            get1(TS, b, st.FRAME_INTERPOLATION, l), dt,
+            P[b, PRM_LOCAL_INERTIA], P[b, PRM_LOCAL_MOVEMENT_SPEED_LIMIT] * unit, P[b, PRM_LOCAL_ROTATION_SPEED_LIMIT],
+            v_length(get3(TM, b, bk.INIT_SCALE, l)),
+            (P[b, PRM_GRAVITY_DIRECTION], P[b, PRM_GRAVITY_DIRECTION + 1], P[b, PRM_GRAVITY_DIRECTION + 2]),
+            get3(TM, b, bk.INIT_LOCAL_GRAVITY, l), P[b, PRM_GRAVITY], P[b, PRM_GRAVITY_FALLOFF],
+            P[b, PRM_STABILIZATION_TIME], get1(TS, b, st.VELOCITY_WEIGHT, l), P[b, PRM_BLEND_WEIGHT],
+            get1(TS, b, st.DISTANCE_WEIGHT, l))
+        put3(TS, b, st.NOW_WORLD_POS, l, now_pos)
+        put4(TS, b, st.NOW_WORLD_ROT, l, now_rot)
+        put3(TS, b, st.STEP_VECTOR, l, step_vector)
+        put4(TS, b, st.STEP_ROTATION, l, step_rotation)
+        put1(TS, b, st.STEP_MOVE_INERTIA_RATIO, l, mv)
+        put1(TS, b, st.STEP_ROTATION_INERTIA_RATIO, l, rv)
+        put3(TS, b, st.INERTIA_VECTOR, l, inertia_vector)
+        put4(TS, b, st.INERTIA_ROTATION, l, inertia_rotation)
+        if P[b, PRM_DEPTH_INERTIA] != 0.0:   # what D.1's depth-inertia slerp needs of the lane, once a step
+            slerp_to, slerp_angle, slerp_inv_sin, slerp_far = q_slerp_path(inertia_rotation, step_rotation)
+            put4(TS, b, st.INERTIA_SLERP_TO, l, slerp_to)
+            put1(TS, b, st.INERTIA_SLERP_ANGLE, l, slerp_angle)
+            put1(TS, b, st.INERTIA_SLERP_INV_SIN, l, slerp_inv_sin)
+            put1(TS, b, st.INERTIA_SLERP_FAR, l, slerp_far)
+        put1(TS, b, st.ANGULAR_VELOCITY, l, angular_velocity)
+        put3(TS, b, st.ROTATION_AXIS, l, axis)
+        put1(TS, b, st.SCALE_RATIO, l, scale_ratio)
+        put1(TS, b, st.GRAVITY_DOT, l, gravity_dot)
+        put1(TS, b, st.GRAVITY_RATIO, l, gravity_ratio)
+        put1(TS, b, st.VELOCITY_WEIGHT, l, velocity_weight)
+        put1(TS, b, st.BLEND_WEIGHT, l, blend_weight)
 
 
 @kernel

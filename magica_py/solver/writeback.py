@@ -110,25 +110,30 @@ def transform_block(PS, PM, TS, BI, PT, topology, b, parent_node, world_rotation
 
 
 @kernel(forceinline=False)
-def write_transforms_lane(PS, BI, PT, topology, b, l, local_position, local_rotation):
-    """Write lane l's bones (``transform_block``'s local poses) into the hierarchy's local pose
+def write_transforms_block(PS, TS, TI, BI, PT, topology, b, w, local_position, local_rotation):
+    """Write the bones of every active lane of block b whose transform data is finite
+    (``TRANSFORM_OK``; ``transform_block``'s local poses) into the hierarchy's local pose
     arrays: a scatter through the bones' hierarchy nodes; invalid bones and a moving bone
-    without a parent particle are left alone."""
+    without a parent particle are left alone. The lane loop is here so that numba counts the
+    array arguments once a block."""
     g0 = BI[b, bk.BI_G0]
     attribute, parent = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_PARENT]
-    for j in range(BI[b, bk.BI_N]):
-        attr = topology[attribute + j]
-        g = g0 + j
-        node = PT[g, l]
-        if (attr & MOVE) != 0:
-            if topology[parent + j] < 0:
-                continue
-            lp = get3(PS, g, st.LOCAL_OUT_POSITION, l)
-            local_position[node, 0] = lp[0]
-            local_position[node, 1] = lp[1]
-            local_position[node, 2] = lp[2]
-        elif (attr & FIXED) == 0:
+    for l in range(w):
+        if TI[b, bk.TI_TEAM + l] < 0 or get1(TS, b, st.ACTIVE, l) == 0.0 or get1(TS, b, st.TRANSFORM_OK, l) == 0.0:
             continue
-        lq = get4(PS, g, st.LOCAL_OUT_ROTATION, l)
-        for c in range(4):
-            local_rotation[node, c] = lq[c]
+        for j in range(BI[b, bk.BI_N]):
+            attr = topology[attribute + j]
+            g = g0 + j
+            node = PT[g, l]
+            if (attr & MOVE) != 0:
+                if topology[parent + j] < 0:
+                    continue
+                lp = get3(PS, g, st.LOCAL_OUT_POSITION, l)
+                local_position[node, 0] = lp[0]
+                local_position[node, 1] = lp[1]
+                local_position[node, 2] = lp[2]
+            elif (attr & FIXED) == 0:
+                continue
+            lq = get4(PS, g, st.LOCAL_OUT_ROTATION, l)
+            for c in range(4):
+                local_rotation[node, c] = lq[c]
