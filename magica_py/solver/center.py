@@ -7,7 +7,10 @@ smoothing, world inertia and speed limits of one lane's team, producing the fram
 
 Every function works on one block ``b`` of the packed tables (``solver/lanes.py``): particle
 stages loop over the block's particles and, innermost, its lanes (vectorised across teams);
-team stages run lane by lane (``*_lane``: a team's branches differ from its neighbours').
+team stages run lane by lane (``*_lane``: a team's branches differ from its neighbours'),
+taking the frame's arrays as one object (``frame_call.FrameArrays``), or loop over a block's
+lanes themselves (``*_block``): an array argument of a function called once a lane would cost
+a reference count at every call (docs/architecture.md, *Calling the frame kernel*).
 """
 from __future__ import annotations
 
@@ -211,7 +214,7 @@ def center_from_sums(position_sum, normal_sum, tangent_sum, count):
 
 @kernel
 def world_pose_rows(world_position, world_rotation, lossy_scale, node):
-    """((position, rotation, lossy scale) of hierarchy node ``node``: the rows C.2 and C.4 read
+    """(position, rotation, lossy scale) of hierarchy node ``node``: the rows C.2 and C.4 read
     of a team's component and anchor. Straight-line (no count of the arrays is kept)."""
     return ((world_position[node, 0], world_position[node, 1], world_position[node, 2]),
             (world_rotation[node, 0], world_rotation[node, 1], world_rotation[node, 2], world_rotation[node, 3]),
