@@ -18,6 +18,7 @@ from magica_py.kernels.math3d import (
 )
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
+from magica_py.solver.center import world_pose_rows
 from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
 
 SPHERE = 0
@@ -45,12 +46,7 @@ def collider_frame_block(CS, TS, TI, BI, CT, b, w, world_position, world_rotatio
         srot = get4(TS, b, st.FRAME_SHIFT_ROTATION, l)
         c0 = BI[b, bk.BI_COLLIDER0]
         for k in range(c0, c0 + BI[b, bk.BI_COLLIDERS]):
-            i = CT[k, l]
-            pos = (world_position[i, 0], world_position[i, 1], world_position[i, 2])
-            rot = (world_rotation[i, 0], world_rotation[i, 1], world_rotation[i, 2], world_rotation[i, 3])
-            sx = lossy_scale[i, 0]
-            sy = lossy_scale[i, 1]
-            sz = lossy_scale[i, 2]
+            pos, rot, (sx, sy, sz) = world_pose_rows(world_position, world_rotation, lossy_scale, np.int64(CT[k, l]))
             suspend = False
             if abs(sx) < 1e-6:
                 sx = 1e-6

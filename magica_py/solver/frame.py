@@ -54,7 +54,7 @@ from magica_py.solver import state as st
 from magica_py.solver.attenuations import step_attenuations
 from magica_py.solver.center import (
     center_and_inertia_lane, distance_culling_lane, end_frame_block, reset_or_shift_block, skin_block,
-    snap_lane_to_base_pose, team_world_poses,
+    scale_ratio_of, snap_lane_to_base_pose, team_world_poses, world_pose_rows,
 )
 from magica_py.solver.colliders import (
     collider_end_frame_block, collider_end_step_block, collider_frame_block, collider_step_block,
@@ -308,18 +308,13 @@ def first_frame_continues_build_pose(F, b, l):
     its build pose (whatever the teleport mode): the animation then starts from the build pose
     and the build can be the reset instant. A scene whose rest pose is not the animation's
     pose at t = 0 (a jump at the first frame) keeps MagicaCloth2's first-frame reset."""
-    comp = F.TI[b, bk.TI_COMPONENT + l]
-    init_len = v_length(get3(F.TM, b, bk.INIT_SCALE, l))
-    scale = (F.h_lossy_scale[comp, 0], F.h_lossy_scale[comp, 1], F.h_lossy_scale[comp, 2])
-    ratio = v_length(scale) / init_len if init_len > 0.0 else 1.0
-    jump = v_length(v_sub((F.h_world_position[comp, 0], F.h_world_position[comp, 1], F.h_world_position[comp, 2]),
-                          (F.h_build_world_position[comp, 0], F.h_build_world_position[comp, 1],
-                           F.h_build_world_position[comp, 2])))
-    turn = math.degrees(q_angle(
-        (F.h_build_world_rotation[comp, 0], F.h_build_world_rotation[comp, 1], F.h_build_world_rotation[comp, 2],
-         F.h_build_world_rotation[comp, 3]),
-        (F.h_world_rotation[comp, 0], F.h_world_rotation[comp, 1], F.h_world_rotation[comp, 2],
-         F.h_world_rotation[comp, 3])))
+    comp = np.int64(F.TI[b, bk.TI_COMPONENT + l])
+    now_pos, now_rot, now_scale = world_pose_rows(F.h_world_position, F.h_world_rotation, F.h_lossy_scale, comp)
+    build_pos, build_rot, _scale = world_pose_rows(F.h_build_world_position, F.h_build_world_rotation,
+                                                   F.h_build_lossy_scale, comp)
+    ratio = scale_ratio_of(now_scale, v_length(get3(F.TM, b, bk.INIT_SCALE, l)))
+    jump = v_length(v_sub(now_pos, build_pos))
+    turn = math.degrees(q_angle(build_rot, now_rot))
     return jump < F.P[b, PRM_TELEPORT_DISTANCE] * ratio and turn < F.P[b, PRM_TELEPORT_ROTATION]
 
 
