@@ -39,6 +39,11 @@ VARIANTS = {
     # stages no showcase scene uses: edge collision (D.8 edge mode), the motion constraint (D.9)
     "edge": ["collision_mode=edge"],
     "motion": ["parameters.motion.use_max_distance=true", "parameters.motion.use_backstop=true"],
+    # the angle limit with D.2's rest shape blended halfway to the animated pose, or kept as
+    # the animated pose: the limit then reads D.1's animated rotations of the moving particles
+    # (step.moving_rotation_read)
+    "pose_blend": ["parameters.animation_pose_ratio=0.5", "parameters.angle_limit.use=true"],
+    "pose_kept": ["parameters.animation_pose_ratio=1.0", "parameters.angle_limit.use=true"],
     # every cloth a closed mesh: a fan of strands (the character's hair) then has volume pairs (D.7)
     "loop_mesh": ["connection=sequential_loop_mesh"],
     # the wind a cloth makes from its own movement (wind.moving_wind)

@@ -91,3 +91,14 @@ def test_lanes_of_one_block_that_violate_the_angle_limit_while_others_do_not_giv
     assert mixed > 0
     verdict = port_check.check(path, "faithful", FRAMES, 1)
     assert verdict == f"identical over {FRAMES} frames", verdict
+
+
+@pytest.mark.parametrize("variant", ["pose_blend", "pose_kept", "motion"])
+def test_the_stages_that_read_the_moving_particles_animated_rotations_give_the_reference_bits(tmp_path, variant):
+    """D.1 computes a moving particle's animated rotation at each step only where a stage reads
+    it (``step.moving_rotation_read``): the angle limit after D.2 blended the rest shape towards
+    the animated pose (ratio 0.5) or kept it (1.0), and the motion constraint. Four swinging
+    tails with a 30-degree limit, so the limit acts on the rotations it reads."""
+    path = _swinging_tails(tmp_path)
+    verdict = port_check.check(path, variant, FRAMES, 1)
+    assert verdict == f"identical over {FRAMES} frames", verdict

@@ -28,7 +28,8 @@ from magica_py.solver.parameters import (
     PRM_BLEND_WEIGHT, PRM_CENTRIFUGAL_ACCELERATION, PRM_DEPTH_INERTIA, PRM_FRICTION, PRM_GRAVITY,
     PRM_GRAVITY_DIRECTION, PRM_GRAVITY_FALLOFF, PRM_LOCAL_INERTIA, PRM_LOCAL_MOVEMENT_SPEED_LIMIT,
     PRM_LOCAL_ROTATION_SPEED_LIMIT, PRM_ANIMATION_POSE_RATIO, PRM_PARTICLE_SPEED_LIMIT, PRM_RATE_MODE,
-    PRM_STABILIZATION_TIME, clamp01, step_keep, step_rate, step_share,
+    PRM_STABILIZATION_TIME, PRM_USE_ANGLE_LIMIT, PRM_USE_BACKSTOP, PRM_USE_MAX_DISTANCE,
+    clamp01, step_keep, step_rate, step_share,
 )
 
 MOVE = 0x02
@@ -37,6 +38,8 @@ FRICTION_DAMPING_RATE = 0.6
 STATIC_FRICTION_GAIN = 0.04
 STATIC_FRICTION_LOSS = 0.05
 CENTRIFUGAL_SCALE = 0.02
+BASIC_POSE_KEPT = 0.99    # D.2: above this animation_pose_ratio the step keeps the animated pose
+BASIC_POSE_BLEND = 1e-8   # D.2: above this ratio the rebuilt rest shape is blended to the animated pose
 
 
 @kernel(inline="always")
@@ -199,10 +202,13 @@ def predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, frequency_ratio, power
     prediction (each lane at its own frame interpolation). The lane loops take the
     branch-free forms (``*_select``: the same bits); where every lane is at the frame's last
     step (t = 1) the animated rotation needs no slerp, and without depth inertia the step's
-    inertia needs no mix: those loops leave that work out."""
+    inertia needs no mix: those loops leave that work out. A moving particle's animated
+    rotation at this step is computed only where a later stage of the step reads it
+    (``moving_rotation_read``); its position always is."""
     g0 = BI[b, bk.BI_G0]
     w = bk.lane_width(BI, b)
     attribute = BI[b, bk.BI_ATTRIBUTE]
+    moving_rotation = moving_rotation_read(P, b)
     depth_inertia = P[b, PRM_DEPTH_INERTIA]
     g_dir = (P[b, PRM_GRAVITY_DIRECTION], P[b, PRM_GRAVITY_DIRECTION + 1], P[b, PRM_GRAVITY_DIRECTION + 2])
     g_mag = P[b, PRM_GRAVITY]
@@ -218,8 +224,16 @@ def predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, frequency_ratio, power
                 base_pos = v_lerp(get3(PS, g, st.OLD_POSITION, l), get3(PS, g, st.POSITION, l), 1.0)
                 put3(PS, g, st.BASE_POS, l, base_pos)
                 put3(PS, g, st.STEP_BASIC_POS, l, base_pos)
-                put4(PS, g, st.BASE_ROT, l, get4(PS, g, st.ROTATION, l))
-                put4(PS, g, st.STEP_BASIC_ROT, l, get4(PS, g, st.ROTATION, l))
+            if moving_rotation or not move:
+                for l in range(w):
+                    put4(PS, g, st.BASE_ROT, l, get4(PS, g, st.ROTATION, l))
+                    put4(PS, g, st.STEP_BASIC_ROT, l, get4(PS, g, st.ROTATION, l))
+        elif move and not moving_rotation:
+            for l in range(w):
+                base_pos = v_lerp(get3(PS, g, st.OLD_POSITION, l), get3(PS, g, st.POSITION, l),
+                                  get1(TS, b, st.FRAME_INTERPOLATION, l))
+                put3(PS, g, st.BASE_POS, l, base_pos)
+                put3(PS, g, st.STEP_BASIC_POS, l, base_pos)
         else:
             for l in range(w):
                 t = get1(TS, b, st.FRAME_INTERPOLATION, l)
@@ -245,6 +259,22 @@ def predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, frequency_ratio, power
         else:
             predict_move_lanes(PS, PM, PP, TS, b, g, w, depth_inertia, g_dir, g_mag, frequency_ratio, power_z,
                                rate_mode, dt)
+
+
+@kernel(inline="always")
+def moving_rotation_read(P, b):
+    """Does a stage of this step read a moving particle's animated rotation as D.1 leaves it
+    (``BASE_ROT``, ``STEP_BASIC_ROT``)? D.2 rebuilds each moving baseline entry's
+    ``STEP_BASIC_ROT`` from the fixed start's (reading no moving particle's D.1 rotation), then,
+    with the animation pose ratio above 1e-8, slerps it towards ``BASE_ROT`` (above 0.99 it
+    keeps D.1's instead). Of the stages after it only the angle limit (D.5) reads
+    ``STEP_BASIC_ROT``, and only the motion constraint (D.9) reads ``BASE_ROT``. So the moving
+    particles' rotations are needed for the angle limit with the ratio above 1e-8 and for the
+    motion constraint; elsewhere their slerp is left out. A fixed particle's rotation is always
+    computed (D.2 starts each baseline from it, E.1 reads it as a display frame)."""
+    limit = (P[b, PRM_USE_ANGLE_LIMIT] != 0.0) & (P[b, PRM_ANIMATION_POSE_RATIO] > BASIC_POSE_BLEND)
+    motion = (P[b, PRM_USE_MAX_DISTANCE] != 0.0) | (P[b, PRM_USE_BACKSTOP] != 0.0)
+    return limit | motion
 
 
 @kernel
@@ -292,7 +322,7 @@ def step_basic_pose_block(PS, PM, TS, TM, P, BI, topology, b):
     """D.2 over block b: rebuild the rest shape along each baseline and blend it to the
     animated pose."""
     a = P[b, PRM_ANIMATION_POSE_RATIO]
-    if a > 0.99:
+    if a > BASIC_POSE_KEPT:
         return
     g0 = BI[b, bk.BI_G0]
     w = bk.lane_width(BI, b)
@@ -312,7 +342,7 @@ def step_basic_pose_block(PS, PM, TS, TM, P, BI, topology, b):
                                             get4(PM, gv, bk.BASELINE_LOCAL_ROTATION, l), s)
                 put3(PS, gv, st.STEP_BASIC_POS, l, pos)
                 put4(PS, gv, st.STEP_BASIC_ROT, l, rot)
-        if a > 1e-8:
+        if a > BASIC_POSE_BLEND:
             for e in range(e0, e1):
                 gv = g0 + topology[bl_data + e]
                 for l in range(w):
