@@ -58,7 +58,7 @@ CARRIED_ROWS = PARTICLE.rows
 # (``PARTICLE.share``): stages run one after another, so only the names one stage uses at
 # once must not overlap (tests/test_row_tables.py checks it per module). Shared, the 74 rows
 # of the separate fields became 32, and a particle slot 151 rows instead of 193 (22 % less
-# particle state; docs/BENCHMARKS.md, session 23).
+# particle state; docs/BENCHMARKS.md, session 23; 148 rows now).
 STAGE_SCRATCH = _p("stage_scratch", 32, "scratch rows of the stages (the names shared over them below)")
 
 
@@ -116,14 +116,13 @@ BEND_INVERSE_MASS = _p("bend_inverse_mass", 1, "inverse mass of this bending pas
 ACCUM_FRICTION = _p("accum_friction", 1, "edge collision recorded friction (fixed-point max)")
 ACCUM_NORMAL = _p("accum_normal", 3, "edge collision normal sum")
 BENDING_EDGE_ROWS = (ACCUM_VECTOR // LANES, PARTICLE.rows)   # bending or edge collision
-# angle constraint buffers (D.5/D.6), zeroed after the routine
+# angle constraint buffers (D.5/D.6), written in its buffering pass (the limit's only with the limit)
 ANGLE_LENGTH = _p("angle_length", 1, "m; segment length when the angle routine starts")
 ANGLE_LOCAL_POS = _p("angle_local_pos", 3, "unit; rest edge direction in the parent's frame")
 ANGLE_LOCAL_ROT = _p("angle_local_rot", 4, "xyzw; rest rotation relative to the parent", QUATERNION)
-ANGLE_REST_VECTOR = _p("angle_rest_vector", 3, "m; rest edge vector in world space (restoration)")
 ANGLE_INVERSE_MASS = _p("angle_inverse_mass", 1, "1/(1 + 3 friction) of this angle pass (per step)")
-ANGLE_REST_LENGTH = _p("angle_rest_length", 1, "m; |angle_rest_vector| (restoration, per step)")
-ANGLE_REST_DIRECTION = _p("angle_rest_direction", 3, "unit; angle_rest_vector / its length (restoration, per step)")
+ANGLE_REST_LENGTH = _p("angle_rest_length", 1, "m; length of the rest edge (restoration, per step)")
+ANGLE_REST_DIRECTION = _p("angle_rest_direction", 3, "unit; the rest edge's direction (restoration, per step)")
 ANGLE_ROTATION = _p("angle_rotation", 4, "xyzw; working rotation of the limit pass", QUATERNION)
 ANGLE_LIMIT = _p("angle_limit", 1, "rad; limit angle at the particle's depth (per step)")
 ANGLE_LIMIT_COS = _p("angle_limit_cos", 1, "cos of angle_limit: the no-violation test without acos")

@@ -109,7 +109,7 @@ def restoration_gravity_factor(falloff, gravity_dot):
 def angle_buffer_entry(cp, pp, c_basic_pos, p_basic_pos, c_basic_rot, p_basic_rot, old_rest_direction):
     """Buffering pass of a non-root entry (child c of parent p).
 
-    Returns (angle_length, angle_local_pos, angle_local_rot, angle_rest_vector,
+    Returns (angle_length, angle_local_pos, angle_local_rot, the rest edge vector,
     angle_rest_length, angle_rest_direction); a degenerate segment or rest edge (< 1e-8 m)
     gives length 0, a zero local direction and the identity rotation, and a degenerate rest
     edge keeps ``old_rest_direction`` (the restoration snaps that child and never reads it)."""
@@ -261,15 +261,16 @@ def angle_iteration_lanes(PS, gc, w, p_move, rest_pivot, use_limit, use_restorat
         pp = get3(PS, gc, st.PARTNER_POS, l)
         vel_c = get3(PS, gc, st.VELOCITY_POS, l)
         vel_p = get3(PS, gc, st.PARTNER_VELOCITY_POS, l)
-        rot_c = get4(PS, gc, st.ANGLE_ROTATION, l)
-        kept_c, kept_p, kept_vel_c, kept_vel_p, kept_rot = cp, pp, vel_c, vel_p, rot_c
+        kept_c, kept_p, kept_vel_c, kept_vel_p = cp, pp, vel_c, vel_p
         next_c = cp
         wc = get1(PS, gc, st.ANGLE_INVERSE_MASS, l)
         wp = get1(PS, gc, st.PARTNER_W, l)
         rare = False
+        kept_rot = rot_c = IDENTITY   # the limit's working rotation: read and written with the limit only
         if use_limit:
+            kept_rot = get4(PS, gc, st.ANGLE_ROTATION, l)
             cp, pp, next_c, vel_c, vel_p, rot_c, edge, rare = angle_limit_entry(
-                cp, pp, vel_c, vel_p, rot_c, get4(PS, gc, st.PARTNER_ROTATION, l),
+                cp, pp, vel_c, vel_p, kept_rot, get4(PS, gc, st.PARTNER_ROTATION, l),
                 get3(PS, gc, st.ANGLE_LOCAL_POS, l), get4(PS, gc, st.ANGLE_LOCAL_ROT, l),
                 get1(PS, gc, st.ANGLE_LENGTH, l), get1(PS, gc, st.ANGLE_LIMIT, l), get1(PS, gc, st.ANGLE_LIMIT_COS, l),
                 wc, wp, p_move, limit_stiffness, limit_attenuation, full)
@@ -287,7 +288,8 @@ def angle_iteration_lanes(PS, gc, w, p_move, rest_pivot, use_limit, use_restorat
         put3(PS, gc, st.VELOCITY_POS, l, kept_vel_c if keep else vel_c)
         put3(PS, gc, st.PARTNER_POS, l, kept_p if keep else next_p)
         put3(PS, gc, st.PARTNER_VELOCITY_POS, l, kept_vel_p if keep else vel_p)
-        put4(PS, gc, st.ANGLE_ROTATION, l, kept_rot if keep else rot_c)
+        if use_limit:
+            put4(PS, gc, st.ANGLE_ROTATION, l, kept_rot if keep else rot_c)
         put1(PS, gc, st.ANGLE_RARE, l, 1.0 if (flagged if full else rare) else 0.0)
 
 
@@ -299,7 +301,11 @@ def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
     The inverse mass (friction does not change in this routine), the restoration stiffness
     (curve, rate conversion, gravity factor) and the rest direction (length, unit vector) of
     each particle are computed once per step in the buffering pass
-    rather than in each of the 3 iterations (same operations on the same values: same bits)."""
+    rather than in each of the 3 iterations (same operations on the same values: same bits).
+    The limit's rows (``ANGLE_ROTATION``, ``ANGLE_LENGTH``, ``ANGLE_LOCAL_POS`` / ``_ROT``, the
+    parent's ``PARTNER_ROTATION``) are buffered and carried only when the block uses the limit:
+    the restoration reads none of them. Every buffer row is written in the buffering pass
+    before the iterations read it, so nothing is cleared afterwards."""
     use_limit = P[b, PRM_USE_ANGLE_LIMIT] != 0.0
     use_restoration = P[b, PRM_USE_RESTORATION] != 0.0
     if not use_limit and not use_restoration:
@@ -319,25 +325,29 @@ def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
             c = topology[bl_data + e]
             gc = g0 + c
             for l in range(w):
-                put4(PS, gc, st.ANGLE_ROTATION, l, get4(PS, gc, st.STEP_BASIC_ROT, l))
                 # parents come first in a baseline (B.6), so wp below is always this step's value
                 put1(PS, gc, st.ANGLE_INVERSE_MASS, l, inverse_mass_friction(get1(PS, gc, st.FRICTION, l)))
+            if use_limit:
+                for l in range(w):
+                    put4(PS, gc, st.ANGLE_ROTATION, l, get4(PS, gc, st.STEP_BASIC_ROT, l))
             if e == e0:
                 continue
             gp = g0 + topology[parent + c]
             for l in range(w):   # the parent's rows next to the child: the loop below reads one item
                 put3(PS, gc, st.PARTNER_POS, l, get3(PS, gp, st.NEXT_POS, l))
                 put3(PS, gc, st.PARTNER_BASE, l, get3(PS, gp, st.STEP_BASIC_POS, l))
-                put4(PS, gc, st.PARTNER_ROTATION, l, get4(PS, gp, st.STEP_BASIC_ROT, l))
+            if use_limit:
+                for l in range(w):
+                    put4(PS, gc, st.PARTNER_ROTATION, l, get4(PS, gp, st.STEP_BASIC_ROT, l))
             for l in range(w):
-                length, local_pos, local_rot, rest_vector, rest_length, rest_direction = angle_buffer_entry(
+                length, local_pos, local_rot, _rest_vector, rest_length, rest_direction = angle_buffer_entry(
                     get3(PS, gc, st.NEXT_POS, l), get3(PS, gc, st.PARTNER_POS, l), get3(PS, gc, st.STEP_BASIC_POS, l),
                     get3(PS, gc, st.PARTNER_BASE, l), get4(PS, gc, st.STEP_BASIC_ROT, l),
                     get4(PS, gc, st.PARTNER_ROTATION, l), get3(PS, gc, st.ANGLE_REST_DIRECTION, l))
-                put1(PS, gc, st.ANGLE_LENGTH, l, length)
-                put3(PS, gc, st.ANGLE_LOCAL_POS, l, local_pos)
-                put4(PS, gc, st.ANGLE_LOCAL_ROT, l, local_rot)
-                put3(PS, gc, st.ANGLE_REST_VECTOR, l, rest_vector)
+                if use_limit:
+                    put1(PS, gc, st.ANGLE_LENGTH, l, length)
+                    put3(PS, gc, st.ANGLE_LOCAL_POS, l, local_pos)
+                    put4(PS, gc, st.ANGLE_LOCAL_ROT, l, local_rot)
                 if use_restoration:  # the rest direction does not change over the iterations
                     put1(PS, gc, st.ANGLE_REST_LENGTH, l, rest_length)
                     put3(PS, gc, st.ANGLE_REST_DIRECTION, l, rest_direction)
@@ -383,10 +393,3 @@ def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
                 for l in range(w):
                     put3(PS, gp, st.NEXT_POS, l, get3(PS, gc, st.PARTNER_POS, l))
                     put3(PS, gp, st.VELOCITY_POS, l, get3(PS, gc, st.PARTNER_VELOCITY_POS, l))
-        # clear the buffers
-        for e in range(e0, e1):
-            gc = g0 + topology[bl_data + e]
-            for l in range(w):
-                put1(PS, gc, st.ANGLE_LENGTH, l, 0.0)
-                put3(PS, gc, st.ANGLE_LOCAL_POS, l, ZERO3)
-                put3(PS, gc, st.ANGLE_REST_VECTOR, l, ZERO3)
