@@ -44,6 +44,10 @@ VARIANTS = {
     # (step.moving_rotation_read)
     "pose_blend": ["parameters.animation_pose_ratio=0.5", "parameters.angle_limit.use=true"],
     "pose_kept": ["parameters.animation_pose_ratio=1.0", "parameters.angle_limit.use=true"],
+    # D.10 without friction, particle speed limit or centrifugal term (the light scene's end of
+    # step, compiled without their paths: step.end_step_block)
+    "no_extras": ["parameters.collider_collision.friction=0", "parameters.inertia.particle_speed_limit=off",
+                  "parameters.inertia.centrifugal_acceleration=0"],
     # every cloth a closed mesh: a fan of strands (the character's hair) then has volume pairs (D.7)
     "loop_mesh": ["connection=sequential_loop_mesh"],
     # the wind a cloth makes from its own movement (wind.moving_wind)

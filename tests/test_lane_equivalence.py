@@ -102,3 +102,12 @@ def test_the_stages_that_read_the_moving_particles_animated_rotations_give_the_r
     path = _swinging_tails(tmp_path)
     verdict = port_check.check(path, variant, FRAMES, 1)
     assert verdict == f"identical over {FRAMES} frames", verdict
+
+
+def test_the_end_of_step_without_friction_speed_limit_or_centrifugal_term_gives_the_reference_bits(tmp_path):
+    """D.10 of a block with none of its optional terms runs a lane loop compiled without them
+    (``step.end_step_block``'s ``extras``); every showcase has a speed limit, so the four
+    swinging tails run here with friction 0, no speed limit and no centrifugal term."""
+    path = _swinging_tails(tmp_path)
+    verdict = port_check.check(path, "no_extras", FRAMES, 1)
+    assert verdict == f"identical over {FRAMES} frames", verdict

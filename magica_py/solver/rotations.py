@@ -123,6 +123,25 @@ def line_blend(bq, q, bw):
     return q if bw == 1.0 else blended
 
 
+@kernel
+def line_child_lanes(PS, PM, gc, w, zero, move, a, a_zero):
+    """E.2 of child slot gc (its parent's pose gathered next to it), lanes 0..w: its rest and
+    simulated edges (``CHILD_REST_EDGE``, ``CHILD_EDGE``) and, when it moves, its rotation.
+    ``a_zero``: the animation pose ratio a is 0 (a constant at each call site)."""
+    z = (0.0, 0.0, 0.0)
+    for l in range(min(w, LANES)):
+        q = get4(PS, gc, st.PARENT_ROTATION, l)
+        lp, lq = line_child_pose(q_inverse(get4(PS, gc, st.PARENT_BASE_ROT, l)), get3(PS, gc, st.PARENT_BASE_POS, l),
+                                 get3(PM, gc, bk.BASELINE_LOCAL_POSITION, l), get4(PM, gc, bk.BASELINE_LOCAL_ROTATION, l),
+                                 get3(PS, gc, st.BASE_POS_BUFFER, l), get4(PS, gc, st.BASE_ROT_BUFFER, l), a, a_zero)
+        tv = z if zero else q_rotate(q, lp)
+        cur = v_sub(get3(PS, gc, st.POSITION, l), get3(PS, gc, st.PARENT_POSITION, l))
+        put3(PS, gc, st.CHILD_REST_EDGE, l, tv)
+        put3(PS, gc, st.CHILD_EDGE, l, cur if move else tv)
+        if move:
+            put4(PS, gc, st.ROTATION, l, line_child_rotation(q, lq, tv, cur, zero))
+
+
 @kernel(forceinline=False)
 def line_rotations_block(PS, PM, TS, P, BI, topology, b):
     """E.2 over the IncludeLine baselines of block b, every lane side by side. For each bone
@@ -169,20 +188,12 @@ def line_rotations_block(PS, PM, TS, P, BI, topology, b):
                     gc = g0 + c
                     zero = (topology[attribute + c] & ZERO_DISTANCE) != 0
                     move = (topology[attribute + c] & MOVE) != 0
-                    for l in range(w):
-                        q = get4(PS, gc, st.PARENT_ROTATION, l)
-                        lp, lq = line_child_pose(q_inverse(get4(PS, gc, st.PARENT_BASE_ROT, l)),
-                                                 get3(PS, gc, st.PARENT_BASE_POS, l),
-                                                 get3(PM, gc, bk.BASELINE_LOCAL_POSITION, l),
-                                                 get4(PM, gc, bk.BASELINE_LOCAL_ROTATION, l),
-                                                 get3(PS, gc, st.BASE_POS_BUFFER, l),
-                                                 get4(PS, gc, st.BASE_ROT_BUFFER, l), a, a_zero)
-                        tv = z if zero else q_rotate(q, lp)
-                        cur = v_sub(get3(PS, gc, st.POSITION, l), get3(PS, gc, st.PARENT_POSITION, l))
-                        put3(PS, gc, st.CHILD_REST_EDGE, l, tv)
-                        put3(PS, gc, st.CHILD_EDGE, l, cur if move else tv)
-                        if move:
-                            put4(PS, gc, st.ROTATION, l, line_child_rotation(q, lq, tv, cur, zero))
+                    # a == 0 goes in as a constant: tested in the lane loop, the rest rotation's
+                    # slerp towards the animated one would be computed for every lane and dropped
+                    if a_zero:
+                        line_child_lanes(PS, PM, gc, w, zero, move, a, np.bool_(True))
+                    else:
+                        line_child_lanes(PS, PM, gc, w, zero, move, a, np.bool_(False))
                 for l in range(w):
                     put3(PS, gx, st.CHILD_REST_SUM, l, z)
                     put3(PS, gx, st.CHILD_EDGE_SUM, l, z)

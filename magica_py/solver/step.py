@@ -253,12 +253,23 @@ def predict_block(PS, PM, PP, TS, P, BI, topology, b, dt, frequency_ratio, power
             continue
         # the damping's rate conversion needs a power only in frequency-consistent mode off
         # 90 Hz: elsewhere the ratio goes in as the constant 1.0, which takes the power (a call
-        # LLVM cannot see into, that would keep the lane loop scalar) out of the compiled loop
-        if rate_mode == 0 or frequency_ratio == 1.0:
-            predict_move_lanes(PS, PM, PP, TS, b, g, w, depth_inertia, g_dir, g_mag, 1.0, power_z, rate_mode, dt)
+        # LLVM cannot see into, that would keep the lane loop scalar) out of the compiled loop;
+        # the depth-inertia mix (a slerp a lane) goes in as a constant too: a branch on the
+        # block's value inside the lane loop would be computed for every lane and selected
+        ratio_one = rate_mode == 0 or frequency_ratio == 1.0
+        if depth_inertia != 0.0:
+            if ratio_one:
+                predict_move_lanes(PS, PM, PP, TS, b, g, w, np.bool_(True), depth_inertia, g_dir, g_mag, 1.0,
+                                   power_z, rate_mode, dt)
+            else:
+                predict_move_lanes(PS, PM, PP, TS, b, g, w, np.bool_(True), depth_inertia, g_dir, g_mag,
+                                   frequency_ratio, power_z, rate_mode, dt)
+        elif ratio_one:
+            predict_move_lanes(PS, PM, PP, TS, b, g, w, np.bool_(False), depth_inertia, g_dir, g_mag, 1.0,
+                               power_z, rate_mode, dt)
         else:
-            predict_move_lanes(PS, PM, PP, TS, b, g, w, depth_inertia, g_dir, g_mag, frequency_ratio, power_z,
-                               rate_mode, dt)
+            predict_move_lanes(PS, PM, PP, TS, b, g, w, np.bool_(False), depth_inertia, g_dir, g_mag,
+                               frequency_ratio, power_z, rate_mode, dt)
 
 
 @kernel(inline="always")
@@ -278,16 +289,18 @@ def moving_rotation_read(P, b):
 
 
 @kernel
-def predict_move_lanes(PS, PM, PP, TS, b, g, w, depth_inertia, g_dir, g_mag, frequency_ratio, power_z, rate_mode, dt):
+def predict_move_lanes(PS, PM, PP, TS, b, g, w, mix, depth_inertia, g_dir, g_mag, frequency_ratio, power_z,
+                       rate_mode, dt):
     """D.1's inertia shift, damping, forces and prediction of the moving particle in slot g,
-    every lane of block b."""
+    every lane of block b. ``mix``: the block's depth inertia is not 0 (a constant at each call
+    site, so that without it the mix's slerp is not compiled into the loop)."""
     for l in range(min(w, LANES)):
         depth = get1(PM, g, bk.DEPTH, l)
         gravity = v_scale(g_dir, g_mag * get1(TS, b, st.GRAVITY_RATIO, l))
         scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)   # forces follow the scale
         iv = get3(TS, b, st.INERTIA_VECTOR, l)
         iq = get4(TS, b, st.INERTIA_ROTATION, l)
-        if depth_inertia != 0.0:   # predict_move's depth-inertia mix, where k != 0
+        if mix:   # predict_move's depth-inertia mix, where k != 0
             k = depth_inertia * (1.0 - depth * depth)
             mixed_v = v_lerp(iv, get3(TS, b, st.STEP_VECTOR, l), k)
             mixed_q = q_slerp_along(iq, get4(TS, b, st.INERTIA_SLERP_TO, l), get1(TS, b, st.INERTIA_SLERP_ANGLE, l),
@@ -442,6 +455,9 @@ def end_step_block(PS, PM, TS, P, BI, topology, b, dt, frequency_ratio):
     centrifugal = step_share(centrifugal_parameter, frequency_ratio, mode) if consistent else centrifugal_parameter
     friction_keep = step_keep(FRICTION_DAMPING_RATE, frequency_ratio, mode)
     gain = step_rate(STATIC_FRICTION_GAIN, frequency_ratio, 1.0, mode)
+    # friction (static and dynamic), the particle speed limit and the centrifugal term act only
+    # with their parameter set; without any of them the lane loop leaves their paths out
+    extras = dynamic > 0.0 or speed_limit >= 0.0 or centrifugal > 1e-8
     for j in range(BI[b, bk.BI_N]):
         g = g0 + j
         if (topology[attribute + j] & MOVE) == 0:
@@ -452,19 +468,30 @@ def end_step_block(PS, PM, TS, P, BI, topology, b, dt, frequency_ratio):
             continue
         # the consistent brake's pow (an opaque call that keeps a loop scalar) is left out of
         # the compiled loop by a constant argument where it cannot apply (a plain bool, which
-        # LLVM folds after inlining: one compile for both, docs/tech-notes.md §7)
+        # LLVM folds after inlining: one compile for both, docs/tech-notes.md §7); so are the
+        # extras' paths where the block has none (tested in the lane loop, a branch on a block's
+        # value is computed for every lane and its result selected)
         if consistent:
-            end_step_lanes(PS, PM, TS, g, b, w, dt, frequency_ratio, np.bool_(True), dynamic, speed_limit, centrifugal,
-                           friction_keep, gain, loss_scale)
+            if extras:
+                end_step_lanes(PS, PM, TS, g, b, w, dt, frequency_ratio, np.bool_(True), np.bool_(True), dynamic,
+                               speed_limit, centrifugal, friction_keep, gain, loss_scale)
+            else:
+                end_step_lanes(PS, PM, TS, g, b, w, dt, frequency_ratio, np.bool_(True), np.bool_(False), dynamic,
+                               speed_limit, centrifugal, friction_keep, gain, loss_scale)
+        elif extras:
+            end_step_lanes(PS, PM, TS, g, b, w, dt, 1.0, np.bool_(False), np.bool_(True), dynamic, speed_limit,
+                           centrifugal, friction_keep, gain, loss_scale)
         else:
-            end_step_lanes(PS, PM, TS, g, b, w, dt, 1.0, np.bool_(False), dynamic, speed_limit, centrifugal, friction_keep,
-                           gain, loss_scale)
+            end_step_lanes(PS, PM, TS, g, b, w, dt, 1.0, np.bool_(False), np.bool_(False), dynamic, speed_limit,
+                           centrifugal, friction_keep, gain, loss_scale)
 
 
 @kernel
-def end_step_lanes(PS, PM, TS, g, b, w, dt, frequency_ratio, consistent, dynamic, speed_limit, centrifugal,
+def end_step_lanes(PS, PM, TS, g, b, w, dt, frequency_ratio, consistent, extras, dynamic, speed_limit, centrifugal,
                    friction_keep, gain, loss_scale):
-    """``end_step_block`` of the Move particle in slot g of block b, lanes 0..w."""
+    """``end_step_block`` of the Move particle in slot g of block b, lanes 0..w. ``extras``
+    (a constant at each call site): the block has friction, a particle speed limit or a
+    centrifugal acceleration; without, their paths are not compiled into the loop."""
     for l in range(w):
         scale = get1(TS, b, st.SCALE_RATIO, l) * get1(TS, b, st.LENGTH_UNIT, l)
         static_threshold = dynamic * scale
@@ -476,7 +503,7 @@ def end_step_lanes(PS, PM, TS, g, b, w, dt, frequency_ratio, consistent, dynamic
         contact = v_length_sq(cn) > 1e-8 and f > 1e-8
         velocity_pos = get3(PS, g, st.VELOCITY_POS, l)
         static_friction = get1(PS, g, st.STATIC_FRICTION, l)
-        if contact and static_threshold > 0.0:
+        if extras and contact and static_threshold > 0.0:
             next_pos, velocity_pos, sf = static_friction_step(next_pos, old_pos, velocity_pos, cn,
                                                               static_friction, dt, static_threshold, gain,
                                                               loss_scale)
@@ -484,15 +511,15 @@ def end_step_lanes(PS, PM, TS, g, b, w, dt, frequency_ratio, consistent, dynamic
             sf = saturate(static_friction - STATIC_FRICTION_LOSS * loss_scale)
         put1(PS, g, st.STATIC_FRICTION, l, sf)
         vel, direction, moving = end_step_velocity(next_pos, velocity_pos, dt)
-        if moving and contact and dynamic > 0.0:
+        if extras and moving and contact and dynamic > 0.0:
             if consistent:
                 vel = dynamic_friction_keep(vel, direction, cn, f, dynamic, frequency_ratio)
             else:
                 vel = dynamic_friction_brake(vel, direction, cn, f, dynamic)
         put1(PS, g, st.FRICTION, l, f * friction_keep)
-        if speed_limit >= 0.0:
+        if extras and speed_limit >= 0.0:
             vel = clamp_length(vel, speed_limit * scale)
-        if angular_velocity > 1e-8 and centrifugal > 1e-8:
+        if extras and angular_velocity > 1e-8 and centrifugal > 1e-8:
             vel = centrifugal_velocity(vel, next_pos, direction, moving, get1(PM, g, bk.DEPTH, l),
                                        angular_velocity, centrifugal, get3(TS, b, st.ROTATION_AXIS, l),
                                        get3(TS, b, st.NOW_WORLD_POS, l))
