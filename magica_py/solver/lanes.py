@@ -25,7 +25,11 @@ the lane loop is the innermost loop; it reads a partner item's rows (another par
 team) in a loop of its own that copies them next to the item being solved (a *gather* into
 scratch rows), so that the solving loop touches one item of each table; a value chosen by a
 condition is loaded unconditionally and then selected (a conditional load stops the
-vectoriser).
+vectoriser). A branch inside the lane loop is computed on both sides for every lane and one
+result selected, also where its condition is the same for the whole block: a costly path that
+depends on a block's parameter goes into the function holding the loop as an ``np.bool_``
+constant, one call site per value (``step.predict_move_lanes``' ``mix``), so that the loop
+without it is compiled without it.
 """
 from __future__ import annotations
 
