@@ -109,8 +109,8 @@ def restoration_gravity_factor(falloff, gravity_dot):
 def angle_buffer_entry(cp, pp, c_basic_pos, p_basic_pos, c_basic_rot, p_basic_rot, old_rest_direction):
     """Buffering pass of a non-root entry (child c of parent p).
 
-    Returns (angle_length, angle_local_pos, angle_local_rot, the rest edge vector,
-    angle_rest_length, angle_rest_direction); a degenerate segment or rest edge (< 1e-8 m)
+    Returns (angle_length, angle_local_pos, angle_local_rot, angle_rest_length,
+    angle_rest_direction); a degenerate segment or rest edge (< 1e-8 m)
     gives length 0, a zero local direction and the identity rotation, and a degenerate rest
     edge keeps ``old_rest_direction`` (the restoration snaps that child and never reads it)."""
     length = v_length(v_sub(cp, pp))
@@ -125,7 +125,7 @@ def angle_buffer_entry(cp, pp, c_basic_pos, p_basic_pos, c_basic_rot, p_basic_ro
     local_pos = ZERO3 if degenerate else local_pos
     local_rot = IDENTITY if degenerate else local_rot
     rest_direction = direction if blen >= 1e-8 else old_rest_direction
-    return length, local_pos, local_rot, bv, blen, rest_direction
+    return length, local_pos, local_rot, blen, rest_direction
 
 
 @kernel(inline="always")
@@ -340,7 +340,7 @@ def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
                 for l in range(w):
                     put4(PS, gc, st.PARTNER_ROTATION, l, get4(PS, gp, st.STEP_BASIC_ROT, l))
             for l in range(w):
-                length, local_pos, local_rot, _rest_vector, rest_length, rest_direction = angle_buffer_entry(
+                length, local_pos, local_rot, rest_length, rest_direction = angle_buffer_entry(
                     get3(PS, gc, st.NEXT_POS, l), get3(PS, gc, st.PARTNER_POS, l), get3(PS, gc, st.STEP_BASIC_POS, l),
                     get3(PS, gc, st.PARTNER_BASE, l), get4(PS, gc, st.STEP_BASIC_ROT, l),
                     get4(PS, gc, st.PARTNER_ROTATION, l), get3(PS, gc, st.ANGLE_REST_DIRECTION, l))
