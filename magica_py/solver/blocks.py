@@ -33,12 +33,14 @@ from magica_py.solver.lanes import LANES, QUATERNION, RowTable
 PARTICLE_MODEL = RowTable("particle model", "particle slot")
 _m = PARTICLE_MODEL.add
 DEPTH = _m("depth", 1, "[0,1] normalised arc length from the root (B.8)")
-LOCAL_POSITION = _m("local_position", 3, "m; cloth-local build position (B.2)")
-LOCAL_NORMAL = _m("local_normal", 3, "unit; cloth-local normal (B.4)")
-LOCAL_TANGENT = _m("local_tangent", 3, "unit; cloth-local tangent (B.4)")
+# C.1's bind pose applied to the build vertex: ``skin_bind_pose @ (local position, 1)``, ``@ (local
+# normal, 0)``, ``@ (local tangent, 0)`` (``center.bound_vectors``), constant per vertex, so computed
+# once when the lane is written; the skinning then applies only the bone's matrix each frame
+SKIN_BOUND_POSITION = _m("skin_bound_position", 4, "bind pose @ (cloth-local build position (B.2), 1)")
+SKIN_BOUND_NORMAL = _m("skin_bound_normal", 4, "bind pose @ (cloth-local unit normal (B.4), 0)")
+SKIN_BOUND_TANGENT = _m("skin_bound_tangent", 4, "bind pose @ (cloth-local unit tangent (B.4), 0)")
 BIND_ROTATION = _m("bind_rotation", 4, "xyzw; qinv(rot_from(n, t)) (B.4.8)", QUATERNION)
 VERTEX_TO_TRANSFORM_ROTATION = _m("vertex_to_transform_rotation", 4, "xyzw; v2t (B.4.7)", QUATERNION)
-SKIN_BIND_POSE = _m("skin_bind_pose", 16, "inverse(TRS bone) @ init render local-to-world, row major (B.2)")
 BASELINE_LOCAL_POSITION = _m("baseline_local_position", 3, "m; rest position in the parent's frame (B.7)")
 BASELINE_LOCAL_ROTATION = _m("baseline_local_rotation", 4, "xyzw; rest rotation relative to the parent (B.7)",
                              QUATERNION)
@@ -75,6 +77,24 @@ BEND_SIGN = BEND_MODEL.add("bend_sign", 1, "+-1 (D.7)")
 
 VOLUME_MODEL = RowTable("volume model", "volume slot")
 VOLUME_REST = VOLUME_MODEL.add("volume_rest", 1, "1000 x rest volume (D.7)")
+
+
+def bound_vectors(bind_pose, local_position, local_normal, local_tangent):
+    """The build's half of C.1 for every vertex of a team: its bind pose ``bind_pose`` (N, 4, 4)
+    applied to its cloth-local position (w = 1), normal and tangent (w = 0), each (N, 3): the
+    4-vectors ``B @ (v, w)``. Returns (N, 3, 4): the position's, normal's and tangent's, which
+    ``center.skin_block`` takes to world space each frame (``SKIN_BOUND_*``). The bind pose is
+    fixed at build, so this is computed once when a lane is written. numpy: each row's four
+    products summed left to right, with no fused multiply-add (numba emits none either), the
+    order in which the skinning computed it per frame before; tests/test_skinning.py checks the
+    bits against the reference solver's per-frame ``bind_point``."""
+    out = np.empty((bind_pose.shape[0], 3, 4))
+    for k, (v, w) in enumerate(((local_position, 1.0), (local_normal, 0.0), (local_tangent, 0.0))):
+        for r in range(4):
+            row = bind_pose[:, r]
+            out[:, k, r] = row[:, 0] * v[:, 0] + row[:, 1] * v[:, 1] + row[:, 2] * v[:, 2] + row[:, 3] * w
+    return out
+
 
 # ----------------------------------------------------------------------------- block ints
 # columns of ``block_ints`` (B, BLOCK_INT_COUNT) int32: counts, chunk starts, topology offsets
@@ -441,12 +461,15 @@ class BlockLayout:
         g = self._rows(b, "particle")
         pm, w = PARTICLE_MODEL, self.particle_model
         pm.write(w, "depth", g, lane, model.depth)
-        pm.write(w, "local_position", g, lane, model.local_position)
-        pm.write(w, "local_normal", g, lane, model.local_normal)
-        pm.write(w, "local_tangent", g, lane, model.local_tangent)
+        bound = bound_vectors(np.ascontiguousarray(model.skin_bind_pose, dtype=np.float64).reshape(-1, 4, 4),
+                              np.ascontiguousarray(model.local_position, dtype=np.float64),
+                              np.ascontiguousarray(model.local_normal, dtype=np.float64),
+                              np.ascontiguousarray(model.local_tangent, dtype=np.float64))
+        pm.write(w, "skin_bound_position", g, lane, bound[:, 0])
+        pm.write(w, "skin_bound_normal", g, lane, bound[:, 1])
+        pm.write(w, "skin_bound_tangent", g, lane, bound[:, 2])
         pm.write(w, "bind_rotation", g, lane, model.bind_rotation)
         pm.write(w, "vertex_to_transform_rotation", g, lane, model.vertex_to_transform_rotation)
-        pm.write(w, "skin_bind_pose", g, lane, np.asarray(model.skin_bind_pose).reshape(-1, 16))
         pm.write(w, "baseline_local_position", g, lane, model.baseline_local_position)
         pm.write(w, "baseline_local_rotation", g, lane, model.baseline_local_rotation)
         TEAM_MODEL.write(self.team_model, "init_scale", b, lane, np.asarray(model.init_scale).reshape(1, 3))

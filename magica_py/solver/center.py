@@ -43,16 +43,6 @@ TELEPORT_KEEP = 2
 
 
 @kernel
-def bind_point(b0, b1, b2, b3, v, w):
-    """``B @ (v, w)`` with ``B`` the bind pose (rows b0..b3, 4-tuples): the 4-vector C.1 then
-    takes to world space with the bone's matrix (``world_point``)."""
-    return (b0[0] * v[0] + b0[1] * v[1] + b0[2] * v[2] + b0[3] * w,
-            b1[0] * v[0] + b1[1] * v[1] + b1[2] * v[2] + b1[3] * w,
-            b2[0] * v[0] + b2[1] * v[1] + b2[2] * v[2] + b2[3] * w,
-            b3[0] * v[0] + b3[1] * v[1] + b3[2] * v[2] + b3[3] * w)
-
-
-@kernel
 def world_point(l0, l1, l2, x):
     """The first three rows l0..l2 of ``L`` (4-tuples) applied to the 4-vector x."""
     return (l0[0] * x[0] + l0[1] * x[1] + l0[2] * x[2] + l0[3] * x[3],
@@ -62,39 +52,24 @@ def world_point(l0, l1, l2, x):
 
 @kernel(inline="always")
 def skin_bound_vertex(l0, l1, l2, bound_position, bound_normal, bound_tangent):
-    """C.1 for one vertex from its ``bind_point`` 4-vectors (position w = 1, normal and tangent
-    w = 0) and its bone's local-to-world rows l0..l2. Branch-free (a loop vectorises)."""
+    """C.1 for one vertex from its bound 4-vectors (``bound_vectors``: its bind pose applied to
+    its build position, normal and tangent) and its bone's local-to-world rows l0..l2.
+    Branch-free (a loop vectorises)."""
     pos = world_point(l0, l1, l2, bound_position)
     nor = v_normalize_select(world_point(l0, l1, l2, bound_normal))
     tan = v_normalize_select(world_point(l0, l1, l2, bound_tangent))
     return pos, rot_from_normal_tangent_select(nor, tan)
 
 
-@kernel(inline="always")
-def skin_vertex(l0, l1, l2, b0, b1, b2, b3, local_position, local_normal, local_tangent):
-    """C.1 for one vertex: world (position, rotation) from its bone's local-to-world rows
-    l0..l2 and its bind pose rows b0..b3. Branch-free (a loop over vertices vectorises)."""
-    return skin_bound_vertex(l0, l1, l2, bind_point(b0, b1, b2, b3, local_position, 1.0),
-                             bind_point(b0, b1, b2, b3, local_normal, 0.0),
-                             bind_point(b0, b1, b2, b3, local_tangent, 0.0))
-
-
 MATRIX_ROW = 4 * LANES   # columns from one row of a row-major 4x4 matrix field to the next
-
-
-@kernel(inline="always")
-def bind_rows(PM, g, l):
-    """The four rows of lane l's bind pose (``blocks.SKIN_BIND_POSE``, row major)."""
-    c = bk.SKIN_BIND_POSE
-    return (get4(PM, g, c, l), get4(PM, g, c + MATRIX_ROW, l), get4(PM, g, c + 2 * MATRIX_ROW, l),
-            get4(PM, g, c + 3 * MATRIX_ROW, l))
 
 
 @kernel(forceinline=False)
 def skin_block(PS, PM, BI, PT, local_to_world, b, l0, l1):
     """C.1: one-bone skinning of every vertex of block b's lanes ``l0 .. l1 - 1`` with the bone
     matrices ``local_to_world`` (this frame's; quality mode's build reset passes the build
-    pose's): a read-only pass over the model and the matrices, writing position and rotation.
+    pose's): a read-only pass over the model (each vertex's bind pose already applied to it,
+    ``bound_vectors``) and the matrices, writing position and rotation.
     Each vertex's bone matrix is first copied next to it (``BONE_MATRIX``; a gather through the
     bone's node), so that the skinning loop reads one particle slot per table."""
     l1 = min(l1, LANES)
@@ -108,9 +83,8 @@ def skin_block(PS, PM, BI, PT, local_to_world, b, l0, l1):
                     PS[g, st.BONE_MATRIX + (4 * k + c) * LANES + l] = local_to_world[node, k, c]
         for l in range(l0, l1):
             m0, m1, m2 = bone_rows(PS, g, l)
-            i0, i1, i2, i3 = bind_rows(PM, g, l)
-            pos, rot = skin_vertex(m0, m1, m2, i0, i1, i2, i3, get3(PM, g, bk.LOCAL_POSITION, l),
-                                   get3(PM, g, bk.LOCAL_NORMAL, l), get3(PM, g, bk.LOCAL_TANGENT, l))
+            pos, rot = skin_bound_vertex(m0, m1, m2, get4(PM, g, bk.SKIN_BOUND_POSITION, l),
+                                         get4(PM, g, bk.SKIN_BOUND_NORMAL, l), get4(PM, g, bk.SKIN_BOUND_TANGENT, l))
             put3(PS, g, st.POSITION, l, pos)
             put4(PS, g, st.ROTATION, l, rot)
 
