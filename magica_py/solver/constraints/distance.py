@@ -5,7 +5,9 @@ shear links half of it; a zero-rest link *overwrites* the accumulated correction
 ``distance_block`` runs one block: a first pass writes every particle's inverse mass and
 stiffness of this pass (``distance_particle_terms``), then the particles in order
 (Gauss-Seidel, §D.0), each link gathered (``PARTNER_*`` rows) and solved across the lanes
-(``distance_link``, ``distance_rest_length``), the mean applied (``distance_apply``).
+(``distance_link_lanes``: ``distance_rest_length``, ``distance_link``), the mean applied
+(``distance_apply``). With an animation pose ratio of 0 (every preset's) the rest length is the
+build's at the team's scale, and the animated distance is neither gathered nor computed.
 """
 from __future__ import annotations
 
@@ -13,11 +15,11 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    inverse_mass_friction_depth, lerp, saturate, v_add, v_length, v_length_sq, v_scale, v_sub,
+    inverse_mass_friction_depth, lerp, saturate, v_add, v_length, v_scale, v_sub,
 )
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
-from magica_py.solver.lanes import get1, get3, put1, put3
+from magica_py.solver.lanes import LANES, get1, get3, put1, put3
 from magica_py.solver.parameters import (
     PRM_ANIMATION_POSE_RATIO, PRM_QUALITY, PRM_RATE_MODE, clamp01, constraint_stiffness,
 )
@@ -46,13 +48,8 @@ def distance_link(p_pos, q_pos, rest, w_p, w_q, stiffness):
 def distance_rest_length(signed_rest, scale, p_base, q_base, animation_pose_ratio):
     """The link's rest length this step: the build rest length at the team's scale blended
     towards the animated pose's distance, ``lerp(|rest| scale, |p_base - q_base|, ratio)``.
-
-    With a ratio of 0 the lerp is ``x + (d - x) * 0``: x when d is finite, NaN when it is not,
-    and the squared distance is finite exactly when the distance is, so it stands in for the
-    distance with the same bits and without the square root."""
-    d2 = v_length_sq(v_sub(p_base, q_base))
-    pose = np.sqrt(d2) if animation_pose_ratio != 0.0 else d2
-    return lerp(abs(signed_rest) * scale, pose, animation_pose_ratio)
+    ``distance_link_lanes`` calls it only for a ratio other than 0 (``a_zero``)."""
+    return lerp(abs(signed_rest) * scale, v_length(v_sub(p_base, q_base)), animation_pose_ratio)
 
 
 @kernel(inline="always")
@@ -112,6 +109,36 @@ def distance_terms_lanes(PS, PM, PP, g, w, frequency_ratio, power_y, mode, quali
         put1(PS, g, st.K_HORIZONTAL, l, k_horizontal)
 
 
+@kernel
+def distance_link_lanes(PS, TS, TM, LM, g, b, lk, w, a, a_zero):
+    """One link (slot ``lk``) of the Move particle in slot g, lanes 0..w, its partner's rows
+    gathered next to it: the correction added to ``ACCUM3`` / ``ACCUM_N``. ``a_zero``: the
+    animation pose ratio a is 0 (a constant at each call site), where the rest length is the
+    build's at the team's scale, ``lerp(x, d, 0)``, and the animated distance d is not read
+    (the same bits for every finite d; ``PARTNER_BASE`` is not gathered)."""
+    for l in range(min(w, LANES)):
+        r = get1(LM, lk, bk.DISTANCE_REST, l)
+        pp = get3(PS, g, st.NEXT_POS, l)
+        qp = get3(PS, g, st.PARTNER_POS, l)
+        s = get1(TM, b, bk.INIT_SCALE, l) * get1(TS, b, st.SCALE_RATIO, l)
+        if a_zero:
+            rest = abs(r) * s
+        else:
+            rest = distance_rest_length(r, s, get3(PS, g, st.BASE_POS, l), get3(PS, g, st.PARTNER_BASE, l), a)
+        k_vertical = get1(PS, g, st.K_VERTICAL, l)
+        k_horizontal = get1(PS, g, st.K_HORIZONTAL, l)
+        corr, ok = distance_link(pp, qp, rest, get1(PS, g, st.INVERSE_MASS, l), get1(PS, g, st.PARTNER_W, l),
+                                 k_vertical if r > 0.0 else k_horizontal)
+        acc = get3(PS, g, st.ACCUM3, l)
+        n = get1(PS, g, st.ACCUM_N, l)
+        zero = r == 0.0   # zero-distance link: assignment, not accumulation (quirk)
+        half = v_scale(v_sub(qp, pp), 0.5)
+        summed = v_add(acc, corr)
+        acc = half if zero else (summed if ok else acc)
+        put3(PS, g, st.ACCUM3, l, acc)
+        put1(PS, g, st.ACCUM_N, l, n + (1.0 if (zero or ok) else 0.0))
+
+
 @kernel(forceinline=False)
 def distance_block(PS, PM, PP, TS, TM, LM, P, BI, topology, b, frequency_ratio, power_y, attenuation):
     """D.4 over block b (Gauss-Seidel in particle order, every lane side by side)."""
@@ -123,6 +150,7 @@ def distance_block(PS, PM, PP, TS, TM, LM, P, BI, topology, b, frequency_ratio, 
                                            BI[b, bk.BI_DISTANCE_TARGET])
     link0 = BI[b, bk.BI_LINK0]
     a = P[b, PRM_ANIMATION_POSE_RATIO]
+    a_zero = a == 0.0
     for j in range(BI[b, bk.BI_N]):
         if (topology[attribute + j] & MOVE) == 0:
             continue
@@ -135,27 +163,15 @@ def distance_block(PS, PM, PP, TS, TM, LM, P, BI, topology, b, frequency_ratio, 
             gq = g0 + topology[link_target + k]
             for l in range(w):   # the partner's values next to p's (solving then reads item g only)
                 put3(PS, g, st.PARTNER_POS, l, get3(PS, gq, st.NEXT_POS, l))
-                put3(PS, g, st.PARTNER_BASE, l, get3(PS, gq, st.BASE_POS, l))
                 put1(PS, g, st.PARTNER_W, l, get1(PS, gq, st.INVERSE_MASS, l))
-            lk = link0 + k
-            for l in range(w):
-                r = get1(LM, lk, bk.DISTANCE_REST, l)
-                pp = get3(PS, g, st.NEXT_POS, l)
-                qp = get3(PS, g, st.PARTNER_POS, l)
-                s = get1(TM, b, bk.INIT_SCALE, l) * get1(TS, b, st.SCALE_RATIO, l)
-                rest = distance_rest_length(r, s, get3(PS, g, st.BASE_POS, l), get3(PS, g, st.PARTNER_BASE, l), a)
-                k_vertical = get1(PS, g, st.K_VERTICAL, l)
-                k_horizontal = get1(PS, g, st.K_HORIZONTAL, l)
-                corr, ok = distance_link(pp, qp, rest, get1(PS, g, st.INVERSE_MASS, l), get1(PS, g, st.PARTNER_W, l),
-                                         k_vertical if r > 0.0 else k_horizontal)
-                acc = get3(PS, g, st.ACCUM3, l)
-                n = get1(PS, g, st.ACCUM_N, l)
-                zero = r == 0.0   # zero-distance link: assignment, not accumulation (quirk)
-                half = v_scale(v_sub(qp, pp), 0.5)
-                summed = v_add(acc, corr)
-                acc = half if zero else (summed if ok else acc)
-                put3(PS, g, st.ACCUM3, l, acc)
-                put1(PS, g, st.ACCUM_N, l, n + (1.0 if (zero or ok) else 0.0))
+            if not a_zero:
+                for l in range(w):
+                    put3(PS, g, st.PARTNER_BASE, l, get3(PS, gq, st.BASE_POS, l))
+            # a ratio of 0 goes in as a constant: the animated distance is then not read at all
+            if a_zero:
+                distance_link_lanes(PS, TS, TM, LM, g, b, link0 + k, w, a, np.bool_(True))
+            else:
+                distance_link_lanes(PS, TS, TM, LM, g, b, link0 + k, w, a, np.bool_(False))
         for l in range(w):
             next_pos, velocity_pos = distance_apply(get3(PS, g, st.NEXT_POS, l), get3(PS, g, st.VELOCITY_POS, l),
                                                     get3(PS, g, st.ACCUM3, l), get1(PS, g, st.ACCUM_N, l), attenuation)
