@@ -84,15 +84,13 @@ def swing_select(a, b):
 
 
 @kernel(inline="always")
-def line_child_pose(ibq, bp, rest_position, rest_rotation, base_pos_c, base_rot_c, a, a_zero):
+def line_child_pose(ibq, bp, rest_position, rest_rotation, base_pos_c, base_rot_c, a):
     """E.2: the rest pose (position, rotation) of child c relative to its parent x, moved
-    towards the animated one by ``animation_pose_ratio`` a (``a_zero``: a == 0, where the slerp
-    is its first argument). ``ibq``: inverse animated rotation of x; ``bp``: animated position of x."""
+    towards the animated one by ``animation_pose_ratio`` a (> 0: ``line_child_lanes`` takes the
+    rest pose as it is for a = 0). ``ibq``: inverse animated rotation of x; ``bp``: animated
+    position of x."""
     lp = v_lerp(rest_position, q_rotate(ibq, v_sub(base_pos_c, bp)), a)
-    if a_zero:
-        lq = rest_rotation
-    else:
-        lq = q_slerp(rest_rotation, q_mul(ibq, base_rot_c), a)
+    lq = q_slerp(rest_rotation, q_mul(ibq, base_rot_c), a)
     return lp, lq
 
 
@@ -127,13 +125,21 @@ def line_blend(bq, q, bw):
 def line_child_lanes(PS, PM, gc, w, zero, move, a, a_zero):
     """E.2 of child slot gc (its parent's pose gathered next to it), lanes 0..w: its rest and
     simulated edges (``CHILD_REST_EDGE``, ``CHILD_EDGE``) and, when it moves, its rotation.
-    ``a_zero``: the animation pose ratio a is 0 (a constant at each call site)."""
+    ``a_zero``: the animation pose ratio a is 0 (a constant at each call site), where the rest
+    pose is the build's and the animated poses are not read: ``lerp(p, x, 0)`` is p for every
+    finite x but for the sign of a zero component of p (docs/solver.md §E.2), and the slerp
+    at 0 is its first argument."""
     z = (0.0, 0.0, 0.0)
     for l in range(min(w, LANES)):
         q = get4(PS, gc, st.PARENT_ROTATION, l)
-        lp, lq = line_child_pose(q_inverse(get4(PS, gc, st.PARENT_BASE_ROT, l)), get3(PS, gc, st.PARENT_BASE_POS, l),
-                                 get3(PM, gc, bk.BASELINE_LOCAL_POSITION, l), get4(PM, gc, bk.BASELINE_LOCAL_ROTATION, l),
-                                 get3(PS, gc, st.BASE_POS_BUFFER, l), get4(PS, gc, st.BASE_ROT_BUFFER, l), a, a_zero)
+        if a_zero:
+            lp = get3(PM, gc, bk.BASELINE_LOCAL_POSITION, l)
+            lq = get4(PM, gc, bk.BASELINE_LOCAL_ROTATION, l)
+        else:
+            lp, lq = line_child_pose(q_inverse(get4(PS, gc, st.PARENT_BASE_ROT, l)), get3(PS, gc, st.PARENT_BASE_POS, l),
+                                     get3(PM, gc, bk.BASELINE_LOCAL_POSITION, l),
+                                     get4(PM, gc, bk.BASELINE_LOCAL_ROTATION, l), get3(PS, gc, st.BASE_POS_BUFFER, l),
+                                     get4(PS, gc, st.BASE_ROT_BUFFER, l), a)
         tv = z if zero else q_rotate(q, lp)
         cur = v_sub(get3(PS, gc, st.POSITION, l), get3(PS, gc, st.PARENT_POSITION, l))
         put3(PS, gc, st.CHILD_REST_EDGE, l, tv)
@@ -180,9 +186,11 @@ def line_rotations_block(PS, PM, TS, P, BI, topology, b):
                     gc = g0 + topology[child_data + k]
                     for l in range(w):   # x's pose next to the child
                         put4(PS, gc, st.PARENT_ROTATION, l, get4(PS, gx, st.ROTATION, l))
-                        put4(PS, gc, st.PARENT_BASE_ROT, l, get4(PS, gx, st.BASE_ROT_BUFFER, l))
-                        put3(PS, gc, st.PARENT_BASE_POS, l, get3(PS, gx, st.BASE_POS_BUFFER, l))
                         put3(PS, gc, st.PARENT_POSITION, l, get3(PS, gx, st.POSITION, l))
+                    if not a_zero:   # x's animated pose: read only to move the rest pose towards it
+                        for l in range(w):
+                            put4(PS, gc, st.PARENT_BASE_ROT, l, get4(PS, gx, st.BASE_ROT_BUFFER, l))
+                            put3(PS, gc, st.PARENT_BASE_POS, l, get3(PS, gx, st.BASE_POS_BUFFER, l))
                 for k in range(c0, c0 + cn):
                     c = topology[child_data + k]
                     gc = g0 + c
