@@ -64,13 +64,15 @@ def rot_from_normal_tangent_select(normal, tangent):
 
 
 @kernel
-def swing_select(a, b):
+def swing_select(a, b, with_opposite=True):
     """``fromto_v(a, b, 1)`` for unit a and b (docs/solver.md §0.2) without trigonometry or a
     branch: the half-angle quaternion ``normalize(a x b, 1 + a.b)`` is the same rotation; a and
     b opposite (``|1 + a.b| < 1e-6``): pi about ``orthogonal_axis(a)``; within 1e-6 of
     parallel: the identity. Every path is computed and the answer selected; the reference
     solver's branching ``full_swing`` (tests/reference_solver) gives the same bits. Used by E.2
-    and the angle limit (D.5)."""
+    and the angle limit (D.5). ``with_opposite`` False (a constant at the call site) leaves
+    the opposite path out: the result is then not the swing where a and b are opposite, which
+    the caller must detect and redo (the angle stage's lean pass, ``angle_iteration_lanes``)."""
     c = v_dot(a, b)
     c = 1.0 if c > 1.0 else c
     c = -1.0 if c < -1.0 else c
@@ -78,9 +80,12 @@ def swing_select(a, b):
     w = 1.0 + c
     inv = 1.0 / np.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + w * w)
     half_angle = (x[0] * inv, x[1] * inv, x[2] * inv, w * inv)
+    kept = IDENTITY if abs(1.0 - c) < 1e-6 else half_angle
+    if not with_opposite:
+        return kept
     opposite = abs(1.0 + c) < 1e-6
     flip = q_axis_angle(orthogonal_axis_select(a), math.pi * 1.0)
-    return flip if opposite else (IDENTITY if abs(1.0 - c) < 1e-6 else half_angle)
+    return flip if opposite else kept
 
 
 @kernel(inline="always")

@@ -8,11 +8,13 @@ child move; the restoration pivot grows 0.1 -> 0.3 -> 0.5 over the iterations.
 per-element functions ``angle_buffer_entry`` (buffering pass), ``angle_limit_entry`` (D.5 half
 of an iteration) and ``angle_restoration_entry`` (D.6 half): tuples in and out, no array
 access, the reference's early returns written as selects. An iteration runs its lanes side
-by side without the limit's violation path (``angle_iteration_lanes`` with ``full`` False: its
-acos, sincos and normalisations left out), flags the lanes that met a violation or an
-opposite swing, and runs again on the full path for them when there are any: the same bits
-as the full path everywhere, with the rare path's cost only where it is taken (the crowd's
-and the character's kernels ~8-10 % faster, docs/BENCHMARKS.md, session 14).
+by side without the limit's violation path and without the opposite-vector paths of the
+limit's swing and the restoration's turn (``angle_iteration_lanes`` with ``full`` False: their
+acos, sincos, orthogonal axes and normalisations left out), flags the lanes that met a
+violation or an opposite vector, and runs again on the full path for them when there are any:
+the same bits as the full path everywhere, with the rare paths' cost only where they are taken
+(the crowd's and the character's kernels ~8-10 % faster, docs/BENCHMARKS.md, session 14; the
+opposite paths ~5 % of the angle stage, session 32).
 
 The solves are written on the edge v = cp - pp rather than on world positions, and the
 restoration's from-to rotation is applied as a turn in the plane of the edge and its rest
@@ -51,17 +53,18 @@ MIN_NORMAL = 2.2250738585072014e-308   # the smallest normal float64 (sys.float_
 
 
 @kernel
-def swing_rotation(a, b):
+def swing_rotation(a, b, full=True):
     """``rotations.swing_select(a, b)`` (unit a, b: the rotation swinging a onto b), and whether
-    a and b are opposite. Returns (rotation, opposite)."""
+    a and b are opposite. Returns (rotation, opposite). ``full`` False: without the opposite
+    path (the rotation is then not the swing where ``opposite`` is True)."""
     c = v_dot(a, b)
     c = 1.0 if c > 1.0 else c
     c = -1.0 if c < -1.0 else c
-    return swing_select(a, b), abs(1.0 + c) < 1e-6
+    return swing_select(a, b, full), abs(1.0 + c) < 1e-6
 
 
 @kernel(inline="always")
-def restoration_offset(a, v, vl, b, t):
+def restoration_offset(a, v, vl, b, t, full=True):
     """``r - v`` for ``r = from_to_rotation_unit(a, b, t) · v`` (a = v / vl unit, b unit): the
     same rotation written for a short dependency chain. v turns by t times the angle theta = acos(a·b) in the plane of a and b:
     ``r = v cos(t theta) + vl sin(t theta) w / |w|``, w = b - (a·b) a the in-plane
@@ -70,7 +73,8 @@ def restoration_offset(a, v, vl, b, t):
     product, one sincos of the full angle; acos and sincos in their fma forms
     (``trig.acos_fma``, ``trig.sincos_fma``). Paths as the reference's: parallel (1 - c <
     1e-6) gives 0, opposite (1 + c < 1e-6) turns t pi about ``orthogonal_axis(a)`` (w =
-    axis x a).
+    axis x a). ``full`` False (a constant at the call site) leaves the opposite path out: the
+    offset is then not the turn where ``opposite`` is True, which the caller redoes.
 
     Returns (r - v, opposite)."""
     c = v_dot(a, b)
@@ -80,8 +84,9 @@ def restoration_offset(a, v, vl, b, t):
     parallel = abs(1.0 - c) < 1e-6
     w = v_sub(b, v_scale(a, c))
     theta = trig.acos_fma(c)
-    w = v_cross(orthogonal_axis_select(a), a) if opposite else w
-    theta = math.pi if opposite else theta
+    if full:
+        w = v_cross(orthogonal_axis_select(a), a) if opposite else w
+        theta = math.pi if opposite else theta
     # off the chain: ready before the sincos. |w| is 0 only on the parallel path, whose result
     # is discarded (|w| >= ~1e-3 on the kept ones): the floor keeps the discarded division
     # finite, which the JIT-off run needs (a Python float division by 0 raises)
@@ -197,7 +202,7 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
     solved_vel_c = v_add(vel_c, v_scale(dc, attenuation))
     solved_p = v_add(pp, dp) if p_move else pp
     solved_vel_p = v_add(vel_p, v_scale(dp, attenuation)) if p_move else vel_p
-    swing, opposite = swing_rotation(tn, edge_unit)
+    swing, opposite = swing_rotation(tn, edge_unit, full)
     swung = q_mul(swing, rest_rot)
     solved_rot = rot_c if edge_length < 1e-8 else swung
     # path selection (a NaN compares false everywhere, as the reference's early returns do)
@@ -220,16 +225,17 @@ def angle_limit_entry(cp, pp, vel_c, vel_p, rot_c, rot_p, local_pos, local_rot, 
 
 @kernel(inline="always")
 def angle_restoration_entry(cp, pp, edge, next_c, vel_c, next_p, vel_p, rest_length, rest_direction, stiffness,
-                            pivot, wc, wp, p_move, attenuation):
+                            pivot, wc, wp, p_move, attenuation, full=True):
     """The restoration half of one iteration for child c: the edge cp - pp (as the limit
     pass returned it; ``edge`` = (v, |v|, v / |v|) of it, from ``angle_limit_entry`` or
     ``edge_of``) turned towards ``rest_direction`` by ``stiffness`` about the point at
     ``pivot``, the corrections added to the current next_pos / velocity_pos of c and p.
     A degenerate rest edge snaps c onto pp; a degenerate edge does nothing.
     Returns (next_c, vel_c, next_p, vel_p, rare): ``rare``, the solve path met an opposite
-    edge."""
+    edge (``full`` False: its results are then not the reference's, and the caller redoes
+    the lane on the full path)."""
     v, vl, a = edge
-    d, opposite = restoration_offset(a, v, vl, rest_direction, stiffness)
+    d, opposite = restoration_offset(a, v, vl, rest_direction, stiffness, full)
     # solve_pivot_pair(pp, cp, v, v + d, pivot, wp, wc) with cp - pp = v: the pivot cancels
     dp = v_scale(d, -pivot * wp)
     dc = v_scale(d, (1.0 - pivot) * wc)
@@ -252,10 +258,11 @@ def angle_restoration_entry(cp, pp, edge, next_c, vel_c, next_p, vel_p, rest_len
 def angle_iteration_lanes(PS, gc, w, p_move, rest_pivot, use_limit, use_restoration, limit_stiffness,
                           limit_attenuation, restoration_attenuation, full):
     """One iteration of D.5 then D.6 for child slot gc, every lane, from its rows (the
-    parent's gathered next to them). ``full`` False: without the limit's violation path, the
-    lanes where it was needed (``angle_limit_entry``'s ``rare``) flagged in ``ANGLE_RARE`` and
-    their rows left as they were; ``full`` True: the flagged lanes solved on the full path
-    (every lane computed, the others' results discarded: a vector loop needs no branch)."""
+    parent's gathered next to them). ``full`` False: without the limit's violation path and
+    the opposite-vector paths of the limit's swing and of the restoration's turn, the lanes
+    where one was needed (the entries' ``rare``) flagged in ``ANGLE_RARE`` and their rows left
+    as they were; ``full`` True: the flagged lanes solved on the full path (every lane
+    computed, the others' results discarded: a vector loop needs no branch)."""
     for l in range(min(w, LANES)):
         cp = get3(PS, gc, st.NEXT_POS, l)
         pp = get3(PS, gc, st.PARTNER_POS, l)
@@ -278,10 +285,11 @@ def angle_iteration_lanes(PS, gc, w, p_move, rest_pivot, use_limit, use_restorat
             edge = edge_of(cp, pp)
         next_p = pp
         if use_restoration:
-            next_c, vel_c, next_p, vel_p, _rare = angle_restoration_entry(
+            next_c, vel_c, next_p, vel_p, opposite = angle_restoration_entry(
                 cp, pp, edge, next_c, vel_c, next_p, vel_p, get1(PS, gc, st.ANGLE_REST_LENGTH, l),
                 get3(PS, gc, st.ANGLE_REST_DIRECTION, l), get1(PS, gc, st.ANGLE_RESTORATION_K, l),
-                rest_pivot, wc, wp, p_move, restoration_attenuation)
+                rest_pivot, wc, wp, p_move, restoration_attenuation, full)
+            rare = rare | opposite
         flagged = get1(PS, gc, st.ANGLE_RARE, l) != 0.0
         keep = (not flagged) if full else rare
         put3(PS, gc, st.NEXT_POS, l, kept_c if keep else next_c)
