@@ -526,23 +526,30 @@ def q_slerp_along(q1, to, angle, inv_sin, far, t):
 
 
 @kernel(inline="always")
-def from_to_rotation_unit_select(a, b, t):
-    """``from_to_rotation_unit`` without a branch."""
+def from_to_rotation_unit_select(a, b, t, with_opposite=True):
+    """``from_to_rotation_unit`` without a branch. ``with_opposite`` False (a constant at the
+    call site) leaves the path of opposite a and b out: the result is then not the
+    reference's where ``opposite_unit(a, b)``, which the caller must detect and redo."""
     c = v_dot(a, b)
     c = 1.0 if c > 1.0 else c
     c = -1.0 if c < -1.0 else c
-    opposite = q_axis_angle(orthogonal_axis_select(a), math.pi * t)
     general = q_axis_angle(v_normalize_select(v_cross(a, b)), trig.acos(c) * t)
-    is_opposite = abs(1.0 + c) < 1e-6
     is_parallel = abs(1.0 - c) < 1e-6
     q = ((0.0, 0.0, 0.0, 1.0) if is_parallel else general)
-    return opposite if is_opposite else q
+    if not with_opposite:
+        return q
+    opposite = q_axis_angle(orthogonal_axis_select(a), math.pi * t)
+    return opposite if opposite_unit(a, b) else q
 
 
 @kernel(inline="always")
-def from_to_rotation_select(a, b, t):
-    """``from_to_rotation`` without a branch."""
-    return from_to_rotation_unit_select(v_normalize_select(a), v_normalize_select(b), t)
+def opposite_unit(a, b):
+    """Are the unit vectors a and b opposite in the sense of the from-to rotations and swings
+    (``|1 + a.b| < 1e-6``, a.b clamped to [-1, 1])?"""
+    c = v_dot(a, b)
+    c = 1.0 if c > 1.0 else c
+    c = -1.0 if c < -1.0 else c
+    return abs(1.0 + c) < 1e-6
 
 
 @kernel

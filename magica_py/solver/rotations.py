@@ -14,7 +14,7 @@ import numpy as np
 
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
-    from_to_rotation_select, orthogonal_axis_select, q_axis_angle, q_inverse, q_mul,
+    from_to_rotation_unit_select, opposite_unit, orthogonal_axis_select, q_axis_angle, q_inverse, q_mul,
     q_normalize_select, q_rotate, q_slerp, q_slerp_select, v_add, v_cross, v_dot, v_length, v_length_sq, v_lerp,
     v_normalize_select, v_scale, v_sub,
 )
@@ -100,23 +100,33 @@ def line_child_pose(ibq, bp, rest_position, rest_rotation, base_pos_c, base_rot_
 
 
 @kernel(inline="always")
-def line_child_rotation(q, lq, tv, cur, zero):
+def line_child_rotation(q, lq, tv, cur, zero, full):
     """E.2: rotation of a moving child: its rest rotation carried by x's rotation q, swung so
     the rest edge ``tv`` matches the simulated edge ``cur`` (not for a zero-distance child).
-    Branch-free (``swing_select``)."""
+    Branch-free (``swing_select``). Returns (rotation, opposite): ``opposite``, the swing met
+    edges in opposite directions, whose path ``full`` False leaves out (the rotation is then
+    not the reference's and the caller redoes the lane with ``full`` True)."""
     qc = q_mul(q, lq)
+    a = v_normalize_select(tv)
+    b = v_normalize_select(cur)
+    opposite = False
     if not zero:
-        qc = q_mul(swing_select(v_normalize_select(tv), v_normalize_select(cur)), qc)
-    return qc
+        qc = q_mul(swing_select(a, b, full), qc)
+        opposite = opposite_unit(a, b)
+    return qc, opposite
 
 
 @kernel(inline="always")
-def line_turn(q, ctv, cv, t):
+def line_turn(q, ctv, cv, t, full):
     """E.2: x's rotation q turned by fraction t from its children's rest directions ``ctv``
     towards their simulated ones ``cv`` (left as is when either sum is (near) zero).
-    Branch-free."""
-    turned = q_mul(from_to_rotation_select(ctv, cv, t), q)
-    return turned if ((v_length(ctv) >= 1e-8) & (v_length(cv) >= 1e-8)) else q
+    Branch-free. Returns (rotation, opposite): ``opposite``, the turn met sums in opposite
+    directions, whose path ``full`` False leaves out (see ``line_child_rotation``)."""
+    a = v_normalize_select(ctv)
+    b = v_normalize_select(cv)
+    turned = q_mul(from_to_rotation_unit_select(a, b, t, full), q)
+    turns = (v_length(ctv) >= 1e-8) & (v_length(cv) >= 1e-8)
+    return (turned if turns else q), turns & opposite_unit(a, b)
 
 
 @kernel(inline="always")
@@ -127,14 +137,18 @@ def line_blend(bq, q, bw):
 
 
 @kernel
-def line_child_lanes(PS, PM, gc, w, zero, move, a, a_zero):
+def line_child_lanes(PS, PM, gc, w, zero, move, a, a_zero, full):
     """E.2 of child slot gc (its parent's pose gathered next to it), lanes 0..w: its rest and
     simulated edges (``CHILD_REST_EDGE``, ``CHILD_EDGE``) and, when it moves, its rotation.
     ``a_zero``: the animation pose ratio a is 0 (a constant at each call site), where the rest
     pose is the build's and the animated poses are not read: ``lerp(p, x, 0)`` is p for every
     finite x but for the sign of a zero component of p (docs/solver.md §E.2), and the slerp
-    at 0 is its first argument."""
+    at 0 is its first argument. ``full`` False: without the swing's opposite-edge path;
+    returns whether a moving lane needed it, and then the caller runs every lane again with
+    ``full`` True (the pass reads none of the rows it writes, so running it twice is the same
+    as running it once)."""
     z = (0.0, 0.0, 0.0)
+    rare = False
     for l in range(min(w, LANES)):
         q = get4(PS, gc, st.PARENT_ROTATION, l)
         if a_zero:
@@ -150,7 +164,10 @@ def line_child_lanes(PS, PM, gc, w, zero, move, a, a_zero):
         put3(PS, gc, st.CHILD_REST_EDGE, l, tv)
         put3(PS, gc, st.CHILD_EDGE, l, cur if move else tv)
         if move:
-            put4(PS, gc, st.ROTATION, l, line_child_rotation(q, lq, tv, cur, zero))
+            rotation, opposite = line_child_rotation(q, lq, tv, cur, zero, full)
+            put4(PS, gc, st.ROTATION, l, rotation)
+            rare = rare | opposite
+    return rare
 
 
 @kernel(forceinline=False)
@@ -202,11 +219,14 @@ def line_rotations_block(PS, PM, TS, P, BI, topology, b):
                     zero = (topology[attribute + c] & ZERO_DISTANCE) != 0
                     move = (topology[attribute + c] & MOVE) != 0
                     # a == 0 goes in as a constant: tested in the lane loop, the rest rotation's
-                    # slerp towards the animated one would be computed for every lane and dropped
+                    # slerp towards the animated one would be computed for every lane and dropped;
+                    # the lean pass leaves the opposite-edge swing out, redone where it is needed
                     if a_zero:
-                        line_child_lanes(PS, PM, gc, w, zero, move, a, np.bool_(True))
+                        rare = line_child_lanes(PS, PM, gc, w, zero, move, a, np.bool_(True), np.bool_(False))
                     else:
-                        line_child_lanes(PS, PM, gc, w, zero, move, a, np.bool_(False))
+                        rare = line_child_lanes(PS, PM, gc, w, zero, move, a, np.bool_(False), np.bool_(False))
+                    if rare:
+                        line_child_lanes(PS, PM, gc, w, zero, move, a, a_zero, np.bool_(True))
                 for l in range(w):
                     put3(PS, gx, st.CHILD_REST_SUM, l, z)
                     put3(PS, gx, st.CHILD_EDGE_SUM, l, z)
@@ -218,10 +238,19 @@ def line_rotations_block(PS, PM, TS, P, BI, topology, b):
                         put3(PS, gx, st.CHILD_EDGE_SUM, l,
                              v_add(get3(PS, gx, st.CHILD_EDGE_SUM, l), get3(PS, gc, st.CHILD_EDGE, l)))
                 t = ri if (attr & MOVE) != 0 else rr
+                rare = False   # the lean turn: lanes whose sums are opposite keep their rotation
                 for l in range(w):
-                    q = line_turn(get4(PS, gx, st.ROTATION, l), get3(PS, gx, st.CHILD_REST_SUM, l),
-                                  get3(PS, gx, st.CHILD_EDGE_SUM, l), t)
-                    put4(PS, gx, st.ROTATION, l, q)
+                    q0 = get4(PS, gx, st.ROTATION, l)
+                    q, opposite = line_turn(q0, get3(PS, gx, st.CHILD_REST_SUM, l),
+                                            get3(PS, gx, st.CHILD_EDGE_SUM, l), t, np.bool_(False))
+                    put4(PS, gx, st.ROTATION, l, q0 if opposite else q)
+                    rare = rare | opposite
+                if rare:       # and turn on the full path
+                    for l in range(w):
+                        q0 = get4(PS, gx, st.ROTATION, l)
+                        q, opposite = line_turn(q0, get3(PS, gx, st.CHILD_REST_SUM, l),
+                                                get3(PS, gx, st.CHILD_EDGE_SUM, l), t, np.bool_(True))
+                        put4(PS, gx, st.ROTATION, l, q if opposite else q0)
             if blend:
                 for l in range(w):
                     put4(PS, gx, st.ROTATION, l, line_blend(get4(PS, gx, st.BASE_ROT_BUFFER, l),
