@@ -54,7 +54,8 @@ def test_bound_vectors_of_built_cloths_give_the_reference_bits():
         for spec in scene.cloths:
             m = build_cloth(scene.hierarchy, spec, cache=None)
             B = np.ascontiguousarray(m.skin_bind_pose, dtype=np.float64).reshape(-1, 4, 4)
-            args = [np.ascontiguousarray(a, dtype=np.float64) for a in (m.local_position, m.local_normal, m.local_tangent)]
+            args = [np.ascontiguousarray(a, dtype=np.float64)
+                    for a in (m.local_position, m.local_normal, m.local_tangent)]
             assert np.array_equal(_bits(bound_vectors(B, *args)), _bits(_reference_bound(B, *args)))
             checked += B.shape[0]
     assert checked > 100

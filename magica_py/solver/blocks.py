@@ -34,7 +34,7 @@ PARTICLE_MODEL = RowTable("particle model", "particle slot")
 _m = PARTICLE_MODEL.add
 DEPTH = _m("depth", 1, "[0,1] normalised arc length from the root (B.8)")
 # C.1's bind pose applied to the build vertex: ``skin_bind_pose @ (local position, 1)``, ``@ (local
-# normal, 0)``, ``@ (local tangent, 0)`` (``center.bound_vectors``), constant per vertex, so computed
+# normal, 0)``, ``@ (local tangent, 0)`` (``bound_vectors`` below), constant per vertex, so computed
 # once when the lane is written; the skinning then applies only the bone's matrix each frame
 SKIN_BOUND_POSITION = _m("skin_bound_position", 4, "bind pose @ (cloth-local build position (B.2), 1)")
 SKIN_BOUND_NORMAL = _m("skin_bound_normal", 4, "bind pose @ (cloth-local unit normal (B.4), 0)")

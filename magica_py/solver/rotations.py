@@ -155,8 +155,8 @@ def line_child_lanes(PS, PM, gc, w, zero, move, a, a_zero, full):
             lp = get3(PM, gc, bk.BASELINE_LOCAL_POSITION, l)
             lq = get4(PM, gc, bk.BASELINE_LOCAL_ROTATION, l)
         else:
-            lp, lq = line_child_pose(q_inverse(get4(PS, gc, st.PARENT_BASE_ROT, l)), get3(PS, gc, st.PARENT_BASE_POS, l),
-                                     get3(PM, gc, bk.BASELINE_LOCAL_POSITION, l),
+            lp, lq = line_child_pose(q_inverse(get4(PS, gc, st.PARENT_BASE_ROT, l)),
+                                     get3(PS, gc, st.PARENT_BASE_POS, l), get3(PM, gc, bk.BASELINE_LOCAL_POSITION, l),
                                      get4(PM, gc, bk.BASELINE_LOCAL_ROTATION, l), get3(PS, gc, st.BASE_POS_BUFFER, l),
                                      get4(PS, gc, st.BASE_ROT_BUFFER, l), a)
         tv = z if zero else q_rotate(q, lp)
