@@ -90,7 +90,11 @@ def assert_lane_holds(layout, team, model):
     b, lane = layout.place(team)
     g = layout.slots(team)["particle"]
     pm = bk.PARTICLE_MODEL
-    assert np.array_equal(pm.view(layout.particle_model, "local_position", g, lane), model.local_position)
+    assert np.array_equal(pm.view(layout.particle_model, "baseline_local_position", g, lane),
+                          model.baseline_local_position)
+    bound = bk.bound_vectors(np.reshape(model.skin_bind_pose, (-1, 4, 4)), np.asarray(model.local_position),
+                             np.asarray(model.local_normal), np.asarray(model.local_tangent))
+    assert np.array_equal(pm.view(layout.particle_model, "skin_bound_position", g, lane), bound[:, 0])
     assert np.array_equal(pm.view(layout.particle_model, "depth", g, lane), model.depth)
     assert np.array_equal(bk.LINK_MODEL.view(layout.link_model, "distance_rest", layout.slots(team)["link"], lane),
                           model.distance_rest)
