@@ -56,9 +56,8 @@ CARRIED_ROWS = PARTICLE.rows
 # to the particle being solved, so that the solving loop touches one item per table, lanes.py;
 # sums over a particle's links). One pool of rows that every stage reuses under its own names
 # (``PARTICLE.share``): stages run one after another, so only the names one stage uses at
-# once must not overlap (tests/test_row_tables.py checks it per module). Shared, the 74 rows
-# of the separate fields became 32, and a particle slot 151 rows instead of 193 (22 % less
-# particle state; docs/BENCHMARKS.md, session 23; 148 rows now).
+# once must not overlap (tests/test_row_tables.py checks it per module): 32 rows where separate
+# fields would take 74 (docs/BENCHMARKS.md, session 23).
 STAGE_SCRATCH = _p("stage_scratch", 32, "scratch rows of the stages (the names shared over them below)")
 
 
@@ -127,8 +126,8 @@ ANGLE_ROTATION = _p("angle_rotation", 4, "xyzw; working rotation of the limit pa
 ANGLE_LIMIT = _p("angle_limit", 1, "rad; limit angle at the particle's depth (per step)")
 ANGLE_LIMIT_COS = _p("angle_limit_cos", 1, "cos of angle_limit: the no-violation test without acos")
 ANGLE_RESTORATION_K = _p("angle_restoration_k", 1, "restoration stiffness of this step (curve, rate, gravity factor)")
-ANGLE_RARE = _p("angle_rare", 1, "scratch of D.5: 1 where this iteration's limit pass met a violation or an opposite "
-                "swing (the lane is solved again on the full path)")
+ANGLE_RARE = _p("angle_rare", 1, "scratch of D.5/D.6: 1 where this iteration's lean pass met a limit violation, "
+                "an opposite swing or an opposite restoration turn (the lane is solved again on the full path)")
 ANGLE_ROWS = (ANGLE_LENGTH // LANES, PARTICLE.rows)
 # display of quality mode (display.py): the last two step states in their display frame
 # (the particle's fixed root, or the team center), written at the end of each step (D.10)

@@ -31,8 +31,8 @@ import numpy as np
 from magica_py.jit import kernel
 from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
-    angle_between_vectors_select, clamp_angle_select, inverse_mass_friction, lerp, orthogonal_axis_select, q_inverse,
-    q_mul, q_rotate, saturate, v_add, v_cross, v_dot, v_length, v_scale, v_sub,
+    angle_between_vectors_select, clamp_angle_select, inverse_mass_friction, lerp, opposite_unit,
+    orthogonal_axis_select, q_inverse, q_mul, q_rotate, saturate, v_add, v_cross, v_dot, v_length, v_scale, v_sub,
 )
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
@@ -57,10 +57,7 @@ def swing_rotation(a, b, full=True):
     """``rotations.swing_select(a, b)`` (unit a, b: the rotation swinging a onto b), and whether
     a and b are opposite. Returns (rotation, opposite). ``full`` False: without the opposite
     path (the rotation is then not the swing where ``opposite`` is True)."""
-    c = v_dot(a, b)
-    c = 1.0 if c > 1.0 else c
-    c = -1.0 if c < -1.0 else c
-    return swing_select(a, b, full), abs(1.0 + c) < 1e-6
+    return swing_select(a, b, full), opposite_unit(a, b)
 
 
 @kernel(inline="always")
