@@ -273,7 +273,18 @@ def inertia_lane(F, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, apos,
     (``apos``, ``arot``: its world pose, when the team has one), teleport, smoothing, world
     inertia, speed limits, the frame shift (see ``center_and_inertia_lane``)."""
     TS, TI, P = F.TS, F.TI, F.P
+    # every value of P and TI read here, before the first branch, so that they are not held
+    # to the end (docs/tech-notes.md §10)
     time_based = P[b, PRM_TIME_BASED_SMOOTHING] != 0.0
+    anchor_inertia = P[b, PRM_ANCHOR_INERTIA]
+    mode = int(P[b, PRM_TELEPORT_MODE])
+    teleport_distance, teleport_rotation = P[b, PRM_TELEPORT_DISTANCE], P[b, PRM_TELEPORT_ROTATION]
+    s = P[b, PRM_MOVEMENT_SMOOTHING]
+    limit = P[b, PRM_MOVEMENT_SPEED_LIMIT]
+    world_inertia = P[b, PRM_WORLD_INERTIA]
+    rlimit = P[b, PRM_ROTATION_SPEED_LIMIT]
+    stab = P[b, PRM_STABILIZATION_TIME]
+    anchor = TI[b, bk.TI_ANCHOR + l]
     unit = get1(TS, b, st.LENGTH_UNIT, l)
     put3(TS, b, st.FRAME_WORLD_POS, l, center_pos)
     put4(TS, b, st.FRAME_WORLD_ROT, l, center_rot)
@@ -287,16 +298,14 @@ def inertia_lane(F, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, apos,
     # 1. anchor
     anchor_delta = ZERO3
     anchor_rot = IDENTITY
-    anchor = TI[b, bk.TI_ANCHOR + l]
     if anchor >= 0:
         if reset or get1(TS, b, st.ANCHOR_VALID, l) == 0.0:
             put3(TS, b, st.ANCHOR_COMPONENT_LOCAL_POS, l, q_rotate(q_inverse(arot), v_sub(cpos, apos)))
             put4(TS, b, st.OLD_ANCHOR_ROT, l, arot)
             put1(TS, b, st.ANCHOR_VALID, l, 1.0)
         anchor_center = v_add(apos, q_rotate(arot, get3(TS, b, st.ANCHOR_COMPONENT_LOCAL_POS, l)))
-        a = P[b, PRM_ANCHOR_INERTIA]
-        anchor_delta = v_scale(v_sub(anchor_center, old_pos), 1.0 - a)
-        anchor_rot = q_slerp(IDENTITY, q_from_to(get4(TS, b, st.OLD_ANCHOR_ROT, l), arot), 1.0 - a)
+        anchor_delta = v_scale(v_sub(anchor_center, old_pos), 1.0 - anchor_inertia)
+        anchor_rot = q_slerp(IDENTITY, q_from_to(get4(TS, b, st.OLD_ANCHOR_ROT, l), arot), 1.0 - anchor_inertia)
         old_pos = v_add(old_pos, anchor_delta)
         old_rot = q_mul(anchor_rot, old_rot)
         put4(TS, b, st.OLD_ANCHOR_ROT, l, arot)
@@ -305,11 +314,10 @@ def inertia_lane(F, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, apos,
         put1(TS, b, st.ANCHOR_VALID, l, 0.0)
     # 2. teleport
     keep = get1(TS, b, st.KEEP_TELEPORT, l) != 0.0
-    mode = int(P[b, PRM_TELEPORT_MODE])
     if mode != 0 and not reset:
         delta = v_length(v_sub(cpos, old_pos))
         angle = math.degrees(q_angle(old_rot, crot))
-        if delta >= P[b, PRM_TELEPORT_DISTANCE] * ratio * unit or angle >= P[b, PRM_TELEPORT_ROTATION]:
+        if delta >= teleport_distance * ratio * unit or angle >= teleport_rotation:
             if mode == TELEPORT_RESET:
                 reset = True
                 put1(TS, b, st.RESET, l, 1.0)
@@ -318,8 +326,6 @@ def inertia_lane(F, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, apos,
                 put1(TS, b, st.KEEP_TELEPORT, l, 1.0)
     # 3. movement smoothing
     smooth_delta = ZERO3
-    s = P[b, PRM_MOVEMENT_SMOOTHING]
-    limit = P[b, PRM_MOVEMENT_SPEED_LIMIT]
     if s >= 1e-6 and not reset and not keep:
         if time_based:
             felt = time_based_smoothing(TS, b, l, v_sub(cpos, old_pos), frame_delta_time, s,
@@ -360,7 +366,7 @@ def inertia_lane(F, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, apos,
         # 5. world shift
         shift_vec = v_sub(cpos, old_pos)
         shift_rot = q_from_to(old_rot, crot)
-        ms = 1.0 - P[b, PRM_WORLD_INERTIA]
+        ms = 1.0 - world_inertia
         rs = ms
         if keep:
             ms = 1.0
@@ -380,7 +386,6 @@ def inertia_lane(F, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, apos,
                     ms = lerp(ms, 1.0, k)
                     work_pos = v_lerp(work_pos, cpos, k)
                     shift = True
-            rlimit = P[b, PRM_ROTATION_SPEED_LIMIT]
             if rlimit >= 0.0:
                 speed = math.degrees(q_angle(work_rot, crot)) / frame_delta_time
                 if speed > rlimit:
@@ -395,7 +400,6 @@ def inertia_lane(F, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, apos,
         if vw < 1.0:
             w = vw
             if time_based:
-                stab = P[b, PRM_STABILIZATION_TIME]
                 if stab > 1e-6:  # the ramp in continuous time: it rose since the last step too
                     w = saturate(w + max(since_last_step, 0.0) / stab)
                 w = mean_velocity_weight(w, stab, frame_delta_time * now_time_scale)
@@ -430,7 +434,7 @@ def inertia_lane(F, b, l, cpos, crot, cscl, ratio, center_pos, center_rot, apos,
              v_scale(moving, 1.0 / moving_length) if moving_length > 1e-6 else ZERO3)
     # 7. reset consequences
     if reset or get1(TS, b, st.TIME_RESET, l) != 0.0:
-        vw = 0.0 if P[b, PRM_STABILIZATION_TIME] > 1e-6 else 1.0
+        vw = 0.0 if stab > 1e-6 else 1.0
         put1(TS, b, st.VELOCITY_WEIGHT, l, vw)
         put1(TS, b, st.BLEND_WEIGHT, l, vw)
 

@@ -177,8 +177,6 @@ def line_rotations_block(PS, PM, TS, P, BI, topology, b):
     each child's rotation and its rest and simulated edges are solved across the lanes
     (``CHILD_REST_EDGE`` / ``CHILD_EDGE``), the edges are summed at x in child order, and x
     turns and blends. Each loop touches one or two items, so the lane loops vectorise."""
-    if BI[b, bk.BI_HAS_LINES] == 0:
-        return
     ri = P[b, PRM_ROTATIONAL_INTERPOLATION]
     rr = P[b, PRM_ROOT_ROTATION]
     a = P[b, PRM_ANIMATION_POSE_RATIO]
@@ -189,11 +187,14 @@ def line_rotations_block(PS, PM, TS, P, BI, topology, b):
     child_start, child_count, child_data = BI[b, bk.BI_CHILD_START], BI[b, bk.BI_CHILD_COUNT], BI[b, bk.BI_CHILD_DATA]
     bl_flags, bl_start, bl_count, bl_data = (BI[b, bk.BI_BASELINE_FLAGS], BI[b, bk.BI_BASELINE_START],
                                              BI[b, bk.BI_BASELINE_COUNT], BI[b, bk.BI_BASELINE_DATA])
+    lines = BI[b, bk.BI_BASELINES]
+    if BI[b, bk.BI_HAS_LINES] == 0:   # no early return (docs/tech-notes.md §10)
+        lines = 0
     z = (0.0, 0.0, 0.0)
     blend = False   # a lane whose blend weight is not 1 (line_blend is the identity at 1: its slerp left out)
     for l in range(w):
         blend = blend | (get1(TS, b, st.BLEND_WEIGHT, l) != 1.0)
-    for line in range(BI[b, bk.BI_BASELINES]):
+    for line in range(lines):
         if (topology[bl_flags + line] & INCLUDE_LINE) == 0:
             continue
         e0 = topology[bl_start + line]

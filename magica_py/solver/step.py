@@ -335,13 +335,14 @@ def step_basic_pose_block(PS, PM, TS, TM, P, BI, topology, b):
     """D.2 over block b: rebuild the rest shape along each baseline and blend it to the
     animated pose."""
     a = P[b, PRM_ANIMATION_POSE_RATIO]
-    if a > BASIC_POSE_KEPT:
-        return
     g0 = BI[b, bk.BI_G0]
     w = bk.lane_width(BI, b)
     parent = BI[b, bk.BI_PARENT]
     bl_start, bl_count, bl_data = BI[b, bk.BI_BASELINE_START], BI[b, bk.BI_BASELINE_COUNT], BI[b, bk.BI_BASELINE_DATA]
-    for line in range(BI[b, bk.BI_BASELINES]):
+    lines = BI[b, bk.BI_BASELINES]
+    if a > BASIC_POSE_KEPT:   # the step keeps the animated pose (no early return: docs/tech-notes.md §10)
+        lines = 0
+    for line in range(lines):
         e0 = topology[bl_start + line]
         e1 = e0 + topology[bl_count + line]
         for e in range(e0 + 1, e1):

@@ -313,8 +313,6 @@ def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
     before the iterations read it, so nothing is cleared afterwards."""
     use_limit = P[b, PRM_USE_ANGLE_LIMIT] != 0.0
     use_restoration = P[b, PRM_USE_RESTORATION] != 0.0
-    if not use_limit and not use_restoration:
-        return
     limit_stiffness = P[b, PRM_LIMIT_STIFFNESS]
     falloff = P[b, PRM_RESTORATION_GRAVITY_FALLOFF]
     rate_mode = int(P[b, PRM_RATE_MODE])
@@ -322,7 +320,10 @@ def angle_block(PS, PP, TS, P, BI, topology, b, frequency_ratio, power_w, limit_
     w = bk.lane_width(BI, b)
     attribute, parent = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_PARENT]
     bl_start, bl_count, bl_data = BI[b, bk.BI_BASELINE_START], BI[b, bk.BI_BASELINE_COUNT], BI[b, bk.BI_BASELINE_DATA]
-    for line in range(BI[b, bk.BI_BASELINES]):
+    lines = BI[b, bk.BI_BASELINES]
+    if not use_limit and not use_restoration:   # no early return (docs/tech-notes.md §10)
+        lines = 0
+    for line in range(lines):
         e0 = topology[bl_start + line]
         e1 = e0 + topology[bl_count + line]
         # buffering pass

@@ -65,9 +65,12 @@ def tether_block(PS, P, BI, topology, b, attenuation, frequency_ratio):
     g0 = BI[b, bk.BI_G0]
     w = bk.lane_width(BI, b)
     attribute, root_index = BI[b, bk.BI_ATTRIBUTE], BI[b, bk.BI_ROOT_INDEX]
+    n = BI[b, bk.BI_N]
+    # every value of P read before the first branch (docs/tech-notes.md §10)
     compression_limit = 1.0 - P[b, PRM_TETHER_COMPRESSION]
-    ratio = frequency_ratio if (P[b, PRM_RATE_MODE] != 0.0 and P[b, PRM_QUALITY] == 0.0) else 1.0
-    for j in range(BI[b, bk.BI_N]):
+    rate_mode, quality = P[b, PRM_RATE_MODE], P[b, PRM_QUALITY]
+    ratio = frequency_ratio if (rate_mode != 0.0 and quality == 0.0) else 1.0
+    for j in range(n):
         if (topology[attribute + j] & MOVE) == 0:
             continue
         r = topology[root_index + j]
