@@ -3,8 +3,9 @@ opposite paths out (``line_child_lanes`` and ``line_turn`` with ``full`` False) 
 lanes that need them, so such a lane gets the reference's half turn about ``orthogonal_axis``
 (docs/solver.md §0.2 fromto_v) while its neighbours keep their own results.
 
-A block of 16 two-bone chains of the light scene (a fixed root and one moving child); lane 5's
-child is moved so that its simulated edge points against its rest edge. Hand-written expected
+A block of 16 two-bone chains of the light scene (a fixed root and one moving child); one lane's
+child is moved so that its simulated edge points against its rest edge: lane 5, and lane 13 (a
+full block's lean turn runs lanes h and h + 8 side by side, ``line_turn_pairs``). Hand-written expected
 values: the child's rotation is ``rot(ortho(a), pi) * (Q * lq)`` and the root's
 ``rot(ortho(a), pi * root_rotation) * Q``, with a the unit rest edge, Q the root's animated
 rotation and lq the child's rest rotation (the branching maths of ``kernels.math3d``)."""
@@ -12,6 +13,7 @@ import math
 import pathlib
 
 import numpy as np
+import pytest
 
 from magica_py.config import load_scene
 from magica_py.kernels.math3d import orthogonal_axis, q_axis_angle, q_mul, q_rotate, v_normalize
@@ -24,7 +26,6 @@ from magica_py.solver.rotations import line_rotations_block
 from magica_py.solver.system import ClothSystem
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
-LANE = 5
 
 
 def _get(table, g, field, size, lane):
@@ -44,7 +45,8 @@ def _rotations(T, b, PS, gx, gc):
     return (T.PS[gx, rows[0]:rows[0] + 4 * LANES].copy(), T.PS[gc, rows[0]:rows[0] + 4 * LANES].copy())
 
 
-def test_an_edge_opposite_its_rest_direction_turns_half_about_the_orthogonal_axis():
+@pytest.mark.parametrize("LANE", [5, 13])
+def test_an_edge_opposite_its_rest_direction_turns_half_about_the_orthogonal_axis(LANE):
     scene = load_scene(ROOT / "configs" / "light_chains.yaml",
                        overrides=["rigs.0.instances.count=16", "rigs.0.parts.0.chain.bones=2",
                                   "rigs.0.parts.0.chain.length=0.1"])

@@ -130,6 +130,31 @@ def line_turn(q, ctv, cv, t, full):
 
 
 @kernel(inline="always")
+def line_turn_pairs(PS, gx, t):
+    """The lean pass of ``line_turn`` for bone slot gx of a full block (``LANES`` lanes), two
+    lanes an iteration: lane h and lane h + LANES / 2. The turn's acos, sincos and
+    normalisations are one long dependency chain per lane, and LLVM's vector loop runs one
+    vector of lanes at a time; two independent vectors side by side keep the core's pipelines
+    busy (E.2 10-14 % faster on the light scene, docs/BENCHMARKS.md, session 33). The half is a
+    constant, so the two groups are known not to overlap and the loop still vectorises.
+    Returns whether a lane's sums were opposite (its rotation is then kept, for the full pass)."""
+    rare = False
+    for h in range(LANES // 2):
+        la = h
+        lb = h + LANES // 2
+        q0a = get4(PS, gx, st.ROTATION, la)
+        q0b = get4(PS, gx, st.ROTATION, lb)
+        qa, oa = line_turn(q0a, get3(PS, gx, st.CHILD_REST_SUM, la), get3(PS, gx, st.CHILD_EDGE_SUM, la), t,
+                           np.bool_(False))
+        qb, ob = line_turn(q0b, get3(PS, gx, st.CHILD_REST_SUM, lb), get3(PS, gx, st.CHILD_EDGE_SUM, lb), t,
+                           np.bool_(False))
+        put4(PS, gx, st.ROTATION, la, q0a if oa else qa)
+        put4(PS, gx, st.ROTATION, lb, q0b if ob else qb)
+        rare = rare | oa | ob
+    return rare
+
+
+@kernel(inline="always")
 def line_blend(bq, q, bw):
     """E.2: the bone rotation blended from the animated one by ``blend_weight`` bw. Branch-free."""
     blended = q_slerp_select(bq, q, bw)
@@ -239,13 +264,17 @@ def line_rotations_block(PS, PM, TS, P, BI, topology, b):
                         put3(PS, gx, st.CHILD_EDGE_SUM, l,
                              v_add(get3(PS, gx, st.CHILD_EDGE_SUM, l), get3(PS, gc, st.CHILD_EDGE, l)))
                 t = ri if (attr & MOVE) != 0 else rr
-                rare = False   # the lean turn: lanes whose sums are opposite keep their rotation
-                for l in range(w):
-                    q0 = get4(PS, gx, st.ROTATION, l)
-                    q, opposite = line_turn(q0, get3(PS, gx, st.CHILD_REST_SUM, l),
-                                            get3(PS, gx, st.CHILD_EDGE_SUM, l), t, np.bool_(False))
-                    put4(PS, gx, st.ROTATION, l, q0 if opposite else q)
-                    rare = rare | opposite
+                # the lean turn: lanes whose sums are opposite keep their rotation
+                if w == LANES:
+                    rare = line_turn_pairs(PS, gx, t)
+                else:
+                    rare = False
+                    for l in range(w):
+                        q0 = get4(PS, gx, st.ROTATION, l)
+                        q, opposite = line_turn(q0, get3(PS, gx, st.CHILD_REST_SUM, l),
+                                                get3(PS, gx, st.CHILD_EDGE_SUM, l), t, np.bool_(False))
+                        put4(PS, gx, st.ROTATION, l, q0 if opposite else q)
+                        rare = rare | opposite
                 if rare:       # and turn on the full path
                     for l in range(w):
                         q0 = get4(PS, gx, st.ROTATION, l)
