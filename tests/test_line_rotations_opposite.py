@@ -45,8 +45,8 @@ def _rotations(T, b, PS, gx, gc):
     return (T.PS[gx, rows[0]:rows[0] + 4 * LANES].copy(), T.PS[gc, rows[0]:rows[0] + 4 * LANES].copy())
 
 
-@pytest.mark.parametrize("LANE", [5, 13])
-def test_an_edge_opposite_its_rest_direction_turns_half_about_the_orthogonal_axis(LANE):
+@pytest.mark.parametrize("lane", [5, 13])
+def test_an_edge_opposite_its_rest_direction_turns_half_about_the_orthogonal_axis(lane):
     scene = load_scene(ROOT / "configs" / "light_chains.yaml",
                        overrides=["rigs.0.instances.count=16", "rigs.0.parts.0.chain.bones=2",
                                   "rigs.0.parts.0.chain.length=0.1"])
@@ -60,30 +60,30 @@ def test_an_edge_opposite_its_rest_direction_turns_half_about_the_orthogonal_axi
     gx, gc = g0, g0 + 1   # the fixed root and its moving child
     # E.2's input as the frame leaves it: display positions, animated rotations (E.1)
     original = T.PS.copy()
-    q_root = _get(original, gx, st.ROTATION, 4, LANE)
-    tv = q_rotate(q_root, _get(T.PM, gc, bk.BASELINE_LOCAL_POSITION, 3, LANE))
-    root_position = _get(original, gx, st.POSITION, 3, LANE)
+    q_root = _get(original, gx, st.ROTATION, 4, lane)
+    tv = q_rotate(q_root, _get(T.PM, gc, bk.BASELINE_LOCAL_POSITION, 3, lane))
+    root_position = _get(original, gx, st.POSITION, 3, lane)
     flipped = original.copy()
-    _put(flipped, gc, st.POSITION, tuple(p - v for p, v in zip(root_position, tv)), LANE)
+    _put(flipped, gc, st.POSITION, tuple(p - v for p, v in zip(root_position, tv)), lane)
 
     root_rows, child_rows = _rotations(T, b, flipped, gx, gc)
-    root = tuple(root_rows[k * LANES + LANE] for k in range(4))
-    child = tuple(child_rows[k * LANES + LANE] for k in range(4))
+    root = tuple(root_rows[k * LANES + lane] for k in range(4))
+    child = tuple(child_rows[k * LANES + lane] for k in range(4))
     a = v_normalize(tv)
-    lq = _get(T.PM, gc, bk.BASELINE_LOCAL_ROTATION, 4, LANE)
+    lq = _get(T.PM, gc, bk.BASELINE_LOCAL_ROTATION, 4, lane)
     child_expected = q_mul(q_axis_angle(orthogonal_axis(a), math.pi), q_mul(q_root, lq))
     root_expected = q_mul(q_axis_angle(orthogonal_axis(a), math.pi * T.P[b, PRM_ROOT_ROTATION]), q_root)
     assert np.allclose(child, child_expected, rtol=0.0, atol=1e-15), (child, child_expected)
     assert np.allclose(root, root_expected, rtol=0.0, atol=1e-15), (root, root_expected)
     # the child's half turn takes its rest edge onto the simulated one, against it
-    edge = np.subtract(_get(flipped, gc, st.POSITION, 3, LANE), root_position)
+    edge = np.subtract(_get(flipped, gc, st.POSITION, 3, lane), root_position)
     turned = q_rotate(child, q_rotate((-lq[0], -lq[1], -lq[2], lq[3]), q_rotate(
         (-q_root[0], -q_root[1], -q_root[2], q_root[3]), tv)))
     assert np.allclose(turned, edge, rtol=0.0, atol=1e-12)
 
     # every other lane: the bits E.2 gives it when no lane of the block is opposite
     plain_root, plain_child = _rotations(T, b, original, gx, gc)
-    others = np.array([[k * LANES + l for l in range(LANES) if l != LANE] for k in range(4)]).ravel()
+    others = np.array([[k * LANES + l for l in range(LANES) if l != lane] for k in range(4)]).ravel()
     assert root_rows[others].tobytes() == plain_root[others].tobytes()
     assert child_rows[others].tobytes() == plain_child[others].tobytes()
-    assert not np.allclose(child, plain_child[[k * LANES + LANE for k in range(4)]])
+    assert not np.allclose(child, plain_child[[k * LANES + lane for k in range(4)]])

@@ -135,7 +135,7 @@ def line_turn_pairs(PS, gx, t):
     lanes an iteration: lane h and lane h + LANES / 2. The turn's acos, sincos and
     normalisations are one long dependency chain per lane, and LLVM's vector loop runs one
     vector of lanes at a time; two independent vectors side by side keep the core's pipelines
-    busy (E.2 10-14 % faster on the light scene, docs/BENCHMARKS.md, session 33). The half is a
+    busy (E.2 about 11 % faster on the light scene, docs/BENCHMARKS.md, session 33). The half is a
     constant, so the two groups are known not to overlap and the loop still vectorises.
     Returns whether a lane's sums were opposite (its rotation is then kept, for the full pass)."""
     rare = False
