@@ -68,6 +68,20 @@ def chain_nodes(h, bones=5, name="tail"):
     return np.array([h.index(f"{name}_{i}") for i in range(bones)])
 
 
+def three_tails(parallel=None):
+    """Three line-mode tails of 4, 5 and 6 bones under their own roots (the middle one with the
+    skirt preset): three teams of different structure, so three blocks. Returns (system,
+    hierarchy)."""
+    bones = []
+    for i in range(3):
+        bones += [BoneSpec(f"root{i}", None, (i * 1.0, 1.0, 0.0))]
+        bones += rigs.chain(f"tail{i}", f"root{i}", 4 + i, 0.4, direction=(0.0, 0.0, -1.0))
+    h = TransformHierarchy(bones)
+    specs = [Spec(f"tail{i}", (h.index(f"tail{i}_0"),), h.index(f"root{i}"), "line",
+                  params("skirt" if i == 1 else None)) for i in range(3)]
+    return ClothSystem(h, specs, settings=Settings(), parallel=parallel), h
+
+
 def run(system, frames, dt=1.0 / 60.0, before=None):
     """Run frames with a fixed delta; ``before(frame)`` may move the rig (then propagate)."""
     for f in range(frames):

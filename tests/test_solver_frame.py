@@ -10,7 +10,7 @@ import pytest
 
 from magica_py.kernels.math3d import q_rotate
 from magica_py.scene.hierarchy import BoneSpec
-from solver_scenes import chain_nodes, chain_system, params, run
+from solver_scenes import chain_nodes, chain_system, params, run, three_tails
 
 
 def test_moving_bones_point_at_their_simulated_child_and_fixed_bones_keep_their_position():
@@ -246,25 +246,25 @@ def test_anchor_with_zero_anchor_inertia_removes_the_anchor_motion():
     assert lag > 0.01
 
 
-def test_parallel_kernel_is_bit_identical_to_the_serial_one_on_several_teams():
-    from magica_py.scene import rigs
-    from magica_py.scene.hierarchy import TransformHierarchy
-    from magica_py.solver.system import ClothSystem
-    from solver_scenes import Settings, Spec
+@pytest.mark.parametrize("shares", ["measured", "lopsided"])
+def test_parallel_kernel_is_bit_identical_to_the_serial_one_on_several_teams(monkeypatch, shares):
+    """Two threads on any machine (the frame's threads are Python threads, not numba's), with
+    the shares the threads' speeds give or with a different lopsided split every frame: the
+    shares decide only which thread runs a block."""
+    from magica_py.solver import balance, system
 
-    def build(parallel):
-        bones = []
-        for i in range(3):
-            bones += [BoneSpec(f"root{i}", None, (i * 1.0, 1.0, 0.0))]
-            bones += rigs.chain(f"tail{i}", f"root{i}", 4 + i, 0.4, direction=(0.0, 0.0, -1.0))
-        h = TransformHierarchy(bones)
-        specs = [Spec(f"tail{i}", (h.index(f"tail{i}_0"),), h.index(f"root{i}"), "line",
-                      params("skirt" if i == 1 else None)) for i in range(3)]
-        return ClothSystem(h, specs, settings=Settings(), parallel=parallel), h
+    monkeypatch.setattr(system.numba, "get_num_threads", lambda: 2)
+    if shares == "lopsided":
+        splits = iter([0.05, 0.95, 0.5, 0.2, 0.8] * 40)
 
+        def lopsided(self, seconds, load, workers, share):
+            share[0] = next(splits)
+            share[1] = 1.0 - share[0]
+        monkeypatch.setattr(balance.WorkerBalance, "update", lopsided)
     out = []
     for parallel in (False, True):
-        s, h = build(parallel)
+        s, h = three_tails(parallel)
+        assert s.threads == (2 if parallel else 1)
         frames = []
         for f in range(90):
             def move(_f, f=f):

@@ -120,8 +120,10 @@ StageSwitches = namedtuple("StageSwitches", [
     "angle", "bending", "point_collision", "edge_collision", "motion", "quality", "lines", "triangles", "wind",
     "colliders"])
 # the per-thread work table of a parallel frame: block_worker (blocks,) int32, worker_load
-# (threads,) int64 particle-steps (written by ``assign_workers`` each frame)
-WorkerTable = namedtuple("WorkerTable", ["block_worker", "worker_load"])
+# (threads,) int64 particle-steps (both written by ``assign_workers`` each frame), worker_share
+# (threads,) float64 the fraction of a frame's load each thread gets (written by the system
+# after each frame from the threads' measured speeds, ``solver/balance.py``; equal at first)
+WorkerTable = namedtuple("WorkerTable", ["block_worker", "worker_load", "worker_share"])
 
 
 def frame_input_values() -> np.ndarray:
@@ -152,7 +154,9 @@ def hierarchy_arrays(h) -> HierarchyArrays:
 
 
 def worker_table(block_capacity: int, threads: int) -> WorkerTable:
-    return WorkerTable(np.full(max(block_capacity, 1), -1, dtype=np.int32), np.zeros(max(threads, 1), dtype=np.int64))
+    threads = max(threads, 1)
+    return WorkerTable(np.full(max(block_capacity, 1), -1, dtype=np.int32), np.zeros(threads, dtype=np.int64),
+                       np.full(threads, 1.0 / threads))
 
 
 # rows of the tables a lane's save copies (module constants: the kernels read them as constants)
@@ -638,7 +642,7 @@ def simulate_frame(F, frame_values, area, wind_zones, angle, bending, point_coll
 
 
 @kernel(forceinline=False)
-def begin_parallel_frame(F, frame_values, block_worker, worker_load):
+def begin_parallel_frame(F, frame_values, block_worker, worker_load, worker_share):
     """A frame on several threads, before the threads: ``simulate_frame``'s scale suspension,
     culling and team clocks, then the blocks dealt to the threads (``assign_workers``,
     ``WorkerTable``). Returns the number of threads that get blocks. The system then runs
@@ -649,7 +653,7 @@ def begin_parallel_frame(F, frame_values, block_worker, worker_load):
     prepare_lanes(F)
     _time_frame_update(F, fi)
     workers = max(1, min(fi.threads, worker_load.shape[0]))
-    assign_workers(F, WorkerTable(block_worker, worker_load), workers)
+    assign_workers(F, WorkerTable(block_worker, worker_load, worker_share), workers)
     return workers
 
 
@@ -679,20 +683,30 @@ def end_parallel_frame(F, frame_values):
 @kernel(forceinline=False)
 def assign_workers(F, wt, workers):
     """``wt.block_worker`` for this frame: the live blocks cut into ``workers`` runs of
-    consecutive blocks of about equal load (a block's load: its particles times the lanes it
-    uses times the steps of its busiest lane, plus one for the frame stages). Consecutive
-    blocks on one thread keep each thread's writes (particle and team rows, team clocks, the
-    bones written back) in one region of memory, away from the other threads'."""
+    consecutive blocks, run w holding about ``wt.worker_share[w]`` of the frame's load (a
+    block's load: its particles times the lanes it uses times the steps of its busiest lane,
+    plus one for the frame stages); a block goes to the run its middle falls in, so that no
+    run is more than half a block off its share. Consecutive blocks on one thread keep each
+    thread's writes (particle and team rows, team clocks, the bones written back) in one
+    region of memory, away from the other threads'."""
     total = np.int64(0)
     for i in range(F.blocks.shape[0]):
         total += block_load(F, F.blocks[i])
+    shares = 0.0
     for w in range(workers):
         wt.worker_load[w] = 0
+        shares += wt.worker_share[w]
+    # run w ends at ``edge`` (in load units, doubled so that a block's middle is an integer)
+    scale = 2.0 * total / shares if shares > 0.0 else 0.0
+    w = 0
+    edge = wt.worker_share[0] * scale
     done = np.int64(0)
     for i in range(F.blocks.shape[0]):
         b = F.blocks[i]
-        w = min(workers - 1, int((done * workers) // max(total, 1)))
         load = block_load(F, b)
+        while w < workers - 1 and 2 * done + load >= edge:
+            w += 1
+            edge += wt.worker_share[w] * scale
         wt.block_worker[b] = w
         wt.worker_load[w] += load
         done += load

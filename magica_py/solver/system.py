@@ -42,6 +42,7 @@ from magica_py.kernels import portable
 from magica_py.params import default_parameters
 from magica_py.runtime.team_time import SimulationTimeSettings, TeamTimeState, update_mode_code
 from magica_py.solver import compile_helper
+from magica_py.solver.balance import WorkerBalance
 from magica_py.solver import state as st
 from magica_py.solver.blocks import (
     BI_COLLIDERS, BI_N, LANES, PARTICLE_PARAMETERS, TI_ANCHOR, TI_CULLING_REFERENCE, BlockLayout,
@@ -90,6 +91,17 @@ def choose_threads(parallel, setting, teams: int, particles: int) -> int:
         many = teams >= AUTO_PARALLEL_TEAMS and particles >= AUTO_PARALLEL_PARTICLES
         return available if many else 1
     return max(1, min(int(setting), available))
+
+
+def _timed_worker(seconds: list, start: float, head: tuple, worker: int, stages) -> None:
+    """Thread ``worker``'s run of a parallel frame (``simulate_worker``); the time it ends,
+    counted from ``start`` (when the threads were handed their runs: a thread's wake-up counts
+    too), into ``seconds[worker]``, the measure ``WorkerBalance`` deals the next frame's blocks
+    by."""
+    try:
+        simulate_worker(*head, worker, *stages)
+    finally:
+        seconds[worker] = _time.perf_counter() - start
 
 
 class ClothSystem:
@@ -405,6 +417,8 @@ class ClothSystem:
         most_c = int(lay.block_ints[blocks, BI_COLLIDERS].max()) if blocks.size else 0
         self._save_area = lane_save_area(most_n, most_c, self.threads)
         self._workers = worker_table(max(lay.block_count, 1), self.threads)
+        self._balance = WorkerBalance(self.threads)
+        self._worker_seconds = [0.0] * self.threads   # the last parallel frame's run of each thread, s
         self.stages = self.stage_switches()
         self._written_plan = self.hierarchy.plan(self.restored_bones())
         if register and self._player is not None:
@@ -685,8 +699,8 @@ class ClothSystem:
         (solver/frame.py). The first frame runs the workers one after the other in this thread,
         so that their kernel compiles here (the compile's announcement and timing, the compile
         helper)."""
-        block_worker, worker_load = self._workers
-        workers = begin_parallel_frame(F, fi, block_worker, worker_load)
+        block_worker, worker_load, worker_share = self._workers
+        workers = begin_parallel_frame(F, fi, block_worker, worker_load, worker_share)
         head = (F, fi, self._save_area, zones, block_worker)
         stages = self.stages
         pool = self._pool
@@ -695,11 +709,15 @@ class ClothSystem:
                 simulate_worker(*head, w, *stages)
             self._pool = FrameThreads(self.threads - 1)
         else:
-            pool.run([partial(simulate_worker, *head, w, *stages) for w in range(1, workers)])
+            seconds = self._worker_seconds
+            start = _time.perf_counter()
+            pool.run([partial(_timed_worker, seconds, start, head, w, stages) for w in range(1, workers)])
             try:
-                simulate_worker(*head, 0, *stages)
+                _timed_worker(seconds, start, head, 0, stages)
             finally:   # every thread's blocks finish before the frame closes or an error leaves
                 pool.join()
+            # the next frame's shares from the threads' speeds (the results do not depend on them)
+            self._balance.update(seconds, worker_load, workers, worker_share)
         return end_parallel_frame(F, fi)
 
     def _first_frame_call(self, fi) -> tuple:
