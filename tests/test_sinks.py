@@ -421,6 +421,23 @@ def test_a_failure_while_opening_leaves_no_temporary_file(tmp_path, monkeypatch)
     assert list(tmp_path.iterdir()) == []
 
 
+class _Interrupt(BaseException):
+    """Stands in for ^C (KeyboardInterrupt) or SIGTERM (cli.Terminated): not an Exception."""
+
+
+@pytest.mark.parametrize("where", ["send_recording_name", "_log_statics"])
+def test_an_interrupt_while_opening_leaves_no_temporary_file(tmp_path, monkeypatch, where):
+    """^C or SIGTERM while the stream's sinks open, or while the statics are written (a job
+    scheduler ending a run at its first frame): the interrupt goes on, the file does not stay."""
+    def interrupted(*args, **kwargs):
+        raise _Interrupt()
+
+    monkeypatch.setattr(rr.RecordingStream if where == "send_recording_name" else RerunSink, where, interrupted)
+    with pytest.raises(_Interrupt):
+        RerunSink(statics(), rrd_path=tmp_path / "x.rrd")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_spawn_and_connect_stream_with_one_frame_batches(tmp_path, monkeypatch):
     """Wiring only: the viewer start, the port checks and the gRPC sink are replaced."""
     from magica_py.sinks import live

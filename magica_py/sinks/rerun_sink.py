@@ -212,12 +212,15 @@ class RerunSink:
         self.live_urls = list(live_urls or [])
         self.batch_frames = batch_frames
         self.batch = max(1, int(batch_frames if batch_frames is not None else (1 if self.live else FILE_BATCH_FRAMES)))
-        sinks = []
-        if self.final_path is not None:
-            self.temp_path = self.final_path.with_name(f".{self.final_path.stem}.{os.getpid()}.partial.rrd")
-            sinks.append(rr.FileSink(str(self.temp_path)))
-        sinks += [rr.GrpcSink(url) for url in self.live_urls]
+        # from here on an error, ^C or SIGTERM (``cli.Terminated``, a BaseException) closes the
+        # stream and removes the temporary file before it leaves: the caller never got the sink,
+        # so nobody else could
         try:
+            sinks = []
+            if self.final_path is not None:
+                self.temp_path = self.final_path.with_name(f".{self.final_path.stem}.{os.getpid()}.partial.rrd")
+                sinks.append(rr.FileSink(str(self.temp_path)))
+            sinks += [rr.GrpcSink(url) for url in self.live_urls]
             self.metrics = FrameMetrics(statics.cloths,
                                         collider_kind if collider_kind is not None else np.zeros(0, np.int64),
                                         collider_slot if collider_slot is not None else np.zeros(0, np.int64))
@@ -226,16 +229,18 @@ class RerunSink:
                                           follow=open_at_end or self.live, wind=statics.wind_zones is not None)
             self.rec.set_sinks(*sinks, default_blueprint=blueprint)
             self.rec.send_recording_name(recording_name or statics.name or "magica_py")
-        except Exception as exc:  # noqa: BLE001 - rerun raises plain RuntimeError
-            self._discard()
-            raise OutputError(f"cannot open the recording output: {exc}") from exc
+        except BaseException as exc:
+            self._abandon()
+            if isinstance(exc, Exception):   # rerun raises plain RuntimeError
+                raise OutputError(f"cannot open the recording output: {exc}") from exc
+            raise
         self.closed = False
         try:
             self._prepare(statics, collider_kind, collider_slot, collider_set)
             if self.live:   # the statics must reach the viewer: fail before the first frame otherwise
                 self._flush_live("before the first frame")
-        except Exception:
-            self.close(success=False)   # no temporary file left behind
+        except BaseException:
+            self.close(success=False)
             raise
         self.seconds += time.perf_counter() - t0
 
@@ -564,6 +569,15 @@ class RerunSink:
                     self._discard()
         if live_error is not None:
             raise live_error
+
+    def _abandon(self) -> None:
+        """Opening failed or was interrupted: the stream's sinks are closed (so that no writer
+        creates the file again), then the temporary file is removed."""
+        try:
+            self.rec.disconnect()
+        except Exception:  # noqa: BLE001 - the stream may be half made; the file goes either way
+            pass
+        self._discard()
 
     def _discard(self) -> None:
         if self.temp_path is not None:
