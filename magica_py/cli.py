@@ -24,7 +24,8 @@ Exit codes: 0 success, 1 unexpected failure (with a traceback: a bug), 2 bad inp
 file, ``--set``, output path, build error: printed without a traceback), 130 interrupted (^C),
 143 terminated (SIGTERM).
 No partial output: the recording is written to a temporary name and renamed at the end by the
-sink; a failed or interrupted run deletes it.
+sink, every other file a command writes likewise (``magica_py/atomic.py``); a failed or
+interrupted run deletes the temporary file.
 
 Heavy modules (numpy, numba, rerun) are imported inside the commands, so ``--help`` is fast.
 """
@@ -37,6 +38,8 @@ import signal
 import sys
 import traceback
 import warnings
+
+from magica_py import atomic
 
 EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
 
@@ -454,7 +457,7 @@ def _avatar_scene(args):
         _check_scene_target(target)
         text = avatar_scene_text(vrm, args.clip, base_dir=target.parent.absolute())
         target.parent.mkdir(parents=True, exist_ok=True)
-        target.write_text(text, encoding="utf-8")
+        atomic.write_text(target, text)
         if not args.quiet:
             print(f"magica-py: wrote the scene to {target} (edit it, then: magica-py run {target})", file=sys.stderr)
         return load_scene(target, args.overrides)

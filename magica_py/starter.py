@@ -12,6 +12,8 @@ import pathlib
 import re
 import sys
 
+from magica_py import atomic
+
 TEMPLATES = {
     "ponytail": "a ponytail on a head that nods and turns, with a skull collider",
     "tail": "a tail on a creature running in a circle",
@@ -54,7 +56,7 @@ def write_starter(name: str, template: str = DEFAULT_TEMPLATE, force: bool = Fal
     if path.is_dir():
         raise ValueError(f"{path} is a folder")
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text, encoding="utf-8")
+    atomic.write_text(path, text)
     return path
 
 

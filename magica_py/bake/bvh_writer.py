@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from magica_py import atomic
 from magica_py.io import coords
 from magica_py.io.quat import qto_matrix
 
@@ -125,8 +126,5 @@ def write_bvh(path, motion, *, unit_scale: float = 1.0, mirror_axis: str = "x") 
     lines += ["MOTION", f"Frames: {f}", f"Frame Time: {frame_time:.10g}"]
     table = np.concatenate(columns, axis=1)
     body = "\n".join(" ".join(number(v) for v in row) for row in table)
-    path = Path(path)
-    tmp = path.with_name(path.name + ".partial")
-    tmp.write_text("\n".join(lines) + "\n" + body + "\n", encoding="utf-8")
-    tmp.replace(path)
+    atomic.write_text(Path(path), "\n".join(lines) + "\n" + body + "\n")
     return notes

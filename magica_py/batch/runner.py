@@ -20,6 +20,7 @@ import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from magica_py import atomic
 from magica_py.batch.executor import Executor, WorkerLost
 from magica_py.batch.jobs import Job
 from magica_py.batch.run_job import run_job
@@ -66,9 +67,7 @@ class _NoProgress:
 
 def _write_atomic(path: Path, data: bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".partial")
-    tmp.write_bytes(data)
-    tmp.replace(path)
+    atomic.write_bytes(path, data)
 
 
 def finished_rows(out: Path) -> dict[str, dict]:

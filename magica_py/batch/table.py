@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from magica_py import atomic
+
 LABEL_COLUMNS = ("scene", "clip", "override", "fps", "seed")
 METRIC_COLUMNS = ("frames", "particles", "max_stretch", "mean_stretch", "max_root_stretch", "max_penetration",
                   "mean_penetration", "max_speed", "mean_speed", "resets", "non_finite_frames", "particle_steps",
@@ -50,10 +52,9 @@ def write_summary(rows: list[dict], folder) -> tuple[Path, Path]:
     folder = Path(folder)
     table = to_table(sorted(rows, key=_row_order))
     parquet, csv = folder / "summary.parquet", folder / "summary.csv"
-    pq.write_table(table, str(parquet) + ".partial")
-    pacsv.write_csv(table, str(csv) + ".partial")
-    Path(str(parquet) + ".partial").replace(parquet)
-    Path(str(csv) + ".partial").replace(csv)
+    with atomic.replacing(parquet) as parquet_tmp, atomic.replacing(csv) as csv_tmp:
+        pq.write_table(table, str(parquet_tmp))
+        pacsv.write_csv(table, str(csv_tmp))
     return parquet, csv
 
 
@@ -112,7 +113,7 @@ def pareto_plot(rows: list[dict], path, metric: str = "max_stretch", cost: str =
     if groups:
         ax.legend(fontsize=6, ncol=2 if len(groups) > 8 else 1)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    atomic.save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 

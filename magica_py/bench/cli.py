@@ -40,6 +40,8 @@ import time
 
 import numpy as np
 
+from magica_py import atomic
+
 FREQUENCIES = (30, 45, 60, 90, 120, 180, 360, 720)
 SCENES = ("tail_orbit", "character_walk")
 
@@ -229,7 +231,7 @@ def _bench(args, families: dict, executor) -> int:
     elapsed = time.perf_counter() - started
     text = R.bench_markdown(results, extra, f"Machine: {machine_description()}. Wall time of the whole run: "
                                              f"{elapsed:.0f} s; {load.describe()}.")
-    (out / "bench.md").write_text(text)
+    atomic.write_text(out / "bench.md", text)
     checks = [c for res in results for c in res.checks]
     if not args.quiet:
         print(text)
@@ -430,8 +432,8 @@ def main_stability(argv) -> int:
     out.mkdir(parents=True, exist_ok=True)
     table = R.markdown_table(rows, R.STABILITY_COLUMNS)
     R.write_csv(out / "stability.csv", rows, R.STABILITY_COLUMNS)
-    (out / "stability.md").write_text(f"# magica-py stability ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())})"
-                                      f"\n\n{machine_description()}\n\n{table}\n")
+    atomic.write_text(out / "stability.md", f"# magica-py stability ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())})"
+                                            f"\n\n{machine_description()}\n\n{table}\n")
     if not args.quiet:
         print(table)
         print(f"\n{len(rows) - failed}/{len(rows)} cases within their bounds; written {out / 'stability.md'}")
@@ -485,7 +487,7 @@ def main_mocap(args) -> int:
             f"{'; parameters ' + ', '.join(f'{k}={v}' for k, v in params.items()) if params else ''}"
             f"\n\nEach cell: {legend}.\n\n{S.side_by_side_table(rows)}\n\n## Issue 16 bounds\n\n"
             f"{S.bound_summary(rows)}\n")
-    (out / "stability_mocap.md").write_text(text)
+    atomic.write_text(out / "stability_mocap.md", text)
     if not args.quiet:
         print(text)
         print(f"written: {out / 'stability_mocap.md'}, {out / 'stability_mocap.csv'}")

@@ -13,6 +13,8 @@ import time
 
 import numpy as np
 
+from magica_py import atomic
+
 BENCH_COLUMNS = (
     ("scene", "scene", "{}"),
     ("family", "family", "{}"),
@@ -73,7 +75,7 @@ def markdown_table(rows: list[dict], columns) -> str:
 def write_csv(path, rows: list[dict], columns) -> None:
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as fh:
+    with atomic.replacing(path) as tmp, tmp.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow([c[0] for c in columns])
         for r in rows:
@@ -331,5 +333,5 @@ def pareto_plot(path, results: list, title: str = "speed against short-horizon e
     fig.canvas.draw()
     for ax, points, labels in to_label:        # after the layout: the boxes are final
         label_points(ax, points, labels)
-    fig.savefig(path, dpi=110)
+    atomic.save_figure(fig, path, dpi=110)
     plt.close(fig)
