@@ -1,8 +1,8 @@
 """Output files written whole or not at all.
 
-Every file a command writes for the user (a baked BVH, a batch job's row and summary tables,
-bench reports and plots, a saved scene, a starter scene) is written under a temporary name
-beside its final one and renamed when complete: a reader sees the old file or the new one,
+Every file a command writes for the user (a baked glTF, VRM or BVH, a batch job's row and
+summary tables, bench reports and plots, a saved scene, a starter scene) is written under a
+temporary name beside its final one and renamed when complete: a reader sees the old file or the new one,
 never half of one. If the writing ends early, by an error, ^C or a job scheduler's SIGTERM
 (``cli.Terminated``: a ``BaseException``, like ``KeyboardInterrupt``), the temporary file is
 removed and the final path is left as it was. (The Rerun recording keeps its own temporary

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import pygltflib
 
+from magica_py import atomic
 from magica_py.io import coords
 from magica_py.io.gltf import _Buffers, read_document
 
@@ -187,19 +188,13 @@ def write_gltf(path, motion, *, source=None, node_of: dict[str, int] | None = No
         bin_name = path.with_suffix(".bin").name
         raw["buffers"] = [{"byteLength": len(data), "uri": urllib.parse.quote(bin_name)}]
     gltf = pygltflib.GLTF2.gltf_from_json(json.dumps(raw))
-    tmp = path.with_name(path.name + ".partial")
-    try:
+    # whole or not at all (magica_py/atomic.py); a .gltf's buffer is renamed just before it
+    with atomic.replacing(path) as tmp:
         if binary:
             gltf.set_binary_blob(data)
             gltf.save_binary(str(tmp))
         else:
-            bin_tmp = path.with_suffix(".bin.partial")
-            bin_tmp.write_bytes(data)
-            gltf.save_json(str(tmp))
-            bin_tmp.replace(path.with_suffix(".bin"))
-        tmp.replace(path)
-    finally:
-        for leftover in (tmp, path.with_suffix(".bin.partial")):
-            if leftover.exists():
-                leftover.unlink()
+            with atomic.replacing(path.with_suffix(".bin")) as bin_tmp:
+                bin_tmp.write_bytes(data)
+                gltf.save_json(str(tmp))
     return notes
