@@ -39,7 +39,10 @@ def _run(disable_jit: bool, snippet: str = SNIPPET) -> dict:
     env.pop("NUMBA_DISABLE_JIT", None)
     if disable_jit:
         env["NUMBA_DISABLE_JIT"] = "1"
-    out = subprocess.run([sys.executable, "-c", snippet], cwd=ROOT, env=env, capture_output=True, text=True,
+    # numpy's RuntimeWarnings (an overflow, a division by zero in a discarded branch) become
+    # errors: with the JIT off the kernels' arithmetic on numpy scalars warns where compiled
+    # code wraps or gives inf silently
+    out = subprocess.run([sys.executable, "-W", "error::RuntimeWarning", "-c", snippet], cwd=ROOT, env=env, capture_output=True, text=True,
                          timeout=1800)
     assert out.returncode == 0, out.stderr[-3000:]
     return json.loads(out.stdout.strip().splitlines()[-1])

@@ -62,7 +62,10 @@ def key_table(capacity: int) -> np.ndarray:
 def key_insert(table, key):
     """Insert ``key`` (>= 0); True when it was not there yet."""
     mask = table.shape[0] - 1
-    h = (key * 2654435761) & mask
+    # the low bits of key * 2654435761 depend only on the low bits of key: masking first keeps
+    # the product below 2**63 (the same slot; no int64 overflow, which numpy warns about when
+    # the build runs with NUMBA_DISABLE_JIT=1)
+    h = ((key & mask) * 2654435761) & mask
     while True:
         k = table[h]
         if k == key:
