@@ -381,6 +381,9 @@ def background_compile(argv: list[str]) -> int:
 
     folder = cache_folder()
     started = time.perf_counter()
+    # SIGTERM (``kill PID``, a test's clean-up) unwinds like ^C: the scratch folder, the
+    # recording's temporary file and the lock go with it
+    previous = cli._terminate_like_interrupt()
     try:
         args = cli.build_parser().parse_args(["run", *argv])
         if args.save_scene:
@@ -411,6 +414,10 @@ def background_compile(argv: list[str]) -> int:
         print(f"compiled {scene.name!r} in {time.perf_counter() - started:.1f} s ({watch.seconds:.1f} s compiling"
               f"{_peak_memory()})", flush=True)
         return 0
+    except (cli.Terminated, KeyboardInterrupt) as exc:
+        print(f"background compile {'terminated' if isinstance(exc, cli.Terminated) else 'interrupted'} after "
+              f"{time.perf_counter() - started:.1f} s (what compiled so far stays cached)", flush=True)
+        return cli.EXIT_TERMINATED if isinstance(exc, cli.Terminated) else cli.EXIT_INTERRUPTED
     except BaseException as exc:   # noqa: BLE001 - the log is the only place to say it
         import traceback
 
@@ -418,6 +425,10 @@ def background_compile(argv: list[str]) -> int:
         print(f"background compile failed: {exc}", flush=True)
         return 1
     finally:
+        if previous is not None:
+            import signal
+
+            signal.signal(signal.SIGTERM, previous)
         if folder is not None:
             try:
                 if _read_lock(folder)[0] == os.getpid():

@@ -111,12 +111,27 @@ def _wait_for_exit(pid, timeout):
     return False
 
 
+def _end_background(pid):
+    """End a background compile's process group: SIGTERM (it removes its scratch folder and
+    lock), then SIGKILL what is still there after 30 s."""
+    try:
+        os.killpg(pid, signal.SIGTERM)
+    except (ProcessLookupError, PermissionError):
+        return
+    if not _wait_for_exit(pid, 30):
+        try:
+            os.killpg(pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+
 def test_a_short_first_run_goes_interpreted_and_the_background_compile_serves_the_next_run(tmp_path):
     """The whole story on an empty cache: the run goes interpreted and says so, its recording
     is written; the background compile fills the cache; the next run compiles nothing and
     records the same particles and bones, bit for bit."""
     cache = tmp_path / "cache"
-    env = {"NUMBA_CACHE_DIR": str(cache), "MAGICA_FIRST_RUN": "auto", "MAGICA_STAGES": "used"}
+    env = {"NUMBA_CACHE_DIR": str(cache), "MAGICA_FIRST_RUN": "auto", "MAGICA_STAGES": "used",
+           "TMPDIR": str(tmp_path)}
     first = _cli(["run", TAIL, "--frames", "8", "--rrd", str(tmp_path / "first.rrd")], env)
     pid = None
     try:
@@ -133,10 +148,7 @@ def test_a_short_first_run_goes_interpreted_and_the_background_compile_serves_th
         assert first_run.frame_kernel_cached(cache)
     finally:
         if pid is not None:
-            try:
-                os.killpg(pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
+            _end_background(pid)
     second = _cli(["run", TAIL, "--frames", "8", "--rrd", str(tmp_path / "second.rrd")], env)
     assert second.returncode == 0, second.stderr
     assert "interpreted" not in second.stdout + second.stderr
@@ -196,7 +208,8 @@ def test_a_terminated_interpreted_run_ends_its_child_and_leaves_no_recording(tmp
     cache = tmp_path / "cache"
     env = dict(os.environ)
     env.pop("NUMBA_DISABLE_JIT", None)
-    env.update({"NUMBA_CACHE_DIR": str(cache), "MAGICA_FIRST_RUN": "auto", "MAGICA_STAGES": "used"})
+    env.update({"NUMBA_CACHE_DIR": str(cache), "MAGICA_FIRST_RUN": "auto", "MAGICA_STAGES": "used",
+                "TMPDIR": str(tmp_path)})
     out = tmp_path / "out"
     out.mkdir()
     run = subprocess.Popen([sys.executable, "-m", "magica_py.cli", "run", CHARACTER, "--frames", "25",
@@ -216,10 +229,36 @@ def test_a_terminated_interpreted_run_ends_its_child_and_leaves_no_recording(tmp
         if run.poll() is None:
             run.kill()
         if pid is not None:
-            try:
-                os.killpg(pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
+            _end_background(pid)
+
+
+def test_a_terminated_background_compile_removes_its_scratch_folder_and_lock_and_says_so(tmp_path):
+    """``kill PID`` of the background compile (its pid is in the run's note and the lock):
+    it unwinds like ^C, so that its scratch folder (the recording it writes) and its lock go,
+    and its log says it was terminated."""
+    cache, scratch = tmp_path / "cache", tmp_path / "tmp"
+    cache.mkdir()
+    scratch.mkdir()
+    env = dict(os.environ)
+    env.pop("NUMBA_DISABLE_JIT", None)
+    env.update({"NUMBA_CACHE_DIR": str(cache), "TMPDIR": str(scratch), "MAGICA_COMPILE_HELPER": "0"})
+    child = subprocess.Popen([sys.executable, "-m", "magica_py.first_run", TAIL, "--frames", "3"], cwd=ROOT,
+                             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        (cache / first_run.LOCK_NAME).write_text(first_run._lock_text(child.pid, [TAIL, "--frames", "3"]))
+        end = time.monotonic() + 120
+        while not list(scratch.glob("magica-first-run-*")) and time.monotonic() < end and child.poll() is None:
+            time.sleep(0.05)
+        assert list(scratch.glob("magica-first-run-*")), "the compile did not start"
+        time.sleep(1.0)   # compiling the tail's kernels (tens of seconds from an empty cache)
+        child.send_signal(signal.SIGTERM)
+        assert child.wait(timeout=60) == 143
+        assert "background compile terminated after" in child.stdout.read()
+        assert list(scratch.iterdir()) == []
+        assert not (cache / first_run.LOCK_NAME).exists()
+    finally:
+        if child.poll() is None:
+            child.kill()
 
 
 def test_a_compiling_run_waits_for_a_running_background_compile_and_says_so(monkeypatch, tmp_path):
