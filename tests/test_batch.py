@@ -107,9 +107,12 @@ def _executing(dask_worker):
     return [str(ts.key) for ts in dask_worker.state.executing]
 
 
-def test_two_worker_cluster_survives_a_killed_worker_with_the_same_bits(tmp_path, repo_root):
+def test_two_worker_cluster_survives_a_killed_worker_with_the_same_bits(tmp_path, repo_root, monkeypatch):
     from dask.distributed import Client, LocalCluster
 
+    # the killed worker's job folder cannot be removed by it: the workers' temporary folders
+    # (they inherit the environment) go to the test's own folder
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
     path = job_file(tmp_path, repo_root, "set:\n  cloths.tail.parameters.damping: [0.05, 0.1, 0.2, 0.4]\n")
     jobs = load_job_file(path).jobs
     reference = run_batch(jobs[:1], tmp_path / "here", Executor(workers=0)).rows[0]
