@@ -211,7 +211,7 @@ def warm_block(F, b, area, angle, bending, edge_collision, quality):
     stages compiled (``angle``, ``bending``, ``edge_collision``, ``quality``: the frame's
     stage switches, None where no team uses it); the stages' scratch rows are written before
     they are read, so they are not fetched (the light scene's kernel 3-5 % faster than reading
-    all 151 rows: docs/BENCHMARKS.md, session 30). The sum goes to the thread's save area
+    every row, 151 a slot then: docs/BENCHMARKS.md, session 30). The sum goes to the thread's save area
     (its last value, never read), so that the reads are kept; nothing else is written."""
     if F.BI[b, bk.BI_LANES_USED] < WARM_MIN_LANES or F.PS.shape[0] * F.PS.shape[1] < WARM_MIN_STATE_VALUES:
         return
