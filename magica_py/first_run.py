@@ -374,16 +374,15 @@ def background_compile(argv: list[str]) -> int:
     """The background compile's own work (``python -m magica_py.first_run RUN-ARGUMENTS``):
     the run's scene, solver and sink (recording to a scratch file, never to a viewer),
     the scene's frames (module docstring), compiled and cached. Returns 0, or 1 with the reason
-    in the log."""
+    in the log; SIGTERM ends it with 143 (``_end_on_sigterm``)."""
     import tempfile
 
     from magica_py import cli
 
     folder = cache_folder()
     started = time.perf_counter()
-    # SIGTERM (``kill PID``, a test's clean-up) unwinds like ^C: the scratch folder, the
-    # recording's temporary file and the lock go with it
-    previous = cli._terminate_like_interrupt()
+    scratches: list[str] = []
+    previous = _end_on_sigterm(folder, scratches, started)
     try:
         args = cli.build_parser().parse_args(["run", *argv])
         if args.save_scene:
@@ -393,6 +392,7 @@ def background_compile(argv: list[str]) -> int:
 
         # CompileWatch: Python's collector runs less often while numba compiles
         with CompileWatch() as watch, tempfile.TemporaryDirectory(prefix="magica-first-run-") as scratch:
+            scratches.append(scratch)
             scene = cli.load_run_scene(args)
             player = Player.for_scene(scene)
             cli._attach_solver(player, scene, [])
@@ -414,10 +414,6 @@ def background_compile(argv: list[str]) -> int:
         print(f"compiled {scene.name!r} in {time.perf_counter() - started:.1f} s ({watch.seconds:.1f} s compiling"
               f"{_peak_memory()})", flush=True)
         return 0
-    except (cli.Terminated, KeyboardInterrupt) as exc:
-        print(f"background compile {'terminated' if isinstance(exc, cli.Terminated) else 'interrupted'} after "
-              f"{time.perf_counter() - started:.1f} s (what compiled so far stays cached)", flush=True)
-        return cli.EXIT_TERMINATED if isinstance(exc, cli.Terminated) else cli.EXIT_INTERRUPTED
     except BaseException as exc:   # noqa: BLE001 - the log is the only place to say it
         import traceback
 
@@ -429,12 +425,42 @@ def background_compile(argv: list[str]) -> int:
             import signal
 
             signal.signal(signal.SIGTERM, previous)
-        if folder is not None:
-            try:
-                if _read_lock(folder)[0] == os.getpid():
-                    _lock_path(folder).unlink()
-            except OSError:
-                pass
+        _release_lock(folder)
+
+
+def _release_lock(folder: pathlib.Path | None) -> None:
+    """Remove the background compile's lock when this process holds it."""
+    if folder is not None:
+        try:
+            if _read_lock(folder)[0] == os.getpid():
+                _lock_path(folder).unlink()
+        except OSError:
+            pass
+
+
+def _end_on_sigterm(folder: pathlib.Path | None, scratches: list, started: float):
+    """Make SIGTERM (``kill PID``, a test's clean-up) end the background compile at once and
+    leave nothing behind: its scratch folders (the recording it writes), its lock, a line in
+    its log, exit status 143. The handler exits itself rather than raise: an exception raised
+    in the middle of numba's compiler can surface as another one or be lost inside it, the
+    compile carrying on for tens of seconds. What numba had cached stays (it writes each file
+    under a temporary name and renames it). Returns the previous handler (None where the
+    platform has no SIGTERM)."""
+    import shutil
+    import signal
+
+    if not hasattr(signal, "SIGTERM"):
+        return None
+
+    def end(signum, frame):
+        for path in scratches:
+            shutil.rmtree(path, ignore_errors=True)
+        _release_lock(folder)
+        print(f"background compile terminated after {time.perf_counter() - started:.1f} s (what compiled "
+              "so far stays cached)", flush=True)
+        os._exit(143)
+
+    return signal.signal(signal.SIGTERM, end)
 
 
 if __name__ == "__main__":
