@@ -143,7 +143,10 @@ def test_rest_alignment_lets_an_a_pose_target_follow_a_t_pose_source(cmu):
     _, aligned = pose_world(retarget(clip, anim.bones, target), tgt_h, times)
     for got, ref in zip(arm_directions(aligned, tgt_h), want):
         assert np.allclose(got, ref, atol=1e-9)
-    _, naive = pose_world(retarget(clip, anim.bones, target, align_rest=False), tgt_h, times)
+    with pytest.warns(UserWarning, match="45.0 deg off the source's") as caught:   # it says so, per bone
+        unaligned = retarget(clip, anim.bones, target, align_rest=False)
+    assert {str(w.message).split(": ")[1].split(" ")[0] for w in caught} == {"leftUpperArm", "leftLowerArm"}
+    _, naive = pose_world(unaligned, tgt_h, times)
     upper = arm_directions(naive, tgt_h)[0]
     angles = np.degrees(np.arccos(np.clip(np.sum(upper * want[0], axis=1), -1, 1)))
     assert np.allclose(angles, 45.0, atol=1.0)      # without alignment the arm keeps its 45 deg offset
