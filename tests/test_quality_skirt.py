@@ -1,7 +1,7 @@
 """Skirts that keep their shape in quality mode (issue 16 item 3, docs/quality-mode.md *Long
 chains and skirts*).
 
-* Oracles of the edge projection (``quality.edge_projection_lane``) on a hand-made ring: a
+* Oracles of the edge projection (``edge_projection.edge_projection_lane``) on a hand-made ring: a
   ring stretched uniformly (the slowest mode of its edges for Gauss-Seidel passes) comes
   back to its rest lengths in one projection, where two Gauss-Seidel passes leave most of the
   stretch; with a contact direction, the pushed particle does not move along it.
@@ -49,15 +49,15 @@ class Ring:
         self.hb.write(field, values)
 
     def project(self, iterations, contacts):
-        """One edge projection (``quality.edge_projection_lane``)."""
-        from magica_py.solver.quality import edge_projection_lane
+        """One edge projection (``edge_projection.edge_projection_lane``)."""
+        from magica_py.solver.edge_projection import edge_projection_lane
 
         hb = self.hb
         return edge_projection_lane(hb.PS, hb.PM, hb.EDS, hb.BI, hb.topology, hb.b, hb.lane, iterations, contacts)
 
     def edge_pass(self):
-        """One Gauss-Seidel edge pass (``quality.edge_pass_lanes``)."""
-        from magica_py.solver.quality import edge_pass_lanes
+        """One Gauss-Seidel edge pass (``edge_projection.edge_pass_lanes``)."""
+        from magica_py.solver.edge_projection import edge_pass_lanes
 
         hb = self.hb
         edge_pass_lanes(hb.PS, hb.PM, hb.BI, hb.topology, hb.b, hb.lane, hb.lane + 1)
@@ -77,7 +77,7 @@ def test_a_uniformly_stretched_ring_comes_back_in_one_projection():
     exact after one iteration up to the 0.1 % compliance; a uniform scaling is exact under
     the linearisation); two Gauss-Seidel edge passes leave > 3 % (each removes ~13 % of this
     mode on a 12-particle ring: 2 sin^2(pi/12))."""
-    from magica_py.solver.quality import PROJECTION_ITERATIONS
+    from magica_py.solver.edge_projection import PROJECTION_ITERATIONS
 
     ring = Ring(0.05)
     assert ring.project(PROJECTION_ITERATIONS, False)

@@ -87,7 +87,8 @@ def test_edge_pass_and_tight_tether_oracles():
 
     from magica_py.kernels.math3d import inverse_mass_friction_depth
     from magica_py.solver.parameters import PRM_TETHER_LIMIT
-    from magica_py.solver.quality import edge_pass_lanes, tight_tether_block
+    from magica_py.solver.edge_projection import edge_pass_lanes
+    from magica_py.solver.quality import tight_tether_block
 
     rest = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
 

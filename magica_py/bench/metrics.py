@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from magica_py.build.proxy import MOVE
+
 ZERO_LENGTH = 1e-9      # m; rest lengths below this are zero-length bones: no stretch ratio
 
 
@@ -54,7 +56,7 @@ def chain_geometry(model, rest_positions: np.ndarray) -> ChainGeometry:
     edge_rest = np.linalg.norm(rest[edges[:, 1]] - rest[edges[:, 0]], axis=1) if edges.size else np.zeros(0)
     parent = np.asarray(model.parent, dtype=np.int64)
     root = np.asarray(model.root_index, dtype=np.int64)
-    moving = (np.asarray(model.attribute) & 0x02) != 0
+    moving = (np.asarray(model.attribute) & MOVE) != 0
     root = np.where(moving, root, -1)
     root_rest = np.where(root >= 0, np.linalg.norm(rest - rest[np.maximum(root, 0)], axis=1), 0.0)
     arc = np.zeros(n)

@@ -12,6 +12,8 @@ from types import MappingProxyType
 
 import numpy as np
 
+from magica_py.build.proxy import FIXED, MOVE, ZERO_DISTANCE
+
 
 @dataclass(frozen=True, eq=False)
 class ClothModel:
@@ -121,9 +123,9 @@ def topology_hash(arrays: dict, features: dict) -> str:
 def describe(model: ClothModel) -> list[str]:
     """Human-readable summary of what was built and skipped (``magica-py info``)."""
     n = model.particle_count
-    fixed = int(np.count_nonzero(model.attribute & 0x01))
-    move = int(np.count_nonzero(model.attribute & 0x02))
-    zero = int(np.count_nonzero(model.attribute & 0x20))
+    fixed = int(np.count_nonzero(model.attribute & FIXED))
+    move = int(np.count_nonzero(model.attribute & MOVE))
+    zero = int(np.count_nonzero(model.attribute & ZERO_DISTANCE))
     out = [
         f"cloth {model.name!r}: {n} particles ({fixed} fixed, {move} move, {n - fixed - move} invalid), "
         f"mode {model.connection_mode}, {len(model.root_vertices)} roots",

@@ -15,12 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from magica_py.build.proxy import DISABLE_COLLISION, MOVE
 from magica_py.jit import kernel
 from magica_py.sinks.base import ClothTopology
 from magica_py.sinks.shapes import CAPSULE, PLANE, SPHERE
-
-MOVE = 0x02
-INVALID = 0x08
 
 
 # ----------------------------------------------------------------------------- kernels
@@ -128,11 +126,11 @@ class FrameMetrics:
         self.edges, self.rest = self.edges[keep], self.rest[keep]
         radius = [np.asarray(c.radius, dtype=np.float64).reshape(-1) for c in cloths]
         self.radius = np.concatenate(radius) if radius else np.zeros(0)
-        # (particle, collider slot) pairs per shape kind, Move and not Invalid particles only
+        # (particle, collider slot) pairs per shape kind: the particles D.8 collides (Move, collision not disabled)
         pairs = {SPHERE: ([], []), CAPSULE: ([], []), PLANE: ([], [])}
         for i, c in enumerate(cloths):
             attribute = np.asarray(c.attribute)
-            movable = np.flatnonzero(((attribute & MOVE) != 0) & ((attribute & INVALID) == 0)) + offsets[i]
+            movable = np.flatnonzero(((attribute & MOVE) != 0) & ((attribute & DISABLE_COLLISION) == 0)) + offsets[i]
             for col in np.asarray(c.colliders, dtype=np.int64):
                 if not 0 <= col < len(collider_kind):   # a collider the sink was not told about
                     continue

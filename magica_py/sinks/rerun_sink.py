@@ -27,6 +27,7 @@ import uuid
 
 import numpy as np
 
+from magica_py.build.proxy import FIXED, MOVE
 from magica_py.jit import kernel
 from magica_py.sinks import layout as L
 from magica_py.sinks.base import FrameData, SceneStatics
@@ -316,8 +317,8 @@ class RerunSink:
         for g in self.groups:
             colors = np.empty((g.count, 4), np.uint8)
             colors[:] = L.COLOR_MOVE
-            colors[(g.attribute & 0x01) != 0] = L.COLOR_FIXED
-            colors[(g.attribute & 0x08) != 0] = L.COLOR_INVALID
+            colors[(g.attribute & FIXED) != 0] = L.COLOR_FIXED
+            colors[(g.attribute & (FIXED | MOVE)) == 0] = L.COLOR_INVALID   # Invalid: neither (§B.5)
             if tg.particles:
                 rec.log(g.path("particles"), rr.Points3D.from_fields(radii=g.radius.astype(np.float32), colors=colors),
                         static=True)

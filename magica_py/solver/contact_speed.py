@@ -25,11 +25,12 @@ clamp.
 """
 from __future__ import annotations
 
+from magica_py.build.proxy import DISABLE_COLLISION, MOVE
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import clamp_length, q_inverse, q_rotate, v_add, v_dot, v_length, v_scale, v_sub
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
-from magica_py.solver.constraints.collision import FAR, INVALID_OR_NO_COLLISION, MOVE, PLANE, particle_radius
+from magica_py.solver.constraints.collision import FAR, PLANE, particle_radius
 from magica_py.solver.lanes import get1, get3, get4, put1, put3
 from magica_py.solver.parameters import PRM_CONTACT_SPEED_LIMIT, PRM_PARTICLE_SPEED_LIMIT
 from magica_py.solver.quality import step_axis_point
@@ -80,7 +81,7 @@ def contact_speed_block(PS, PP, TS, CS, P, BI, topology, b, dt):
     z = (0.0, 0.0, 0.0)
     for j in range(BI[b, bk.BI_N]):
         attr = topology[attribute + j]
-        if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
+        if (attr & MOVE) == 0 or (attr & DISABLE_COLLISION) != 0:
             continue
         g = g0 + j
         for l in range(w):

@@ -23,6 +23,7 @@ the colliders at this frame's pose as far as the edge bounds allow.
 """
 from __future__ import annotations
 
+from magica_py.build.proxy import MOVE
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import clamp_length, q_inverse, q_rotate, v_add, v_length, v_lerp, v_scale, v_sub
 from magica_py.solver import blocks as bk
@@ -30,7 +31,6 @@ from magica_py.solver import state as st
 from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
 from magica_py.solver.parameters import PRM_TIME_BASED_SMOOTHING
 
-MOVE = 0x02
 MAX_DISTANCE_RATIO = 1.3   # MaxDistanceRatioFutuerPrediction
 
 

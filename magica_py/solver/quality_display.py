@@ -8,17 +8,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from magica_py.build.proxy import DISABLE_COLLISION, MOVE
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import q_rotate, v_add, v_dot, v_length, v_length_sq, v_lerp, v_scale, v_sub
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
 from magica_py.solver.colliders import capsule_ends
 from magica_py.solver.constraints.collision import (
-    INVALID_OR_NO_COLLISION, PLANE, SPHERE, particle_radius, segment_parameter,
+    PLANE, SPHERE, particle_radius, segment_parameter,
 )
 from magica_py.solver.lanes import get1, get3, get4, put1, put3
 from magica_py.solver.parameters import PRM_COLLISION_LAST, PRM_COLLISION_MODE
-from magica_py.solver.quality import MOVE, clamp_to_sphere, push_out_of_ball
+from magica_py.solver.quality import clamp_to_sphere, push_out_of_ball
 
 DISPLAY_PASSES = 2        # collider push + edge clamp passes of the quality display
 DISPLAY_EDGE_PASSES = 2    # edge passes of the quality display's target after its collider push
@@ -220,7 +221,7 @@ def display_constraints_block(PS, PP, TS, CS, EDS, P, BI, topology, b, dt):
                 continue
             gv = g0 + v
             gp = g0 + p
-            hits = collide and (attr & INVALID_OR_NO_COLLISION) == 0
+            hits = collide and (attr & DISABLE_COLLISION) == 0
             for l in range(w):
                 if get1(TS, b, st.DISPLAY_LANE, l) == LANE_DONE:
                     continue

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from magica_py.build.proxy import BASELINE_INCLUDE_LINE, FIXED, MOVE, ZERO_DISTANCE
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     from_to_rotation_unit_select, opposite_unit, orthogonal_axis_select, q_axis_angle, q_inverse, q_mul,
@@ -23,10 +24,6 @@ from magica_py.solver import state as st
 from magica_py.solver.lanes import LANES, get1, get3, get4, put3, put4
 from magica_py.solver.parameters import PRM_ANIMATION_POSE_RATIO, PRM_ROOT_ROTATION, PRM_ROTATIONAL_INTERPOLATION
 
-FIXED = 0x01
-MOVE = 0x02
-ZERO_DISTANCE = 0x20
-INCLUDE_LINE = 0x01
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
 
@@ -220,7 +217,7 @@ def line_rotations_block(PS, PM, TS, P, BI, topology, b):
     for l in range(w):
         blend = blend | (get1(TS, b, st.BLEND_WEIGHT, l) != 1.0)
     for line in range(lines):
-        if (topology[bl_flags + line] & INCLUDE_LINE) == 0:
+        if (topology[bl_flags + line] & BASELINE_INCLUDE_LINE) == 0:
             continue
         e0 = topology[bl_start + line]
         for e in range(e0, e0 + topology[bl_count + line]):

@@ -134,7 +134,7 @@ ANGLE_ROWS = (ANGLE_LENGTH // LANES, PARTICLE.rows)
 DISPLAY_LOCAL = _p("display_local", 3, "m; state of the last step in its display frame (D.10)")
 DISPLAY_PREV_LOCAL = _p("display_prev_local", 3, "m; state of the step before it, same frame (D.10)")
 DISPLAY_HISTORY = _p("display_history", 1, "0-2: step states recorded since the last reset (C.5 sets 0)", INTEGER)
-# quality mode's edge projection (quality.edge_projection_block, per step)
+# quality mode's edge projection (edge_projection.edge_projection_lane, per step)
 PROJECTION_INVERSE_MASS = _p("projection_inverse_mass", 1, "inverse mass of the edge projection (0: fixed)")
 PROJECTION_GATHER = _p("projection_gather", 3, "W J^T p of the projection's conjugate gradients")
 PROJECTION_CONTACT = _p("projection_contact", 3, "unit or 0; direction collision last pushed it this step")
@@ -190,7 +190,7 @@ DISPLAY_ALPHA = _t("display_alpha", 1, "[0,1): quality display's time since the 
 DISPLAY_LANE = _t("display_lane", 1, "quality display's progress of the lane (quality_display.py, the frame): "
                   "0 done, 1 shown, 2 moving, 3 in the move passes", INTEGER)
 PROJECTION_NEEDED = _t("projection_needed", 1, "1: an edge of the lane is stretched beyond the edge projection's "
-                       "threshold (quality.stretched_lanes, the inextensibility pass)", INTEGER)
+                       "threshold (edge_projection.stretched_lanes, the inextensibility pass)", INTEGER)
 DISPLAY_COMMON = _t("display_common", 1, "[0,1]; quality display: the team's common move fraction (the frame)")
 RAMP_FROM_BUILD = _t("ramp_from_build", 1, "1 while the team's last reset was the build reset (quality)", INTEGER)
 # component pose (C.2)

@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from magica_py.build.proxy import MOVE
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     lerp, q_angle, q_from_to, q_to_angle_axis,
@@ -32,7 +33,6 @@ from magica_py.solver.parameters import (
     clamp01, step_keep, step_rate, step_share,
 )
 
-MOVE = 0x02
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 FRICTION_DAMPING_RATE = 0.6
 STATIC_FRICTION_GAIN = 0.04

@@ -10,14 +10,12 @@ from __future__ import annotations
 
 import math
 
+from magica_py.build.proxy import FIXED, MOVE
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import q_inverse, q_mul, q_normalize, q_normalize_select, q_rotate, v_sub
 from magica_py.solver import blocks as bk
 from magica_py.solver import state as st
 from magica_py.solver.lanes import get1, get3, get4, put1, put3, put4
-
-FIXED = 0x01
-MOVE = 0x02
 
 
 @kernel(inline="always")

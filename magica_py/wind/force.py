@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from magica_py.build.proxy import MOVE
 from magica_py.jit import kernel
 from magica_py.kernels import portable
 from magica_py.kernels.math3d import lerp, saturate, unlerp, v_add, v_scale
@@ -46,7 +47,6 @@ from magica_py.solver.parameters import (
 )
 from magica_py.wind.noise import cnoise
 
-MOVE = 0x02
 WIND_BASE_SPEED = 7.5        # m/s, Define.System.WindBaseSpeed
 WIND_MAX_TIME = 10000.0      # Define.System.WindMaxTime: phase wrap (and the start value, negated)
 WIND_MIN_MAIN = 0.01         # m/s: weaker zones are skipped

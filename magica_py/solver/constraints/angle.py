@@ -28,6 +28,7 @@ import math
 
 import numpy as np
 
+from magica_py.build.proxy import MOVE
 from magica_py.jit import kernel
 from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
@@ -43,7 +44,6 @@ from magica_py.solver.parameters import (
     clamp01, step_rate,
 )
 
-MOVE = 0x02
 ITERATIONS = 3               # AngleLimitIteration
 LIMIT_ATTENUATION = 0.9      # AngleLimitAttenuation
 LIMIT_PIVOT = 0.4

@@ -17,6 +17,7 @@ import math
 import numpy as np
 
 
+from magica_py.build.proxy import MOVE
 from magica_py.jit import kernel
 from magica_py.kernels import trig
 from magica_py.kernels.math3d import (
@@ -27,7 +28,6 @@ from magica_py.solver import state as st
 from magica_py.solver.lanes import LANES, get1, get3, put1, put3
 from magica_py.solver.parameters import PRM_BENDING_STIFFNESS, PRM_QUALITY, PRM_RATE_MODE, constraint_stiffness
 
-MOVE = 0x02
 FIXED_POINT = 1e6
 DONT_MOVE_INVERSE_MASS = 0.01
 ZERO3 = (0.0, 0.0, 0.0)

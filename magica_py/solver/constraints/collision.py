@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 
+from magica_py.build.proxy import DISABLE_COLLISION, MOVE
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     closest_segment_segment, q_rotate, saturate, v_add, v_dot, v_length, v_length_sq, v_lerp, v_normalize, v_scale,
@@ -29,8 +30,6 @@ from magica_py.solver.lanes import get1, get3, get4, put1, put3
 
 from magica_py.solver.constraints.bending import FIXED_POINT
 
-MOVE = 0x02
-INVALID_OR_NO_COLLISION = 0x10
 SPHERE = 0
 CAPSULE = 1
 PLANE = 2
@@ -172,7 +171,7 @@ def point_collision_block(PS, PP, TS, CS, BI, topology, b):
     z = (0.0, 0.0, 0.0)
     for j in range(BI[b, bk.BI_N]):
         attr = topology[attribute + j]
-        if (attr & MOVE) == 0 or (attr & INVALID_OR_NO_COLLISION) != 0:
+        if (attr & MOVE) == 0 or (attr & DISABLE_COLLISION) != 0:
             continue
         g = g0 + j
         for l in range(w):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from magica_py.build.proxy import MOVE
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import (
     inverse_mass_friction_depth, lerp, saturate, v_add, v_length, v_scale, v_sub,
@@ -24,8 +25,6 @@ from magica_py.solver.parameters import (
     PRM_ANIMATION_POSE_RATIO, PRM_QUALITY, PRM_RATE_MODE, clamp01, constraint_stiffness,
 )
 
-MOVE = 0x02
-FIXED = 0x01
 VELOCITY_ATTENUATION = 0.3   # DistanceVelocityAttenuation
 FIX_MASS = 50.0              # inverse mass of a fixed partner is 1/50
 ZERO3 = (0.0, 0.0, 0.0)

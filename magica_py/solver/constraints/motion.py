@@ -7,6 +7,7 @@ side by side."""
 from __future__ import annotations
 
 
+from magica_py.build.proxy import INVALID_MOTION, MOVE
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import q_rotate, v_add, v_length, v_lerp, v_scale, v_sub
 from magica_py.solver import blocks as bk
@@ -18,8 +19,6 @@ from magica_py.solver.parameters import (
     PRM_USE_BACKSTOP, PRM_USE_MAX_DISTANCE,
 )
 
-MOVE = 0x02
-INVALID_MOTION = 0x08
 VELOCITY_ATTENUATION = 0.95
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from magica_py.build.proxy import MOVE
 from magica_py.jit import kernel
 from magica_py.kernels.math3d import saturate, v_add, v_length, v_scale, v_sub
 from magica_py.solver import blocks as bk
@@ -13,7 +14,6 @@ from magica_py.solver import state as st
 from magica_py.solver.lanes import get3, put3
 from magica_py.solver.parameters import PRM_QUALITY, PRM_RATE_MODE, PRM_TETHER_COMPRESSION, step_rate
 
-MOVE = 0x02
 STRETCH_LIMIT = 0.03          # TetherStretchLimit
 STIFFNESS_WIDTH = 0.3         # TetherStiffnessWidth
 COMPRESSION_STIFFNESS = 1.0   # TetherCompressionStiffness
