@@ -17,7 +17,7 @@ from collections.abc import Mapping
 
 from magica_py.params.curves import Curve, evaluate_curve, evaluate_curve_clamp01
 from magica_py.params.presets import PRESETS
-from magica_py.params.table import LIMIT_ENABLED_DEFAULTS, PARAMETER_DEFS, PARAMETERS, ParameterDef
+from magica_py.params.table import INTEGER_PARAMETERS, LIMIT_ENABLED_DEFAULTS, PARAMETER_DEFS, PARAMETERS, ParameterDef
 
 __all__ = [
     "Curve", "ClothParameters", "ParameterError", "PARAMETERS", "PARAMETER_DEFS", "PRESETS",
@@ -162,7 +162,10 @@ def parse_value(d: ParameterDef, raw, where: str, current=None):
     """Validate and convert one raw (YAML) value for parameter ``d``."""
     kind = d.kind
     if kind == "float":
-        return _check_range(d, _number(raw, where), where)
+        value = _number(raw, where)
+        if d.key in INTEGER_PARAMETERS and value != int(value):
+            raise ParameterError(where, f"expected a whole number, got {raw!r}")
+        return _check_range(d, value, where)
     if kind == "curve":
         if isinstance(raw, (int, float)) and not isinstance(raw, bool) and isinstance(current, Curve) and current.use_curve:
             # a bare number on a curve parameter rescales the curve, like the inspector's value field

@@ -77,7 +77,7 @@ PARAMETER_DEFS: tuple[ParameterDef, ...] = (
     _p("angle_restoration.use", "bool", True, ref="D.6", doc="Restore each edge towards its rest direction."),
     _p("angle_restoration.stiffness", "curve", {"value": 0.2, "curve": [1.0, 0.2]}, 0, 1, "", "D.6", "Restoration stiffness over depth; the job table is value x 0.2."),
     _p("angle_restoration.velocity_attenuation", "float", 0.8, 0, 1, "", "D.6", "Fraction of the restoration correction not turned into velocity."),
-    _p("angle_restoration.gravity_falloff", "float", 0.0, 0, 1, "", "D.6", "Weakens restoration while gravity pulls along the rest direction."),
+    _p("angle_restoration.gravity_falloff", "float", 0.0, 0, 1, "", "D.6", "Weakens restoration (to 1 - value) as the cloth's center frame turns away from its build orientation against gravity (gravity_dot of C.3): no effect while the build orientation is kept, full upside down."),
     _p("angle_limit.use", "bool", False, ref="D.5", doc="Limit the angle between each edge and its rest direction."),
     _p("angle_limit.limit_angle", "curve", {"value": 60.0, "curve": [0.0, 1.0]}, 0, 180, "deg", "D.5", "Maximum angle over depth (evaluated without clamp)."),
     _p("angle_limit.stiffness", "float", 1.0, 0, 1, "", "D.5", "How far a violating edge is brought back to the limit per iteration."),
@@ -141,5 +141,8 @@ LIMIT_ENABLED_DEFAULTS = {
     "inertia.particle_speed_limit": 4.0,
     "culling.distance_culling_length": 30.0,
 }
+
+# ``float`` parameters that take whole numbers only (validated: 2.5 is an error naming the path)
+INTEGER_PARAMETERS = frozenset({"solver.distance_iterations"})
 
 PARAMETERS = {d.key: d for d in PARAMETER_DEFS}

@@ -6,7 +6,8 @@ teams contiguous in team order, so the sink gathers each field once per frame wh
 number of cloths (a cloth's frame is a slice of it). What is read (all world space, after
 LATE_UPDATE):
 
-* ``particles.position``        display positions (docs/solver.md §E.1 overwrites the base pose with them)
+* ``particles.position``        display positions (docs/solver.md §E.1 overwrites the base pose with them;
+  a team not simulated this frame, culled or disabled, at its bones: ``display_positions``)
 * ``particles.base_pos_buffer`` the animated base pose of this frame (§C.1, kept for §E.2)
 * ``time_state.update_count``   steps each team ran this frame (§A.4)
 
@@ -70,7 +71,13 @@ class ClothSystemSnapshots:
 
     # fast path used by the recorder: one array for every cloth
     def particle_positions(self) -> np.ndarray:
-        return self.system.particles.position
+        return self._positions()
+
+    def _positions(self) -> np.ndarray:
+        """Display positions; a team not simulated this frame (culled, disabled) at its bones
+        (``ClothSystem.display_positions``)."""
+        display = getattr(self.system, "display_positions", None)
+        return display() if display is not None else self.system.particles.position
 
     def particle_base_positions(self) -> np.ndarray:
         return self.system.particles.base_pos_buffer
@@ -87,7 +94,7 @@ class ClothSystemSnapshots:
 
     def cloth_frames(self) -> list[ClothFrame]:
         s, m = self.system, self.system.model
-        position = s.particles.position          # one gather per field for every cloth
+        position = self._positions()             # one gather per field for every cloth
         base = s.particles.base_pos_buffer
         frames = []
         for t in range(len(s.team_names)):

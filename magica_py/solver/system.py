@@ -667,8 +667,35 @@ class ClothSystem:
 
     # ------------------------------------------------------------------ queries
     def positions(self, cloth) -> np.ndarray:
-        """Display positions (world, m) of one cloth's particles (a copy)."""
-        return self.read_particles(self.teams_of(cloth)[0], "position")
+        """Display positions (world, m) of one cloth's particles (a copy); a team not
+        simulated this frame reports its bones' positions (``display_positions``)."""
+        team = self.teams_of(cloth)[0]
+        if self.read_team(team, "active") == 0.0:
+            return self._bone_positions(team)
+        return self.read_particles(team, "position")
+
+    def _bone_positions(self, team: int) -> np.ndarray:
+        """World positions of a team's bones (particle order)."""
+        m = self.model
+        start, count = int(m.team_particle_start[team]), int(m.team_particle_count[team])
+        nodes = np.asarray(m.transform_index[start:start + count], np.int64)
+        return np.array(self.hierarchy.world_position[nodes], dtype=np.float64)
+
+    def display_positions(self) -> np.ndarray:
+        """``particles.position`` of every live team (team order, (P, 3), world m), except that
+        a team not simulated this frame (distance culled, disabled or scale-suspended:
+        ``ACTIVE`` 0; docs/solver.md §H.1, §H.2) reports its bones' world positions: its
+        bones are not written from the particles, which hold stale values (zeros for a team
+        culled since its first frame), so the API, the recordings and their metrics show the
+        bones as they are rather than a cloth at the origin with 100 % stretch."""
+        position = self.particles.position
+        m = self.model
+        for team in np.flatnonzero(self.teams.active == 0):   # one gather of every team's flag
+            if self.models[team] is None or int(m.team_particle_count[team]) == 0:
+                continue
+            start, count = int(m.team_particle_start[team]), int(m.team_particle_count[team])
+            position[start:start + count] = self._bone_positions(team)
+        return position
 
     # ------------------------------------------------------------------ internals
     def select_wind(self) -> None:
