@@ -30,7 +30,7 @@ def replacing(path):
     finally:
         try:
             os.unlink(tmp)
-        except FileNotFoundError:
+        except OSError:   # never created (missing or unwritable folder): the original error stands
             pass
 
 

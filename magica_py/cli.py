@@ -260,8 +260,9 @@ def _is_input_error(exc: BaseException) -> bool:
 
     if isinstance(exc, (ConfigError, InputError)):
         return True
-    # errors that name a bad input of the user: output path, build of a cloth
-    return type(exc).__name__ in ("OutputError", "BuildError", "ParameterError", "RecordingError")
+    # errors that name a bad input of the user: output path, build of a cloth, an asset file
+    # (``magica-py run AVATAR.vrm`` imports the file before any scene exists)
+    return type(exc).__name__ in ("OutputError", "BuildError", "ParameterError", "RecordingError", "AssetError")
 
 
 def _format_input_error(exc: BaseException) -> str:

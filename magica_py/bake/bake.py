@@ -141,6 +141,10 @@ def check_output(out) -> Path:
         raise BakeError(f"--out {str(out)!r} is a folder; give a file name")
     if not out.parent.exists():
         raise BakeError(f"--out {str(out)!r}: the folder {str(out.parent)!r} does not exist")
+    if not out.parent.is_dir():
+        raise BakeError(f"--out {str(out)!r}: {str(out.parent)!r} is not a folder")
+    if not os.access(out.parent, os.W_OK):
+        raise BakeError(f"--out {str(out)!r}: the folder {str(out.parent)!r} is not writable")
     return out
 
 
@@ -228,7 +232,10 @@ def bake_scene(scene_path, out, overrides=(), bones=None, frames: int | None = N
             chosen, source = plan_bones(scene, out, bones, rig, rigs)
         motion = simulate_and_capture(scene, chosen, count, progress, compile_watch)
         with Stopwatch(compile_watch) as writing:
-            notes = bake_capture(scene, motion, out, source, rigs, units, animation_name)
+            try:
+                notes = bake_capture(scene, motion, out, source, rigs, units, animation_name)
+            except OSError as exc:   # written whole or not at all (atomic): nothing is left behind
+                raise BakeError(f"--out {str(out)!r}: cannot write the file ({exc.strerror or exc})") from None
     size = out.stat().st_size + (out.with_suffix(".bin").stat().st_size if out.suffix.lower() == ".gltf" else 0)
     return BakeResult(out, motion, size, loading.seconds, motion.wall_time, writing.seconds, notes, whole.compiled)
 

@@ -116,15 +116,18 @@ class _Tokens:
         line = self.line()
         tok = self.next()
         try:
-            return float(tok)
+            value = float(tok)
         except ValueError:
             raise AssetError(self.path, f"line {line}", f"expected a number for {what}, got {tok!r}") from None
+        if not np.isfinite(value):
+            raise AssetError(self.path, f"line {line}", f"expected a finite number for {what}, got {tok!r}")
+        return value
 
 
 def parse_bvh(path) -> BvhFile:
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
+        text = path.read_text(encoding="utf-8-sig", errors="replace")   # -sig: a byte-order mark is skipped
     except OSError as exc:
         raise AssetError(path, "", f"cannot read the file ({exc.strerror or exc})") from None
     lines = text.splitlines()
@@ -188,23 +191,26 @@ def parse_bvh(path) -> BvhFile:
     if tokens.peek() is not None:
         raise AssetError(path, f"line {tokens.line()}", f"unexpected {tokens.peek()!r} after the hierarchy")
 
-    header = [l for l in lines[motion_line + 1:motion_line + 3]]
+    # the two header lines after MOTION (blank lines between them are skipped)
+    header = [n for n in range(motion_line + 1, len(lines)) if lines[n].strip()][:2]
+    frames_line = header[0] if header else motion_line + 1
     try:
-        key, value = header[0].split(":", 1)
+        key, value = lines[header[0]].split(":", 1)
         assert key.strip().lower() == "frames"
         frame_count = int(value)
     except (IndexError, ValueError, AssertionError):
-        raise AssetError(path, f"line {motion_line + 2}", "expected 'Frames: <count>'") from None
+        raise AssetError(path, f"line {frames_line + 1}", "expected 'Frames: <count>'") from None
+    time_line = header[1] if len(header) > 1 else frames_line + 1
     try:
-        key, value = header[1].split(":", 1)
+        key, value = lines[header[1]].split(":", 1)
         assert key.strip().lower() == "frame time"
         frame_time = float(value)
     except (IndexError, ValueError, AssertionError):
-        raise AssetError(path, f"line {motion_line + 3}", "expected 'Frame Time: <seconds>'") from None
-    if not frame_time > 0.0:
-        raise AssetError(path, f"line {motion_line + 3}", f"frame time must be positive, got {frame_time}")
-    first = motion_line + 3
-    rows = []
+        raise AssetError(path, f"line {time_line + 1}", "expected 'Frame Time: <seconds>'") from None
+    if not 0.0 < frame_time < np.inf:
+        raise AssetError(path, f"line {time_line + 1}", f"frame time must be a positive finite number of seconds, got {frame_time}")
+    first = time_line + 1
+    rows, row_lines = [], []
     for n in range(first, len(lines)):
         values = lines[n].split()
         if not values:
@@ -212,20 +218,31 @@ def parse_bvh(path) -> BvhFile:
         if len(values) != column:
             raise AssetError(path, f"line {n + 1}", f"frame {len(rows)} has {len(values)} values but the hierarchy declares {column} channels")
         rows.append(values)
+        row_lines.append(n + 1)
     if len(rows) != frame_count:
         if abs(len(rows) - frame_count) != 1 or not rows:
-            raise AssetError(path, f"line {motion_line + 2}",
+            raise AssetError(path, f"line {frames_line + 1}",
                              f"header declares {frame_count} frames but the file has {len(rows)}")
         # exporters commonly count the T-pose frame or not: one frame off is read as written
-        warnings.warn(f"{path}: line {motion_line + 2}: header declares {frame_count} frames but the file has "
+        warnings.warn(f"{path}: line {frames_line + 1}: header declares {frame_count} frames but the file has "
                       f"{len(rows)}; all {len(rows)} frames are read", UserWarning, stacklevel=2)
         frame_count = len(rows)
     try:
         motion = np.array(rows, dtype=np.float64).reshape(frame_count, column)
     except ValueError:
+        for f, row in enumerate(rows):
+            for c, tok in enumerate(row):
+                try:
+                    float(tok)
+                except ValueError:
+                    raise AssetError(path, f"line {row_lines[f]}", f"frame {f}, channel {c + 1}: expected a number, "
+                                     f"got {tok!r}") from None
         raise AssetError(path, "MOTION", "frame data contains a value that is not a number") from None
-    if not np.all(np.isfinite(motion)):
-        raise AssetError(path, "MOTION", "frame data contains NaN or infinite values")
+    bad = np.argwhere(~np.isfinite(motion))
+    if bad.size:
+        f, c = (int(x) for x in bad[0])
+        raise AssetError(path, f"line {row_lines[f]}", f"frame {f}, channel {c + 1}: expected a finite number, "
+                         f"got {rows[f][c]!r}")
     return BvhFile(path, names, parents, np.array(offsets, dtype=np.float64), channels, starts, ends,
                    frame_count, frame_time, motion)
 

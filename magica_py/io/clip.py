@@ -151,6 +151,11 @@ class Clip:
             tracks.append(Track(tr.node, tr.path, times - start, values, tr.interpolation))
         return replace(self, tracks=tracks, notes=self.notes + [f"trimmed to [{start:g}, {end:g}] s"])
 
+    def pose_at(self, t: float) -> "Clip":
+        """A one-key clip holding the pose at time ``t`` (every track sampled there, at time 0)."""
+        tracks = [Track(tr.node, tr.path, np.zeros(1), sample_track_many(tr, [float(t)]), "linear") for tr in self.tracks]
+        return replace(self, tracks=tracks, notes=self.notes + [f"the pose at {t:g} s"])
+
     def frame_times(self) -> np.ndarray:
         """Times (s) of the source's frames: multiples of ``frame_time`` (BVH) up to the
         duration, else every distinct key time of the tracks (glTF has no frame rate)."""

@@ -95,7 +95,7 @@ def read_document(path) -> tuple[pygltflib.GLTF2, bytes | None, dict]:
     except json.JSONDecodeError as exc:
         raise AssetError(path, f"line {exc.lineno} column {exc.colno}", f"invalid glTF JSON: {exc.msg}") from None
     _check_top_level(path, raw)
-    return _document(raw), None, raw
+    return _document(path, raw), None, raw
 
 
 def _read_glb(path: Path, data: bytes):
@@ -123,11 +123,16 @@ def _read_glb(path: Path, data: bytes):
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise AssetError(path, "GLB JSON chunk", f"invalid JSON ({exc})") from None
     _check_top_level(path, raw)
-    return _document(raw), chunks.get(b"BIN\x00"), raw
+    return _document(path, raw), chunks.get(b"BIN\x00"), raw
 
 
-def _document(raw: dict) -> pygltflib.GLTF2:
-    return pygltflib.GLTF2.gltf_from_json(json.dumps({k: raw[k] for k in _DOCUMENT_KEYS if k in raw}))
+def _document(path: Path, raw: dict) -> pygltflib.GLTF2:
+    try:
+        return pygltflib.GLTF2.gltf_from_json(json.dumps({k: raw[k] for k in _DOCUMENT_KEYS if k in raw}))
+    except (TypeError, ValueError, AttributeError, KeyError) as exc:
+        # a value of the wrong type (a string where numbers belong, ...): pygltflib's decoder
+        # does not say where; the nodes' TRS are checked again with their path at load
+        raise AssetError(path, "glTF JSON", f"a value of the wrong type for glTF 2.0 ({type(exc).__name__}: {exc})") from None
 
 
 def _check_top_level(path: Path, raw) -> None:
@@ -135,6 +140,23 @@ def _check_top_level(path: Path, raw) -> None:
         raise AssetError(path, "$", f"expected a glTF JSON object, got {type(raw).__name__}")
     if "asset" not in raw:
         raise AssetError(path, "asset", "missing (every glTF 2.0 file has asset.version)")
+    for key in ("scenes", "nodes", "skins", "animations", "buffers", "accessors", "bufferViews"):
+        items = raw.get(key)
+        if items is None:
+            continue
+        if not isinstance(items, list):
+            raise AssetError(path, key, f"expected an array of objects, got {type(items).__name__}")
+        for k, item in enumerate(items):
+            if not isinstance(item, dict):
+                raise AssetError(path, f"{key}[{k}]", f"expected an object, got {item!r}")
+    for i, node in enumerate(raw.get("nodes") or []):
+        for key, size in (("translation", 3), ("rotation", 4), ("scale", 3), ("matrix", 16)):
+            value = node.get(key)
+            if value is not None and not (isinstance(value, list) and all(
+                    isinstance(x, (int, float)) and not isinstance(x, bool) for x in value)):
+                text = repr(value)
+                raise AssetError(path, f"nodes[{i}].{key}", f"expected {size} numbers, got "
+                                 f"{text if len(text) <= 80 else text[:77] + '...'}")
     scenes = raw.get("scenes")
     if not isinstance(scenes, list) or not scenes:
         raise AssetError(path, "scenes", "no scene: expected a non-empty 'scenes' array naming the root nodes")
@@ -154,21 +176,26 @@ class _Buffers:
     def get(self, index: int) -> bytes:
         if index not in self.cache:
             where = f"buffers[{index}]"
-            if index >= len(self.doc.buffers):
-                raise AssetError(self.path, where, "does not exist")
+            if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < len(self.doc.buffers):
+                raise AssetError(self.path, where, f"does not exist (the file has {len(self.doc.buffers)} buffers)")
             buf = self.doc.buffers[index]
             if buf.uri is None:
                 if self.glb_bin is None:
                     raise AssetError(self.path, where, "has no uri and the file has no GLB binary chunk")
                 data = self.glb_bin
             elif buf.uri.startswith("data:"):
-                data = base64.b64decode(buf.uri.split(",", 1)[1])
+                try:
+                    data = base64.b64decode(buf.uri.split(",", 1)[1], validate=True)
+                except (IndexError, ValueError) as exc:
+                    raise AssetError(self.path, f"{where}.uri", f"invalid base64 data: URI ({exc})") from None
             else:
                 file = self.path.parent / buf.uri
                 try:
                     data = file.read_bytes()
                 except OSError:
                     raise AssetError(self.path, f"{where}.uri", f"cannot read {file}") from None
+            if not isinstance(buf.byteLength, int) or isinstance(buf.byteLength, bool) or buf.byteLength < 0:
+                raise AssetError(self.path, f"{where}.byteLength", f"expected the buffer's size in bytes, got {buf.byteLength!r}")
             if len(data) < buf.byteLength:
                 raise AssetError(self.path, where, f"truncated: byteLength {buf.byteLength}, only {len(data)} bytes available")
             self.cache[index] = data
@@ -199,6 +226,9 @@ class _Buffers:
         stride = view.get("byteStride") or itemsize * width
         start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
         end = start + stride * (count - 1) + itemsize * width if count else start
+        if start < 0 or view.get("byteOffset", 0) < 0 or acc.get("byteOffset", 0) < 0:
+            raise AssetError(self.path, where, f"negative byteOffset (accessor {acc.get('byteOffset', 0)}, "
+                             f"buffer view {view.get('byteOffset', 0)}); expected offsets >= 0")
         if end > view.get("byteOffset", 0) + view.get("byteLength", 0) or end > len(data):
             raise AssetError(self.path, where, f"reads bytes {start}..{end} beyond its buffer view / buffer")
         values = np.ndarray((count, width), dtype=np.dtype(dtype).newbyteorder("<"), buffer=data,
@@ -298,9 +328,9 @@ def _scene_nodes(path: Path, doc: pygltflib.GLTF2, prefix: str):
 def _node_trs(path: Path, node, i: int):
     """Local translation, rotation (xyzw) and scale of a node in the file's convention."""
     if node.matrix is not None:
-        m = np.asarray(node.matrix, dtype=np.float64)
-        if m.shape != (16,):
-            raise AssetError(path, f"nodes[{i}].matrix", f"expected 16 numbers, got {m.size}")
+        m = _numbers(path, node.matrix, f"nodes[{i}].matrix")
+        if m.shape != (16,) or not np.all(np.isfinite(m)):
+            raise AssetError(path, f"nodes[{i}].matrix", f"expected 16 finite numbers, got {m.tolist()}")
         m = m.reshape(4, 4).T  # glTF stores matrices column-major
         t = m[:3, 3].copy()
         basis = m[:3, :3]
@@ -311,15 +341,23 @@ def _node_trs(path: Path, node, i: int):
             raise AssetError(path, f"nodes[{i}].matrix", "has a zero scale (not decomposable into TRS)")
         r = qfrom_matrix(basis / s)
         return t, r, s
-    t = np.asarray(node.translation if node.translation is not None else (0, 0, 0), dtype=np.float64)
-    r = np.asarray(node.rotation if node.rotation is not None else (0, 0, 0, 1), dtype=np.float64)
-    s = np.asarray(node.scale if node.scale is not None else (1, 1, 1), dtype=np.float64)
+    t = _numbers(path, node.translation if node.translation is not None else (0, 0, 0), f"nodes[{i}].translation")
+    r = _numbers(path, node.rotation if node.rotation is not None else (0, 0, 0, 1), f"nodes[{i}].rotation")
+    s = _numbers(path, node.scale if node.scale is not None else (1, 1, 1), f"nodes[{i}].scale")
     for key, v, size in (("translation", t, 3), ("rotation", r, 4), ("scale", s, 3)):
         if v.shape != (size,) or not np.all(np.isfinite(v)):
             raise AssetError(path, f"nodes[{i}].{key}", f"expected {size} finite numbers, got {v.tolist()}")
     if portable.norm(r) < 1e-9:
         raise AssetError(path, f"nodes[{i}].rotation", "is a zero quaternion")
     return t, qnormalize(r), s
+
+
+def _numbers(path: Path, raw, where: str) -> np.ndarray:
+    """A JSON array of numbers as float64 (an AssetError naming ``where`` if it is not one)."""
+    try:
+        return np.asarray(raw, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise AssetError(path, where, f"expected an array of numbers, got {raw!r}") from None
 
 
 def _load_clips(path, doc, buffers, names, unit_scale, mirror_axis) -> dict[str, Clip]:
@@ -355,6 +393,12 @@ def _load_clips(path, doc, buffers, names, unit_scale, mirror_axis) -> dict[str,
                 raise AssetError(path, f"{swhere}.output", f"{target.path} needs {width} components per key, got {values.shape[1]}")
             if len(times) == 0:
                 raise AssetError(path, f"{swhere}.input", "has no keys")
+            for key, data in (("input", times), ("output", values)):
+                flat = data.reshape(len(data), -1)
+                bad = np.flatnonzero(~np.isfinite(flat).all(axis=1))
+                if bad.size:
+                    raise AssetError(path, f"{swhere}.{key}", f"element {bad[0]} is not finite ({flat[bad[0]].tolist()}); "
+                                     f"expected finite key {'times' if key == 'input' else 'values'}")
             if np.any(np.diff(times) <= 0.0):
                 raise AssetError(path, f"{swhere}.input", "key times must strictly increase")
             expected = 3 * len(times) if interp == "cubicspline" else len(times)

@@ -139,6 +139,9 @@ def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, t
     mirror = "x"
     if path.suffix.lower() == ".bvh":
         anim = load_bvh(path, units=units if unit_scale is None else unit_scale)
+        if anim.frame_count == 0:
+            raise AssetError(path, "MOTION", "Frames: 0: the file has a skeleton but no motion; "
+                             "a clip needs at least one frame")
         source_bones, clip = anim.bones, anim.clip
     else:
         mirror = "z" if _is_vrm0(path) else "x"
@@ -179,6 +182,9 @@ def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, t
                 raise ValueError(f"{ref}: the trim [{start:g}, {end:g}] s ends before the first frame after the "
                                  f"rest frame {rest_frame} ({after:g} s)")
             trim = (after, end)
+            if end is None and after >= clip.duration:
+                # one frame follows the rest frame (a T-pose and one pose): the clip is that pose
+                clip, trim = clip.pose_at(after), None
     if trim is not None:
         clip = clip.trimmed(float(trim[0]), None if trim[1] is None else float(trim[1]))
     if rate is not None:

@@ -183,6 +183,11 @@ def load_vrm(path, *, oversized_colliders: str = "keep", leaf_tails: str = "root
                      warnings=builder.warnings, skipped=builder.skipped)
 
 
+def _short(raw, limit: int = 80) -> str:
+    text = repr(raw)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 class _Builder:
     def __init__(self, rig: GltfRig, unit_scale: float, oversized: str, leaf_tails: str):
         self.rig, self.path, self.unit_scale = rig, rig.source, unit_scale
@@ -200,6 +205,26 @@ class _Builder:
         """Group / spring names become cloth names: two springs both called "Hair" stay apart."""
         used = {c.group for c in self.chains}
         return label if label not in used else f"{label}_{index}"
+
+    def obj(self, raw, where: str) -> dict:
+        """A JSON object of the extension ({} when absent); an AssetError if it is something else."""
+        if raw is None:
+            return {}
+        if not isinstance(raw, dict):
+            raise AssetError(self.path, where, f"expected an object, got {_short(raw)}")
+        return raw
+
+    def array(self, raw, where: str, objects: bool = True) -> list:
+        """A JSON array of the extension ([] when absent), of objects unless ``objects`` is False."""
+        if raw is None:
+            return []
+        if not isinstance(raw, list):
+            raise AssetError(self.path, where, f"expected an array, got {_short(raw)}")
+        if objects:
+            for k, item in enumerate(raw):
+                if not isinstance(item, dict):
+                    raise AssetError(self.path, f"{where}[{k}]", f"expected an object, got {_short(item)}")
+        return raw
 
     def node(self, index, where: str) -> str:
         return self.rig.node_name(index, where)
@@ -283,16 +308,21 @@ class _Builder:
     # -- VRM 0.x
     def read_vrm0(self, vrm: dict) -> None:
         base = "extensions.VRM"
-        for k, hb in enumerate((vrm.get("humanoid") or {}).get("humanBones") or []):
+        vrm = self.obj(vrm, base)
+        humanoid = self.obj(vrm.get("humanoid"), f"{base}.humanoid")
+        for k, hb in enumerate(self.array(humanoid.get("humanBones"), f"{base}.humanoid.humanBones")):
+            if not isinstance(hb.get("bone"), str):
+                raise AssetError(self.path, f"{base}.humanoid.humanBones[{k}].bone",
+                                 f"expected a humanoid bone name, got {hb.get('bone')!r}")
             self.humanoid[hb.get("bone")] = self.node(hb.get("node"), f"{base}.humanoid.humanBones[{k}].node")
-        sec = vrm.get("secondaryAnimation") or {}
+        sec = self.obj(vrm.get("secondaryAnimation") or {}, f"{base}.secondaryAnimation")
         group_colliders: list[list[str]] = []
-        for g, group in enumerate(sec.get("colliderGroups") or []):
+        for g, group in enumerate(self.array(sec.get("colliderGroups"), f"{base}.secondaryAnimation.colliderGroups")):
             where = f"{base}.secondaryAnimation.colliderGroups[{g}]"
             node = self.node(group.get("node"), f"{where}.node")
             scale = self.unit_scale
             names = []
-            for c, col in enumerate(group.get("colliders") or []):
+            for c, col in enumerate(self.array(group.get("colliders"), f"{where}.colliders")):
                 cw = f"{where}.colliders[{c}]"
                 offset = self.vector(col.get("offset"), f"{cw}.offset", (0, 0, 0)) * scale  # Unity axes already
                 radius = self.number(col.get("radius"), f"{cw}.radius") * scale
@@ -303,9 +333,10 @@ class _Builder:
                 if len(self.colliders) > before:
                     names.append(collider.name)
             group_colliders.append(names)
-        for g, group in enumerate(sec.get("boneGroups") or []):
+        for g, group in enumerate(self.array(sec.get("boneGroups"), f"{base}.secondaryAnimation.boneGroups")):
             where = f"{base}.secondaryAnimation.boneGroups[{g}]"
-            roots = [self.node(bone, f"{where}.bones[{b}]") for b, bone in enumerate(group.get("bones") or [])]
+            bones = self.array(group.get("bones"), f"{where}.bones", objects=False)
+            roots = [self.node(bone, f"{where}.bones[{b}]") for b, bone in enumerate(bones)]
             label = self.unique_label(group.get("comment") or bones_label(roots) or f"group{g}", g)
             center_index = group.get("center", -1)
             center = None if center_index in (None, -1) else self.node(center_index, f"{where}.center")
@@ -317,12 +348,12 @@ class _Builder:
                 "hit_radius": self.number(group.get("hitRadius"), f"{where}.hitRadius", 0.02) * self.unit_scale,
             }
             colliders = []
-            for j, gi in enumerate(group.get("colliderGroups") or []):
+            for j, gi in enumerate(self.array(group.get("colliderGroups"), f"{where}.colliderGroups", objects=False)):
                 if not isinstance(gi, int) or not 0 <= gi < len(group_colliders):
                     raise AssetError(self.path, f"{where}.colliderGroups[{j}]",
                                      f"collider group {gi!r} does not exist ({len(group_colliders)} groups)")
                 colliders += group_colliders[gi]
-            for b, bone in enumerate(group.get("bones") or []):
+            for b, bone in enumerate(bones):
                 root = self.node(bone, f"{where}.bones[{b}]")
                 joints = self.subtree(root)
                 leaves = [j for j in joints if not self.hierarchy.children[self.hierarchy.index(j)]]
@@ -333,27 +364,32 @@ class _Builder:
 
     # -- VRM 1.0
     def read_vrm1(self, ext: dict) -> None:
-        for bone, spec in ((ext.get("VRMC_vrm") or {}).get("humanoid") or {}).get("humanBones", {}).items():
-            self.humanoid[bone] = self.node((spec or {}).get("node"), f"extensions.VRMC_vrm.humanoid.humanBones.{bone}.node")
+        vrmc = self.obj(ext.get("VRMC_vrm"), "extensions.VRMC_vrm")
+        humanoid = self.obj(vrmc.get("humanoid"), "extensions.VRMC_vrm.humanoid")
+        human_bones = self.obj(humanoid.get("humanBones"), "extensions.VRMC_vrm.humanoid.humanBones")
+        for bone, spec in human_bones.items():
+            where = f"extensions.VRMC_vrm.humanoid.humanBones.{bone}"
+            self.humanoid[bone] = self.node(self.obj(spec, where).get("node"), f"{where}.node")
         sb = ext.get("VRMC_springBone")
         if sb is None:
             return
         base = "extensions.VRMC_springBone"
+        sb = self.obj(sb, base)
         collider_names: list[str | None] = []
-        for c, col in enumerate(sb.get("colliders") or []):
+        for c, col in enumerate(self.array(sb.get("colliders"), f"{base}.colliders")):
             collider_names.append(self.read_collider1(c, col, f"{base}.colliders[{c}]"))
         group_colliders = []
-        for g, group in enumerate(sb.get("colliderGroups") or []):
+        for g, group in enumerate(self.array(sb.get("colliderGroups"), f"{base}.colliderGroups")):
             names = []
-            for j, ci in enumerate(group.get("colliders") or []):
+            for j, ci in enumerate(self.array(group.get("colliders"), f"{base}.colliderGroups[{g}].colliders", objects=False)):
                 if not isinstance(ci, int) or not 0 <= ci < len(collider_names):
                     raise AssetError(self.path, f"{base}.colliderGroups[{g}].colliders[{j}]", f"collider {ci!r} does not exist")
                 if collider_names[ci] is not None and collider_names[ci] not in names:
                     names.append(collider_names[ci])
             group_colliders.append(names)
-        for s, spring in enumerate(sb.get("springs") or []):
+        for s, spring in enumerate(self.array(sb.get("springs"), f"{base}.springs")):
             where = f"{base}.springs[{s}]"
-            raw_joints = spring.get("joints") or []
+            raw_joints = self.array(spring.get("joints"), f"{where}.joints")
             joints = [self.node(j.get("node"), f"{where}.joints[{k}].node") for k, j in enumerate(raw_joints)]
             label = self.unique_label(spring.get("name") or f"spring{s}", s)
             if len(joints) < 2:
@@ -373,7 +409,7 @@ class _Builder:
                 values[key] = float(np.mean(vals))
             gdir = 0.0 + coords.position_to_unity(self.vector(simulated[0].get("gravityDir"), f"{where}.joints[0].gravityDir", (0, -1, 0)), "x")
             colliders = []
-            for j, gi in enumerate(spring.get("colliderGroups") or []):
+            for j, gi in enumerate(self.array(spring.get("colliderGroups"), f"{where}.colliderGroups", objects=False)):
                 if not isinstance(gi, int) or not 0 <= gi < len(group_colliders):
                     raise AssetError(self.path, f"{where}.colliderGroups[{j}]", f"collider group {gi!r} does not exist")
                 colliders += [n for n in group_colliders[gi] if n not in colliders]
@@ -395,15 +431,15 @@ class _Builder:
         node = self.node(col.get("node"), f"{where}.node")
         i = self.hierarchy.index(node)
         world_scale = abs(float(self.hierarchy.lossy_scale[i, 0])) or 1.0
-        shape = (col.get("shape") or {})
         sw = f"{where}.shape"
+        shape = self.obj(col.get("shape"), sw)
         extended = ((col.get("extensions") or {}).get("VRMC_springBone_extended_collider") or {}).get("shape")
         if extended:
             shape, sw = extended, f"{where}.extensions.VRMC_springBone_extended_collider.shape"
         if len(shape) != 1:
             raise AssetError(self.path, sw, f"expected exactly one of sphere, capsule, plane; got {sorted(shape)}")
         kind, spec = next(iter(shape.items()))
-        spec = spec or {}
+        spec = self.obj(spec, f"{sw}.{kind}")
         if spec.get("inside"):
             self.skipped.append(f"{sw}.{kind}: inside {kind} has no MagicaCloth2 counterpart (colliders only push out)")
             return None

@@ -37,6 +37,7 @@ from functools import partial
 import numba
 import numpy as np
 
+from magica_py.build.errors import BuildError
 from magica_py.jit import stage_policy
 from magica_py.kernels import portable
 from magica_py.params import default_parameters
@@ -788,9 +789,10 @@ class ClothSystem:
             nodes = list(np.asarray(model.transform_index)) + [int(model.component_transform)]
             for node in nodes:
                 if (hierarchy.lossy_scale[node] < 0.0).any():
-                    where = getattr(spec, "document_path", "") or f"cloth {getattr(spec, 'name', '?')!r}"
-                    raise ValueError(
-                        f"{where}: transform {hierarchy.names[node]!r} has a negative scale "
+                    where = getattr(spec, "document_path", "")
+                    raise BuildError(
+                        getattr(spec, "name", "?"),
+                        f"{where + ': ' if where else ''}transform {hierarchy.names[node]!r} has a negative scale "
                         f"{tuple(float(x) for x in hierarchy.lossy_scale[node])}; negative scale is not "
                         f"supported (MagicaCloth2 refuses it at build too, docs/solver.md §H.7): use positive scales")
 
