@@ -56,6 +56,27 @@ def test_unknown_connection_mode_and_bone_attribute_are_rejected():
         build_cloth(h, Spec("tail", (h.index("c0"),), bone_attributes={h.index("c1"): "frozen"}))
 
 
+@pytest.mark.parametrize("offset", [(0.0, -1e300, 0.0), (0.0, 2e9, 0.0), (float("nan"), 0.0, 0.0)])
+def test_a_bone_too_far_from_the_origin_is_refused_before_its_squares_overflow(offset):
+    """A bone beyond POSITION_LIMIT (or at a non-finite place) is a BuildError naming it and
+    where it is, not numpy overflow warnings and NaN depths that crash a sink later."""
+    h = TransformHierarchy([BoneSpec("body", None, (0.0, 1.0, 0.0)), BoneSpec("c0", "body", (0.0, 0.0, 0.0)),
+                            BoneSpec("c1", "c0", (0.0, -0.1, 0.0)), BoneSpec("c2", "c1", offset)])
+    with np.errstate(all="raise"):   # refused before any arithmetic on the huge values
+        with pytest.raises(BuildError, match=r"cloth 'tail': bone 'c2' is at .* m: expected finite positions "
+                                             r"within 1e\+09 m of the origin"):
+            build_cloth(h, Spec("tail", (h.index("c0"),)), cache=None)
+
+
+def test_a_bone_at_the_position_limit_still_builds():
+    h = chain_rig()
+    far = TransformHierarchy([BoneSpec("body", None, (0.0, 1.0, 0.0)), BoneSpec("c0", "body", (9.9e8, 0.0, 0.0)),
+                              BoneSpec("c1", "c0", (0.0, -0.1, 0.0)), BoneSpec("c2", "c1", (0.0, -0.1, 0.0))])
+    model = build_cloth(far, Spec("tail", (far.index("c0"),)), cache=None)
+    assert all(np.all(np.isfinite(a)) for _, a in _float_arrays(model))
+    assert model.particle_count == build_cloth(h, Spec("tail", (h.index("c0"),)), cache=None).particle_count
+
+
 def test_zero_length_bone_gets_zero_distance_flag_and_a_zero_rest_link_without_nan():
     h = TransformHierarchy([
         BoneSpec("body"),

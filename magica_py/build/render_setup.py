@@ -27,6 +27,10 @@ from magica_py.build.errors import BuildError
 from magica_py.scene.hierarchy import propagate_world
 from magica_py.kernels import portable
 
+# m: a bone (or the component) further from the origin is refused at build. float64 still
+# resolves 1e-7 m there; far beyond it the build's squared lengths overflow to inf and NaN.
+POSITION_LIMIT = 1e9
+
 
 @dataclass(frozen=True)
 class RenderSetup:
@@ -140,6 +144,13 @@ def collect_transforms(hierarchy, cloth_name: str, root_bones, component=None) -
     if np.any(np.abs(c_scale) < 1e-12):
         raise BuildError(cloth_name, f"component transform {names[component]!r} has a zero scale: "
                                      "cloth-local space is undefined")
+    nodes = np.append(transform_index, component)
+    far = np.nonzero(~np.all(np.abs(hierarchy.world_position[nodes]) <= POSITION_LIMIT, axis=1))[0]
+    if far.size:
+        node = int(nodes[far[0]])
+        raise BuildError(cloth_name, f"bone {names[node]!r} is at {hierarchy.world_position[node].tolist()} m: "
+                                     f"expected finite positions within {POSITION_LIMIT:g} m of the origin "
+                                     "(a translation or unit scale far too large?)")
     l2w = trs_matrix(hierarchy.world_position[component], hierarchy.world_rotation[component], c_scale)
     rel_position, rel_rotation = _component_relative_pose(hierarchy, transform_index, roots, component)
     if rel_position is None:  # component not above the roots (or sheared): go through world space
