@@ -126,7 +126,7 @@ def test_gltf_node_that_is_not_an_object_is_rejected(tmp_path):
         load_gltf(path)
 
 
-def _animated(tmp_path, times, values, **buffer):
+def _animated(tmp_path, times, values, target="translation", interpolation="LINEAR", **buffer):
     times = np.asarray(times, dtype=np.float32)
     values = np.asarray(values, dtype=np.float32)
     blob = times.tobytes() + values.tobytes()
@@ -137,9 +137,10 @@ def _animated(tmp_path, times, values, **buffer):
         "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": times.nbytes},
                         {"buffer": 0, "byteOffset": times.nbytes, "byteLength": values.nbytes}],
         "accessors": [{"bufferView": 0, "componentType": 5126, "count": len(times), "type": "SCALAR"},
-                      {"bufferView": 1, "componentType": 5126, "count": len(values), "type": "VEC3"}],
-        "animations": [{"name": "clip", "samplers": [{"input": 0, "output": 1}],
-                        "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}}]}],
+                      {"bufferView": 1, "componentType": 5126, "count": len(values),
+                       "type": "VEC4" if target == "rotation" else "VEC3"}],
+        "animations": [{"name": "clip", "samplers": [{"input": 0, "output": 1, "interpolation": interpolation}],
+                        "channels": [{"sampler": 0, "target": {"node": 0, "path": target}}]}],
     }
     for key in [k for k, v in buffer.items() if v is None]:
         del doc["buffers"][0][key]
@@ -156,6 +157,23 @@ def _animated(tmp_path, times, values, **buffer):
 def test_gltf_non_finite_animation_key_is_rejected(tmp_path, times, values, where):
     with pytest.raises(AssetError, match=r"anim\.gltf: animations\[0\]\." + where):
         load_gltf(_animated(tmp_path, times, values))
+
+
+def test_gltf_zero_quaternion_rotation_key_is_rejected(tmp_path):
+    path = _animated(tmp_path, [0, 1, 2], [[0, 0, 0, 1], [0, 0, 0, 0], [0, 0, 0, 1]], target="rotation")
+    with pytest.raises(AssetError, match=r"anim\.gltf: animations\[0\]\.samplers\[0\]\.output: element 1 is a zero "
+                                         r"quaternion"):
+        load_gltf(path)
+
+
+def test_gltf_cubic_rotation_with_zero_tangents_loads(tmp_path):
+    key = [[0, 0, 0, 0], [0, 0, 0.6, 0.8], [0, 0, 0, 0]]   # in-tangent, value, out-tangent
+    path = _animated(tmp_path, [0, 1], key + key, target="rotation", interpolation="CUBICSPLINE")
+    clip = next(iter(load_gltf(path).clips.values()))
+    assert np.allclose(np.linalg.norm(clip.tracks[0].values, axis=1), 1.0)
+    with pytest.raises(AssetError, match=r"output: element 4 is a zero quaternion"):
+        load_gltf(_animated(tmp_path, [0, 1], key + [[0, 0, 0, 0]] * 3, target="rotation",
+                            interpolation="CUBICSPLINE"))
 
 
 def test_gltf_buffer_without_byte_length_is_rejected(tmp_path):

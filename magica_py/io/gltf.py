@@ -408,6 +408,12 @@ def _load_clips(path, doc, buffers, names, unit_scale, mirror_axis) -> dict[str,
                 in_t, values, out_t = values[0::3], values[1::3], values[2::3]
             else:
                 in_t = out_t = None
+            if target.path == "rotation":   # keys (not tangents) are unit quaternions in glTF
+                zero = np.flatnonzero(np.linalg.norm(values, axis=1) < 1e-9)
+                if zero.size:
+                    k = int(zero[0]) * (3 if interp == "cubicspline" else 1) + (1 if interp == "cubicspline" else 0)
+                    raise AssetError(path, f"{swhere}.output", f"element {k} is a zero quaternion; expected unit "
+                                     "rotations")
             convert = {"translation": lambda v: coords.position_to_unity(v * unit_scale, mirror_axis),
                        "rotation": lambda v: coords.rotation_to_unity(v, mirror_axis),
                        "scale": lambda v: coords.scale_to_unity(v, mirror_axis)}[target.path]
