@@ -11,6 +11,7 @@ import pytest
 from magica_py.io.bvh import load_bvh
 from magica_py.io.errors import AssetError
 from magica_py.io.gltf import load_gltf
+from magica_py.io.retarget import RetargetError
 from magica_py.io.sections import load_clip
 from magica_py.io.vrm import load_vrm
 
@@ -96,6 +97,14 @@ def test_two_frame_bvh_with_source_rest_0_plays_its_second_frame(tmp_path):
     clip = load_clip(path, retarget_to=bones, retarget_options={"source_rest": 0})
     assert clip.tracks and clip.duration == 0.0
     assert all(len(tr.times) == 1 and np.isfinite(tr.values).all() for tr in clip.tracks)
+
+
+@needs_data
+def test_a_source_skeleton_without_hips_names_the_file_and_the_way_out(tmp_path):
+    path = _write(tmp_path, _bvh_text(), "generic.bvh")
+    with pytest.raises(RetargetError, match=r"generic\.bvh: source skeleton: no bone mapped to humanoid 'hips' "
+                                            r".*; name it with source_overrides: \{hips: BONE\} or give source_map"):
+        load_clip(path, retarget_to=load_bvh(CMU).bones)
 
 
 # ----------------------------------------------------------------------------- glTF

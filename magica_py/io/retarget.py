@@ -315,9 +315,13 @@ def retarget_with_report(clip: Clip, source_bones: list[BoneSpec], target_bones:
     src_names, tgt_names = src_match.mapping, tgt_match.mapping
     for bone in REQUIRED_BONES:
         if bone not in src_names:
-            raise RetargetError(f"source skeleton: no bone mapped to humanoid {bone!r} (bones: {src_h.names[:8]}...)")
+            raise RetargetError(f"source skeleton: no bone mapped to humanoid {bone!r} (bones: {src_h.names[:8]}...); "
+                                f"name it with source_overrides: {{{bone}: BONE}} or give source_map: cmu, mixamo "
+                                "or vrm (docs/import.md)")
         if bone not in tgt_names:
-            raise RetargetError(f"target skeleton: no bone mapped to humanoid {bone!r} (bones: {tgt_h.names[:8]}...)")
+            raise RetargetError(f"target skeleton: no bone mapped to humanoid {bone!r} (bones: {tgt_h.names[:8]}...); "
+                                f"name it with target_overrides: {{{bone}: BONE}} or give target_map: cmu, mixamo "
+                                "or vrm (docs/import.md)")
     shared = [b for b in src_names if b in tgt_names]
     pairs = [(src_names[b], tgt_names[b]) for b in shared]
     if same_names:  # bones outside the humanoid set named alike on both sides (fingers, a twist bone, ...)

@@ -21,7 +21,7 @@ from magica_py.io.bvh import load_bvh
 from magica_py.io.clip import Clip
 from magica_py.io.errors import AssetError
 from magica_py.io.gltf import load_gltf, read_document
-from magica_py.io.retarget import retarget_with_report
+from magica_py.io.retarget import RetargetError, retarget_with_report
 from magica_py.io.vrm import load_vrm
 from magica_py.scene.hierarchy import BoneSpec
 
@@ -168,7 +168,10 @@ def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, t
         for key in ("source_forward", "source_up"):
             if options.get(key) is not None:
                 options[key] = file_axis_to_project(options[key], mirror)
-        clip, found = retarget_with_report(clip, source_bones, retarget_to, target_map=target_map, **options)
+        try:
+            clip, found = retarget_with_report(clip, source_bones, retarget_to, target_map=target_map, **options)
+        except RetargetError as exc:   # the skeletons do not match: say which file's
+            raise RetargetError(f"{path}: {exc}") from None
         if report is not None:
             report.append(found)
     elif prefix:
