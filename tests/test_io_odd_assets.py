@@ -99,6 +99,20 @@ def test_two_frame_bvh_with_source_rest_0_plays_its_second_frame(tmp_path):
     assert all(len(tr.times) == 1 and np.isfinite(tr.values).all() for tr in clip.tracks)
 
 
+@pytest.mark.parametrize("offset", ["0 169 0", "0 0 169", "169 0 0"])
+def test_automatic_units_read_a_skeleton_the_same_standing_or_lying(tmp_path, offset):
+    """The automatic unit measures the rest skeleton's largest extent on any axis: a 1.7 m
+    skeleton in centimetres is read as centimetres whichever axis it lies along."""
+    bvh = load_bvh(_write(tmp_path, _bvh_text(offset=offset)))
+    assert bvh.unit_scale == 0.01
+
+
+def test_automatic_units_warn_when_no_unit_gives_a_human_size(tmp_path):
+    with pytest.warns(UserWarning, match=r"far\.bvh: units auto: rest size 1\.7e\+05 file units along Y → mm "
+                                         r"\(170 m\), far from a human's 1\.7 m"):
+        assert load_bvh(_write(tmp_path, _bvh_text(offset="0 169999 0"), "far.bvh")).unit_scale == 0.001
+
+
 @needs_data
 def test_a_source_skeleton_without_hips_names_the_file_and_the_way_out(tmp_path):
     path = _write(tmp_path, _bvh_text(), "generic.bvh")

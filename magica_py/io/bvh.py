@@ -32,6 +32,7 @@ from magica_py.kernels import portable
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "cmu": 0.0254 / 0.45}
 HUMAN_HEIGHT = 1.7
+AUTO_UNITS_SPREAD = 3.0   # an automatic unit giving a skeleton outside [1.7 / 3, 1.7 x 3] m is warned about
 _CHANNELS = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 _AXIS = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
 
@@ -271,13 +272,22 @@ def resolve_units(units, bvh: BvhFile) -> tuple[float, str]:
     world = np.zeros_like(bvh.offsets)
     for j, p in enumerate(bvh.parents):
         world[j] = bvh.offsets[j] + (world[p] if p >= 0 else 0.0)
-    points = [world] + [world[j] + e for j, e in bvh.end_sites.items()]
-    ys = np.concatenate([np.atleast_2d(p)[:, 1] for p in points])
-    height = float(ys.max() - ys.min())
+    points = np.concatenate([world] + [np.atleast_2d(world[j] + e) for j, e in bvh.end_sites.items()])
+    # the rest skeleton's largest extent along a file axis: its height standing (a T-pose's arm
+    # span is about the same), or its length if the file has it lying along Z or X
+    extents = points.max(axis=0) - points.min(axis=0)
+    axis = int(np.argmax(extents))
+    height = float(extents[axis])
     if height <= 0:
-        return 1.0, "units auto: flat skeleton, metres assumed"
+        return 1.0, "units auto: a skeleton of one point, metres assumed"
     name = min(UNITS, key=lambda u: abs(portable.log(height * UNITS[u] / HUMAN_HEIGHT)))
-    return UNITS[name], f"units auto: rest height {height:.4g} file units → {name} ({height * UNITS[name]:.3g} m)"
+    size = height * UNITS[name]
+    note = f"units auto: rest size {height:.4g} file units along {'XYZ'[axis]} → {name} ({size:.3g} m)"
+    if not HUMAN_HEIGHT / AUTO_UNITS_SPREAD <= size <= HUMAN_HEIGHT * AUTO_UNITS_SPREAD:
+        warnings.warn(f"{bvh.source}: {note}, far from a human's {HUMAN_HEIGHT:g} m whatever the unit; "
+                      "give the units (units: m, cm, mm, inch, cmu or a number of m per file unit)",
+                      UserWarning, stacklevel=3)
+    return UNITS[name], note
 
 
 def load_bvh(path, *, units="auto", mirror_axis: str = "x", prefix: str = "", end_sites: bool = False,
