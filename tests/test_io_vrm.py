@@ -125,10 +125,23 @@ def test_vrm1_extended_plane_becomes_a_plane_whose_up_is_the_normal():
 
 
 def test_vrm1_inside_sphere_is_skipped_with_a_note():
-    avatar = load_vrm(EXAMPLES / "inside-collider.gltf")
+    with pytest.warns(UserWarning, match=r"inside-collider\.gltf: skipped extensions\.VRMC_springBone\.colliders\[0\]"
+                                         r".*inside sphere has no MagicaCloth2 counterpart"):
+        avatar = load_vrm(EXAMPLES / "inside-collider.gltf")
     assert avatar.colliders == [] and len(avatar.chains) == 1
     assert any("inside sphere has no MagicaCloth2 counterpart" in s for s in avatar.skipped)
     assert avatar.cloth_entries()[0]["collision_mode"] == "none"
+
+
+def test_a_vrm_without_spring_bones_says_it_adds_no_cloth(tmp_path):
+    for f in ("sphere-collider.gltf", "sphere_mesh.bin"):
+        shutil.copy(EXAMPLES / f, tmp_path / f)
+    path = tmp_path / "sphere-collider.gltf"
+    doc = json.loads(path.read_text())
+    doc["extensions"]["VRMC_springBone"]["springs"] = []
+    path.write_text(json.dumps(doc))
+    with pytest.warns(UserWarning, match=r"sphere-collider\.gltf: the VRM has no spring bones .*: it adds no cloth"):
+        assert vrm_sections(path)["cloths"] == []
 
 
 def test_spring_joint_referencing_a_missing_node_names_the_json_path(tmp_path):

@@ -84,6 +84,9 @@ def vrm_sections(path, *, group_by: str = "group", prefix: str = "", cloth_prefi
     """
     avatar = load_vrm(path, prefix=prefix, oversized_colliders=oversized_colliders)
     cloths = avatar.cloth_entries(group_by=group_by, prefix=cloth_prefix)
+    if not cloths:
+        warnings.warn(f"{path}: the VRM has no spring bones (VRM 0.x secondaryAnimation.boneGroups, VRM 1.0 "
+                      "VRMC_springBone.springs): it adds no cloth", UserWarning, stacklevel=2)
     if chains is not None:
         wanted = {f"{cloth_prefix}{c}" for c in chains}
         unknown = wanted - {c["name"] for c in cloths}

@@ -178,6 +178,8 @@ def load_vrm(path, *, oversized_colliders: str = "keep", leaf_tails: str = "root
         builder.read_vrm1(ext)
     for w in builder.warnings:
         warnings.warn(f"{path}: {w}", stacklevel=2)
+    for s in builder.skipped:   # what has no MagicaCloth2 counterpart is left out, and said so
+        warnings.warn(f"{path}: skipped {s}", stacklevel=2)
     return VrmAvatar(rig=rig, spec_version=version, humanoid=builder.humanoid, chains=builder.chains,
                      colliders=builder.colliders, extra_bones=builder.extra_bones,
                      warnings=builder.warnings, skipped=builder.skipped)
@@ -286,8 +288,7 @@ class _Builder:
             msg = (f"{collider.source}: radius {world:g} m exceeds "
                    f"MagicaCloth2's {MAX_COLLIDER_RADIUS:g} m inspector maximum (an authoring quirk)")
             if self.oversized == "drop":
-                self.warnings.append(msg + "; dropped")
-                self.skipped.append(collider.source)
+                self.skipped.append(msg + "; dropped")   # said with the other skipped items
                 return
             if self.oversized == "clamp":
                 collider.radius = min(collider.radius, limit)
