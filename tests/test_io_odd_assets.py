@@ -315,18 +315,3 @@ def test_atomic_write_into_a_file_as_folder_keeps_the_original_error(tmp_path):
     with pytest.raises(NotADirectoryError) as caught:
         atomic.write_bytes(tmp_path / "afile" / "x.bin", b"data")
     assert caught.value.__context__ is None    # the write's own error, not the cleanup's over it
-
-
-def test_negative_scale_on_a_cloth_bone_is_a_build_error():
-    from magica_py.build.errors import BuildError
-    from magica_py.scene import rigs
-    from magica_py.scene.hierarchy import BoneSpec, TransformHierarchy
-    from magica_py.solver.system import ClothSystem
-    from solver_scenes import Spec, params
-
-    bones = [BoneSpec("root", None, (0.0, 1.0, 0.0), scale=(-1.0, 1.0, 1.0))] + rigs.chain("tail", "root", 3, 0.3)
-    h = TransformHierarchy(bones)
-    spec = Spec("tail", (h.index("tail_0"),), h.index("root"), "line", params())
-    # a BuildError: the CLI reports it as bad input (exit 2), not as an internal error
-    with pytest.raises(BuildError, match=r"cloth 'tail': transform 'tail_0' has a negative scale"):
-        ClothSystem(h, [spec])

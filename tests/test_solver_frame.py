@@ -8,6 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from magica_py.build import BuildError, build_cloth
 from magica_py.kernels.math3d import q_rotate
 from magica_py.scene.hierarchy import BoneSpec
 from solver_scenes import chain_nodes, chain_system, params, run, three_tails
@@ -192,8 +193,19 @@ def test_negative_scale_is_rejected_at_build_with_a_clear_error():
     bones = [BoneSpec("root", None, (0.0, 1.0, 0.0), scale=(-1.0, 1.0, 1.0))] + rigs.chain("tail", "root", 3, 0.3)
     h = TransformHierarchy(bones)
     spec = Spec("tail", (h.index("tail_0"),), h.index("root"), "line", params())
-    with pytest.raises(ValueError, match=r"cloth 'tail': transform 'tail_0' has a negative scale"):
+    # a BuildError from the build itself, so that validate finds it too (the CLI: exit 2)
+    with pytest.raises(BuildError, match=r"cloth 'tail': transform 'tail_0' has a negative scale"):
+        build_cloth(h, spec, cache=None)
+    with pytest.raises(BuildError, match=r"cloth 'tail': transform 'tail_0' has a negative scale"):
         ClothSystem(h, [spec])
+    # a model built before the scale turned negative: the system checks the pose it starts from
+    h.local_scale[h.index("root")] = (1.0, 1.0, 1.0)
+    h.propagate()
+    model = build_cloth(h, spec, cache=None)
+    h.local_scale[h.index("root")] = (-1.0, 1.0, 1.0)
+    h.propagate()
+    with pytest.raises(BuildError, match=r"cloth 'tail': transform 'tail_0' has a negative scale"):
+        ClothSystem(h, [spec], models=[model])
 
 
 def test_negative_component_scale_at_run_time_suspends_the_team():

@@ -38,6 +38,7 @@ import numba
 import numpy as np
 
 from magica_py.build.errors import BuildError
+from magica_py.build.render_setup import negative_scale_message
 from magica_py.jit import stage_policy
 from magica_py.kernels import portable
 from magica_py.params import default_parameters
@@ -784,17 +785,16 @@ class ClothSystem:
         return default if value is None else value
 
     def _check_positive_scale(self, hierarchy, pairs=None) -> None:
-        """Negative scale is rejected (§H.7 allows a Python port to assume positive scale)."""
+        """Negative scale is rejected (§H.7 allows a Python port to assume positive scale): the
+        build refuses it at the rest pose; this checks the pose the system starts from, and
+        models given to it."""
         for spec, model in (pairs if pairs is not None else zip(self.specs, self.models)):
             nodes = list(np.asarray(model.transform_index)) + [int(model.component_transform)]
             for node in nodes:
                 if (hierarchy.lossy_scale[node] < 0.0).any():
                     where = getattr(spec, "document_path", "")
-                    raise BuildError(
-                        getattr(spec, "name", "?"),
-                        f"{where + ': ' if where else ''}transform {hierarchy.names[node]!r} has a negative scale "
-                        f"{tuple(float(x) for x in hierarchy.lossy_scale[node])}; negative scale is not "
-                        f"supported (MagicaCloth2 refuses it at build too, docs/solver.md §H.7): use positive scales")
+                    raise BuildError(getattr(spec, "name", "?"), (f"{where}: " if where else "")
+                                     + negative_scale_message(hierarchy.names[node], hierarchy.lossy_scale[node]))
 
     def _write_parameters(self, team: int) -> None:
         def resolve(name):
