@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from magica_py.build.proxy import DISABLE_COLLISION, FIXED, INVALID_MOTION, MOVE
 from magica_py.sinks.base import ClothTopology
 from magica_py.sinks.metrics import FrameMetrics
 
@@ -41,7 +42,7 @@ def numpy_twin(cloths, x, sh, dt, previous):
             for (i, j), r in zip(c.edges, c.rest_length):
                 stretch[f] = max(stretch[f], abs(np.linalg.norm(x[f, o + i] - x[f, o + j]) / r - 1))
             for p in range(c.particle_count):
-                if not (c.attribute[p] & 2) or (c.attribute[p] & 8):
+                if not (c.attribute[p] & MOVE) or (c.attribute[p] & DISABLE_COLLISION):   # as D.8
                     continue
                 q, r = x[f, o + p], c.radius[p]
                 for col in c.colliders:
@@ -60,7 +61,8 @@ def numpy_twin(cloths, x, sh, dt, previous):
 
 def test_kernels_match_the_numpy_twin_on_random_batches():
     rng = np.random.default_rng(3)
-    attribute = np.array([1, 2, 2, 10, 2, 2], np.uint8)          # fixed and invalid particles skipped
+    # the fixed particle and the one with DisableCollision are skipped; InvalidMotion collides (D.8)
+    attribute = np.array([FIXED, MOVE, MOVE, MOVE | DISABLE_COLLISION, MOVE | INVALID_MOTION, MOVE], np.uint8)
     cloths = [cloth(6, [0, 1, 2], attribute), cloth(4, [1]), cloth(3, [])]
     metrics = FrameMetrics(cloths, KIND, SLOT)
     previous = None

@@ -409,7 +409,7 @@ def _load_clips(path, doc, buffers, names, unit_scale, mirror_axis) -> dict[str,
             else:
                 in_t = out_t = None
             if target.path == "rotation":   # keys (not tangents) are unit quaternions in glTF
-                zero = np.flatnonzero(np.linalg.norm(values, axis=1) < 1e-9)
+                zero = np.flatnonzero(np.sum(values * values, axis=1) < 1e-18)
                 if zero.size:
                     k = int(zero[0]) * (3 if interp == "cubicspline" else 1) + (1 if interp == "cubicspline" else 0)
                     raise AssetError(path, f"{swhere}.output", f"element {k} is a zero quaternion; expected unit "
