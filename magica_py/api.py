@@ -23,6 +23,9 @@ frame's cloth particles, bone rotations, metrics and events into arrays.
 """
 from __future__ import annotations
 
+import copy
+import math
+import numbers
 import os
 import pathlib
 from dataclasses import dataclass
@@ -99,14 +102,19 @@ class Simulation:
 
 # ----------------------------------------------------------------------------- loading
 def load(scene_or_path, overrides=()):
-    """A ``Scene`` from a YAML path, a VRM avatar path, YAML text, or a ``Scene`` (returned
-    as is; ``overrides`` then is an error: they apply to a document)."""
+    """A ``Scene`` from a YAML path, a VRM avatar path, YAML text, or a ``Scene`` (a copy:
+    running moves the scene's bones, and a ``Scene`` given by the caller must stay as loaded
+    so that it runs again with the same result; ``overrides`` then is an error: they apply
+    to a document)."""
     from magica_py.config import load_scene, load_scene_text
 
+    if isinstance(overrides, (str, bytes)):
+        raise TypeError(f"overrides: expected a list of 'PATH=VALUE' strings, got the string {overrides!r} "
+                        f"(write overrides=[{overrides!r}])")
     if hasattr(scene_or_path, "hierarchy") and hasattr(scene_or_path, "settings"):
         if overrides:
             raise ValueError("overrides apply to a scene document; give the path or the YAML text")
-        return scene_or_path
+        return copy.deepcopy(scene_or_path)
     if isinstance(scene_or_path, str) and "\n" in scene_or_path:
         return load_scene_text(scene_or_path, list(overrides))
     path = pathlib.Path(os.fspath(scene_or_path))
@@ -218,6 +226,7 @@ class Session:
         self.recorder = None
         self.system = None
         self.closed = False
+        self.recording_kept = False   # set by close(): the recording was renamed into place
         with self.compile_watch:
             if simulate_cloths and self.scene.cloths:
                 from magica_py.solver import attach
@@ -244,10 +253,16 @@ class Session:
         path.parent.mkdir(parents=True, exist_ok=True)
         return attach(self.player, self.scene, SinkOptions(rrd=path))
 
+    def _check_open(self, what: str) -> None:
+        if self.closed:
+            raise RuntimeError(f"Session.{what}: the session of {self.scene.name!r} is closed "
+                               f"(after {len(self.capture.time)} frames); make a new Session to run more")
+
     def step(self):
         """Run one frame; returns its ``FrameContext`` (``ctx.metrics``, ``ctx.events``, ...)."""
         import time
 
+        self._check_open("step()")
         start = time.perf_counter()
         compiled = self.compile_watch.seconds
         with self.compile_watch, self.warning_events:
@@ -259,8 +274,15 @@ class Session:
         """Run ``frames`` more frames (default: the scene's length) and return the result so far."""
         from magica_py.runner import FrameProgress, play
 
+        self._check_open("run()")
         if frames is None:
             frames = self.scene.settings.frame_count()
+        elif not isinstance(frames, numbers.Integral) or isinstance(frames, bool):
+            if not (isinstance(frames, numbers.Real) and not isinstance(frames, bool)
+                    and math.isfinite(frames) and float(frames).is_integer()):
+                raise TypeError(f"frames: expected a whole number of frames, got {frames!r}")
+        if frames is not None:
+            frames = int(frames)
         if frames is not None and frames < 0:
             raise ValueError(f"frames: expected >= 0, got {frames}")
         bar = FrameProgress(frames, notebook=True, delay=0.5) if progress else None
@@ -281,7 +303,7 @@ class Session:
         """Everything captured so far as arrays."""
         cloths, metrics = self.capture.result(self.scene)
         out = None
-        if self.recorder is not None and self.closed:
+        if self.recorder is not None and self.closed and self.recording_kept:
             out = str(self.recorder.output_path) if self.recorder.output_path is not None else None
         return Simulation(scene=self.scene, frames=len(self.capture.time), time=np.asarray(self.capture.time),
                           delta_time=np.asarray(self.capture.delta_time), cloths=cloths, metrics=metrics,
@@ -295,6 +317,7 @@ class Session:
             self.closed = True
             if self.recorder is not None:
                 self.recorder.close(success)
+                self.recording_kept = bool(success)
 
     def __enter__(self):
         return self

@@ -47,6 +47,9 @@ class JobFileError(ValueError):
         self.file, self.where, self.message = str(file), where, message
         super().__init__(f"{file}: {where}: {message}" if where else f"{file}: {message}")
 
+    def __reduce__(self):  # unpickles as itself (Dask workers, multiprocessing)
+        return (type(self), (self.file, self.where, self.message), self.__dict__)
+
 
 @dataclass(frozen=True)
 class Job:

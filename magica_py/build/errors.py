@@ -9,3 +9,6 @@ class BuildError(ValueError):
         self.cloth = cloth
         self.message = message
         super().__init__(f"cloth {cloth!r}: {message}")
+
+    def __reduce__(self):  # unpickles as itself (Dask workers, multiprocessing)
+        return (type(self), (self.cloth, self.message), self.__dict__)

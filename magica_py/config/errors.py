@@ -57,6 +57,11 @@ class ConfigError(ValueError):
     def __str__(self) -> str:
         return self.report()
 
+    def __reduce__(self):
+        # rebuilt from its arguments, not from ``args``: an error raised on a Dask worker
+        # (or in a multiprocessing pool) must reach the caller as itself
+        return (type(self), (self.source, self.issues), self.__dict__)
+
     def paths(self) -> list[str]:
         """The document paths of all issues (handy in tests)."""
         return [issue.path for issue in self.issues]

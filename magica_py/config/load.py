@@ -26,7 +26,6 @@ one instanced rig.
 from __future__ import annotations
 
 import pathlib
-from types import MappingProxyType
 
 from magica_py.config.checker import Checker
 from magica_py.config.document import Document, parse_text, read_document
@@ -88,7 +87,7 @@ def build_scene(resolved: ResolvedScene, source: pathlib.Path | None, text: str 
     it was loaded with, kept on the scene for recordings and ``resim``)."""
     from magica_py.scene.colliders import ColliderSet
     from magica_py.scene.hierarchy import HierarchyError, TransformHierarchy
-    from magica_py.scene.scene import ClothSpec, OutputSpec, RigInfo, Scene, SceneSettings
+    from magica_py.scene.scene import ClothSpec, FrozenMapping, OutputSpec, RigInfo, Scene, SceneSettings
 
     src = resolved.source
     try:
@@ -102,11 +101,11 @@ def build_scene(resolved: ResolvedScene, source: pathlib.Path | None, text: str 
                         component=hierarchy.index(cl["component"]), connection_mode=cl["connection_mode"],
                         parameters=cl["parameters"], colliders=tuple(cl["colliders"]),
                         collision_mode=cl["collision_mode"],
-                        bone_attributes=MappingProxyType({hierarchy.index(b): a for b, a in cl["bone_attributes"].items()}),
+                        bone_attributes=FrozenMapping({hierarchy.index(b): a for b, a in cl["bone_attributes"].items()}),
                         instance=cl["instance"], preset=cl["preset"], document_path=cl["document_path"])
               for cl in resolved.cloths]
     out = resolved.output
-    output = OutputSpec(rrd=pathlib.Path(out["rrd"]) if out["rrd"] else None, log=MappingProxyType(dict(out["log"])))
+    output = OutputSpec(rrd=pathlib.Path(out["rrd"]) if out["rrd"] else None, log=FrozenMapping(dict(out["log"])))
     rigs = [RigInfo(r["name"], tuple(hierarchy.index(roots[0]) for roots in r["roots"] if roots),
                     r["nodes_per_instance"], r["instances"]) for r in resolved.rigs]
     from magica_py.wind.zones import WindZoneSpec

@@ -20,3 +20,6 @@ class AssetError(ValueError):
         if where:
             location += f": {where}"
         super().__init__(f"{location}: {message}")
+
+    def __reduce__(self):  # unpickles as itself (Dask workers, multiprocessing)
+        return (type(self), (self.file, self.where, self.message), self.__dict__)

@@ -35,6 +35,9 @@ class ParameterError(ValueError):
         self.path = path
         self.message = message
 
+    def __reduce__(self):  # unpickles as itself (Dask workers, multiprocessing)
+        return (type(self), (self.path, self.message), self.__dict__)
+
 
 class ClothParameters(Mapping):
     """Immutable mapping dotted key → value, complete (every key of the table is present)."""

@@ -10,8 +10,33 @@ from __future__ import annotations
 import math
 import pathlib
 from dataclasses import dataclass, field
-from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Any, Iterator, Mapping
+
+
+class FrozenMapping(Mapping):
+    """A read-only mapping that pickles and deep-copies (``types.MappingProxyType`` does
+    neither, and a ``Scene`` must: a Dask worker receives one, ``simulate`` copies one and
+    returns it inside a pickled ``Simulation``)."""
+
+    __slots__ = ("_data",)
+
+    def __init__(self, data: Mapping | None = None):
+        self._data = dict(data or {})
+
+    def __getitem__(self, key):
+        return self._data[key]
+
+    def __iter__(self) -> Iterator:
+        return iter(self._data)
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+    def __repr__(self) -> str:
+        return f"FrozenMapping({self._data!r})"
+
+    def __reduce__(self):
+        return (FrozenMapping, (self._data,))
 
 
 @dataclass(frozen=True)
@@ -91,7 +116,7 @@ class ClothSpec:
     parameters: Any                        # magica_py.params.ClothParameters
     colliders: tuple[int, ...] = ()
     collision_mode: str = "point"
-    bone_attributes: Mapping[int, str] = field(default_factory=lambda: MappingProxyType({}))
+    bone_attributes: Mapping[int, str] = field(default_factory=FrozenMapping)
     instance: int | None = None            # instance number for a replicated cloth
     preset: str | None = None
     document_path: str = ""                # e.g. "cloths[1]", for messages
@@ -102,7 +127,7 @@ class OutputSpec:
     """``output:`` section: the recording path (None: no recording) and what to log."""
 
     rrd: pathlib.Path | None = None
-    log: Mapping[str, bool] = field(default_factory=lambda: MappingProxyType({}))
+    log: Mapping[str, bool] = field(default_factory=FrozenMapping)
 
     def logs(self, what: str) -> bool:
         return bool(self.log.get(what, False))

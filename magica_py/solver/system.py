@@ -31,6 +31,7 @@ Guards: a team reset by ``solver/guards.py`` raises ``("cloth_reset", {"cloth", 
 """
 from __future__ import annotations
 
+import math
 import time as _time
 from functools import partial
 
@@ -163,6 +164,7 @@ class ClothSystem:
             self._activate(t)
         self._time = time_arrays(self.time_state)
         self._hierarchy = hierarchy_arrays(hierarchy)
+        self._source_hierarchy = hierarchy   # attach() checks that the player moves these bones
         self.frame_count = 0
         self._player = None
         self.threads = choose_threads(parallel, getattr(settings, "threads", "auto") if settings is not None else "auto",
@@ -283,6 +285,15 @@ class ClothSystem:
         non-invalid bone of every cloth, docs/solver.md §A.2, §B.5)."""
         from magica_py.runtime.phases import Phase, System
 
+        player_hierarchy = getattr(getattr(player, "scene", None), "hierarchy", None)
+        if player_hierarchy is not None and player_hierarchy is not self._source_hierarchy:
+            # the player would restore and propagate this system's bone indices in its own
+            # hierarchy: out of range there, a write past the end of its arrays
+            player_name = getattr(player.scene, "name", "?")
+            scene_name = getattr(scene, "name", None) or "another scene"
+            raise ValueError(f"attach_solver: the cloth system of {scene_name!r} is built on another hierarchy "
+                             f"than the player's scene {player_name!r}; attach a scene to the player made "
+                             f"from it (Player.for_scene(scene))")
         player.schedule.add(Phase.LATE_UPDATE, System(self.name, self.run))
         player.register_restored_bones(self.restored_bones(), owner=self)
         self._player = player
@@ -611,7 +622,16 @@ class ClothSystem:
 
     def add_force(self, cloth, direction, speed: float, mode: str = "velocity_add") -> None:
         """MagicaCloth.AddForce: an acceleration on every step of the next frame that runs."""
-        d = np.asarray(direction, dtype=np.float64)
+        try:
+            d = np.asarray(direction, dtype=np.float64)
+            speed = float(speed)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"add_force: expected direction (3 numbers) and speed (a number), "
+                             f"got {direction!r}, {speed!r}") from exc
+        if d.shape != (3,) or not np.isfinite(d).all():
+            raise ValueError(f"add_force direction: expected 3 finite numbers, got {direction!r}")
+        if not math.isfinite(speed):
+            raise ValueError(f"add_force speed: expected a finite number (m/s), got {speed!r}")
         n = portable.norm(d)
         if mode not in FORCE_MODES:
             raise ValueError(f"add_force mode {mode!r}: expected one of {sorted(FORCE_MODES)}")
