@@ -32,6 +32,7 @@ Heavy modules (numpy, numba, rerun) are imported inside the commands, so ``--hel
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import signal
@@ -358,7 +359,8 @@ def cmd_run(args) -> int:
         _check_output_path(scene, args)  # fail before the (slow to compile) solver is built
         with compile_watch:
             notes: list[str] = []
-            system = None if args.no_simulation else _attach_solver(player, scene, notes)
+            with _cloth_errors_in(scene):
+                system = None if args.no_simulation else _attach_solver(player, scene, notes)
             solver_attached = system is not None
             warning_events.attach(player)  # before the sink: this frame's warnings reach its events
             recorder = _attach_sink(player, scene, args, notes)
@@ -385,6 +387,8 @@ def cmd_run(args) -> int:
                            threads=getattr(system, "threads", None), interpreted=background is not None))
         if summary.warnings:
             print(f"magica-py: {summary.warnings}", file=sys.stderr)
+        if summary.resets_summary():
+            print(f"magica-py: {summary.resets_summary()}", file=sys.stderr)
     return EXIT_OK
 
 
@@ -748,7 +752,28 @@ def _build_models(scene):
         build_cloth = getattr(build, "build_cloth")
     except (ImportError, AttributeError):
         return None
-    return {spec.name: build_cloth(scene.hierarchy, spec) for spec in _representative_cloths(scene)}
+    with _cloth_errors_in(scene):
+        return {spec.name: build_cloth(scene.hierarchy, spec) for spec in _representative_cloths(scene)}
+
+
+@contextlib.contextmanager
+def _cloth_errors_in(scene):
+    """A cloth that cannot be built (``BuildError``) reported like a scene problem: the file and
+    the cloth's path in the document (``cloths[1]``), exit code 2."""
+    try:
+        yield
+    except Exception as exc:
+        if type(exc).__name__ != "BuildError":
+            raise
+        from magica_py.config.errors import ConfigError, Issue
+
+        cloth = getattr(exc, "cloth", None)
+        spec = next((c for c in scene.cloths if c.name == cloth), None)
+        path = getattr(spec, "document_path", "") or ""
+        where = f"cloth {cloth!r}" if cloth is not None else ""
+        message = getattr(exc, "message", None) or str(exc)
+        raise ConfigError(str(scene.source) if scene.source is not None else None,
+                          [Issue(path, f"{where}: {message}" if where else message)]) from None
 
 
 def _describe_model(model) -> list[str]:

@@ -20,7 +20,7 @@ import sys
 import time
 import warnings
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 # Per-frame metrics: simulation steps this frame (first one present wins) and particle-steps.
 STEP_METRICS = ("cloth.simulation_steps", "solver.steps", "simulation.steps")
@@ -274,6 +274,21 @@ class RunStats:
     compile_seconds: float = 0.0   # s, numba compiles during the run (first run only)
     first_frame_seconds: float = 0.0  # s, the first frame without its compile (loads the cached kernels)
     warnings: str = ""             # the warnings' summary line, "" when none
+    resets: dict = field(default_factory=dict)   # (cloth, reason) -> [count, first frame]: cloth_reset events
+
+    def resets_summary(self) -> str:
+        """One line on the cloth resets of the run (a guard found a non-finite or runaway particle
+        state and reset the cloth), ``""`` when none: a run that keeps resetting is not a good run."""
+        if not self.resets:
+            return ""
+        total = sum(count for count, _ in self.resets.values())
+        ordered = sorted(self.resets.items(), key=lambda kv: -kv[1][0])
+        parts = [f"{cloth!r} x{count} ({reason}, first at frame {first})"
+                 for (cloth, reason), (count, first) in ordered[:3]]
+        more = f" and {len(ordered) - 3} more" if len(ordered) > 3 else ""
+        return (f"warning: {total} cloth reset{'s' if total != 1 else ''} during the run: {'; '.join(parts)}{more}; "
+                f"each is a cloth_reset event of its frame in the recording (check the scene's animation and "
+                f"parameters)")
 
 
 def frame_steps(ctx, system) -> float | None:
@@ -308,6 +323,11 @@ def play(player, scene, frames: int | None, *, system=None, progress: FrameProgr
                     stats.steps += steps
                     stats.steps_known = True
                 stats.particle_steps += float(ctx.metrics.get(PARTICLE_STEP_METRIC, 0.0))
+                for kind, payload in ctx.events or ():
+                    if kind == "cloth_reset" and isinstance(payload, dict):
+                        key = (str(payload.get("cloth")), str(payload.get("reason", "guard")))
+                        entry = stats.resets.setdefault(key, [0, stats.frames - 1])
+                        entry[0] += 1
                 if on_frame is not None:
                     on_frame(ctx)
                 if progress is not None:

@@ -335,6 +335,17 @@ def test_motion_continues_relative_to_the_teleported_place():
                                                {"time": 1, "position": [0, 0, 0]}]}}, "must increase"),
     ({"target": "root", "orbit": {"radius": 1}}, r"orbit\.period: required"),
     ({"at": 1, "teleport": {"target": "root"}}, "a position and/or a rotation"),
+    # rates and angles whose sine would not be finite (NaN transforms) are refused
+    ({"target": "root", "orbit": {"radius": 1, "period": 1e-200}}, r"orbit\.period: expected a period of at least "
+                                                                   r"0\.001 s either way, got 1e-200"),
+    ({"target": "root", "orbit": {"radius": 1, "period": 1, "phase": 1e300}}, r"orbit\.phase: expected a number in "
+                                                                               r"\[-1e\+06, 1e\+06\]"),
+    ({"target": "root", "oscillate": {"amplitude": 1, "frequency": 1e300}}, r"oscillate\.frequency: expected a number "
+                                                                           r"in \(0, 1000\]"),
+    ({"target": "root", "oscillate": {"amplitude": 1e300, "frequency": 1}}, r"oscillate\.amplitude"),
+    ({"target": "root", "spin": {"speed": 1e300}}, r"spin\.speed: expected a number in \[-1e\+06, 1e\+06\]"),
+    ({"target": "root", "walk": {"stride_frequency": 1e300}}, r"walk\.stride_frequency"),
+    ({"target": "root", "walk": {"sway": 1e300}}, r"walk\.sway"),
 ])
 def test_bad_entries_name_the_path(entry, message):
     with pytest.raises(ValueError, match=message):

@@ -135,7 +135,7 @@ def collect_transforms(hierarchy, cloth_name: str, root_bones, component=None) -
         raise BuildError(cloth_name, f"bones {bad} have a zero scale: their pose cannot be inverted")
     flipped = np.nonzero(np.any(lossy < 0.0, axis=1))[0]
     if flipped.size:
-        raise BuildError(cloth_name, negative_scale_message(names[transform_index[flipped[0]]], lossy[flipped[0]]))
+        raise BuildError(cloth_name, negative_scale_message(names[transform_index[flipped[0]]], lossy[flipped[0]], "in the rest pose"))
 
     if component is None:
         p = int(hierarchy.parent[roots[0]])
@@ -148,7 +148,7 @@ def collect_transforms(hierarchy, cloth_name: str, root_bones, component=None) -
         raise BuildError(cloth_name, f"component transform {names[component]!r} has a zero scale: "
                                      "cloth-local space is undefined")
     if np.any(c_scale < 0.0):
-        raise BuildError(cloth_name, negative_scale_message(names[component], c_scale))
+        raise BuildError(cloth_name, negative_scale_message(names[component], c_scale, "in the rest pose"))
     nodes = np.append(transform_index, component)
     far = np.nonzero(~np.all(np.abs(hierarchy.world_position[nodes]) <= POSITION_LIMIT, axis=1))[0]
     if far.size:
@@ -185,11 +185,12 @@ def collect_transforms(hierarchy, cloth_name: str, root_bones, component=None) -
     )
 
 
-def negative_scale_message(name: str, scale) -> str:
-    """What a transform with a negative lossy scale among a cloth's gets (at build and when a
-    cloth system takes the models)."""
-    return (f"transform {name!r} has a negative scale {tuple(float(x) for x in scale)}; negative scale is not "
-            "supported (MagicaCloth2 refuses it at build too, docs/solver.md §H.7): use positive scales")
+def negative_scale_message(name: str, scale, when: str) -> str:
+    """What a transform with a negative lossy scale among a cloth's gets (``when``: in the rest
+    pose at build, at the start when a cloth system takes the models)."""
+    return (f"transform {name!r} has a negative scale {tuple(round(float(x), 6) for x in scale)} {when}; "
+            "negative scale is not supported (MagicaCloth2 refuses it at build too, docs/solver.md §H.7): "
+            "use positive scales")
 
 
 def _component_relative_pose(hierarchy, transform_index, roots, component):

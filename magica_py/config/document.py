@@ -150,7 +150,20 @@ def parse_text(text: str, source: str | None = None) -> Document:
             raise ConfigError(source, [Issue("", "the file is empty (no YAML document in it): expected a scene "
                                                  "mapping with at least 'rigs' (docs/scene-format.md; "
                                                  "`magica-py new NAME` writes a starter scene)")])
-        doc.data = _convert(loader, node, (), doc.lines, issues)
+        # aliases are expanded into copies: a recursive anchor (``&a [*a]``) or nested aliases that
+        # multiply ("billion laughs": a 1 kB file of a billion values) are refused, not expanded
+        budget = _Expansion(max(MIN_EXPANDED_VALUES, 2 * len(text)))
+        try:
+            doc.data = _convert(loader, node, (), doc.lines, issues, budget)
+        except _ExpansionError as exc:
+            raise ConfigError(source, [Issue(format_path(exc.path), exc.message, exc.line)]) from None
+        except yaml.MarkedYAMLError as exc:   # a value PyYAML cannot construct (a bad tag, ...)
+            mark = exc.problem_mark or exc.context_mark
+            raise ConfigError(source, [Issue("", f"invalid YAML: {exc.problem or exc}",
+                                             mark.line + 1 if mark is not None else None)]) from None
+        except RecursionError:
+            raise ConfigError(source, [Issue("", "the document nests too deeply (through aliases): expected a "
+                                                 "scene mapping of ordinary depth")]) from None
         if issues:
             raise ConfigError(source, issues)
         return doc
@@ -190,15 +203,106 @@ def read_document(path: str | pathlib.Path) -> Document:
     return parse_text(text, source)
 
 
-def _convert(loader, node, path: Path, lines: dict, issues: list) -> object:
+# A document's values after its aliases are expanded: at most twice its length in characters
+# (a value takes at least two), and at least this many, so that anchors shared by many entries
+# (``<<: *defaults``) always work.
+MIN_EXPANDED_VALUES = 1_000_000
+
+
+class _ExpansionError(Exception):
+    def __init__(self, path: Path, message: str, line: int | None):
+        super().__init__(message)
+        self.path, self.message, self.line = path, message, line
+
+
+class _Expansion:
+    """The values ``_convert`` produced so far and the nodes it is inside (recursive anchors)."""
+
+    def __init__(self, limit: int):
+        self.limit = limit
+        self.count = 0
+        self.open: set[int] = set()
+
+    def enter(self, node, path: Path) -> None:
+        self.count += 1
+        if self.count > self.limit:
+            raise _ExpansionError(path, f"the document's aliases (*name) expand to more than {self.limit:,} values: "
+                                        "expected a scene of ordinary size (an anchor repeated inside aliases "
+                                        "that are repeated again multiplies)", node.start_mark.line + 1)
+        if id(node) in self.open:
+            raise _ExpansionError(path, "an alias (*name) refers to a mapping or list that contains it: a "
+                                        "recursive structure cannot be a scene value", node.start_mark.line + 1)
+
+
+def _convert(loader, node, path: Path, lines: dict, issues: list, budget: _Expansion | None = None) -> object:
+    if budget is None:
+        budget = _Expansion(MIN_EXPANDED_VALUES)
+    budget.enter(node, path)
     lines[path] = node.start_mark.line + 1
+    if isinstance(node, (yaml.MappingNode, yaml.SequenceNode)):
+        budget.open.add(id(node))
+        try:
+            return _convert_collection(loader, node, path, lines, issues, budget)
+        finally:
+            budget.open.discard(id(node))
+    return _construct_scalar(loader, node, path, issues)
+
+
+def _construct_scalar(loader, node, path: Path, issues: list):
+    """A scalar's value; an explicit tag whose text does not fit it (``!!float abc``,
+    ``!!int 1.5``) is an issue at ``path`` (PyYAML raises a bare ValueError)."""
+    try:
+        return loader.construct_object(node, deep=True)
+    except (ValueError, TypeError, OverflowError) as exc:
+        if isinstance(exc, yaml.YAMLError):
+            raise
+        issues.append(Issue(format_path(path), f"cannot read {node.value!r} as {node.tag.rsplit(':', 1)[-1]}: "
+                                               f"{exc}", node.start_mark.line + 1))
+        return None
+
+
+_MERGE = "tag:yaml.org,2002:merge"
+
+
+def _flattened_pairs(node, path: Path, inside: frozenset = frozenset()) -> list:
+    """(key node, value node, explicit) of a mapping node with its merge keys (``<<: *a``,
+    ``<<: [*a, *b]``) expanded: merged pairs first (the earlier of several merged mappings
+    wins), then the mapping's own pairs, which override them. Unlike PyYAML's
+    ``flatten_mapping`` the nodes are not changed, so a mapping reached again through an alias
+    is read the same way (its own keys still known as its own)."""
+    if id(node) in inside:
+        raise _ExpansionError(path, "a merge key (<<) merges a mapping into itself: a recursive structure "
+                                    "cannot be a scene value", node.start_mark.line + 1)
+    inside = inside | {id(node)}
+    merged: list = []
+    own: list = []
+    for key_node, value_node in node.value:
+        if key_node.tag != _MERGE:
+            own.append((key_node, value_node, True))
+            continue
+        if isinstance(value_node, yaml.MappingNode):
+            sources = [value_node]
+        elif isinstance(value_node, yaml.SequenceNode) and all(isinstance(v, yaml.MappingNode)
+                                                                for v in value_node.value):
+            sources = list(value_node.value)
+        else:
+            raise _ExpansionError(path + ("<<",), "a merge key (<<) takes a mapping or a list of mappings "
+                                                  "(<<: *defaults or <<: [*a, *b]), got "
+                                                  + ("a list with other values" if isinstance(value_node, yaml.SequenceNode)
+                                                     else f"the value {value_node.value!r}"),
+                                  key_node.start_mark.line + 1)
+        for source in reversed(sources):   # the first mapping listed wins: it comes last
+            merged.extend((k, v, False) for k, v, _ in _flattened_pairs(source, path, inside))
+    return merged + own
+
+
+def _convert_collection(loader, node, path: Path, lines: dict, issues: list, budget: _Expansion) -> object:
     if isinstance(node, yaml.MappingNode):
-        explicit = {id(k) for k, _ in node.value if k.tag != "tag:yaml.org,2002:merge"}
-        loader.flatten_mapping(node)  # YAML merge keys (<<: *anchor): merged pairs first
         out: dict = {}
         merged: set = set()  # keys whose current value came from a merge (overridable)
-        for key_node, value_node in node.value:
-            key = loader.construct_object(key_node, deep=True)
+        for key_node, value_node, explicit in _flattened_pairs(node, path):
+            key = _construct_scalar(loader, key_node, path, issues) if isinstance(key_node, yaml.ScalarNode) \
+                else loader.construct_object(key_node, deep=True)
             if not isinstance(key, str):
                 if isinstance(key, (int, float, bool)) or key is None:
                     key = str(key)  # e.g. a bone named 1 in bone_attributes
@@ -206,17 +310,17 @@ def _convert(loader, node, path: Path, lines: dict, issues: list) -> object:
                     issues.append(Issue(format_path(path), f"mapping keys must be text, got {key!r}",
                                         key_node.start_mark.line + 1))
                     continue
-            if key in out and key not in merged and id(key_node) in explicit:
+            if key in out and key not in merged and explicit:
                 issues.append(Issue(format_path(path + (key,)), "duplicate key (it appears twice in this mapping)",
                                     key_node.start_mark.line + 1))
                 continue
-            if id(key_node) in explicit:
+            if explicit:
                 merged.discard(key)
             else:
                 merged.add(key)
-            out[key] = _convert(loader, value_node, path + (key,), lines, issues)
+            out[key] = _convert(loader, value_node, path + (key,), lines, issues, budget)
             lines[path + (key,)] = key_node.start_mark.line + 1
         return out
     if isinstance(node, yaml.SequenceNode):
-        return [_convert(loader, item, path + (i,), lines, issues) for i, item in enumerate(node.value)]
-    return loader.construct_object(node, deep=True)
+        return [_convert(loader, item, path + (i,), lines, issues, budget) for i, item in enumerate(node.value)]
+    raise AssertionError(f"not a collection node: {node!r}")

@@ -219,6 +219,9 @@ def import_clip_entries(c: Checker, m: dict, path: tuple, rigs: list[dict]) -> l
         return []
     if ref is None:
         return []
+    if retarget is not None and any(not isinstance(b, dict) or not isinstance(b.get("name"), str)
+                                    for b in (rig or {}).get("bones") or ()):
+        return []   # a bone of the target rig without a usable name: its own entry reports it
     common = {k: m[k] for k in ("start", "end", "phase_offset", "fade") if m.get(k) is not None}
     try:
         with warnings.catch_warnings(record=True) as caught:
@@ -320,6 +323,8 @@ def import_vrm_sections(c: Checker, m: dict, path: tuple, rigs: list[dict]) -> t
         known = [r["name"] for r in rigs if r.get("file")]
         c.error(path + ("from_vrm",), f"no rig {name!r} loaded from a file{did_you_mean(name, known)}")
         return [], []
+    if not isinstance(rig["file"], str) or not isinstance(rig.get("prefix") or "", str):
+        return [], []   # a rig file or prefix that is not text: the rig's own entry reports it
     try:
         from magica_py.io.sections import vrm_sections
 

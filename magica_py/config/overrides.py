@@ -51,6 +51,8 @@ def parse_override(text: str) -> tuple[list[str | int], object]:
         value = load_yaml_value(raw_value) if raw_value.strip() else None
     except yaml.YAMLError as exc:
         raise ValueError(f"override {text!r}: the value is not valid YAML ({exc})") from None
+    except (ValueError, TypeError, OverflowError) as exc:   # an explicit tag that does not fit: !!float abc
+        raise ValueError(f"override {text!r}: the value cannot be read ({exc})") from None
     return tokens, value
 
 

@@ -95,9 +95,12 @@ class NameTable:
             base, _, index = name.rpartition("#")
             if base in self.base_rig and index.isdigit():
                 return [instance_name(n, int(index)) for n in self.subtree(base)]
-        out, stack = [], [name]
+        out, stack, seen = [], [name], set()
         while stack:
             n = stack.pop()
+            if n in seen:   # a duplicate bone name (reported) lists its children twice: 2^depth paths
+                continue
+            seen.add(n)
             out.append(n)
             stack.extend(reversed(self.children.get(n, [])))
         return out
@@ -237,9 +240,11 @@ def _static_collider_nodes(c: Checker, colliders: list[dict], table: NameTable) 
 def _check_unique(c: Checker, bones: list[BoneSpec], n: NormalizedScene) -> None:
     first: dict[str, int] = {}
     paths = _bone_definition_paths(n)
+    parts = [(part["params"]["name"], part["path"] + ("name",)) for rig in n.rigs for part in rig["parts"]
+             if isinstance(part["params"].get("name"), str)]
     for b in bones:
         if b.name in first:
-            where = paths.get(b.name, ())
+            where = _definition_path(b.name, paths, parts)
             c.error(where, f"duplicate transform name {b.name!r}: every bone, generated bone and "
                            "static collider node needs a unique name")
         first.setdefault(b.name, 1)
@@ -253,6 +258,19 @@ def _check_unique(c: Checker, bones: list[BoneSpec], n: NormalizedScene) -> None
                 c.error(item["path"] + ("name",), f"duplicate {key[:-1]} name {item['name']!r} "
                                                   f"(also {format_path(names[item['name']])})")
             names.setdefault(item["name"], item["path"])
+
+
+def _definition_path(name: str, paths: dict, parts: list) -> tuple:
+    """Where the bone ``name`` is defined: an explicit bone's or static collider's ``name``, or
+    the ``name`` of the generator part that made it (``tail_3`` -> the chain ``tail``, the
+    later part when two make the same names); an instance's copy (``hips#2``) is its rig's bone."""
+    base = name.split("#", 1)[0]
+    if base in paths:
+        return paths[base]
+    for part_name, path in reversed(parts):
+        if base.startswith(part_name + "_"):
+            return path
+    return ()
 
 
 def _bone_definition_paths(n: NormalizedScene) -> dict[str, tuple]:

@@ -102,7 +102,8 @@ PART_FIELDS: dict[str, dict[str, Field]] = {
 INSTANCE_FIELDS = {
     "count": F("int", REQUIRED, COUNT, doc="number of copies of the rig"),
     "spacing": F("vec3", (1.0, 0.0, 0.0), doc="offset between neighbouring copies in a row (m)"),
-    "columns": F("int", 0, NON_NEGATIVE, doc="copies per row; 0 = all in one row"),
+    # bounded like count (a scene has at most 500,000 bones): numpy indexes the grid with C longs
+    "columns": F("int", 0, Range(0, 500_000), doc="copies per row; 0 = all in one row"),
     "row_spacing": F("vec3", None, doc="offset between rows (m); default: spacing turned 90 degrees about Y"),
     "phase_offset": F("number", 0.0, NON_NEGATIVE, doc="animation time offset per instance index (s)"),
     "phase_jitter": F("number", 0.0, NON_NEGATIVE, doc="extra random offset in [0, phase_jitter) per instance (s), seeded by scene.seed"),
@@ -112,6 +113,14 @@ INSTANCE_FIELDS = {
 # The keys and meanings follow magica_py.scene.animation (``_driver_params``, ``INTERPOLATIONS``):
 # tests/test_config_schema.py checks that both sides accept the same keys and choices.
 KEYFRAME_INTERPOLATIONS = ("linear", "step", "smooth", "cubic")
+# The periodic drivers' angles, rates and amplitudes: far beyond any motion a rig makes, and
+# within the range where the angles' sine and cosine stay exact to round-off (an angle of 1e300
+# degrees or a period of 1e-200 s made NaN transforms)
+DRIVER_ANGLE = Range(-1e6, 1e6)          # degrees (phases, amplitudes about an axis)
+DRIVER_AMPLITUDE = Range(-1e6, 1e6)      # m or degrees
+DRIVER_FREQUENCY = Range(0.0, 1000.0, low_open=True)   # Hz
+SPIN_SPEED = Range(-1e6, 1e6)            # degrees/s
+MIN_ORBIT_PERIOD = 1e-3                  # s (either sign)
 DRIVER_FIELDS: dict[str, dict[str, Field]] = {
     "keyframes": {
         "interpolation": F("choice", "linear", choices=KEYFRAME_INTERPOLATIONS,
@@ -123,33 +132,34 @@ DRIVER_FIELDS: dict[str, dict[str, Field]] = {
     "orbit": {
         "center": F("vec3", (0.0, 0.0, 0.0), doc="circle centre in the parent's space (m)"),
         "radius": F("number", REQUIRED, POSITIVE, doc="circle radius (m)"),
-        "period": F("number", REQUIRED, doc="time for one revolution (s), non-zero; negative runs the circle backwards"),
+        "period": F("number", REQUIRED, doc="time for one revolution (s), at least 0.001 s either way; negative runs the "
+                                             "circle backwards"),
         "axis": F("dir3", (0.0, 1.0, 0.0), doc="axis of the circle in the parent's space: a positive rotation about it "
                                                 "(clockwise seen from the axis tip, Unity is left-handed), as spin"),
-        "phase": F("number", 0.0, doc="start angle (degrees)"),
+        "phase": F("number", 0.0, DRIVER_ANGLE, doc="start angle (degrees)"),
         "face_path": F("bool", False, doc="also rotate the target so it faces along the path"),
     },
     "oscillate": {
         "property": F("choice", "position", choices=("position", "rotation"), doc="what oscillates"),
         "axis": F("dir3", (0.0, 1.0, 0.0), doc="direction in the parent's space (position) or rotation axis in the "
                                                 "node's own local axes (rotation)"),
-        "amplitude": F("number", REQUIRED, doc="m for position, degrees for rotation"),
-        "frequency": F("number", REQUIRED, POSITIVE, doc="Hz"),
-        "phase": F("number", 0.0, doc="degrees"),
+        "amplitude": F("number", REQUIRED, DRIVER_AMPLITUDE, doc="m for position, degrees for rotation"),
+        "frequency": F("number", REQUIRED, DRIVER_FREQUENCY, doc="Hz"),
+        "phase": F("number", 0.0, DRIVER_ANGLE, doc="degrees"),
     },
     "spin": {
         "axis": F("dir3", (0.0, 1.0, 0.0), doc="rotation axis in the node's own local axes"),
-        "speed": F("number", REQUIRED, doc="angular speed (degrees/s)"),
+        "speed": F("number", REQUIRED, SPIN_SPEED, doc="angular speed (degrees/s)"),
     },
     "walk": {
         "speed": F("number", 0.0, NON_NEGATIVE, doc="forward speed (m/s); 0 = walk on the spot"),
-        "stride_frequency": F("number", 1.8, POSITIVE,
+        "stride_frequency": F("number", 1.8, DRIVER_FREQUENCY,
                               doc="strides per second (Hz); a stride is one gait cycle of two steps"),
-        "bob": F("number", 0.03, NON_NEGATIVE, doc="bob amplitude along up (m), once per step: twice per stride"),
-        "sway": F("number", 4.0, NON_NEGATIVE, doc="roll amplitude about the node's local +Z (degrees), once per stride"),
-        "lateral": F("number", 0.0, NON_NEGATIVE, doc="side-to-side shift amplitude along up x direction (m), "
+        "bob": F("number", 0.03, Range(0.0, 1e6), doc="bob amplitude along up (m), once per step: twice per stride"),
+        "sway": F("number", 4.0, Range(0.0, 1e6), doc="roll amplitude about the node's local +Z (degrees), once per stride"),
+        "lateral": F("number", 0.0, Range(0.0, 1e6), doc="side-to-side shift amplitude along up x direction (m), "
                                                       "once per stride"),
-        "twist": F("number", 0.0, NON_NEGATIVE, doc="yaw amplitude about the node's local +Y (degrees), once per stride"),
+        "twist": F("number", 0.0, Range(0.0, 1e6), doc="yaw amplitude about the node's local +Y (degrees), once per stride"),
         "direction": F("dir3", (0.0, 0.0, 1.0), doc="forward direction in the parent's space"),
         "up": F("dir3", (0.0, 1.0, 0.0), doc="bob direction in the parent's space (not parallel to direction)"),
     },
@@ -427,8 +437,9 @@ def check_animation_entry(c: Checker, value, path: tuple) -> dict | None:
                 params["keys"] = check_keys(c, m[kind], kp)
         else:
             params = read_fields(c, m[kind], kp, DRIVER_FIELDS[kind])
-        if kind == "orbit" and params and params["period"] == 0:
-            c.error(kp + ("period",), "expected a non-zero period (s); a negative one runs the circle backwards")
+        if kind == "orbit" and params and not abs(params["period"]) >= MIN_ORBIT_PERIOD:
+            c.error(kp + ("period",), f"expected a period of at least {MIN_ORBIT_PERIOD:g} s either way, got "
+                                      f"{params['period']:g} (a negative one runs the circle backwards)")
             return None
         if kind == "walk" and params and params["direction"] and params["up"]:
             d, u = params["direction"], params["up"]

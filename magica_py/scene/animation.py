@@ -572,7 +572,11 @@ class Animation:
 
 
 def _driver_params(kind: str, p: dict, where: str) -> np.ndarray:
-    """The parameter row of one driver (layout in the comment at the top of the module)."""
+    """The parameter row of one driver (layout in the comment at the top of the module).
+    Numbers are checked against the scene format's ranges (``config.schema.DRIVER_FIELDS``),
+    for drivers built from Python as for those read from a scene file."""
+    from magica_py.config.schema import DRIVER_FIELDS, MIN_ORBIT_PERIOD
+
     def num(key, default=None):
         value = p.get(key, default)
         if value is None:
@@ -580,6 +584,9 @@ def _driver_params(kind: str, p: dict, where: str) -> np.ndarray:
         value = float(value)
         if not np.isfinite(value):
             raise ValueError(f"{where}.{key}: expected a finite number, got {value}")
+        bounds = DRIVER_FIELDS[kind][key].rng
+        if not bounds.contains(value):
+            raise ValueError(f"{where}.{key}: expected a number {bounds.describe()}, got {value:g}")
         return value
 
     rad = math.radians
@@ -595,8 +602,9 @@ def _driver_params(kind: str, p: dict, where: str) -> np.ndarray:
         u = ref - portable.dot3(ref, axis) * axis
         u /= portable.norm(u)
         period = num("period")
-        if period == 0.0:
-            raise ValueError(f"{where}.period: expected a non-zero period")
+        if not abs(period) >= MIN_ORBIT_PERIOD:
+            raise ValueError(f"{where}.period: expected a period of at least {MIN_ORBIT_PERIOD:g} s either way, "
+                             f"got {period:g}")
         return np.concatenate([np.asarray(p.get("center", (0.0, 0.0, 0.0)), dtype=np.float64),
                                [num("radius"), period], axis, u,
                                [rad(num("phase", 0.0)), float(bool(p.get("face_path", False)))]])

@@ -814,7 +814,8 @@ class ClothSystem:
                 if (hierarchy.lossy_scale[node] < 0.0).any():
                     where = getattr(spec, "document_path", "")
                     raise BuildError(getattr(spec, "name", "?"), (f"{where}: " if where else "")
-                                     + negative_scale_message(hierarchy.names[node], hierarchy.lossy_scale[node]))
+                                     + negative_scale_message(hierarchy.names[node], hierarchy.lossy_scale[node],
+                                                            "in the pose the cloth system starts from"))
 
     def _write_parameters(self, team: int) -> None:
         def resolve(name):
