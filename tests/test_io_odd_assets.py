@@ -2,6 +2,7 @@
 it (or, when the file is usable, is read as intended); never a traceback, a silent NaN, or a
 crash reported as an internal error."""
 import json
+import warnings
 import struct
 from pathlib import Path
 
@@ -113,6 +114,17 @@ def test_automatic_units_warn_when_no_unit_gives_a_human_size(tmp_path):
         assert load_bvh(_write(tmp_path, _bvh_text(offset="0 169999 0"), "far.bvh")).unit_scale == 0.001
 
 
+def test_a_drop_glob_that_matches_no_animated_bone_is_warned_about(tmp_path):
+    path = _write(tmp_path, _bvh_text(), "d.bvh")
+    with pytest.warns(UserWarning, match=r"d\.bvh: drop 'tail\*' matches no bone the clip animates \(1 bones: "
+                                         r"\['root'\]\)") as caught:
+        clip = load_clip(path, drop=["tail*"])
+    assert len(caught) == 1 and clip.nodes() == ["root"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert load_clip(path, drop=["ro*"]).nodes() == []   # a glob that matches: no warning
+
+
 @needs_data
 def test_a_source_skeleton_without_hips_names_the_file_and_the_way_out(tmp_path):
     path = _write(tmp_path, _bvh_text(), "generic.bvh")
@@ -197,6 +209,18 @@ def test_gltf_cubic_rotation_with_zero_tangents_loads(tmp_path):
     with pytest.raises(AssetError, match=r"output: element 4 is a zero quaternion"):
         load_gltf(_animated(tmp_path, [0, 1], key + [[0, 0, 0, 0]] * 3, target="rotation",
                             interpolation="CUBICSPLINE"))
+
+
+def test_a_trim_past_the_clip_ends_at_its_last_key(tmp_path):
+    """trim: [0, 1e30] is the whole clip (a cubic clip is resampled over the trimmed span:
+    1e30 s of it failed in numpy's allocation)."""
+    key = [[0, 0, 0, 0], [0, 0, 0.6, 0.8], [0, 0, 0, 0]]
+    clip = next(iter(load_gltf(_animated(tmp_path, [0, 1], key + key, target="rotation",
+                                         interpolation="CUBICSPLINE")).clips.values()))
+    whole, past = clip.trimmed(0.0), clip.trimmed(0.0, 1e30)
+    assert past.duration == whole.duration == 1.0
+    assert all(np.array_equal(a.times, b.times) and np.array_equal(a.values, b.values)
+               for a, b in zip(whole.tracks, past.tracks))
 
 
 def test_gltf_buffer_without_byte_length_is_rejected(tmp_path):

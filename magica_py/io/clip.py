@@ -132,8 +132,9 @@ class Clip:
         return replace(self, tracks=keep, notes=self.notes + [f"dropped {paths} of {pats}"])
 
     def trimmed(self, start: float, end: float | None = None) -> "Clip":
-        """The part [start, end] of the clip, re-timed to begin at 0 (end values sampled)."""
-        end = self.duration if end is None else float(end)
+        """The part [start, end] of the clip, re-timed to begin at 0 (end values sampled); an
+        end past the clip's last key is its end (the source has nothing after it)."""
+        end = self.duration if end is None else min(float(end), self.duration)
         if not 0.0 <= start < end:
             raise ValueError(f"clip {self.name!r}: expected 0 <= start < end, got [{start}, {end}]")
         tracks = []
