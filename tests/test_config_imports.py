@@ -64,6 +64,9 @@ cloths:
      "unknown rig 'b'"),
     ("rigs:\n  - {name: a, bones: [{name: root}]}\nanimation:\n  - {clip: x.bvh, retarget: {}}\n", "animation[0]",
      "missing 'rig'"),
+    # a unit scale whose products overflow (the clip's keys became NaN at generated paths)
+    ("rigs:\n  - {name: a, file: nowhere.glb, unit_scale: 1e300}\n", "rigs[0].unit_scale",
+     "expected a number in (0, 1e+06], got 1e+300"),
 ])
 def test_import_errors_name_the_entry(tmp_path, body, path, fragment):
     with pytest.raises(ConfigError) as info:

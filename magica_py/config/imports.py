@@ -42,6 +42,8 @@ import warnings
 from magica_py.config.checker import NON_NEGATIVE, POSITIVE, Checker, Range
 
 RIG_FILE_KEYS = ("file", "prefix", "unit_scale")
+# m per file unit: millimetres to kilometres and far beyond; 1e300 made the clips' keys overflow
+UNIT_SCALE = Range(0.0, 1e6, low_open=True)
 CLIP_KEYS = ("clip", "rig", "loop", "drop", "retarget", "trim", "trim_frames", "rate", "start", "end",
              "phase_offset", "fade")
 RETARGET_KEYS = ("source_map", "target_map", "source_overrides", "target_overrides", "source_rest",
@@ -74,7 +76,7 @@ def import_rig(c: Checker, m: dict, path: tuple) -> dict | None:
     (None after reporting a problem). Bones are normalized explicit-bone entries."""
     file = c.text(m, "file", path, what="a .gltf, .glb, .vrm or .bvh file path")
     prefix = "" if m.get("prefix") in ("", None) else c.text(m, "prefix", path, "", what="a name prefix")
-    unit_scale = c.number(m, "unit_scale", path, 1.0, POSITIVE)
+    unit_scale = c.number(m, "unit_scale", path, 1.0, UNIT_SCALE)
     if file is None:
         return None
     full = asset_path(c, file)
