@@ -118,6 +118,9 @@ def load(scene_or_path, overrides=()):
     if isinstance(scene_or_path, str) and "\n" in scene_or_path:
         return load_scene_text(scene_or_path, list(overrides))
     path = pathlib.Path(os.fspath(scene_or_path))
+    if isinstance(scene_or_path, str) and not path.exists() and ("{" in scene_or_path or ": " in scene_or_path):
+        raise ValueError(f"scene_or_path: {scene_or_path!r} is not a file; YAML text is recognised by its "
+                         "line breaks (a scene document has several lines)")
     from magica_py.avatar import avatar_scene_text, is_vrm_file
 
     if is_vrm_file(path):

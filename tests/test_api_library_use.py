@@ -144,3 +144,15 @@ def test_attach_solver_refuses_a_scene_that_is_not_the_players(in_repo):
     for _ in range(3):
         player.step()
     assert np.isfinite(system.positions("tail")).all()
+
+
+def test_one_line_yaml_text_is_not_taken_for_a_missing_file(in_repo):
+    with pytest.raises(ValueError, match=r"'version: 1' is not a file; YAML text is recognised by its line breaks"):
+        magica_py.simulate("version: 1")
+
+
+@pytest.mark.parametrize("value", ["x", None, [1]])
+def test_a_time_scale_that_is_not_a_number_names_what_was_expected(in_repo, value):
+    with Session(TAIL) as session:
+        with pytest.raises(ValueError, match=r"time scale must be a number in \[0, 1\], got "):
+            session.system.set_time_scale("tail", value)

@@ -112,6 +112,8 @@ CASES = [
      ["did you mean 'line'", "sequential_loop_mesh"]),
     ("wrong parameter type", _set(("cloths", 0, "parameters", "damping"), "soft"), "cloths[0].parameters.damping",
      ["expected"]),
+    ("parameters as an empty list", _set(("cloths", 0, "parameters"), []), "cloths[0].parameters",
+     ["expected a mapping of parameter names to values, got []"]),
     # unknown names
     ("unknown parent", _set(("rigs", 0, "bones", 2, "parent"), "hip"), "rigs[0].bones[2].parent",
      ["unknown parent 'hip'", "did you mean 'hips'"]),

@@ -612,7 +612,7 @@ def check_cloth(c: Checker, value, path: tuple) -> dict | None:
              "component": c.text(m, "component", path, None, what="a transform name"),
              "connection": c.choice(m, "connection", path, CONNECTION_MODES, "line"),
              "preset": c.text(m, "preset", path, None, what="a preset name"),
-             "parameters": m.get("parameters") or {},
+             "parameters": {} if m.get("parameters") is None else m["parameters"],   # [] or 0 is a mistake
              "colliders": c.names(m, "colliders", path),
              "collision_mode": c.choice(m, "collision_mode", path, COLLISION_MODES, None),
              "bone_attributes": {}, "path": path}

@@ -389,7 +389,10 @@ class TeamTimeState:
 
     def set_time_scale(self, team: int, value: float) -> None:
         """Team time scale, clamped to [0,1] as MagicaCloth2's API does."""
-        v = float(value)
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"team {team}: time scale must be a number in [0, 1], got {value!r}") from None
         if math.isnan(v):
             raise ValueError(f"team {team}: time scale must be a number in [0, 1], got nan")
         self.team_time_scale[team] = min(max(v, 0.0), 1.0)
