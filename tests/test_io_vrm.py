@@ -1,12 +1,14 @@
 """VRM 0.x / 1.0 spring bones → bone cloths and colliders (magica_py.io.vrm, io.sections)."""
 import json
 import shutil
+import struct
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from magica_py.io.errors import AssetError
+from magica_py.io.quat import qrotate
 from magica_py.io.sections import rig_section, vrm_sections
 from magica_py.io.vrm import load_vrm
 from magica_py.params import resolve_parameters
@@ -242,3 +244,81 @@ def test_springs_with_the_same_name_stay_separate_cloths(tmp_path):
     assert [e["name"] for e in entries] == ["vrm_Hair", "vrm_Hair_1"]
     assert [e["root_bones"] for e in entries] == [["Spring A"], ["Spring C"]]
     assert entries[0]["parameters"] != entries[1]["parameters"]
+
+
+def _glb_chunks(data: bytes) -> list:
+    length = struct.unpack_from("<I", data, 8)[0]
+    off, chunks = 12, []
+    while off < length:
+        size, kind = struct.unpack_from("<II", data, off)
+        chunks.append([kind, data[off + 8:off + 8 + size]])
+        off += 8 + size
+    return chunks
+
+
+def _as_vrm1(path: Path, out: Path) -> Path:
+    """Godette (VRM 0.x) written as a VRM 1.0 file, by the rules of the two specifications: the
+    same nodes under a root turned 180 degrees about Y (0.x models face -Z, 1.0 ones +Z); the
+    humanoid bones; one spring per chain of a bone group, every joint with the group's
+    parameters; the sphere colliders with their offsets turned from the Unity axes 0.x stores
+    them in into glTF axes (UniVRM 0.x's glTF is Unity's with Z reversed: z negated)."""
+    chunks = _glb_chunks(path.read_bytes())
+    doc = json.loads(chunks[0][1])
+    vrm = doc["extensions"].pop("VRM")
+    doc["nodes"].append({"name": "vrm1_root", "children": doc["scenes"][0]["nodes"], "rotation": [0, 1, 0, 0]})
+    doc["scenes"][0]["nodes"] = [len(doc["nodes"]) - 1]
+    colliders, groups, springs = [], [], []
+    for g in vrm["secondaryAnimation"]["colliderGroups"]:
+        groups.append({"colliders": list(range(len(colliders), len(colliders) + len(g["colliders"])))})
+        colliders += [{"node": g["node"], "shape": {"sphere": {"offset": [c["offset"]["x"], c["offset"]["y"],
+                                                                          -c["offset"]["z"]],
+                                                               "radius": c["radius"]}}} for c in g["colliders"]]
+    for g in vrm["secondaryAnimation"]["boneGroups"]:
+        for bone in g["bones"]:
+            chain = [bone]
+            while doc["nodes"][chain[-1]].get("children"):
+                chain.append(doc["nodes"][chain[-1]]["children"][0])
+            joint = {"stiffness": g["stiffiness"], "gravityPower": g["gravityPower"], "dragForce": g["dragForce"],
+                     "hitRadius": g["hitRadius"], "gravityDir": [0, -1, 0]}
+            springs.append({"joints": [dict(joint, node=n) for n in chain], "colliderGroups": g.get("colliderGroups", [])})
+    doc["extensions"]["VRMC_vrm"] = {"specVersion": "1.0", "meta": {"name": "godette as 1.0"}, "humanoid": {
+        "humanBones": {h["bone"]: {"node": h["node"]} for h in vrm["humanoid"]["humanBones"]}}}
+    doc["extensions"]["VRMC_springBone"] = {"specVersion": "1.0", "colliders": colliders, "colliderGroups": groups,
+                                            "springs": springs}
+    doc["extensionsUsed"] = ["VRMC_vrm", "VRMC_springBone"]
+    text = json.dumps(doc).encode()
+    chunks[0][1] = text + b" " * (-len(text) % 4)
+    body = b"".join(struct.pack("<II", len(d), kind) + d for kind, d in chunks)
+    out.write_bytes(struct.pack("<III", 0x46546C67, 2, 12 + len(body)) + body)
+    return out
+
+
+def _world(avatar):
+    h = TransformHierarchy(avatar.bones)
+    return h, {n: h.world_position[h.index(n)] for n in h.names}
+
+
+def test_a_vrm0_avatar_and_its_vrm1_form_give_the_same_bones_springs_and_colliders(godette, tmp_path):
+    """Two conventions, one avatar: the 0.x file read with Z mirrored and its 1.0 form read with
+    X mirrored under a root turned about Y place every bone, spring joint and collider at the
+    same world position, with the same spring parameters and cloth entries."""
+    with pytest.warns(UserWarning, match="radius 1 m exceeds"):
+        v1 = load_vrm(_as_vrm1(GODETTE, tmp_path / "godette1.vrm"))
+    assert v1.spec_version == "1.0" and v1.humanoid == godette.humanoid
+    h0, world0 = _world(godette)
+    h1, world1 = _world(v1)
+    for name, p in world0.items():
+        np.testing.assert_allclose(world1[name], p, atol=1e-9, err_msg=name)
+    assert [(c.root, c.joints, c.vrm) for c in v1.chains] == [(c.root, c.joints, c.vrm) for c in godette.chains]
+
+    def centres(avatar, h):
+        out = []
+        for c in avatar.colliders:
+            i = h.index(c.transform)
+            out.append(h.world_position[i] + qrotate(h.world_rotation[i], np.asarray(c.center) * h.lossy_scale[i]))
+        return np.array(sorted(map(tuple, out)))
+    np.testing.assert_allclose(centres(v1, h1), centres(godette, h0), atol=1e-9)
+    assert [c.radius for c in sorted(v1.colliders, key=lambda c: c.radius)] == \
+        [c.radius for c in sorted(godette.colliders, key=lambda c: c.radius)]
+    params = lambda avatar: [e["parameters"] for e in avatar.cloth_entries(group_by="chain")]   # noqa: E731
+    assert params(v1) == params(godette)
