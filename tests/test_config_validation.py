@@ -115,6 +115,10 @@ CASES = [
     ("parameters as an empty list", _set(("cloths", 0, "parameters"), []), "cloths[0].parameters",
      ["expected a mapping of parameter names to values, got []"]),
     # unknown names
+    ("bone name with the instance separator", _set(("rigs", 0, "bones", 2, "name"), "head#2"),
+     "rigs[0].bones[2].name", ["'head#2': a name cannot contain '#'"]),
+    ("part name with the instance separator", _set(("rigs", 0, "parts", 0, "chain", "name"), "tail#1"),
+     "rigs[0].parts[0].chain.name", ["a name cannot contain '#'"]),
     ("unknown parent", _set(("rigs", 0, "bones", 2, "parent"), "hip"), "rigs[0].bones[2].parent",
      ["unknown parent 'hip'", "did you mean 'hips'"]),
     ("unknown chain parent", _set(("rigs", 0, "parts", 0, "chain", "parent"), "hipz"), "rigs[0].parts[0].chain.parent",

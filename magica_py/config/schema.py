@@ -386,7 +386,7 @@ def check_rig(c: Checker, value, path: tuple) -> dict | None:
         bm = c.mapping(b, bp, ("name", "parent", "position", "rotation", "euler", "scale"))
         if bm is None:
             continue
-        rig["bones"].append({"name": c.text(bm, "name", bp, what="a bone name"),
+        rig["bones"].append({"name": _defined_name(c, bm, bp, "a bone name"),
                              "parent": c.text(bm, "parent", bp, None, what="a bone name or null"),
                              "path": bp, **check_pose(c, bm, bp)})
     rig["parts"] = []
@@ -399,6 +399,8 @@ def check_rig(c: Checker, value, path: tuple) -> dict | None:
         if kind is None:
             continue
         params = read_fields(c, pm[kind], pp + (kind,), PART_FIELDS[kind])
+        if params is not None and isinstance(pm[kind], dict):
+            params["name"] = _defined_name(c, pm[kind], pp + (kind,), "a name") if params.get("name") else None
         if params is not None:
             rig["parts"].append({"kind": kind, "params": params, "path": pp + (kind,)})
     rig["instances"] = None
@@ -408,6 +410,17 @@ def check_rig(c: Checker, value, path: tuple) -> dict | None:
         c.error(path, "a rig needs bones, parts and/or a file")
     rig["path"] = path
     return rig
+
+
+def _defined_name(c: Checker, m: dict, path: tuple, what: str):
+    """The name a bone or a generator part defines: text without '#', which separates an
+    instance's number from its rig's bone name (``hips#2``) in every reference."""
+    name = c.text(m, "name", path, what=what)
+    if name is not None and "#" in name:
+        c.error(path + ("name",), f"{name!r}: a name cannot contain '#', which names a rig instance's copy "
+                                  "(hips#2 is instance 2's hips)")
+        return None
+    return name
 
 
 # ----------------------------------------------------------------------------- animation
