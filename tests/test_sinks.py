@@ -538,3 +538,16 @@ def test_the_focus_box_spans_the_characters_joints_and_particles_but_not_the_ste
         joints, tail, skirt = traj[f]
         points = np.vstack([joints[1:], tail, skirt])          # joint 0 (the root) is a stem
         np.testing.assert_array_equal(box[f], np.stack([points.min(0), points.max(0)]).astype(np.float32))
+
+
+def test_a_recording_file_that_cannot_be_created_names_the_recording_not_its_temporary(tmp_path, monkeypatch):
+    """A folder that passes the access check but refuses the file (root in /proc): rerun's error
+    names the hidden temporary file; the message leads with the recording the user asked for."""
+    def refused(path, *args, **kwargs):
+        raise RuntimeError(f"Failed to create file: No such file or directory (os error 2), path: {path}")
+
+    monkeypatch.setattr(rr, "FileSink", refused)
+    with pytest.raises(OutputError, match=rf"cannot write the recording '{tmp_path / 'x.rrd'}' \(its temporary "
+                                          r"file beside it: Failed to create file"):
+        RerunSink(statics(), rrd_path=tmp_path / "x.rrd")
+    assert list(tmp_path.iterdir()) == []

@@ -233,6 +233,9 @@ class RerunSink:
         except BaseException as exc:
             self._abandon()
             if isinstance(exc, Exception):   # rerun raises plain RuntimeError
+                if self.final_path is not None and self.temp_path is not None and not self.live_urls:
+                    raise OutputError(f"cannot write the recording {str(self.final_path)!r} (its temporary file "
+                                      f"beside it: {exc})") from exc
                 raise OutputError(f"cannot open the recording output: {exc}") from exc
             raise
         self.closed = False
