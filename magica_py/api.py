@@ -280,11 +280,10 @@ class Session:
         self._check_open("run()")
         if frames is None:
             frames = self.scene.settings.frame_count()
-        elif not isinstance(frames, numbers.Integral) or isinstance(frames, bool):
-            if not (isinstance(frames, numbers.Real) and not isinstance(frames, bool)
-                    and math.isfinite(frames) and float(frames).is_integer()):
-                raise TypeError(f"frames: expected a whole number of frames, got {frames!r}")
-        if frames is not None:
+        elif (isinstance(frames, bool) or not isinstance(frames, numbers.Real) or not math.isfinite(frames)
+              or not float(frames).is_integer()):
+            raise TypeError(f"frames: expected a whole number of frames, got {frames!r}")
+        if frames is not None:   # None: a realtime clock with a duration stops on the wall clock
             frames = int(frames)
         if frames is not None and frames < 0:
             raise ValueError(f"frames: expected >= 0, got {frames}")

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import fnmatch
 import math
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -124,9 +125,16 @@ class Clip:
         """A copy without the channels ``paths`` of nodes matching any glob in ``patterns``.
 
         Use it for bones the simulation moves (``clip.without(["b_Tail*"])``): a keyframed
-        tail would otherwise be overwritten by the clip every frame before the cloth runs.
+        tail would otherwise be overwritten by the clip every frame before the cloth runs. A
+        glob that matches no animated bone is warned about: the bone it meant stays keyframed.
         """
         pats = [patterns] if isinstance(patterns, str) else list(patterns)
+        animated = sorted(self.nodes())
+        for p in pats:
+            if not any(fnmatch.fnmatchcase(n, p) for n in animated):
+                warnings.warn(f"{self.source or self.name}: drop {p!r} matches no bone the clip animates "
+                              f"({len(animated)} bones: {animated[:6]}{' ...' if len(animated) > 6 else ''})",
+                              UserWarning, stacklevel=2)
         keep = [tr for tr in self.tracks
                 if not (tr.path in paths and any(fnmatch.fnmatchcase(tr.node, p) for p in pats))]
         return replace(self, tracks=keep, notes=self.notes + [f"dropped {paths} of {pats}"])
@@ -154,7 +162,8 @@ class Clip:
 
     def pose_at(self, t: float) -> "Clip":
         """A one-key clip holding the pose at time ``t`` (every track sampled there, at time 0)."""
-        tracks = [Track(tr.node, tr.path, np.zeros(1), sample_track_many(tr, [float(t)]), "linear") for tr in self.tracks]
+        tracks = [Track(tr.node, tr.path, np.zeros(1), sample_track_many(tr, [float(t)]), "linear")
+                  for tr in self.tracks]
         return replace(self, tracks=tracks, notes=self.notes + [f"the pose at {t:g} s"])
 
     def frame_times(self) -> np.ndarray:

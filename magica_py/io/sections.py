@@ -14,7 +14,6 @@ metres), ``colliders`` and ``cloths`` entries, and animation either as a ``Clip`
 """
 from __future__ import annotations
 
-import fnmatch
 import warnings
 from pathlib import Path
 
@@ -197,12 +196,6 @@ def load_clip(ref, *, base_dir=".", retarget_to: list[BoneSpec] | None = None, t
     if rate is not None:
         clip = clip.resampled(float(rate))
     if drop:
-        animated = sorted(clip.nodes())
-        for pattern in drop:   # a glob that matches nothing leaves the bone it meant keyframed
-            if not any(fnmatch.fnmatchcase(n, pattern) for n in animated):
-                warnings.warn(f"{path}: drop {pattern!r} matches no bone the clip animates "
-                              f"({len(animated)} bones: {animated[:6]}{' ...' if len(animated) > 6 else ''})",
-                              UserWarning, stacklevel=2)
         clip = clip.without(drop)
     return clip
 
